@@ -1,0 +1,58 @@
+"""The ``tether-companion`` command line: one entry point, one module per command.
+
+Each command lives in ``tether_companion.commands.<name>`` and exposes ``HELP`` (one line),
+``add_arguments(parser)`` and ``run(args) -> int``. Usage and config errors exit with code 2
+and a one-line message, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from tether_companion import __version__
+from tether_companion.config import ConfigError
+from tether_companion.errors import InputError
+
+COMMANDS: tuple[str, ...] = ()
+"""Command names, in the order ``--help`` lists them; module ``commands/<name>.py`` each."""
+
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser with one sub-parser per command."""
+    parser = argparse.ArgumentParser(
+        prog="tether-companion",
+        description="Localise a tethered drone from its tether's pull and feed the position "
+        "to ArduPilot or PX4 over MAVLink.",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMANDS:
+        module = importlib.import_module(f"tether_companion.commands.{name}")
+        command_parser = sub.add_parser(name, help=module.HELP, description=module.HELP)
+        module.add_arguments(command_parser)
+        command_parser.set_defaults(run=module.run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the process exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.run(args) or 0)
+    except (ConfigError, InputError) as exc:
+        print(f"tether-companion {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print(f"tether-companion {args.command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""The simulator dressed as an ArduPilot-like flight controller speaking MAVLink."""

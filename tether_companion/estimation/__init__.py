@@ -1,0 +1,1 @@
+"""Estimators: a generic continuous-discrete EKF and the tether models that plug into it."""

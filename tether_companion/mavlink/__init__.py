@@ -1,0 +1,1 @@
+"""MAVLink edges: transports (UDP, TCP, serial, logs), decoding to SI samples, encoding."""

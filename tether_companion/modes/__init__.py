@@ -1,0 +1,1 @@
+"""Tension-driven flight modes: tension-following and landing by the tether (Martins 2019)."""

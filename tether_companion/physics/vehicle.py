@@ -1,0 +1,114 @@
+"""Vehicle profiles: mass, inertia, motor geometry and thrust curve of a multicopter.
+
+Loaded from YAML files in ``configs/vehicles/``. Motor geometry follows ArduPilot's
+numbering for a quad X frame: motor ``i`` is SERVO_OUTPUT_RAW ``servo{i}_raw``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.config import ConfigError, load_yaml, spec
+from tether_companion.physics.thrust import ThrustCurve
+from tether_companion.resources import VEHICLES_DIR, builtin_path
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Motor:
+    """One rotor: where it sits and which way it spins.
+
+    ``angle_deg`` is measured in the body x-y plane from the nose (body x), positive toward
+    the right wing (body y), as ArduPilot's ``add_motor`` angles are. ``spin`` is seen from
+    above: a ``ccw`` propeller pushes the airframe clockwise (positive yaw in FRD).
+    """
+
+    angle_deg: float = spec(doc="arm direction from the nose, positive to the right [deg]")
+    spin: str = spec(choices=("ccw", "cw"), doc="propeller rotation seen from above")
+
+
+QUAD_X_ARDUPILOT: tuple[Motor, ...] = (
+    Motor(45.0, "ccw"),
+    Motor(-135.0, "ccw"),
+    Motor(-45.0, "cw"),
+    Motor(135.0, "cw"),
+)
+"""ArduPilot Copter quad X: motor 1 front-right, 2 back-left, 3 front-left, 4 back-right."""
+
+
+@dataclass(frozen=True)
+class VehicleProfile:
+    """Rigid-body and propulsion parameters of a multicopter (SI units)."""
+
+    name: str = spec("default-quad", doc="profile name")
+    mass_kg: float = spec(1.5, exclusive_minimum=0.0, doc="take-off mass [kg]")
+    inertia_kg_m2: tuple[float, float, float] = spec(
+        (0.015, 0.015, 0.025), exclusive_minimum=0.0, doc="principal moments (Jx, Jy, Jz) [kg m^2]"
+    )
+    arm_length_m: float = spec(0.25, exclusive_minimum=0.0, doc="centre to rotor axis [m]")
+    yaw_moment_per_thrust_m: float = spec(
+        0.016, minimum=0.0, doc="rotor drag torque per unit thrust [N m / N]"
+    )
+    drag_coefficient_n_s_per_m: float = spec(
+        0.0, minimum=0.0, doc="linear aerodynamic drag on the airframe [N per m/s]"
+    )
+    motor_time_constant_s: float = spec(
+        0.04, exclusive_minimum=0.0, doc="first-order lag of each motor's thrust [s]"
+    )
+    thrust_curve: ThrustCurve = spec(default_factory=ThrustCurve, doc="static PWM-to-thrust map")
+    motors: tuple[Motor, ...] = spec(QUAD_X_ARDUPILOT, doc="rotors in output-channel order")
+
+    def validate(self) -> None:
+        """A profile must be able to hover and must have at least 4 motors."""
+        if len(self.motors) < 4:
+            raise ConfigError("", "motors", len(self.motors), "at least 4 motors are needed")
+        capacity = self.thrust_curve.max_thrust_n * len(self.motors)
+        weight = self.mass_kg * 9.80665
+        if capacity <= weight:
+            raise ConfigError(
+                "", "thrust_curve", capacity, f"total maximum thrust must exceed the weight ({weight:.2f} N)"
+            )
+
+    @property
+    def n_motors(self) -> int:
+        """Number of rotors."""
+        return len(self.motors)
+
+    def allocation_matrix(self) -> FloatArray:
+        """Map motor thrusts [N] to (total thrust [N], roll, pitch, yaw torque [N m]).
+
+        Shape (4, n_motors). Thrust acts along body -z (up); torques are about the FRD body
+        axes: a rotor at body (x, y) gives roll ``-y f`` and pitch ``x f``; a ``ccw`` rotor
+        gives yaw ``+k f`` (Martins 2019 eq. 3-5 for a general layout).
+        """
+        columns = []
+        for motor in self.motors:
+            angle = math.radians(motor.angle_deg)
+            x = self.arm_length_m * math.cos(angle)
+            y = self.arm_length_m * math.sin(angle)
+            yaw = self.yaw_moment_per_thrust_m * (1.0 if motor.spin == "ccw" else -1.0)
+            columns.append((1.0, -y, x, yaw))
+        return np.array(columns, dtype=float).T
+
+
+def load_vehicle(name_or_path: str | Path) -> VehicleProfile:
+    """Load a vehicle profile by built-in name (``configs/vehicles/NAME.yaml``) or file path.
+
+    Raises
+    ------
+    ConfigError
+        When the file is missing or any value is invalid.
+    """
+    path = Path(name_or_path)
+    if not path.suffix:
+        try:
+            path = builtin_path(VEHICLES_DIR, str(name_or_path))
+        except FileNotFoundError as exc:
+            raise ConfigError(str(name_or_path), "", str(name_or_path), str(exc)) from None
+    return load_yaml(VehicleProfile, path)

@@ -1,0 +1,1 @@
+"""The asyncio companion service: ingest, estimate, publish, record, health, systemd."""

@@ -1,0 +1,1 @@
+"""The offline simulator: sensors, controller, trajectories and scenarios."""

@@ -1,0 +1,1 @@
+"""Thrust-model identification from flight logs (Al-Radaideh & Sun 2021, section 5)."""

@@ -1,0 +1,309 @@
+"""A generic continuous-discrete extended Kalman filter (Al-Radaideh & Sun 2021, Algorithm 1).
+
+The filter owns the state ``x`` (shape ``(n,)``) and its covariance ``P`` (shape ``(n, n)``)
+and knows nothing about tethers: a process model supplies ``f(x, u)`` and its Jacobian, each
+sensor's fusion supplies a measurement function returning the predicted measurement and its
+Jacobian at the filter's current state.
+
+Prediction (Algorithm 1, lines 3-8) integrates ``x_dot = f(x, u)`` and the covariance
+equation ``P_dot = F P + P F^T + Q_c`` with ``N`` Euler sub-steps, ``Q_c`` being the process
+noise *spectral density* (units of state^2 per second). For a random-walk model (``f = 0``,
+``F = 0``) the covariance equation is integrated exactly as ``P += Q_c dt``, which is also the
+paper's discrete eq. 31 with ``Q_k = Q_c dt``; :mod:`tether_companion.estimation.config`
+converts the paper's per-step ``Q`` into ``Q_c``.
+
+Correction (lines 9-14) is done once per sensor sample with
+
+* rejection of non-finite inputs (never let NaN/inf into the state; counted),
+* a chi-square innovation gate on the normalised innovation squared (NIS),
+* the Joseph form ``P = (I - K H) P (I - K H)^T + K R K^T``, which stays symmetric positive
+  semi-definite under rounding where the paper's ``(I - K H) P`` (eq. 34) does not,
+* symmetrisation and a positive-definiteness check (Cholesky); a covariance that lost
+  definiteness is repaired by clipping its eigenvalues, and a state or covariance that is no
+  longer finite makes the filter reset to its initial condition (counted in ``resets``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.linalg.lapack import dpotrf
+from scipy.stats import chi2
+
+FloatArray = NDArray[np.float64]
+
+MeasurementFunction = Callable[[FloatArray], tuple[FloatArray, FloatArray]]
+"""``measure(x) -> (z_pred (m,), H (m, n))``: predicted measurement and its Jacobian at ``x``."""
+
+EIGENVALUE_FLOOR = 1e-12
+"""Smallest eigenvalue a repaired covariance keeps [state units^2]."""
+
+
+class ProcessModel(Protocol):
+    """Continuous process model ``x_dot = f(x, u)`` with its Jacobian ``F = df/dx``."""
+
+    def derivative(self, x: FloatArray, u: FloatArray | None) -> FloatArray:
+        """``f(x, u)``, shape (n,)."""
+        ...
+
+    def jacobian(self, x: FloatArray, u: FloatArray | None) -> FloatArray:
+        """``df/dx`` at ``(x, u)``, shape (n, n)."""
+        ...
+
+
+class RandomWalk:
+    """The paper's process model (eq. 26): ``x_dot = 0``; all motion enters through ``Q``."""
+
+    is_random_walk = True
+
+    def derivative(self, x: FloatArray, u: FloatArray | None) -> FloatArray:
+        """Zero derivative, shape (n,)."""
+        return np.zeros_like(x)
+
+    def jacobian(self, x: FloatArray, u: FloatArray | None) -> FloatArray:
+        """Zero Jacobian, shape (n, n)."""
+        return np.zeros((x.size, x.size))
+
+
+FUSED = "fused"
+GATED = "gated"
+NONFINITE = "nonfinite"
+SINGULAR = "singular"
+
+
+@dataclass(slots=True)
+class SensorStatus:
+    """What happened to one sensor's samples (PX4-style aid-source status).
+
+    Attributes
+    ----------
+    fused, gated, nonfinite, singular
+        Counts of samples fused, rejected by the innovation gate, rejected because a value
+        was NaN/inf, and rejected because the innovation covariance was not positive definite.
+    forced
+        Samples fused after ``max_consecutive_rejections`` gate rejections in a row (the gate
+        yields so a filter that started far from the truth can still converge).
+    consecutive_rejections
+        Gate rejections since the last fused sample.
+    last_nis
+        Normalised innovation squared of the last finite sample (dimensionless).
+    last_innovation
+        Innovation ``z - h(x)`` of the last finite sample, shape (m,), sensor units.
+    last_fused_time_s
+        Filter time of the last fused sample [s] (``nan`` before the first).
+    """
+
+    fused: int = 0
+    gated: int = 0
+    nonfinite: int = 0
+    singular: int = 0
+    forced: int = 0
+    consecutive_rejections: int = 0
+    last_nis: float = math.nan
+    last_innovation: FloatArray = field(default_factory=lambda: np.zeros(0))
+    last_fused_time_s: float = math.nan
+
+
+@dataclass(frozen=True, slots=True)
+class UpdateResult:
+    """Outcome of one measurement update: ``status`` is ``fused``, ``gated``, ``nonfinite``
+    or ``singular``; ``nis`` is the normalised innovation squared (``nan`` when not computed)."""
+
+    status: str
+    nis: float
+
+
+def chi2_threshold(probability: float, dof: int) -> float:
+    """Chi-square gate threshold: NIS values above it are rejected (``inf`` disables the gate)."""
+    if probability >= 1.0:
+        return math.inf
+    return float(chi2.ppf(probability, dof))
+
+
+class ExtendedKalmanFilter:
+    """Continuous-discrete EKF with gated Joseph-form updates and covariance health checks.
+
+    Parameters
+    ----------
+    x0
+        Initial state, shape (n,).
+    p0
+        Initial covariance, shape (n, n), symmetric positive definite.
+    q_density
+        Process noise spectral density ``Q_c``, shape (n, n) [state units^2 / s].
+    process
+        Process model; ``None`` means the paper's random walk.
+    substeps
+        Euler sub-steps per prediction for a non-random-walk model (Algorithm 1's ``N``).
+    gate_probability
+        Probability mass of the chi-square gate (e.g. 0.9999); 1.0 disables gating.
+    max_consecutive_rejections
+        After this many gate rejections in a row on one sensor, the next sample is fused
+        regardless (counted as ``forced``); 0 means never force.
+    """
+
+    def __init__(
+        self,
+        x0: FloatArray,
+        p0: FloatArray,
+        q_density: FloatArray,
+        process: ProcessModel | None = None,
+        *,
+        substeps: int = 1,
+        gate_probability: float = 1.0,
+        max_consecutive_rejections: int = 0,
+    ) -> None:
+        x0 = np.asarray(x0, dtype=float).reshape(-1)
+        n = x0.size
+        p0 = np.asarray(p0, dtype=float)
+        q_density = np.asarray(q_density, dtype=float)
+        if p0.shape != (n, n) or q_density.shape != (n, n):
+            raise ValueError(f"P0 and Q must be ({n}, {n}); got {p0.shape} and {q_density.shape}")
+        if not (
+            np.all(np.isfinite(x0)) and np.all(np.isfinite(p0)) and np.all(np.isfinite(q_density))
+        ):
+            raise ValueError("x0, P0 and Q must be finite")
+        if dpotrf(p0, lower=1, clean=0)[1] != 0:
+            raise ValueError("P0 must be symmetric positive definite")
+        if substeps < 1:
+            raise ValueError(f"substeps must be >= 1, got {substeps}")
+        self._x0 = x0.copy()
+        self._p0 = p0.copy()
+        self.q_density = q_density.copy()
+        self.process: ProcessModel = process if process is not None else RandomWalk()
+        self._random_walk = bool(getattr(self.process, "is_random_walk", False))
+        self.substeps = substeps
+        self.gate_probability = gate_probability
+        self.max_consecutive_rejections = max_consecutive_rejections
+        self._thresholds: dict[int, float] = {}
+        self._eye = np.eye(n)
+        self.x: FloatArray = x0.copy()
+        self.P: FloatArray = p0.copy()
+        self.sensors: dict[str, SensorStatus] = {}
+        self.resets = 0
+        self.pd_repairs = 0
+        self.rejected_predictions = 0
+
+    @property
+    def n(self) -> int:
+        """State dimension."""
+        return self.x.size
+
+    # ------------------------------------------------------------------ prediction
+    def predict(self, dt_s: float, u: FloatArray | None = None) -> bool:
+        """Propagate the state and covariance over ``dt_s`` seconds (Algorithm 1, lines 3-8).
+
+        Returns ``False`` (and counts ``rejected_predictions``) when ``dt_s`` is negative or
+        not finite, or ``u`` is not finite; the state is then left unchanged.
+        """
+        if not (dt_s >= 0.0 and math.isfinite(dt_s)) or (
+            u is not None and not np.all(np.isfinite(u))
+        ):
+            self.rejected_predictions += 1
+            return False
+        if dt_s == 0.0:
+            return True
+        if self._random_walk:
+            self.P += self.q_density * dt_s
+            return True
+        h = dt_s / self.substeps
+        x, p = self.x, self.P
+        for _ in range(self.substeps):
+            f_jac = self.process.jacobian(x, u)
+            x = x + h * self.process.derivative(x, u)
+            fp = f_jac @ p
+            p = p + h * (fp + fp.T + self.q_density)
+        self.x, self.P = x, p
+        self._check_health()
+        return True
+
+    # ------------------------------------------------------------------ correction
+    def update(
+        self, sensor: str, z: FloatArray, measure: MeasurementFunction, r: FloatArray
+    ) -> UpdateResult:
+        """Fuse one measurement ``z`` (shape (m,)) with noise covariance ``r`` (shape (m, m)).
+
+        ``measure(x)`` returns the predicted measurement and its Jacobian at the current
+        state. The sample is rejected (state untouched, counted in ``sensors[sensor]``) when
+        any value is NaN/inf, when the innovation covariance is not positive definite, or
+        when its NIS exceeds the chi-square gate.
+        """
+        status = self.sensors.get(sensor)
+        if status is None:
+            status = self.sensors[sensor] = SensorStatus()
+        z_pred, h_jac = measure(self.x)
+        innovation = z - z_pred
+        # one reduction catches any NaN/inf (they propagate through the sum)
+        if not math.isfinite(float(innovation.sum()) + float(h_jac.sum()) + float(r.sum())):
+            status.nonfinite += 1
+            return UpdateResult(NONFINITE, math.nan)
+        pht = self.P @ h_jac.T
+        s = h_jac @ pht + r
+        if dpotrf(s, lower=1, clean=0)[1] != 0:  # Cholesky: is S positive definite?
+            status.singular += 1
+            return UpdateResult(SINGULAR, math.nan)
+        s_inv = 1.0 / s if innovation.size == 1 else np.linalg.inv(s)
+        nis = float(innovation @ s_inv @ innovation)
+        status.last_nis = nis
+        status.last_innovation = innovation
+        m = innovation.size
+        threshold = self._thresholds.get(m)
+        if threshold is None:
+            threshold = self._thresholds[m] = chi2_threshold(self.gate_probability, m)
+        if nis > threshold:
+            limit = self.max_consecutive_rejections
+            if limit <= 0 or status.consecutive_rejections < limit:
+                status.consecutive_rejections += 1
+                status.gated += 1
+                return UpdateResult(GATED, nis)
+            status.forced += 1
+        gain = pht @ s_inv
+        self.x = self.x + gain @ innovation
+        # Joseph form: symmetric PSD by construction, unlike (I - K H) P under rounding
+        a = self._eye - gain @ h_jac
+        p = a @ self.P @ a.T + gain @ r @ gain.T
+        self.P = 0.5 * (p + p.T)
+        status.fused += 1
+        status.consecutive_rejections = 0
+        self._check_health()
+        return UpdateResult(FUSED, nis)
+
+    # ------------------------------------------------------------------ diagnostics
+    def nees(self, x_true: FloatArray) -> float:
+        """Normalised estimation error squared ``e^T P^-1 e`` with ``e = x - x_true``."""
+        error = self.x - np.asarray(x_true, dtype=float)
+        return float(error @ np.linalg.solve(self.P, error))
+
+    def reset(self, x: FloatArray | None = None, p: FloatArray | None = None) -> None:
+        """Restart from ``(x, p)`` (default: the initial condition); counts in ``resets``."""
+        self.x = (self._x0 if x is None else np.asarray(x, dtype=float)).copy()
+        self.P = (self._p0 if p is None else np.asarray(p, dtype=float)).copy()
+        for status in self.sensors.values():
+            status.consecutive_rejections = 0
+        self.resets += 1
+
+    def _check_health(self) -> None:
+        """Keep ``P`` symmetric positive definite; repair it or reset the filter."""
+        if not math.isfinite(float(self.x.sum()) + float(self.P.sum())):
+            self.reset()
+            return
+        if dpotrf(self.P, lower=1, clean=0)[1] != 0:  # Cholesky failed: not PD
+            self._repair_covariance()
+
+    def _repair_covariance(self) -> None:
+        """Clip the eigenvalues of the symmetrised covariance to a small positive floor."""
+        sym = 0.5 * (self.P + self.P.T)
+        try:
+            values, vectors = np.linalg.eigh(sym)
+        except np.linalg.LinAlgError:
+            self.reset()
+            return
+        floor = max(EIGENVALUE_FLOOR, EIGENVALUE_FLOOR * float(np.max(np.abs(values))))
+        self.P = (vectors * np.maximum(values, floor)) @ vectors.T
+        self.P = 0.5 * (self.P + self.P.T)
+        self.pd_repairs += 1

@@ -1,0 +1,355 @@
+"""Time alignment and sensor fusion around the tether EKF: samples in, estimates out.
+
+:class:`TetherEstimator` is the one pipeline used offline (simulate, bench), by the live
+service and by replay. It is pure and synchronous: the caller hands it samples in time order
+and it returns an :class:`Estimate` per IMU tick.
+
+* ``on_attitude``, ``on_pwm``, ``set_known_tension_n`` store the latest value (non-finite
+  samples are rejected and counted).
+* ``on_imu`` ticks the filter: predict to the IMU time, then fuse the accelerometer with the
+  latest attitude (rotation) and PWM (thrust through a :class:`ThrustInput`) if each is within
+  its staleness bound of the IMU time; otherwise the update is skipped and counted.
+* ``on_range`` tilt-corrects the rangefinder with the latest attitude (``d cos(phi) cos(theta)``,
+  flat ground) and fuses it as the height above the anchor; out-of-range or stale readings
+  are dropped and counted.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.estimation.config import EstimatorConfig
+from tether_companion.estimation.ekf import FUSED, GATED, NONFINITE, ExtendedKalmanFilter
+from tether_companion.estimation.tether_models import (
+    POSITION,
+    FourStateModel,
+    ThreeStateModel,
+    altimeter,
+)
+from tether_companion.estimation.thrust_input import StaticThrustInput, ThrustInput
+from tether_companion.frames import rotation_ned_to_body
+from tether_companion.physics.vehicle import VehicleProfile
+from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
+
+FloatArray = NDArray[np.float64]
+
+ACCEL = "accel"
+ALTIMETER = "altimeter"
+
+
+@dataclass(slots=True)
+class EstimatorHealth:
+    """Counters of what the pipeline did with its inputs (all monotonic except the flags).
+
+    Attributes
+    ----------
+    imu_ticks
+        IMU samples that advanced the filter.
+    accel_fused, accel_gated, accel_forced
+        Accelerometer updates fused, rejected by the innovation gate, fused after the gate
+        yielded (see ``gate.max_consecutive_rejections``).
+    stale_attitude, stale_pwm, stale_tension
+        IMU ticks without an accelerometer update because the attitude, PWM or known
+        tension (3-state) was missing or older than its staleness bound.
+    near_anchor
+        IMU ticks without an accelerometer update because the estimate was closer to the
+        anchor than ``min_cable_length_m`` (cable direction undefined).
+    range_fused, range_gated, range_out_of_range, range_stale
+        Rangefinder samples fused, gated, outside the valid range or tilt, or without a
+        fresh attitude / older than the filter.
+    nonfinite_rejected
+        Samples (any kind) or derived inputs containing NaN/inf, rejected before the filter.
+    out_of_order
+        Samples older than the filter time, dropped.
+    resets
+        Filter restarts (long IMU gap, non-finite state); equals ``reset_counter``.
+    pd_repairs
+        Covariances repaired after losing positive definiteness.
+    last_accel_nis, last_range_nis
+        Normalised innovation squared of the last accelerometer / rangefinder sample.
+    """
+
+    imu_ticks: int = 0
+    accel_fused: int = 0
+    accel_gated: int = 0
+    accel_forced: int = 0
+    stale_attitude: int = 0
+    stale_pwm: int = 0
+    stale_tension: int = 0
+    near_anchor: int = 0
+    range_fused: int = 0
+    range_gated: int = 0
+    range_out_of_range: int = 0
+    range_stale: int = 0
+    nonfinite_rejected: int = 0
+    out_of_order: int = 0
+    resets: int = 0
+    pd_repairs: int = 0
+    last_accel_nis: float = math.nan
+    last_range_nis: float = math.nan
+
+    def copy(self) -> EstimatorHealth:
+        """A snapshot."""
+        return EstimatorHealth(*(getattr(self, name) for name in self.__slots__))
+
+
+@dataclass(frozen=True, slots=True)
+class Estimate:
+    """The estimator's output at one IMU tick.
+
+    Attributes
+    ----------
+    time_s
+        Flight-controller time of the tick [s].
+    position_ned_m
+        Drone position relative to the tether anchor, NED, shape (3,) [m].
+    tension_n
+        Cable tension [N]: the state's (4-state) or the known one (3-state).
+    covariance
+        State covariance, shape (n, n): position block [m^2] first, then tension [N^2].
+    reset_counter
+        Increments each time the filter restarts (for VISION_POSITION_ESTIMATE.reset_counter).
+    accel_fused
+        Whether this tick fused the accelerometer.
+    health
+        Snapshot of the pipeline's counters.
+    """
+
+    time_s: float
+    position_ned_m: FloatArray
+    tension_n: float
+    covariance: FloatArray
+    reset_counter: int
+    accel_fused: bool
+    health: EstimatorHealth = field(repr=False)
+
+    @property
+    def position_covariance_m2(self) -> FloatArray:
+        """Position block of the covariance, shape (3, 3) [m^2]."""
+        return self.covariance[POSITION, POSITION]
+
+
+def _finite(value: float) -> bool:
+    return math.isfinite(value)
+
+
+class TetherEstimator:
+    """The tether EKF (3- or 4-state) fed by typed samples, ticking at the IMU rate.
+
+    Parameters
+    ----------
+    config
+        Estimator settings (``kind`` selects the model).
+    vehicle
+        Vehicle profile (mass, thrust curve, motor count).
+    thrust_input
+        PWM-to-thrust map; default :class:`StaticThrustInput` of ``vehicle``.
+    """
+
+    def __init__(
+        self,
+        config: EstimatorConfig,
+        vehicle: VehicleProfile,
+        thrust_input: ThrustInput | None = None,
+    ) -> None:
+        self.config = config
+        self.vehicle = vehicle
+        self.thrust_input: ThrustInput = (
+            thrust_input if thrust_input is not None else StaticThrustInput(vehicle)
+        )
+        model_cls = FourStateModel if config.kind == "four_state" else ThreeStateModel
+        self.model = model_cls(vehicle.mass_kg, config.min_cable_length_m)
+        self.filter = ExtendedKalmanFilter(
+            config.x0(),
+            config.p0(),
+            config.q_density(),
+            gate_probability=config.gate.probability,
+            max_consecutive_rejections=config.gate.max_consecutive_rejections,
+        )
+        self.health = EstimatorHealth()
+        self._r_accel = np.eye(3) * config.accel_noise.variance_mps2_sq
+        self._r_alt = np.array([[config.altimeter_noise_variance_m2]])
+        self._stale = config.staleness
+        self._time_s = math.nan
+        self._attitude: AttitudeSample | None = None
+        self._rotation: FloatArray = np.eye(3)
+        self._cos_tilt = 1.0
+        self._pwm_time_s = math.nan
+        self._thrust_n = math.nan
+        self._tension_time_s = math.nan
+        self._known_tension_n = math.nan
+
+    # ------------------------------------------------------------------ inputs
+    @property
+    def time_s(self) -> float:
+        """Filter time [s] (``nan`` before the first IMU tick)."""
+        return self._time_s
+
+    @property
+    def reset_counter(self) -> int:
+        """Number of filter restarts so far."""
+        return self.filter.resets
+
+    def on_attitude(self, sample: AttitudeSample) -> None:
+        """Store the latest attitude (rejected and counted when not finite)."""
+        if not (
+            _finite(sample.time_s)
+            and _finite(sample.roll_rad)
+            and _finite(sample.pitch_rad)
+            and _finite(sample.yaw_rad)
+        ):
+            self.health.nonfinite_rejected += 1
+            return
+        self._attitude = sample
+        self._rotation = rotation_ned_to_body(sample.roll_rad, sample.pitch_rad, sample.yaw_rad)
+        self._cos_tilt = math.cos(sample.roll_rad) * math.cos(sample.pitch_rad)
+
+    def on_pwm(self, sample: PwmSample) -> None:
+        """Store the total thrust [N] of the latest motor outputs (rejected when not finite)."""
+        if not _finite(sample.time_s) or not np.isfinite(sample.pwm_us).all():
+            self.health.nonfinite_rejected += 1
+            return
+        thrust_n = self.thrust_input.total_thrust_n(sample.pwm_us, sample.time_s)
+        if not _finite(thrust_n):
+            self.health.nonfinite_rejected += 1
+            return
+        self._pwm_time_s = sample.time_s
+        self._thrust_n = thrust_n
+
+    def set_known_tension_n(self, tension_n: float, time_s: float) -> None:
+        """Known cable tension [N] at ``time_s`` [s] (load cell; used by the 3-state model)."""
+        if not (_finite(tension_n) and _finite(time_s)) or tension_n < 0.0:
+            self.health.nonfinite_rejected += 1
+            return
+        self._known_tension_n = tension_n
+        self._tension_time_s = time_s
+
+    # ------------------------------------------------------------------ ticks
+    def on_imu(self, sample: ImuSample) -> Estimate | None:
+        """Predict to the IMU time and fuse the accelerometer; return the estimate.
+
+        Returns ``None`` when the sample is rejected (non-finite, or older than the filter).
+        """
+        t = sample.time_s
+        accel = sample.specific_force_body_mps2
+        if not (_finite(t) and np.isfinite(accel).all()):
+            self.health.nonfinite_rejected += 1
+            return None
+        if not self._advance_to(t):
+            return None
+        self.health.imu_ticks += 1
+        fused = self._fuse_accel(t, accel)
+        return self._estimate(fused)
+
+    def on_range(self, sample: RangeSample) -> None:
+        """Fuse a downward rangefinder reading as the height above the anchor [m]."""
+        health = self.health
+        if not (_finite(sample.time_s) and _finite(sample.distance_m)):
+            health.nonfinite_rejected += 1
+            return
+        cfg = self.config.rangefinder
+        if not (cfg.min_m <= sample.distance_m <= cfg.max_m):
+            health.range_out_of_range += 1
+            return
+        att = self._attitude
+        if (
+            att is None
+            or abs(sample.time_s - att.time_s) > self._stale.attitude_s
+            or math.isnan(self._time_s)
+            or sample.time_s < self._time_s - self._stale.range_s
+        ):
+            health.range_stale += 1
+            return
+        if self._cos_tilt < math.cos(cfg.max_tilt_rad):
+            health.range_out_of_range += 1
+            return
+        if sample.time_s > self._time_s and not self._advance_to(sample.time_s):
+            return
+        height_m = np.array((sample.distance_m * self._cos_tilt,))
+        result = self.filter.update(ALTIMETER, height_m, altimeter, self._r_alt)
+        health.last_range_nis = result.nis
+        if result.status == FUSED:
+            health.range_fused += 1
+        elif result.status == GATED:
+            health.range_gated += 1
+        elif result.status == NONFINITE:
+            health.nonfinite_rejected += 1
+        self._sync_filter_counters()
+
+    # ------------------------------------------------------------------ internals
+    def _advance_to(self, t: float) -> bool:
+        """Predict the filter to time ``t``; reset after a long gap; False if ``t`` is old."""
+        if math.isnan(self._time_s):
+            self._time_s = t
+            return True
+        dt = t - self._time_s
+        if dt < 0.0:
+            self.health.out_of_order += 1
+            return False
+        if dt > self._stale.max_gap_s:
+            self.filter.reset()
+            self._sync_filter_counters()
+        else:
+            self.filter.predict(dt)
+        self._time_s = t
+        return True
+
+    def _fuse_accel(self, t: float, accel: FloatArray) -> bool:
+        health = self.health
+        stale = self._stale
+        att = self._attitude
+        if att is None or abs(t - att.time_s) > stale.attitude_s:
+            health.stale_attitude += 1
+            return False
+        if math.isnan(self._pwm_time_s) or abs(t - self._pwm_time_s) > stale.pwm_s:
+            health.stale_pwm += 1
+            return False
+        model = self.model
+        tension_n = self._known_tension_n
+        if not model.has_tension_state and (
+            math.isnan(self._tension_time_s) or abs(t - self._tension_time_s) > stale.tension_s
+        ):
+            health.stale_tension += 1
+            return False
+        x = self.filter.x
+        if x[0] * x[0] + x[1] * x[1] + x[2] * x[2] < model.min_cable_length_m**2:
+            health.near_anchor += 1
+            return False
+        rotation, thrust_n = self._rotation, self._thrust_n
+
+        def measure(state: FloatArray) -> tuple[FloatArray, FloatArray]:
+            return model.accel(state, rotation, thrust_n, tension_n)
+
+        result = self.filter.update(ACCEL, accel, measure, self._r_accel)
+        health.last_accel_nis = result.nis
+        status = self.filter.sensors[ACCEL]
+        health.accel_forced = status.forced
+        self._sync_filter_counters()
+        if result.status == FUSED:
+            health.accel_fused += 1
+            return True
+        if result.status == GATED:
+            health.accel_gated += 1
+        elif result.status == NONFINITE:
+            health.nonfinite_rejected += 1
+        return False
+
+    def _sync_filter_counters(self) -> None:
+        self.health.resets = self.filter.resets
+        self.health.pd_repairs = self.filter.pd_repairs
+
+    def _estimate(self, accel_fused: bool) -> Estimate:
+        x = self.filter.x
+        return Estimate(
+            time_s=self._time_s,
+            position_ned_m=x[POSITION].copy(),
+            tension_n=self.model.tension_n(x, self._known_tension_n),
+            covariance=self.filter.P.copy(),
+            reset_counter=self.filter.resets,
+            accel_fused=accel_fused,
+            health=self.health.copy(),
+        )

@@ -1,0 +1,248 @@
+"""MAVLink framing: bytes to messages and back, with no I/O.
+
+Messages are pymavlink's ``ardupilotmega`` dialect classes (which include ``common``); frames
+are MAVLink 2 on output and MAVLink 1 or 2 on input. The parser is written for hostile input:
+it never raises on bad bytes, it resynchronises one byte after a start marker whose frame
+fails its checksum (so a stray 0xFD in garbage cannot swallow the good frame behind it), and
+it counts everything it throws away in :class:`FramingCounters`.
+
+Why not pymavlink's own ``MAVLink.parse_char``: on a bad checksum it raises and discards the
+whole claimed frame (up to 280 bytes), and it keeps no per-cause counts. Here pymavlink still
+decodes the payload (``MAVLink.decode``) once the frame is known to be intact.
+
+Example
+-------
+>>> enc = FrameEncoder(system_id=1, component_id=1)
+>>> data = enc.encode(dialect.MAVLink_heartbeat_message(2, 3, 0, 0, 4, 3))
+>>> parser = FrameParser()
+>>> [m.get_type() for m in parser.feed(data)]
+['HEARTBEAT']
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass, fields
+
+from pymavlink.dialects.v20 import ardupilotmega as dialect
+
+__all__ = [
+    "FrameEncoder",
+    "FrameParser",
+    "FramingCounters",
+    "MAVLinkMessage",
+    "dialect",
+]
+
+MAVLinkMessage = dialect.MAVLink_message
+"""Base class of every decoded message (``msg.get_type()``, ``msg.get_srcSystem()``, ...)."""
+
+_STX_V1 = dialect.PROTOCOL_MARKER_V1
+_STX_V2 = dialect.PROTOCOL_MARKER_V2
+_HEADER_V1 = dialect.HEADER_LEN_V1
+_HEADER_V2 = dialect.HEADER_LEN_V2
+_SIGNATURE_LEN = dialect.MAVLINK_SIGNATURE_BLOCK_LEN
+_IFLAG_SIGNED = dialect.MAVLINK_IFLAG_SIGNED
+_CRC_LEN = 2
+_CRC = struct.Struct("<H")
+_MESSAGE_TYPES = dialect.mavlink_map
+_MAX_BUFFER_BYTES = 1 << 16
+"""A stream parser never holds more than this many unparsed bytes (a frame is <= 280)."""
+
+
+@dataclass
+class FramingCounters:
+    """What a :class:`FrameParser` accepted and threw away (monotonic counts)."""
+
+    bytes_in: int = 0
+    """Bytes fed."""
+    frames_ok: int = 0
+    """Frames with a valid checksum that decoded to a known message."""
+    garbage_bytes: int = 0
+    """Bytes skipped while looking for a start marker (incl. the marker of a bad frame)."""
+    bad_crc: int = 0
+    """Frames of a known message id whose checksum did not match."""
+    bad_header: int = 0
+    """MAVLink 2 start markers followed by unsupported incompatibility flags."""
+    unknown_id: int = 0
+    """Complete frames whose message id the dialect does not define (skipped whole). With no
+    checksum to check, such a frame is believed only when a start marker (or the end of the
+    data) follows it; otherwise its first byte counts as garbage and parsing resumes after it."""
+    bad_payload: int = 0
+    """Intact frames pymavlink could not turn into a message."""
+    truncated: int = 0
+    """Partial frames left at the end of a datagram (UDP) and discarded."""
+
+    def as_dict(self) -> dict[str, int]:
+        """The counters as a plain mapping (for status views and JSON)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    @property
+    def errors(self) -> int:
+        """Everything rejected: bad checksums, headers, payloads, unknown ids, truncations."""
+        return self.bad_crc + self.bad_header + self.unknown_id + self.bad_payload + self.truncated
+
+
+class FrameParser:
+    """Incremental MAVLink 1/2 frame parser for a byte stream or a sequence of datagrams.
+
+    Feed it bytes as they arrive with :meth:`feed`; it returns the complete messages and keeps
+    any partial frame for the next call. For datagram transports call :meth:`end_datagram`
+    after each datagram: a frame never spans two UDP datagrams, so a leftover is truncated.
+    Signed frames are accepted without checking the signature (the emulator and the service do
+    not use signing).
+    """
+
+    def __init__(self, counters: FramingCounters | None = None) -> None:
+        self._buf = bytearray()
+        self._decoder = dialect.MAVLink(None)
+        self.counters = FramingCounters() if counters is None else counters
+        """Counts of what was accepted and dropped; pass one object to several parsers (one
+        per TCP client of a server, say) to total them."""
+
+    def feed(self, data: bytes | bytearray | memoryview) -> list[MAVLinkMessage]:
+        """Add ``data`` and return every message completed by it, in order."""
+        self.counters.bytes_in += len(data)
+        self._buf += data
+        out: list[MAVLinkMessage] = []
+        buf = self._buf
+        pos = 0
+        counters = self.counters
+        n = len(buf)
+        while pos < n:
+            stx = buf[pos]
+            if stx != _STX_V2 and stx != _STX_V1:
+                nxt = _next_marker(buf, pos + 1)
+                counters.garbage_bytes += nxt - pos
+                pos = nxt
+                continue
+            if stx == _STX_V2:
+                if n - pos < 3:
+                    break
+                incompat = buf[pos + 2]
+                if incompat & ~_IFLAG_SIGNED:
+                    counters.bad_header += 1
+                    counters.garbage_bytes += 1
+                    pos += 1
+                    continue
+                header_len = _HEADER_V2
+                frame_len = header_len + buf[pos + 1] + _CRC_LEN
+                if incompat & _IFLAG_SIGNED:
+                    frame_len += _SIGNATURE_LEN
+                if n - pos < header_len:
+                    break
+                msg_id = buf[pos + 7] | (buf[pos + 8] << 8) | (buf[pos + 9] << 16)
+            else:
+                if n - pos < 2:
+                    break
+                header_len = _HEADER_V1
+                frame_len = header_len + buf[pos + 1] + _CRC_LEN
+                if n - pos < header_len:
+                    break
+                msg_id = buf[pos + 5]
+                incompat = 0
+            if n - pos < frame_len:
+                break
+            msg_type = _MESSAGE_TYPES.get(msg_id)
+            if msg_type is None:
+                # No checksum to verify: take it as a frame only if the next frame (or the end
+                # of the data) follows where its length says; otherwise it is a stray marker.
+                end = pos + frame_len
+                if end == n or buf[end] == _STX_V2 or buf[end] == _STX_V1:
+                    counters.unknown_id += 1
+                    pos = end
+                else:
+                    counters.garbage_bytes += 1
+                    pos += 1
+                continue
+            crc_end = pos + frame_len - (_SIGNATURE_LEN if incompat & _IFLAG_SIGNED else 0)
+            crc = dialect.x25crc(buf[pos + 1 : crc_end - _CRC_LEN])
+            crc.accumulate(bytes((msg_type.crc_extra,)))
+            if crc.crc != _CRC.unpack_from(buf, crc_end - _CRC_LEN)[0]:
+                counters.bad_crc += 1
+                counters.garbage_bytes += 1
+                pos += 1
+                continue
+            try:
+                msg = self._decoder.decode(bytearray(buf[pos : pos + frame_len]))
+            except Exception:  # noqa: BLE001 - pymavlink raises assorted errors on odd payloads
+                counters.bad_payload += 1
+                pos += frame_len
+                continue
+            counters.frames_ok += 1
+            out.append(msg)
+            pos += frame_len
+        del buf[:pos]
+        if len(buf) > _MAX_BUFFER_BYTES:  # cannot happen with valid lengths; belt and braces
+            counters.garbage_bytes += len(buf)
+            buf.clear()
+        return out
+
+    def end_datagram(self) -> None:
+        """Discard a partial frame left by the datagram just fed (counted as truncated)."""
+        if self._buf:
+            self.counters.truncated += 1
+            self._buf.clear()
+
+    @property
+    def pending_bytes(self) -> int:
+        """Bytes held waiting for the rest of a frame."""
+        return len(self._buf)
+
+
+def _next_marker(buf: bytearray, start: int) -> int:
+    """Index of the next MAVLink start marker at or after ``start`` (``len(buf)`` if none)."""
+    i2 = buf.find(_STX_V2, start)
+    i1 = buf.find(_STX_V1, start)
+    if i2 < 0:
+        return i1 if i1 >= 0 else len(buf)
+    if i1 < 0:
+        return i2
+    return min(i1, i2)
+
+
+class FrameEncoder:
+    """Packs messages into MAVLink 2 frames as one system/component, counting the sequence.
+
+    One encoder per link: the sequence number is per channel, as on a flight controller.
+
+    Parameters
+    ----------
+    system_id, component_id
+        Identity written into every frame's header (1..255).
+    """
+
+    def __init__(self, system_id: int, component_id: int) -> None:
+        if not (1 <= system_id <= 255 and 0 <= component_id <= 255):
+            raise ValueError(f"system_id {system_id} / component_id {component_id} out of range")
+        self._packer = dialect.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        self.frames_out = 0
+
+    @property
+    def factory(self) -> dialect.MAVLink:
+        """pymavlink's message constructors (``encoder.factory.heartbeat_encode(...)``)."""
+        return self._packer
+
+    @property
+    def system_id(self) -> int:
+        """This encoder's MAVLink system id."""
+        return self._packer.srcSystem
+
+    @property
+    def component_id(self) -> int:
+        """This encoder's MAVLink component id."""
+        return self._packer.srcComponent
+
+    def encode(self, msg: MAVLinkMessage) -> bytes:
+        """One MAVLink 2 frame holding ``msg``; advances the sequence number.
+
+        Raises
+        ------
+        struct.error
+            When a field does not fit its wire type (callers convert and saturate first,
+            see :mod:`tether_companion.mavlink.units`).
+        """
+        frame = msg.pack(self._packer)
+        self._packer.seq = (self._packer.seq + 1) & 0xFF
+        self.frames_out += 1
+        return frame

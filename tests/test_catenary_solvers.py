@@ -196,7 +196,8 @@ def test_end_tensions_balance_weight_and_match_slopes():
     # vertical forces on the supports balance the cable's weight
     assert -(t.on_anchor_vertical_n + t.on_drone_vertical_n) == pytest.approx(w * length)
     # the force on the drone is along the tangent back into the cable: slope sinh((x-x0)/a)
-    assert t.on_drone_vertical_n / t.on_drone_horizontal_n == pytest.approx(math.sinh((4.0 - 1.1) / 2.0))
+    slope = math.sinh((4.0 - 1.1) / 2.0)
+    assert t.on_drone_vertical_n / t.on_drone_horizontal_n == pytest.approx(slope)
     assert t.drone_n == pytest.approx(math.hypot(t.horizontal_n, t.on_drone_vertical_n))
     # eq. 13 magnitude equals w (y - c) at each end
     assert t.drone_n == pytest.approx(w * (height - curve.c_m))

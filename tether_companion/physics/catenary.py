@@ -455,7 +455,9 @@ def end_tensions(curve: CatenaryCurve, weight_per_length_n_per_m: float) -> EndT
     )
 
 
-def horizontal_tension_components_n(horizontal_n: float, direction_rad: float) -> tuple[float, float]:
+def horizontal_tension_components_n(
+    horizontal_n: float, direction_rad: float
+) -> tuple[float, float]:
     """Split a horizontal tension into x and y components (eqs. 14-15) [N].
 
     ``direction_rad`` is the angle ``beta`` of the horizontal force from the world x axis.
@@ -609,7 +611,8 @@ def force_on_drone_ned_n(
         not longer than the anchor-to-drone distance).
     """
     horizontal, height, unit = plane_coordinates(position_ned_m)
-    tensions = end_tensions(solve_known_length(horizontal, height, length_m), weight_per_length_n_per_m)
+    curve = solve_known_length(horizontal, height, length_m)
+    tensions = end_tensions(curve, weight_per_length_n_per_m)
     return np.array(
         [
             tensions.on_drone_horizontal_n * unit[0],

@@ -1,0 +1,296 @@
+"""Tether (cable) models: the force the cable exerts on the drone, NED, anchor at the origin.
+
+Every model follows one protocol (:class:`CableModel`):
+
+- ``force_on_drone_ned_n(position_ned_m, velocity_ned_m_s) -> ndarray(3)``: the force on the
+  drone [N] in the NED frame for the drone's position relative to the anchor and its NED
+  velocity; it also sets ``tension_n``, the tension magnitude at the drone end [N] of that
+  evaluation;
+- ``force_components(pn, pe, pd, vn, ve, vd) -> (fn, fe, fd)``: the same with plain floats, the
+  allocation-free path the simulator's RK4 derivative calls;
+- winch state: ``paid_out_m`` (cable length between the winch and the drone), advanced by
+  ``advance(dt_s)`` at the winch rate set by ``set_winch_rate_mps``; ``set_tension_n`` for a
+  tension-controlled winch; ``release()`` lets the cable go (zero force from then on).
+
+Models
+------
+(a) :class:`ConstantTensionCable`: the paper's winch (Al-Radaideh & Sun 2021, section 3.1,
+    eq. 21-22): a straight cable pulling toward the anchor with a set magnitude ``f_c``,
+    ``F = -f_c p / |p|``. At ``|p| = 0`` the direction is undefined and the force is zero.
+(b) :class:`ElasticCable`: a straight elastic line of paid-out length ``L`` (like ArduPilot
+    SITL's SIM_TETH_*): when ``|p| > L`` a spring ``k (|p| - L)`` plus a damper ``c d|p|/dt``
+    (never pushing); always the weight of the lifted cable ``rho g min(|p|, L)`` along the line
+    toward the anchor.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tether_companion.config import ConfigError, spec
+from tether_companion.constants import GRAVITY_MPS2
+
+FloatArray = NDArray[np.float64]
+
+CABLE_MODELS: tuple[str, ...] = ("constant_tension", "elastic", "none")
+"""Values of ``cable.model`` in a scenario."""
+
+_MIN_DISTANCE_M = 1e-9
+"""Below this anchor-to-drone distance the cable direction is undefined: zero force."""
+
+
+@dataclass(frozen=True)
+class CableConfig:
+    """The ``cable`` section of a scenario (SI units)."""
+
+    model: str = spec("constant_tension", choices=CABLE_MODELS, doc="cable model")
+    tension_n: float = spec(4.0, minimum=0.0, doc="winch tension set-point (constant_tension) [N]")
+    length_m: float = spec(
+        10.0, exclusive_minimum=0.0, doc="initial paid-out length (elastic, catenary) [m]"
+    )
+    min_length_m: float = spec(
+        0.0, minimum=0.0, doc="shortest paid-out length the winch reels to [m]"
+    )
+    spool_length_m: float = spec(
+        100.0, exclusive_minimum=0.0, doc="longest paid-out length (cable on the spool) [m]"
+    )
+    stiffness_n_per_m: float = spec(
+        100.0, exclusive_minimum=0.0, doc="axial spring constant of the taut line [N/m]"
+    )
+    damping_n_s_per_m: float = spec(5.0, minimum=0.0, doc="axial damping of the taut line [N s/m]")
+    linear_density_kg_per_m: float = spec(
+        0.0167, minimum=0.0, doc="cable mass per length (elastic, catenary) [kg/m]"
+    )
+    winch_rate_mps: float = spec(
+        0.0, minimum=-10.0, maximum=10.0, doc="initial winch rate, + pays out, - reels in [m/s]"
+    )
+
+    def validate(self) -> None:
+        """The paid-out length must lie within the winch's range."""
+        if self.spool_length_m < self.min_length_m:
+            raise ConfigError(
+                "",
+                "spool_length_m",
+                self.spool_length_m,
+                f"must be >= min_length_m ({self.min_length_m})",
+            )
+        if not self.min_length_m <= self.length_m <= self.spool_length_m:
+            raise ConfigError(
+                "",
+                "length_m",
+                self.length_m,
+                f"must lie within [min_length_m, spool_length_m] = "
+                f"[{self.min_length_m}, {self.spool_length_m}]",
+            )
+
+
+class CableModel(Protocol):
+    """What the simulator needs from a cable model (see the module docstring)."""
+
+    tension_n: float
+    paid_out_m: float
+    released: bool
+
+    def force_components(
+        self, pn: float, pe: float, pd: float, vn: float, ve: float, vd: float
+    ) -> tuple[float, float, float]:
+        """Force on the drone (north, east, down) [N]; sets ``tension_n``."""
+
+    def force_on_drone_ned_n(
+        self, position_ned_m: ArrayLike, velocity_ned_m_s: ArrayLike
+    ) -> FloatArray:
+        """Force on the drone, shape (3,), NED [N]; sets ``tension_n``."""
+
+    def advance(self, dt_s: float) -> None:
+        """Advance the winch by ``dt_s`` seconds."""
+
+    def set_tension_n(self, tension_n: float) -> None:
+        """Set the winch's tension set-point [N]."""
+
+    def set_winch_rate_mps(self, rate_mps: float) -> None:
+        """Set the winch rate [m/s], positive paying out."""
+
+    def release(self) -> None:
+        """Let the cable go: zero force from now on."""
+
+
+class _CableBase:
+    """Shared state and the array wrapper around ``force_components``."""
+
+    def __init__(
+        self, paid_out_m: float, winch_rate_mps: float, min_length_m: float, spool_length_m: float
+    ) -> None:
+        self.tension_n = 0.0
+        self.paid_out_m = float(paid_out_m)
+        self.released = False
+        self.winch_rate_mps = float(winch_rate_mps)
+        self.min_length_m = float(min_length_m)
+        self.spool_length_m = float(spool_length_m)
+
+    def force_components(
+        self, pn: float, pe: float, pd: float, vn: float, ve: float, vd: float
+    ) -> tuple[float, float, float]:
+        raise NotImplementedError
+
+    def force_on_drone_ned_n(
+        self, position_ned_m: ArrayLike, velocity_ned_m_s: ArrayLike
+    ) -> FloatArray:
+        """Force on the drone (3,), NED [N], for its position (3,) [m] and velocity (3,) [m/s].
+
+        Sets ``tension_n`` to the tension at the drone end [N].
+        """
+        pn, pe, pd = (float(x) for x in np.asarray(position_ned_m, dtype=float).reshape(3))
+        vn, ve, vd = (float(x) for x in np.asarray(velocity_ned_m_s, dtype=float).reshape(3))
+        return np.array(self.force_components(pn, pe, pd, vn, ve, vd))
+
+    def advance(self, dt_s: float) -> None:
+        """Reel the winch at its rate for ``dt_s`` [s], within [min_length_m, spool_length_m]."""
+        if self.winch_rate_mps != 0.0 and not self.released:
+            length = self.paid_out_m + self.winch_rate_mps * dt_s
+            self.paid_out_m = min(max(length, self.min_length_m), self.spool_length_m)
+
+    def set_winch_rate_mps(self, rate_mps: float) -> None:
+        """Set the winch rate [m/s]: positive pays cable out, negative reels it in."""
+        if not math.isfinite(rate_mps):
+            raise ValueError(f"winch rate must be finite, got {rate_mps!r}")
+        self.winch_rate_mps = float(rate_mps)
+
+    def set_tension_n(self, tension_n: float) -> None:
+        raise ValueError(
+            f"{type(self).__name__} has no tension set-point (tension follows from length); "
+            "use set_winch_rate_mps"
+        )
+
+    def release(self) -> None:
+        """Let the cable go: the force is zero from now on."""
+        self.released = True
+        self.tension_n = 0.0
+
+
+class ConstantTensionCable(_CableBase):
+    """The paper's constant-tension winch: ``F = -f_c p/|p|`` (eq. 21-22), zero when released.
+
+    The winch pays out and reels in whatever is needed to keep the tension, so ``paid_out_m``
+    follows the anchor-to-drone distance; a winch rate has no effect on the force.
+    """
+
+    def __init__(self, tension_n: float, spool_length_m: float = math.inf) -> None:
+        super().__init__(0.0, 0.0, 0.0, spool_length_m)
+        self.set_tension_n(tension_n)
+
+    def set_tension_n(self, tension_n: float) -> None:
+        """Set the winch tension ``f_c`` [N] (>= 0)."""
+        if not (math.isfinite(tension_n) and tension_n >= 0.0):
+            raise ValueError(f"tension must be a finite number >= 0 N, got {tension_n!r}")
+        self.set_point_n = float(tension_n)
+
+    def force_components(
+        self, pn: float, pe: float, pd: float, vn: float, ve: float, vd: float
+    ) -> tuple[float, float, float]:
+        """Force (north, east, down) [N] on the drone at position (pn, pe, pd) [m]."""
+        distance = math.sqrt(pn * pn + pe * pe + pd * pd)
+        self.paid_out_m = distance
+        if self.released or distance < _MIN_DISTANCE_M:
+            self.tension_n = 0.0
+            return 0.0, 0.0, 0.0
+        self.tension_n = tension = self.set_point_n
+        scale = -tension / distance
+        return scale * pn, scale * pe, scale * pd
+
+
+class ElasticCable(_CableBase):
+    """A straight elastic line of paid-out length ``L`` with a lifted-cable weight.
+
+    With ``d = |p|`` and ``u = p/d`` (anchor to drone)::
+
+        spring_n = max(k (d - L) + c (p . v)/d, 0)   if d > L else 0
+        weight_n = rho g min(d, L)
+        F = -(spring_n + weight_n) u,   tension_n = spring_n + weight_n
+
+    The weight of the lifted cable pulls along the line toward the anchor, as in ArduPilot
+    SITL's tether (SIM_TETH_*); it grows with the paid-out length until the line is taut.
+    The damper acts on the rate of change of ``d`` and never makes the line push.
+    """
+
+    def __init__(
+        self,
+        length_m: float,
+        stiffness_n_per_m: float,
+        damping_n_s_per_m: float,
+        linear_density_kg_per_m: float,
+        *,
+        winch_rate_mps: float = 0.0,
+        min_length_m: float = 0.0,
+        spool_length_m: float = math.inf,
+        gravity_mps2: float = GRAVITY_MPS2,
+    ) -> None:
+        super().__init__(length_m, winch_rate_mps, min_length_m, spool_length_m)
+        self.stiffness_n_per_m = float(stiffness_n_per_m)
+        self.damping_n_s_per_m = float(damping_n_s_per_m)
+        self.weight_per_length_n_per_m = float(linear_density_kg_per_m) * gravity_mps2
+
+    def taut_tension_n(self, distance_m: float, radial_rate_mps: float) -> float:
+        """Tension [N] of the line at chord ``distance_m`` and chord rate ``radial_rate_mps``."""
+        length = self.paid_out_m
+        spring = 0.0
+        if distance_m > length:
+            spring = (
+                self.stiffness_n_per_m * (distance_m - length)
+                + self.damping_n_s_per_m * radial_rate_mps
+            )
+            spring = max(spring, 0.0)
+        return spring + self.weight_per_length_n_per_m * min(distance_m, length)
+
+    def force_components(
+        self, pn: float, pe: float, pd: float, vn: float, ve: float, vd: float
+    ) -> tuple[float, float, float]:
+        """Force (north, east, down) [N] at (pn, pe, pd) [m] moving at (vn, ve, vd) [m/s]."""
+        distance = math.sqrt(pn * pn + pe * pe + pd * pd)
+        if self.released or distance < _MIN_DISTANCE_M:
+            self.tension_n = 0.0
+            return 0.0, 0.0, 0.0
+        inv = 1.0 / distance
+        radial_rate = (pn * vn + pe * ve + pd * vd) * inv
+        self.tension_n = tension = self.taut_tension_n(distance, radial_rate)
+        scale = -tension * inv
+        return scale * pn, scale * pe, scale * pd
+
+
+class NoCable(_CableBase):
+    """No tether at all (free flight): zero force, zero tension."""
+
+    def __init__(self) -> None:
+        super().__init__(0.0, 0.0, 0.0, 0.0)
+        self.released = True
+
+    def force_components(
+        self, pn: float, pe: float, pd: float, vn: float, ve: float, vd: float
+    ) -> tuple[float, float, float]:
+        """Always (0, 0, 0) [N]."""
+        return 0.0, 0.0, 0.0
+
+
+def make_cable(config: CableConfig, gravity_mps2: float = GRAVITY_MPS2) -> CableModel:
+    """Build the cable model a scenario's ``cable`` section asks for."""
+    if config.model == "constant_tension":
+        return ConstantTensionCable(config.tension_n, spool_length_m=config.spool_length_m)
+    if config.model == "none":
+        return NoCable()
+    kwargs = {
+        "winch_rate_mps": config.winch_rate_mps,
+        "min_length_m": config.min_length_m,
+        "spool_length_m": config.spool_length_m,
+        "gravity_mps2": gravity_mps2,
+    }
+    return ElasticCable(
+        config.length_m,
+        config.stiffness_n_per_m,
+        config.damping_n_s_per_m,
+        config.linear_density_kg_per_m,
+        **kwargs,
+    )

@@ -1,0 +1,262 @@
+"""Cascaded multicopter controller: position -> velocity -> attitude -> body rates -> PWM.
+
+Loops (all gains in the ``controller`` section of a scenario)::
+
+    v_cmd   = v_ff + K_p (p_sp - p)                       (clamped to max speeds)
+    a_cmd   = a_ff + K_v (v_cmd - v) + I,  dI/dt = K_i (v_cmd - v)   (I clamped: anti-windup)
+    F_des   = m (a_cmd - (0, 0, g))                       thrust vector wanted, NED [N]
+    roll_d  = asin(F_y / |F|),  pitch_d = atan2(-F_x, -F_d)   (F rotated by -yaw; tilt clamped)
+    T       = -F_des . z_b                                (collective along the current body -z)
+    rates   = E^-1 (K_att (euler_d - euler))              (eq. 5 inverted)
+    tau     = J K_rate (rates_cmd - omega) + omega x J omega
+    motor thrusts = mixer(T, tau);  PWM = inverse thrust curve, whole microseconds
+
+The integral term is what holds the drone against the cable's pull, which the controller does
+not know. A set-point on the ground (``p_d >= -landed_threshold``) is a landing: the drone
+descends at least at ``landing_speed_mps`` until it touches down, then the motors idle. While
+landed the integrators are held at zero.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.config import spec
+from tether_companion.physics.motors import MotorMixer
+from tether_companion.physics.vehicle import VehicleProfile
+
+FloatArray = NDArray[np.float64]
+Vector3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True, slots=True)
+class Setpoint:
+    """What the vehicle is asked to do, NED frame.
+
+    ``position_ned_m`` given: fly there, with ``velocity_ned_m_s`` and ``acceleration_ned_mps2``
+    as feed-forward. Only ``velocity_ned_m_s``: fly at that velocity. Neither: hold the
+    position where the set-point was received. ``yaw_rad`` None: hold the current yaw.
+    """
+
+    position_ned_m: Vector3 | None = None
+    velocity_ned_m_s: Vector3 | None = None
+    acceleration_ned_mps2: Vector3 | None = None
+    yaw_rad: float | None = None
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """The ``controller`` section of a scenario: loop rate, gains and limits."""
+
+    rate_hz: float = spec(250.0, exclusive_minimum=0.0, doc="controller update rate [Hz]")
+    position_gain_xy_per_s: float = spec(
+        2.0, exclusive_minimum=0.0, doc="horizontal position gain [1/s]"
+    )
+    position_gain_z_per_s: float = spec(
+        2.0, exclusive_minimum=0.0, doc="vertical position gain [1/s]"
+    )
+    velocity_gain_xy_per_s: float = spec(
+        6.0, exclusive_minimum=0.0, doc="horizontal velocity gain [1/s]"
+    )
+    velocity_gain_z_per_s: float = spec(
+        6.0, exclusive_minimum=0.0, doc="vertical velocity gain [1/s]"
+    )
+    velocity_integral_xy_per_s2: float = spec(
+        6.0, minimum=0.0, doc="horizontal velocity-error integral gain [1/s^2]"
+    )
+    velocity_integral_z_per_s2: float = spec(
+        6.0, minimum=0.0, doc="vertical velocity-error integral gain [1/s^2]"
+    )
+    max_integral_mps2: float = spec(8.0, minimum=0.0, doc="integrator limit per axis [m/s^2]")
+    attitude_gain_per_s: float = spec(
+        10.0, exclusive_minimum=0.0, doc="roll/pitch angle gain [1/s]"
+    )
+    yaw_gain_per_s: float = spec(3.0, exclusive_minimum=0.0, doc="yaw angle gain [1/s]")
+    rate_gain_per_s: float = spec(25.0, exclusive_minimum=0.0, doc="roll/pitch rate gain [1/s]")
+    yaw_rate_gain_per_s: float = spec(8.0, exclusive_minimum=0.0, doc="yaw rate gain [1/s]")
+    max_tilt_deg: float = spec(
+        35.0, exclusive_minimum=0.0, maximum=80.0, doc="largest commanded tilt [deg]"
+    )
+    max_speed_xy_mps: float = spec(
+        5.0, exclusive_minimum=0.0, doc="largest commanded horizontal speed [m/s]"
+    )
+    max_speed_z_mps: float = spec(
+        2.5, exclusive_minimum=0.0, doc="largest commanded vertical speed [m/s]"
+    )
+    max_rate_rad_s: float = spec(
+        4.0, exclusive_minimum=0.0, doc="largest commanded roll/pitch rate [rad/s]"
+    )
+    max_yaw_rate_rad_s: float = spec(
+        1.5, exclusive_minimum=0.0, doc="largest commanded yaw rate [rad/s]"
+    )
+    landing_speed_mps: float = spec(
+        0.5, exclusive_minimum=0.0, doc="least descent speed toward a set-point on the ground [m/s]"
+    )
+    landed_threshold_m: float = spec(
+        0.1, minimum=0.0, doc="a set-point this close to the ground keeps a landed drone idle [m]"
+    )
+
+
+def _clamp(value: float, limit: float) -> float:
+    return max(-limit, min(limit, value))
+
+
+def _wrap(angle_rad: float) -> float:
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
+class CascadedController:
+    """The cascade of the module docstring, for one vehicle.
+
+    Parameters
+    ----------
+    config
+        Gains and limits.
+    vehicle
+        Mass, inertia and motors (the controller knows the vehicle, not the cable).
+    gravity_mps2
+        Gravitational acceleration [m/s^2].
+    """
+
+    def __init__(
+        self, config: ControllerConfig, vehicle: VehicleProfile, gravity_mps2: float
+    ) -> None:
+        self.config = config
+        self.vehicle = vehicle
+        self.mixer = MotorMixer(vehicle)
+        self.gravity_mps2 = float(gravity_mps2)
+        self.mass_kg = float(vehicle.mass_kg)
+        self._inertia = tuple(float(j) for j in vehicle.inertia_kg_m2)
+        self._tan_max_tilt = math.tan(math.radians(config.max_tilt_deg))
+        self.integral_ned_mps2 = [0.0, 0.0, 0.0]
+        self.setpoint = Setpoint()
+        self._hold_position: Vector3 | None = None
+        self._hold_yaw_rad: float | None = None
+        self.last_pwm_us = self.mixer.idle_pwm_us()
+
+    def set_setpoint(self, setpoint: Setpoint) -> None:
+        """Replace the set-point; holds (position, yaw) are latched at the next update."""
+        self.setpoint = setpoint
+        self._hold_position = None
+        self._hold_yaw_rad = None
+
+    def reset(self) -> None:
+        """Zero the integrators."""
+        self.integral_ned_mps2 = [0.0, 0.0, 0.0]
+
+    def preload_integral(self, acceleration_ned_mps2: Vector3) -> None:
+        """Start the integrators at a trim acceleration [m/s^2] (e.g. for a start in flight)."""
+        limit = self.config.max_integral_mps2
+        self.integral_ned_mps2 = [_clamp(float(a), limit) for a in acceleration_ned_mps2]
+
+    def idle(self) -> FloatArray:
+        """Motors stopped (disarmed or landed idle): reset and return pwm_min on every output."""
+        self.reset()
+        self.last_pwm_us = self.mixer.idle_pwm_us()
+        return self.last_pwm_us
+
+    def update(
+        self,
+        dt_s: float,
+        position_ned_m: Vector3,
+        velocity_ned_m_s: Vector3,
+        euler_rad: Vector3,
+        body_rates_rad_s: Vector3,
+        *,
+        landed: bool = False,
+    ) -> FloatArray:
+        """One controller step; returns the PWM outputs (n_motors,) in whole microseconds."""
+        c = self.config
+        sp = self.setpoint
+        roll, pitch, yaw = euler_rad
+        if self._hold_yaw_rad is None:
+            self._hold_yaw_rad = yaw
+        yaw_sp = self._hold_yaw_rad if sp.yaw_rad is None else sp.yaw_rad
+
+        # position -> velocity command
+        if sp.position_ned_m is not None:
+            target = sp.position_ned_m
+        elif sp.velocity_ned_m_s is None:
+            if self._hold_position is None:
+                self._hold_position = tuple(position_ned_m)  # type: ignore[assignment]
+            target = self._hold_position
+        else:
+            target = None
+        if landed and (target is None or target[2] >= -c.landed_threshold_m):
+            return self.idle()
+        v_ff = sp.velocity_ned_m_s or (0.0, 0.0, 0.0)
+        if target is None:
+            v_cmd = list(v_ff)
+        else:
+            kxy, kz = c.position_gain_xy_per_s, c.position_gain_z_per_s
+            v_cmd = [
+                v_ff[0] + kxy * (target[0] - position_ned_m[0]),
+                v_ff[1] + kxy * (target[1] - position_ned_m[1]),
+                v_ff[2] + kz * (target[2] - position_ned_m[2]),
+            ]
+        speed_xy = math.hypot(v_cmd[0], v_cmd[1])
+        if speed_xy > c.max_speed_xy_mps:
+            v_cmd[0] *= c.max_speed_xy_mps / speed_xy
+            v_cmd[1] *= c.max_speed_xy_mps / speed_xy
+        if target is not None and target[2] >= -c.landed_threshold_m:
+            v_cmd[2] = max(v_cmd[2], c.landing_speed_mps)
+        v_cmd[2] = _clamp(v_cmd[2], c.max_speed_z_mps)
+
+        # velocity -> acceleration command (PI), anti-windup by clamping
+        a_ff = sp.acceleration_ned_mps2 or (0.0, 0.0, 0.0)
+        gains = (c.velocity_gain_xy_per_s, c.velocity_gain_xy_per_s, c.velocity_gain_z_per_s)
+        igains = (
+            c.velocity_integral_xy_per_s2,
+            c.velocity_integral_xy_per_s2,
+            c.velocity_integral_z_per_s2,
+        )
+        integral = self.integral_ned_mps2
+        a_cmd = [0.0, 0.0, 0.0]
+        for i in range(3):
+            error = v_cmd[i] - velocity_ned_m_s[i]
+            if not landed:
+                integral[i] = _clamp(integral[i] + igains[i] * error * dt_s, c.max_integral_mps2)
+            a_cmd[i] = a_ff[i] + gains[i] * error + integral[i]
+
+        # acceleration -> thrust vector -> attitude set-point
+        g = self.gravity_mps2
+        fn, fe = self.mass_kg * a_cmd[0], self.mass_kg * a_cmd[1]
+        fd = min(self.mass_kg * (a_cmd[2] - g), -0.1 * self.mass_kg * g)
+        horizontal = math.hypot(fn, fe)
+        limit = self._tan_max_tilt * -fd
+        if horizontal > limit:
+            fn *= limit / horizontal
+            fe *= limit / horizontal
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        fx = cy * fn + sy * fe
+        fy = -sy * fn + cy * fe
+        magnitude = math.sqrt(fn * fn + fe * fe + fd * fd)
+        roll_sp = math.asin(fy / magnitude)
+        pitch_sp = math.atan2(-fx, -fd)
+        cr, sr = math.cos(roll), math.sin(roll)
+        cp, sp_ = math.cos(pitch), math.sin(pitch)
+        # body z axis in NED: third row of R_v^b
+        zb = (cr * sp_ * cy + sr * sy, cr * sp_ * sy - sr * cy, cr * cp)
+        collective = max(-(fn * zb[0] + fe * zb[1] + fd * zb[2]), 0.0)
+
+        # attitude -> body rates (eq. 5 inverted) -> torques
+        droll = c.attitude_gain_per_s * (roll_sp - roll)
+        dpitch = c.attitude_gain_per_s * (pitch_sp - pitch)
+        dyaw = _clamp(c.yaw_gain_per_s * _wrap(yaw_sp - yaw), c.max_yaw_rate_rad_s)
+        p_cmd = _clamp(droll - sp_ * dyaw, c.max_rate_rad_s)
+        q_cmd = _clamp(cr * dpitch + sr * cp * dyaw, c.max_rate_rad_s)
+        r_cmd = _clamp(-sr * dpitch + cr * cp * dyaw, c.max_yaw_rate_rad_s)
+        p, q, r = body_rates_rad_s
+        jx, jy, jz = self._inertia
+        torque = (
+            jx * c.rate_gain_per_s * (p_cmd - p) + (jz - jy) * q * r,
+            jy * c.rate_gain_per_s * (q_cmd - q) + (jx - jz) * p * r,
+            jz * c.yaw_rate_gain_per_s * (r_cmd - r) + (jy - jx) * p * q,
+        )
+        thrusts = self.mixer.motor_thrusts_n(collective, torque)
+        self.last_pwm_us = self.mixer.pwm_us(thrusts)
+        return self.last_pwm_us

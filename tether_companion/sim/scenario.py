@@ -1,0 +1,143 @@
+"""Scenarios: everything an offline or emulated run needs, loaded from validated YAML.
+
+A scenario file (``sitl/scenarios/NAME.yaml``) has the top-level keys of :class:`Scenario`;
+each section is a frozen dataclass, so variants are made with :func:`dataclasses.replace`::
+
+    base = load_scenario("paper-circle")
+    strong = replace(base, cable=replace(base.cable, tension_n=10.0))
+
+Unknown keys, wrong types and out-of-range values raise
+:class:`tether_companion.config.ConfigError` naming the file, the key, the value and what is
+allowed. Every key is listed in docs/simulator.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from tether_companion.config import ConfigError, from_mapping, read_yaml, spec
+from tether_companion.physics.cable import CableConfig
+from tether_companion.resources import SCENARIOS_DIR, builtin_path
+from tether_companion.sim.controller import ControllerConfig
+from tether_companion.sim.events import Event
+from tether_companion.sim.sensors import SensorConfig
+from tether_companion.sim.trajectory import TrajectoryConfig
+
+MIN_PHYSICS_RATE_HZ = 500.0
+
+
+@dataclass(frozen=True)
+class WindConfig:
+    """The ``wind`` section: a steady wind, acting through the vehicle's linear drag."""
+
+    velocity_ned_m_s: tuple[float, float, float] = spec(
+        (0.0, 0.0, 0.0), minimum=-30.0, maximum=30.0, doc="wind velocity, NED [m/s]"
+    )
+
+
+@dataclass(frozen=True)
+class HomeConfig:
+    """The ``home`` section: where the tether anchor is on Earth (for MAVLink)."""
+
+    latitude_deg: float = spec(32.2828, minimum=-90.0, maximum=90.0, doc="anchor latitude [deg]")
+    longitude_deg: float = spec(
+        -106.7478, minimum=-180.0, maximum=180.0, doc="anchor longitude [deg]"
+    )
+    altitude_m: float = spec(1200.0, minimum=-500.0, maximum=9000.0, doc="anchor altitude AMSL [m]")
+
+
+@dataclass(frozen=True)
+class InitialConfig:
+    """The ``initial`` section: how the run starts.
+
+    ``airborne: true`` starts armed at the trajectory's first set-point, moving with it, level,
+    the motors and the controller's integrators trimmed against gravity and the cable.
+    ``airborne: false`` starts landed at ``position_ned_m`` (its down is forced to 0), armed
+    only if ``armed`` is true.
+    """
+
+    airborne: bool = spec(True, doc="start in trimmed flight at the trajectory's start")
+    position_ned_m: tuple[float, float, float] = spec(
+        (0.0, 0.0, 0.0), doc="landed start position (down ignored, on the ground) [m]"
+    )
+    armed: bool = spec(True, doc="armed at the start (a landed start may wait for arm())")
+    yaw_deg: float = spec(0.0, minimum=-180.0, maximum=180.0, doc="initial heading [deg]")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A complete simulation set-up (see docs/simulator.md for every key)."""
+
+    duration_s: float = spec(60.0, exclusive_minimum=0.0, maximum=86400.0, doc="run length [s]")
+    seed: int = spec(0, minimum=0, doc="seed of the simulator's random generator")
+    physics_rate_hz: float = spec(
+        1000.0, minimum=MIN_PHYSICS_RATE_HZ, maximum=20000.0, doc="RK4 integration rate [Hz]"
+    )
+    vehicle: str = spec("default-quad", doc="vehicle profile: built-in name or YAML path")
+    cable: CableConfig = spec(default_factory=CableConfig, doc="tether model")
+    sensors: SensorConfig = spec(default_factory=SensorConfig, doc="sensor rates and noise")
+    trajectory: TrajectoryConfig = spec(
+        default_factory=TrajectoryConfig, doc="reference trajectory"
+    )
+    controller: ControllerConfig = spec(default_factory=ControllerConfig, doc="cascaded controller")
+    wind: WindConfig = spec(default_factory=WindConfig, doc="steady wind")
+    events: tuple[Event, ...] = spec((), doc="timed ground-station events")
+    home: HomeConfig = spec(default_factory=HomeConfig, doc="anchor location")
+    initial: InitialConfig = spec(default_factory=InitialConfig, doc="initial condition")
+
+    def validate(self) -> None:
+        """Cross-section checks: controller rate divides the physics rate; events fit the cable."""
+        steps = self.physics_rate_hz / self.controller.rate_hz
+        if abs(steps - round(steps)) > 1e-9 or round(steps) < 1:
+            raise ConfigError(
+                "",
+                "controller.rate_hz",
+                self.controller.rate_hz,
+                f"must divide physics_rate_hz ({self.physics_rate_hz}) into whole steps",
+            )
+        for i, event in enumerate(self.events):
+            if event.kind == "set_tension" and self.cable.model != "constant_tension":
+                raise ConfigError(
+                    "",
+                    f"events[{i}].kind",
+                    event.kind,
+                    f"'set_tension' needs cable.model constant_tension (got {self.cable.model!r})",
+                )
+            if event.time_s > self.duration_s:
+                raise ConfigError(
+                    "",
+                    f"events[{i}].time_s",
+                    event.time_s,
+                    f"must be <= duration_s ({self.duration_s})",
+                )
+
+    @property
+    def controller_steps(self) -> int:
+        """Physics steps per controller update."""
+        return round(self.physics_rate_hz / self.controller.rate_hz)
+
+
+def load_scenario(path_or_name: str | Path) -> Scenario:
+    """Load a scenario by built-in name (``sitl/scenarios/NAME.yaml``) or file path.
+
+    A relative ``vehicle`` path in the file is resolved against the file's folder.
+
+    Raises
+    ------
+    ConfigError
+        When the file is missing or not YAML, or any key is unknown, mistyped or out of range.
+    """
+    path = Path(path_or_name)
+    if not path.suffix and not path.is_file():
+        try:
+            path = builtin_path(SCENARIOS_DIR, str(path_or_name))
+        except FileNotFoundError as exc:
+            raise ConfigError(str(path_or_name), "", str(path_or_name), str(exc)) from None
+    data = dict(read_yaml(path))
+    vehicle = data.get("vehicle")
+    if isinstance(vehicle, str) and Path(vehicle).suffix:
+        candidate = path.parent / vehicle
+        if candidate.is_file():
+            data["vehicle"] = str(candidate.resolve())
+    return from_mapping(Scenario, data, source=str(path))

@@ -1,0 +1,185 @@
+"""Simulated sensors: accelerometer, gyro, attitude, PWM outputs and a downward rangefinder.
+
+Noise defaults follow Al-Radaideh & Sun (2021), section 6, read as variances in SI units
+(see docs/simulator.md): accelerometer sigma^2 = 0.01 (m/s^2)^2 per axis (sigma = 0.1 m/s^2),
+ultrasound sigma^2 = 0.1 m^2 (sigma = 0.316 m), gyro and attitude sigma^2 = 0.01 deg^2
+(sigma = 0.1 deg, per second for the gyro). All randomness comes from one
+``numpy.random.Generator`` (drawn in blocks by :class:`NormalStream`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.config import ConfigError, spec
+from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
+
+FloatArray = NDArray[np.float64]
+
+_PAPER_ACCEL_STD_MPS2 = math.sqrt(0.01)
+_PAPER_RANGE_STD_M = math.sqrt(0.1)
+_PAPER_ANGLE_STD_RAD = math.radians(math.sqrt(0.01))
+_MIN_TILT_COSINE = 0.1
+"""Rangefinder beam tilted beyond acos(0.1) ~ 84 deg from vertical never sees the ground."""
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """The ``sensors`` section of a scenario: rates and noise (SI units)."""
+
+    imu_rate_hz: float = spec(
+        200.0, exclusive_minimum=0.0, maximum=2000.0, doc="IMU sample rate [Hz]"
+    )
+    attitude_rate_hz: float = spec(
+        200.0, exclusive_minimum=0.0, maximum=2000.0, doc="attitude rate [Hz]"
+    )
+    pwm_rate_hz: float = spec(
+        200.0, exclusive_minimum=0.0, maximum=2000.0, doc="PWM output report rate [Hz]"
+    )
+    range_rate_hz: float = spec(
+        200.0, exclusive_minimum=0.0, maximum=2000.0, doc="rangefinder rate [Hz]"
+    )
+    accel_noise_std_mps2: float = spec(
+        _PAPER_ACCEL_STD_MPS2, minimum=0.0, doc="accelerometer white noise sigma per axis [m/s^2]"
+    )
+    accel_bias_mps2: tuple[float, float, float] = spec(
+        (0.0, 0.0, 0.0), minimum=-5.0, maximum=5.0, doc="constant accelerometer bias, FRD [m/s^2]"
+    )
+    accel_vibration_amplitude_mps2: float = spec(
+        0.0,
+        minimum=0.0,
+        doc="amplitude of a sinusoidal vibration on each accelerometer axis [m/s^2]",
+    )
+    accel_vibration_frequency_hz: float = spec(
+        120.0, exclusive_minimum=0.0, doc="vibration frequency [Hz]"
+    )
+    gyro_noise_std_rad_s: float = spec(
+        _PAPER_ANGLE_STD_RAD, minimum=0.0, doc="gyro white noise sigma per axis [rad/s]"
+    )
+    gyro_bias_rad_s: tuple[float, float, float] = spec(
+        (0.0, 0.0, 0.0), minimum=-1.0, maximum=1.0, doc="constant gyro bias, FRD [rad/s]"
+    )
+    attitude_noise_std_rad: float = spec(
+        _PAPER_ANGLE_STD_RAD, minimum=0.0, doc="attitude (roll, pitch, yaw) noise sigma [rad]"
+    )
+    range_noise_std_m: float = spec(
+        _PAPER_RANGE_STD_M, minimum=0.0, doc="rangefinder noise sigma [m]"
+    )
+    range_min_m: float = spec(
+        0.05, minimum=0.0, doc="shortest distance the rangefinder reports [m]"
+    )
+    range_max_m: float = spec(
+        20.0, exclusive_minimum=0.0, doc="longest distance the rangefinder reports [m]"
+    )
+
+    def validate(self) -> None:
+        """The rangefinder's range must not be empty."""
+        if self.range_max_m <= self.range_min_m:
+            raise ConfigError(
+                "", "range_max_m", self.range_max_m, f"must be > range_min_m ({self.range_min_m})"
+            )
+
+
+class NormalStream:
+    """Standard normal numbers drawn from a Generator in blocks (cheap per-sample draws).
+
+    The sequence is a deterministic function of the Generator's state: the same seed gives the
+    same numbers.
+    """
+
+    def __init__(self, rng: np.random.Generator, block: int = 4096) -> None:
+        self._rng = rng
+        self._block = block
+        self._buffer: list[float] = []
+        self._index = 0
+
+    def take(self) -> float:
+        """The next standard normal number."""
+        if self._index >= len(self._buffer):
+            self._buffer = self._rng.standard_normal(self._block).tolist()
+            self._index = 0
+        value = self._buffer[self._index]
+        self._index += 1
+        return value
+
+
+class SensorSuite:
+    """Turns noise-free truth into sensor samples (pure apart from the noise stream).
+
+    Parameters
+    ----------
+    config
+        Noise levels, biases, vibration and rangefinder limits.
+    rng
+        The simulator's Generator; vibration phases are drawn from it at construction.
+    """
+
+    def __init__(self, config: SensorConfig, rng: np.random.Generator) -> None:
+        self.config = config
+        self._noise = NormalStream(rng)
+        self._vibration_phase_rad = tuple(float(v) for v in rng.uniform(0.0, 2.0 * math.pi, 3))
+        self._vibration_omega_rad_s = 2.0 * math.pi * config.accel_vibration_frequency_hz
+
+    def imu(
+        self,
+        time_s: float,
+        specific_force_body_mps2: tuple[float, float, float],
+        body_rates_rad_s: tuple[float, float, float],
+    ) -> ImuSample:
+        """Accelerometer (truth + bias + vibration + noise) and gyro (truth + bias + noise)."""
+        c = self.config
+        take = self._noise.take
+        sa, sg = c.accel_noise_std_mps2, c.gyro_noise_std_rad_s
+        amp = c.accel_vibration_amplitude_mps2
+        accel = [
+            f + b + sa * take()
+            for f, b in zip(specific_force_body_mps2, c.accel_bias_mps2, strict=True)
+        ]
+        if amp > 0.0:
+            wt = self._vibration_omega_rad_s * time_s
+            accel = [
+                a + amp * math.sin(wt + ph)
+                for a, ph in zip(accel, self._vibration_phase_rad, strict=True)
+            ]
+        gyro = [
+            w + b + sg * take() for w, b in zip(body_rates_rad_s, c.gyro_bias_rad_s, strict=True)
+        ]
+        return ImuSample(time_s, np.array(accel), np.array(gyro))
+
+    def attitude(
+        self, time_s: float, roll_rad: float, pitch_rad: float, yaw_rad: float
+    ) -> AttitudeSample:
+        """Euler angles with white noise; yaw wrapped to [-pi, pi)."""
+        s = self.config.attitude_noise_std_rad
+        take = self._noise.take
+        yaw = yaw_rad + s * take()
+        yaw = (yaw + math.pi) % (2.0 * math.pi) - math.pi
+        return AttitudeSample(time_s, roll_rad + s * take(), pitch_rad + s * take(), yaw)
+
+    @staticmethod
+    def pwm(time_s: float, pwm_us: FloatArray) -> PwmSample:
+        """The motor outputs as commanded: whole microseconds, shape (n_motors,)."""
+        return PwmSample(time_s, np.rint(pwm_us))
+
+    def rangefinder(
+        self, time_s: float, height_m: float, roll_rad: float, pitch_rad: float
+    ) -> RangeSample | None:
+        """Downward rangefinder along the body z axis over flat ground at the anchor's level.
+
+        The true distance is ``height / (cos(roll) cos(pitch))``; ``None`` when it lies outside
+        [range_min_m, range_max_m] or the beam points nearly horizontal (or up). The reported
+        value is the true distance plus noise, clipped to the sensor's range.
+        """
+        c = self.config
+        tilt = math.cos(roll_rad) * math.cos(pitch_rad)
+        if tilt < _MIN_TILT_COSINE:
+            return None
+        distance = height_m / tilt
+        if not c.range_min_m <= distance <= c.range_max_m:
+            return None
+        noisy = distance + c.range_noise_std_m * self._noise.take()
+        return RangeSample(time_s, min(max(noisy, c.range_min_m), c.range_max_m))

@@ -1,0 +1,306 @@
+"""The offline simulator: rigid body + motors + cable + controller + sensors, stepped in time.
+
+Typical offline loop (sensors at 200 Hz on a 1 kHz physics clock)::
+
+    sim = Simulator(load_scenario("paper-circle"))
+    period = 1.0 / sim.scenario.sensors.imu_rate_hz
+    for k in range(1, int(sim.scenario.duration_s / period) + 1):
+        sim.advance_to(k * period)
+        imu, att = sim.read_imu(), sim.read_attitude()
+        pwm, rng = sim.read_pwm(), sim.read_rangefinder()
+
+The simulator follows the scenario's trajectory until :meth:`Simulator.set_setpoint` is
+called; from then on it flies the set-points it is sent (the emulator's mode).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tether_companion.constants import GRAVITY_MPS2
+from tether_companion.frames import rotation_ned_to_body
+from tether_companion.physics.cable import CableModel, make_cable
+from tether_companion.physics.rigid_body import (
+    BODY_RATES,
+    EULER,
+    N_RIGID_STATES,
+    POSITION,
+    RigidBody,
+)
+from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
+from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
+from tether_companion.sim.controller import CascadedController, Setpoint
+from tether_companion.sim.events import Event
+from tether_companion.sim.scenario import Scenario
+from tether_companion.sim.sensors import SensorSuite
+from tether_companion.sim.trajectory import Trajectory
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class TruthState:
+    """Noise-free state of the simulated vehicle at ``time_s`` (SI units, NED/FRD)."""
+
+    time_s: float
+    position_ned_m: FloatArray
+    """Position of the drone relative to the anchor, NED, shape (3,) [m]."""
+    velocity_ned_m_s: FloatArray
+    """Velocity, NED, shape (3,) [m/s]."""
+    euler_rad: FloatArray
+    """(roll, pitch, yaw), shape (3,) [rad]."""
+    body_rates_rad_s: FloatArray
+    """(p, q, r), FRD, shape (3,) [rad/s]."""
+    motor_thrust_n: FloatArray
+    """Each motor's thrust, shape (n_motors,) [N]."""
+    pwm_us: FloatArray
+    """PWM outputs, whole microseconds, shape (n_motors,) [us]."""
+    cable_force_ned_n: FloatArray
+    """Force of the cable on the drone, NED, shape (3,) [N]."""
+    tension_n: float
+    """Cable tension at the drone end [N]."""
+    specific_force_body_mps2: FloatArray
+    """Accelerometer specific force without noise or bias, FRD, shape (3,) [m/s^2]."""
+    landed: bool
+    """True while the drone rests on the ground."""
+
+
+class Simulator:
+    """A tethered quadcopter flying a scenario.
+
+    Parameters
+    ----------
+    scenario
+        The set-up (see :mod:`tether_companion.sim.scenario`).
+    vehicle
+        Overrides the scenario's vehicle profile when given.
+    rng
+        The one Generator every noise draw comes from; default ``default_rng(scenario.seed)``.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        vehicle: VehicleProfile | None = None,
+        rng: np.random.Generator | None = None,
+    ) -> None:
+        self.scenario = scenario
+        self.vehicle = vehicle if vehicle is not None else load_vehicle(scenario.vehicle)
+        self.rng = rng if rng is not None else np.random.default_rng(scenario.seed)
+        self.gravity_mps2 = GRAVITY_MPS2
+        self.physics_dt_s = 1.0 / scenario.physics_rate_hz
+        self.cable: CableModel = make_cable(scenario.cable, self.gravity_mps2)
+        self.body = RigidBody(self.vehicle, self.cable.force_components, self.gravity_mps2)
+        self.body.wind_ned_m_s = tuple(float(v) for v in scenario.wind.velocity_ned_m_s)  # type: ignore[assignment]
+        self.controller = CascadedController(scenario.controller, self.vehicle, self.gravity_mps2)
+        self.trajectory = Trajectory(scenario.trajectory)
+        self.sensors = SensorSuite(scenario.sensors, self.rng)
+        self.follow_trajectory = scenario.trajectory.kind != "none"
+        self.navigation_position_override: tuple[float, float, float] | None = None
+        self.armed = False
+        self._curve = self.vehicle.thrust_curve
+        self._controller_steps = scenario.controller_steps
+        self._controller_dt_s = self._controller_steps * self.physics_dt_s
+        self._steps = 0
+        self._events = sorted(scenario.events, key=lambda e: e.time_s)
+        self._next_event = 0
+        self._tug_end_s = math.inf
+        self._pwm_us = self.controller.idle()
+        self._steady_thrust_n = self._thrusts_for(self._pwm_us)
+        self._cache_step = -1
+        self._specific_force: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self._initialise()
+
+    # ------------------------------------------------------------------ set-up
+    def _thrusts_for(self, pwm_us: FloatArray) -> list[float]:
+        return self._curve.thrust_n(pwm_us).tolist()
+
+    def _initialise(self) -> None:
+        init = self.scenario.initial
+        n = self.vehicle.n_motors
+        idle_thrust = self._steady_thrust_n
+        if not init.airborne:
+            state = [0.0] * N_RIGID_STATES + idle_thrust
+            state[0], state[1] = init.position_ned_m[0], init.position_ned_m[1]
+            state[8] = math.radians(init.yaw_deg)
+            self.body.set_state(state, landed=True)
+            self.armed = init.armed
+            return
+        sp = self.trajectory.setpoint_at(0.0)
+        position = sp.position_ned_m if sp.position_ned_m is not None else (0.0, 0.0, -2.0)
+        velocity = sp.velocity_ned_m_s or (0.0, 0.0, 0.0)
+        accel = sp.acceleration_ned_mps2 or (0.0, 0.0, 0.0)
+        yaw = sp.yaw_rad if sp.yaw_rad is not None else math.radians(init.yaw_deg)
+        m, g = self.vehicle.mass_kg, self.gravity_mps2
+        cable = self.cable.force_components(*position, *velocity)
+        thrust_ned = [m * accel[i] - cable[i] for i in range(3)]
+        thrust_ned[2] -= m * g
+        collective = math.sqrt(sum(f * f for f in thrust_ned))
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        fx = cy * thrust_ned[0] + sy * thrust_ned[1]
+        fy = -sy * thrust_ned[0] + cy * thrust_ned[1]
+        roll = math.asin(fy / collective)
+        pitch = math.atan2(-fx, -thrust_ned[2])
+        body_velocity = rotation_ned_to_body(roll, pitch, yaw) @ np.asarray(velocity)
+        state = [*position, *body_velocity.tolist(), roll, pitch, yaw, 0.0, 0.0, 0.0]
+        per_motor = collective / n
+        self.body.set_state(state + [per_motor] * n)
+        self.controller.preload_integral((-cable[0] / m, -cable[1] / m, -cable[2] / m))
+        self._pwm_us = self.controller.mixer.pwm_us(np.full(n, per_motor))
+        self._steady_thrust_n = self._thrusts_for(self._pwm_us)
+        self.armed = True
+
+    # ------------------------------------------------------------------ time
+    @property
+    def time_s(self) -> float:
+        """Simulation time since the start [s] (the flight controller's clock)."""
+        return self._steps * self.physics_dt_s
+
+    def step(self) -> None:
+        """One physics step: events, controller (at its rate), RK4 with motor lag, cable, ground."""
+        t = self.time_s
+        dt = self.physics_dt_s
+        while (
+            self._next_event < len(self._events)
+            and self._events[self._next_event].time_s <= t + 0.5 * dt
+        ):
+            self._apply_event(self._events[self._next_event])
+            self._next_event += 1
+        if t >= self._tug_end_s - 0.5 * dt:
+            self.body.tug_force_ned_n = (0.0, 0.0, 0.0)
+            self._tug_end_s = math.inf
+        if self._steps % self._controller_steps == 0:
+            self._update_controller(t)
+        self.body.step(dt, self._steady_thrust_n)
+        self.cable.advance(dt)
+        self._steps += 1
+
+    def advance_to(self, time_s: float) -> None:
+        """Step until the simulation time reaches ``time_s`` [s] (to the nearest physics step)."""
+        target = round(time_s / self.physics_dt_s)
+        while self._steps < target:
+            self.step()
+
+    def _update_controller(self, t: float) -> None:
+        if not self.armed:
+            pwm = self.controller.idle()
+        else:
+            if self.follow_trajectory:
+                self.controller.set_setpoint(self.trajectory.setpoint_at(t))
+            x = self.body.x
+            position = self.navigation_position_override or (x[0], x[1], x[2])
+            pwm = self.controller.update(
+                self._controller_dt_s,
+                position,
+                self.body.velocity_ned_m_s(),
+                (x[6], x[7], x[8]),
+                (x[9], x[10], x[11]),
+                landed=self.body.landed,
+            )
+        if not np.array_equal(pwm, self._pwm_us):
+            self._pwm_us = pwm
+            self._steady_thrust_n = self._thrusts_for(pwm)
+
+    # ------------------------------------------------------------------ truth
+    @property
+    def landed(self) -> bool:
+        """True while the drone rests on the ground plane."""
+        return self.body.landed
+
+    def _specific_force_now(self) -> tuple[float, float, float]:
+        if self._cache_step != self._steps:
+            self._specific_force = self.body.specific_force_body_mps2()
+            self._cache_step = self._steps
+        return self._specific_force
+
+    @property
+    def truth(self) -> TruthState:
+        """The noise-free state now (arrays are fresh copies)."""
+        state = self.body.state
+        specific_force = self._specific_force_now()
+        velocity = self.body.velocity_ned_m_s()
+        cable = self.cable.force_components(*state[POSITION].tolist(), *velocity)
+        return TruthState(
+            time_s=self.time_s,
+            position_ned_m=state[POSITION].copy(),
+            velocity_ned_m_s=np.array(velocity),
+            euler_rad=state[EULER].copy(),
+            body_rates_rad_s=state[BODY_RATES].copy(),
+            motor_thrust_n=state[N_RIGID_STATES:].copy(),
+            pwm_us=self._pwm_us.copy(),
+            cable_force_ned_n=np.array(cable),
+            tension_n=self.cable.tension_n,
+            specific_force_body_mps2=np.array(specific_force),
+            landed=self.body.landed,
+        )
+
+    # ------------------------------------------------------------------ sensors
+    def read_imu(self) -> ImuSample:
+        """Accelerometer and gyro now, with noise, bias and vibration from the scenario."""
+        x = self.body.x
+        return self.sensors.imu(self.time_s, self._specific_force_now(), (x[9], x[10], x[11]))
+
+    def read_attitude(self) -> AttitudeSample:
+        """Roll, pitch, yaw now, with noise."""
+        x = self.body.x
+        return self.sensors.attitude(self.time_s, x[6], x[7], x[8])
+
+    def read_pwm(self) -> PwmSample:
+        """The PWM outputs now [us], whole microseconds, in the vehicle's motor order."""
+        return self.sensors.pwm(self.time_s, self._pwm_us)
+
+    def read_rangefinder(self) -> RangeSample | None:
+        """Downward rangefinder now (tilted beam, flat ground), or None when out of range."""
+        x = self.body.x
+        return self.sensors.rangefinder(self.time_s, -x[2], x[6], x[7])
+
+    # ------------------------------------------------------------------ flight control
+    def arm(self) -> None:
+        """Arm the motors (the controller starts flying the current set-point)."""
+        self.armed = True
+
+    def disarm(self) -> None:
+        """Disarm: motors to pwm_min at the next controller update (the drone falls if airborne)."""
+        self.armed = False
+
+    def set_setpoint(self, setpoint: Setpoint) -> None:
+        """Fly this set-point from now on (stops following the scenario's trajectory)."""
+        self.follow_trajectory = False
+        self.controller.set_setpoint(setpoint)
+
+    # ------------------------------------------------------------------ ground-station events
+    def set_tension_n(self, tension_n: float) -> None:
+        """Set the winch tension [N] (constant-tension cable only)."""
+        self.cable.set_tension_n(tension_n)
+
+    def set_winch_rate_mps(self, rate_mps: float) -> None:
+        """Set the winch rate [m/s], positive paying out."""
+        self.cable.set_winch_rate_mps(rate_mps)
+
+    def apply_tug(self, force_ned_n: ArrayLike, duration_s: float) -> None:
+        """Pull on the drone with an extra NED force [N] for ``duration_s`` seconds from now."""
+        force = np.asarray(force_ned_n, dtype=float).reshape(3)
+        if not (np.all(np.isfinite(force)) and math.isfinite(duration_s) and duration_s > 0.0):
+            raise ValueError(
+                f"tug needs a finite force and a duration > 0 s, got {force}, {duration_s!r}"
+            )
+        self.body.tug_force_ned_n = tuple(force.tolist())  # type: ignore[assignment]
+        self._tug_end_s = self.time_s + duration_s
+
+    def release_tether(self) -> None:
+        """Let the tether go: no cable force from now on."""
+        self.cable.release()
+
+    def _apply_event(self, event: Event) -> None:
+        if event.kind == "set_tension":
+            self.set_tension_n(event.tension_n)
+        elif event.kind == "winch_rate":
+            self.set_winch_rate_mps(event.winch_rate_mps)
+        elif event.kind == "tug":
+            self.apply_tug(event.force_ned_n, event.duration_s)
+        else:
+            self.release_tether()

@@ -21,11 +21,22 @@ Models
     SITL's SIM_TETH_*): when ``|p| > L`` a spring ``k (|p| - L)`` plus a damper ``c d|p|/dt``
     (never pushing); always the weight of the lifted cable ``rho g min(|p|, L)`` along the line
     toward the anchor.
+(c) :class:`CatenaryCable`: a heavy elastic cable of unstretched length ``L`` hanging as a
+    catenary (Martins 2019, section 3, case 2: known length) between the anchor and the drone,
+    quasi-static. The drone feels the catenary's end force: ``w a`` horizontally toward the
+    anchor and ``w s2`` down (eqs. 11-13), solved by
+    :func:`tether_companion.physics.catenary.solve_known_length` and ``end_tensions``. The
+    cable stretches by ``T / k`` under its drone-end tension ``T`` (solved as a fixed point), so
+    as the drone pulls the cable straight the force goes over smoothly into the taut elastic
+    line of (b). A cable long enough to reach the ground lies on it from the anchor to a
+    touchdown point and rises as a catenary whose lowest point is that touchdown point
+    (Martins case 1 over the remaining span).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -34,10 +45,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from tether_companion.config import ConfigError, spec
 from tether_companion.constants import GRAVITY_MPS2
+from tether_companion.physics.catenary import (
+    end_tensions,
+    solve_known_length,
+    solve_lowest_point_at_anchor,
+)
 
 FloatArray = NDArray[np.float64]
 
-CABLE_MODELS: tuple[str, ...] = ("constant_tension", "elastic", "none")
+CABLE_MODELS: tuple[str, ...] = ("constant_tension", "elastic", "catenary", "none")
 """Values of ``cable.model`` in a scenario."""
 
 _MIN_DISTANCE_M = 1e-9
@@ -261,6 +277,168 @@ class ElasticCable(_CableBase):
         return scale * pn, scale * pe, scale * pd
 
 
+def _bracketed_root(
+    func: Callable[[float], float], low: float, high: float, tolerance: float
+) -> float:
+    """Root of an increasing ``func`` on [low, high] (func(low) <= 0 <= func(high)).
+
+    Regula falsi with the Illinois modification (superlinear, never leaves the bracket),
+    stopping when the bracket is narrower than ``tolerance`` or ``func`` is exactly zero.
+    """
+    f_low, f_high = func(low), func(high)
+    side = 0
+    for _ in range(100):
+        if f_high - f_low <= 0.0:
+            break
+        x = high - f_high * (high - low) / (f_high - f_low)
+        if not low < x < high:
+            x = 0.5 * (low + high)
+        fx = func(x)
+        if fx == 0.0:
+            return x
+        if fx < 0.0:
+            low, f_low = x, fx
+            if side == -1:
+                f_high *= 0.5
+            side = -1
+        else:
+            high, f_high = x, fx
+            if side == 1:
+                f_low *= 0.5
+            side = 1
+        if high - low < tolerance:
+            break
+    return low if abs(f_low) < abs(f_high) else high
+
+
+class CatenaryCable(_CableBase):
+    """A heavy elastic cable hanging as a catenary (see the module docstring, model (c)).
+
+    Quasi-static: the cable's shape follows the drone instantly. With horizontal distance
+    ``X``, height ``H`` and chord ``d``:
+
+    - ``H <= 0`` (drone on the ground): the cable lies on the ground; only a line stretched
+      past its length pulls (the elastic line's spring and damper).
+    - cable long enough to touch the ground (``L`` at least the length of the catenary whose
+      lowest point is the anchor, Martins case 1): the part from the anchor to a touchdown
+      point ``x_t`` lies on the ground; the rest is a case-1 catenary over ``X - x_t`` with
+      length ``L - x_t``; ``L >= X + H`` hangs straight down (force ``w H`` down). The stretch
+      of such a lightly loaded cable (``T/k``, below a millimetre for the defaults) is ignored.
+    - otherwise: the stretch ``e`` solves ``k e = T_cat(L + e)``, with ``T_cat(L')`` the drone
+      end tension of the inextensible catenary of length ``L'`` (case 2); for ``d > L`` the
+      axial damper of the elastic line is added along the chord.
+
+    The ``d`` component of the force is ``w s2`` (downward pull of the cable beyond the lowest
+    point); the horizontal component ``w a`` points toward the anchor.
+    """
+
+    def __init__(self, elastic: ElasticCable, linear_density_kg_per_m: float) -> None:
+        if not linear_density_kg_per_m > 0.0:
+            raise ValueError(
+                f"a catenary needs a linear density > 0 kg/m, got {linear_density_kg_per_m!r}"
+            )
+        super().__init__(
+            elastic.paid_out_m, elastic.winch_rate_mps, elastic.min_length_m, elastic.spool_length_m
+        )
+        self.elastic = elastic
+        self.weight_per_length_n_per_m = elastic.weight_per_length_n_per_m
+        self.stretch_m = 0.0
+
+    def advance(self, dt_s: float) -> None:
+        """Reel the winch (see :meth:`_CableBase.advance`); the line follows."""
+        super().advance(dt_s)
+        self.elastic.paid_out_m = self.paid_out_m
+
+    def release(self) -> None:
+        """Let the cable go."""
+        super().release()
+        self.elastic.release()
+
+    def _free_force(
+        self, horizontal_m: float, height_m: float, length_m: float
+    ) -> tuple[float, float, float]:
+        """(horizontal force toward the anchor, down force, tension) [N] of a free catenary."""
+        curve = solve_known_length(horizontal_m, height_m, length_m)
+        ends = end_tensions(curve, self.weight_per_length_n_per_m)
+        return ends.horizontal_n, -ends.on_drone_vertical_n, ends.drone_n
+
+    def _grounded_force(self, horizontal_m: float, height_m: float) -> tuple[float, float, float]:
+        """As :meth:`_free_force` for a cable partly lying on the ground."""
+        w = self.weight_per_length_n_per_m
+        length = self.paid_out_m
+        if length >= horizontal_m + height_m:
+            return 0.0, w * height_m, w * height_m
+
+        def excess(touchdown_m: float) -> float:
+            rise = solve_lowest_point_at_anchor(horizontal_m - touchdown_m, height_m)
+            return touchdown_m + rise.length_m - length
+
+        touchdown = _bracketed_root(excess, 0.0, horizontal_m, 1e-10)
+        curve = solve_lowest_point_at_anchor(horizontal_m - touchdown, height_m)
+        ends = end_tensions(curve, w)
+        return ends.horizontal_n, -ends.on_drone_vertical_n, ends.drone_n
+
+    def _stretched_force(
+        self, horizontal_m: float, height_m: float, chord_m: float
+    ) -> tuple[float, float, float]:
+        """As :meth:`_free_force` with the cable stretched by its own tension."""
+        k = self.elastic.stiffness_n_per_m
+        length = self.paid_out_m
+        low = max(0.0, chord_m - length) + 1e-9 * max(chord_m, 1.0)
+
+        def balance(stretch_m: float) -> float:
+            return k * stretch_m - self._free_force(horizontal_m, height_m, length + stretch_m)[2]
+
+        previous = self.stretch_m
+        near = (max(low, 0.99 * previous), 1.01 * previous)
+        if previous > low and balance(near[0]) <= 0.0 <= balance(near[1]):
+            low, high = near  # warm start: the stretch changes little between calls
+        else:
+            high = max(2.0 * previous, 2.0 * low, 1e-6)
+            while balance(high) < 0.0:
+                low, high = high, 2.0 * high
+        self.stretch_m = _bracketed_root(balance, low, high, 1e-12)
+        return self._free_force(horizontal_m, height_m, length + self.stretch_m)
+
+    def force_components(
+        self, pn: float, pe: float, pd: float, vn: float, ve: float, vd: float
+    ) -> tuple[float, float, float]:
+        """Force (north, east, down) [N] at (pn, pe, pd) [m] moving at (vn, ve, vd) [m/s]."""
+        horizontal = math.hypot(pn, pe)
+        height = -pd
+        chord = math.hypot(horizontal, height)
+        if self.released or chord < _MIN_DISTANCE_M:
+            self.tension_n = 0.0
+            return 0.0, 0.0, 0.0
+        length = self.paid_out_m
+        if height <= 0.0:
+            spring = 0.0
+            if chord > length:
+                spring = self.elastic.taut_tension_n(chord, (pn * vn + pe * ve + pd * vd) / chord)
+                spring -= self.elastic.weight_per_length_n_per_m * length
+            self.tension_n = spring
+            scale = -spring / chord
+            return scale * pn, scale * pe, scale * pd
+        if length >= solve_lowest_point_at_anchor(horizontal, height).length_m:
+            pull_n, down_n, tension = self._grounded_force(horizontal, height)
+        else:
+            pull_n, down_n, tension = self._stretched_force(horizontal, height, chord)
+        fn = fe = 0.0
+        if horizontal > 0.0:
+            fn = -pull_n * pn / horizontal
+            fe = -pull_n * pe / horizontal
+        fd = down_n
+        if chord > length and self.elastic.damping_n_s_per_m > 0.0:
+            damper = self.elastic.damping_n_s_per_m * (pn * vn + pe * ve + pd * vd) / chord
+            damper = max(damper, -tension)
+            fn -= damper * pn / chord
+            fe -= damper * pe / chord
+            fd -= damper * pd / chord
+            tension += damper
+        self.tension_n = tension
+        return fn, fe, fd
+
+
 class NoCable(_CableBase):
     """No tether at all (free flight): zero force, zero tension."""
 
@@ -287,10 +465,13 @@ def make_cable(config: CableConfig, gravity_mps2: float = GRAVITY_MPS2) -> Cable
         "spool_length_m": config.spool_length_m,
         "gravity_mps2": gravity_mps2,
     }
-    return ElasticCable(
+    elastic = ElasticCable(
         config.length_m,
         config.stiffness_n_per_m,
         config.damping_n_s_per_m,
         config.linear_density_kg_per_m,
         **kwargs,
     )
+    if config.model == "elastic":
+        return elastic
+    return CatenaryCable(elastic, config.linear_density_kg_per_m)

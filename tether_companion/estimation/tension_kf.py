@@ -1,0 +1,469 @@
+"""Tension of the tether on the drone from attitude, thrust and acceleration, Kalman filtered.
+
+Martins (2019) section 4. The observation (eq. 50) in our frames: the accelerometer measures
+the specific force ``f_sf = (F_thrust + F_cable) / m`` in the FRD body frame (gravity is not
+felt), with ``F_thrust = [0, 0, -T]`` (total rotor thrust along body -z). Hence the force of
+the cable ON the drone, in NED::
+
+    F_cable_ned = R_b^v (m f_sf - [0, 0, -T])                                (eq. 50)
+
+Airframe drag (``F_ext`` of eq. 50) is not modelled: it is absorbed into the observation
+(small at the speeds where tension matters; the vehicle profiles ship with zero drag).
+
+Two filters smooth the observation, both plain linear Kalman filters (eqs. 43-47) stepped once
+per observation (IMU sample):
+
+* ``constant`` (eqs. 48-49): ``x = (T_n, T_e, T_d)``, ``A = C = I``;
+* ``derivative`` (eqs. 51-53): per axis ``x = (T_{k-2}, T_{k-1}, T_k)`` with the companion
+  matrix ``A`` of eq. 52 (coefficients ``a``, ``b``) and ``C = (0, 0, 1)``.
+
+With process and measurement noise the same on each axis and uncorrelated between axes (as
+the thesis' diagonal Q and R are), the three axes share one covariance matrix, so both models
+run as one filter over an ``(n, 3)`` state: the constant model is the ``n = 1`` case with
+``A = [[1]]``, exactly eqs. 48-49 for the 3-vector. The update uses the Joseph form, which
+keeps P symmetric positive semi-definite in floating point.
+
+:class:`TensionEstimator` aligns samples (latest attitude and PWM within staleness bounds at
+each IMU tick, like :class:`~tether_companion.estimation.pipeline.TetherEstimator`) and emits
+a :class:`TensionEstimate` per tick. Pure and synchronous.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.config import ConfigError, load_yaml, spec
+from tether_companion.estimation.thrust_input import StaticThrustInput, ThrustInput
+from tether_companion.frames import rotation_body_to_ned
+from tether_companion.physics.vehicle import VehicleProfile
+from tether_companion.samples import AttitudeSample, ImuSample, PwmSample
+
+FloatArray = NDArray[np.float64]
+
+CONSTANT = "constant"
+DERIVATIVE = "derivative"
+
+
+# ---------------------------------------------------------------------------------------------
+# configuration
+
+
+@dataclass(frozen=True)
+class TensionFilterConfig:
+    """Settings of the tension Kalman filter (Martins 2019 section 4).
+
+    The process noise is a variance added per filter step (one step per IMU sample), as in
+    eq. 44; retune it when the IMU rate changes.
+    """
+
+    model: str = spec(
+        DERIVATIVE,
+        choices=(CONSTANT, DERIVATIVE),
+        doc="constant (eqs. 48-49) or derivative (eqs. 51-53) tension model",
+    )
+    derivative_a: float = spec(
+        0.9, minimum=-1.0, maximum=1.0, doc="a of eq. 51: weight of the first difference"
+    )
+    derivative_b: float = spec(
+        0.0, minimum=-1.0, maximum=1.0, doc="b of eq. 51: weight of the second difference"
+    )
+    constant_process_noise_n2: float = spec(
+        1e-4, exclusive_minimum=0.0, doc="constant model: tension variance added per step [N^2]"
+    )
+    derivative_process_noise_n2: float = spec(
+        1e-6,
+        exclusive_minimum=0.0,
+        doc="derivative model: variance added to the newest tension per step [N^2]",
+    )
+    accel_noise_std_mps2: float = spec(
+        0.1, exclusive_minimum=0.0, doc="accelerometer noise per axis [m/s^2], times mass in R"
+    )
+    thrust_noise_std_n: float = spec(
+        0.1, minimum=0.0, doc="total-thrust error [N], added to R on every axis"
+    )
+    initial_variance_n2: float = spec(
+        25.0, exclusive_minimum=0.0, doc="P0 diagonal at (re)start from an observation [N^2]"
+    )
+    max_observed_tension_n: float = spec(
+        200.0,
+        exclusive_minimum=0.0,
+        doc="observations with a larger magnitude are rejected as absurd [N]",
+    )
+    attitude_staleness_s: float = spec(
+        0.05, exclusive_minimum=0.0, doc="attitude may be this much older/newer than the IMU [s]"
+    )
+    pwm_staleness_s: float = spec(
+        0.05, exclusive_minimum=0.0, doc="PWM may be this much older/newer than the IMU [s]"
+    )
+    max_gap_s: float = spec(
+        0.5, exclusive_minimum=0.0, doc="a longer gap between observations restarts the filter [s]"
+    )
+
+    def validate(self) -> None:
+        """The derivative model (eq. 52) must not grow exponentially.
+
+        Its characteristic polynomial factors as ``(z - 1)(z^2 - (a + b) z + b)``: the level
+        (root 1) and two roots that must lie in the closed unit disc.
+        """
+        if self.model == DERIVATIVE:
+            roots = np.roots([1.0, -(self.derivative_a + self.derivative_b), self.derivative_b])
+            radius = float(np.max(np.abs(roots)))
+            if radius > 1.0 + 1e-9:
+                raise ConfigError(
+                    "",
+                    "derivative_b",
+                    self.derivative_b,
+                    f"with derivative_a = {self.derivative_a} the model of eq. 52 diverges "
+                    f"(spectral radius {radius:.4f} > 1); choose a, b with stable roots",
+                )
+
+    def transition(self) -> FloatArray:
+        """State transition ``A``: ``[[1]]`` (eq. 49) or the 3x3 companion matrix of eq. 52."""
+        if self.model == CONSTANT:
+            return np.ones((1, 1))
+        a, b = self.derivative_a, self.derivative_b
+        return np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [b, -(a + 2.0 * b), 1.0 + a + b]])
+
+    def process_noise(self) -> FloatArray:
+        """``Q`` per step [N^2]; the derivative model's shift rows are exact (no noise)."""
+        if self.model == CONSTANT:
+            return np.full((1, 1), self.constant_process_noise_n2)
+        return np.diag([0.0, 0.0, self.derivative_process_noise_n2])
+
+    def measurement_variance_n2(self, mass_kg: float) -> float:
+        """``R`` per axis [N^2]: accelerometer noise times mass, plus thrust error."""
+        return (mass_kg * self.accel_noise_std_mps2) ** 2 + self.thrust_noise_std_n**2
+
+
+def load_tension_filter_config(path: str | Path) -> TensionFilterConfig:
+    """Load a :class:`TensionFilterConfig` from YAML (raises ConfigError naming the key)."""
+    return load_yaml(TensionFilterConfig, path)
+
+
+# ---------------------------------------------------------------------------------------------
+# observation (eq. 50)
+
+
+def observe_tension_ned_n(
+    specific_force_body_mps2: FloatArray,
+    rotation_body_to_ned: FloatArray,
+    thrust_n: float,
+    mass_kg: float,
+) -> FloatArray:
+    """Force of the cable on the drone, NED [N], shape (3,), from one set of readings (eq. 50).
+
+    Parameters
+    ----------
+    specific_force_body_mps2
+        Accelerometer specific force, FRD body frame, shape (3,) [m/s^2].
+    rotation_body_to_ned
+        ``R_b^v``, shape (3, 3).
+    thrust_n
+        Total rotor thrust along body -z [N].
+    mass_kg
+        Vehicle mass [kg].
+    """
+    f = specific_force_body_mps2
+    cable_body = np.array((mass_kg * f[0], mass_kg * f[1], mass_kg * f[2] + thrust_n))
+    return rotation_body_to_ned @ cable_body
+
+
+# ---------------------------------------------------------------------------------------------
+# the filter
+
+
+class TensionKalmanFilter:
+    """Linear KF over an ``(n, 3)`` state: ``n`` history taps per NED axis, shared covariance.
+
+    The newest tap (last row) is the tension estimate. Pure: no clocks, no I/O.
+
+    Parameters
+    ----------
+    transition
+        ``A``, shape (n, n).
+    process_noise_n2
+        ``Q`` per step, shape (n, n) [N^2].
+    measurement_variance_n2
+        ``R`` per axis [N^2] (``C`` picks the newest tap).
+    initial_variance_n2
+        ``P0 = initial_variance_n2 I`` at (re)start [N^2].
+    """
+
+    def __init__(
+        self,
+        transition: FloatArray,
+        process_noise_n2: FloatArray,
+        measurement_variance_n2: float,
+        initial_variance_n2: float,
+    ) -> None:
+        self.A = np.asarray(transition, dtype=float)
+        self.Q = np.asarray(process_noise_n2, dtype=float)
+        self.R = float(measurement_variance_n2)
+        self.n = self.A.shape[0]
+        self._p0 = float(initial_variance_n2)
+        self.x: FloatArray = np.zeros((self.n, 3))
+        self.P: FloatArray = np.eye(self.n) * self._p0
+        self.started = False
+
+    @property
+    def tension_ned_n(self) -> FloatArray:
+        """Current tension estimate, NED [N], shape (3,)."""
+        return self.x[-1].copy()
+
+    @property
+    def variance_n2(self) -> float:
+        """Variance of the current estimate on each axis [N^2]."""
+        return float(self.P[-1, -1])
+
+    def restart(self, observation_ned_n: FloatArray) -> None:
+        """Start from one observation: every tap equals it, ``P = P0``."""
+        self.x = np.tile(np.asarray(observation_ned_n, dtype=float), (self.n, 1))
+        self.P = np.eye(self.n) * self._p0
+        self.started = True
+
+    def predict(self) -> None:
+        """One step of the model (eqs. 43-44)."""
+        self.x = self.A @ self.x
+        P = self.A @ self.P @ self.A.T + self.Q
+        self.P = 0.5 * (P + P.T)
+
+    def update(self, observation_ned_n: FloatArray) -> FloatArray:
+        """Correct with one observation (eqs. 45-47, Joseph form); returns the innovation (3,)."""
+        innovation = np.asarray(observation_ned_n, dtype=float) - self.x[-1]
+        P = self.P
+        s = P[-1, -1] + self.R
+        gain = P[:, -1] / s  # K = P C^T / (C P C^T + R), C = e_n
+        self.x = self.x + np.outer(gain, innovation)
+        i_kc = np.eye(self.n)
+        i_kc[:, -1] -= gain
+        P = i_kc @ P @ i_kc.T + self.R * np.outer(gain, gain)
+        self.P = 0.5 * (P + P.T)
+        return innovation
+
+
+# ---------------------------------------------------------------------------------------------
+# the sample-driven estimator
+
+
+@dataclass(slots=True)
+class TensionHealth:
+    """Counters of what the tension estimator did with its inputs (monotonic).
+
+    Attributes
+    ----------
+    updates
+        Observations fused.
+    stale_attitude, stale_pwm
+        IMU ticks without an observation because attitude / PWM was missing or stale.
+    nonfinite_rejected
+        Samples or observations containing NaN/inf.
+    absurd_rejected
+        Observations larger than ``max_observed_tension_n``.
+    out_of_order
+        IMU samples older than the last one.
+    restarts
+        Filter restarts (first observation, long gap).
+    """
+
+    updates: int = 0
+    stale_attitude: int = 0
+    stale_pwm: int = 0
+    nonfinite_rejected: int = 0
+    absurd_rejected: int = 0
+    out_of_order: int = 0
+    restarts: int = 0
+
+    def copy(self) -> TensionHealth:
+        """A snapshot."""
+        return TensionHealth(*(getattr(self, name) for name in self.__slots__))
+
+
+@dataclass(frozen=True, slots=True)
+class TensionEstimate:
+    """Filtered tension at one IMU tick.
+
+    Attributes
+    ----------
+    time_s
+        Flight-controller time of the tick [s].
+    tension_ned_n
+        Force of the cable ON the drone, NED, shape (3,) [N]; ``nan`` before the first fused
+        observation.
+    variance_n2
+        Variance of each component [N^2].
+    last_update_s
+        Time of the last fused observation [s] (``nan`` if none): ``time_s - last_update_s``
+        is the estimate's age.
+    observation_ned_n
+        This tick's raw observation (eq. 50) [N], ``nan`` when none was made.
+    updated
+        Whether this tick fused an observation.
+    health
+        Snapshot of the counters.
+    """
+
+    time_s: float
+    tension_ned_n: FloatArray
+    variance_n2: float
+    last_update_s: float
+    observation_ned_n: FloatArray
+    updated: bool
+    health: TensionHealth = field(repr=False)
+
+    @property
+    def magnitude_n(self) -> float:
+        """Tension magnitude [N]."""
+        return float(np.linalg.norm(self.tension_ned_n))
+
+    @property
+    def horizontal_n(self) -> float:
+        """Magnitude of the horizontal part of the force on the drone [N]."""
+        return math.hypot(float(self.tension_ned_n[0]), float(self.tension_ned_n[1]))
+
+    @property
+    def down_n(self) -> float:
+        """Downward component of the force on the drone [N] (NED ``d``)."""
+        return float(self.tension_ned_n[2])
+
+    @property
+    def pull_direction_rad(self) -> float:
+        """Bearing of the horizontal pull on the drone from north, toward east [rad].
+
+        The direction the cable drags the drone (toward the anchor for a free-hanging cable,
+        along the tug for a pull). ``nan`` when there is no horizontal force.
+        """
+        n, e = float(self.tension_ned_n[0]), float(self.tension_ned_n[1])
+        return math.atan2(e, n) if (n != 0.0 or e != 0.0) else math.nan
+
+    @property
+    def valid(self) -> bool:
+        """Whether an estimate exists and is finite."""
+        return bool(np.isfinite(self.tension_ned_n).all()) and math.isfinite(self.variance_n2)
+
+    def age_s(self, now_s: float) -> float:
+        """Time since the last fused observation at ``now_s`` [s] (``inf`` if none)."""
+        return now_s - self.last_update_s if math.isfinite(self.last_update_s) else math.inf
+
+
+_NAN3 = np.full(3, math.nan)
+
+
+class TensionEstimator:
+    """Tension KF fed by typed samples, one step per IMU tick (Martins 2019 section 4).
+
+    Parameters
+    ----------
+    config
+        Filter settings (``model`` selects constant or derivative).
+    vehicle
+        Vehicle profile (mass; thrust curve for the default thrust input).
+    thrust_input
+        PWM-to-thrust map; default :class:`StaticThrustInput` of ``vehicle``.
+    """
+
+    def __init__(
+        self,
+        config: TensionFilterConfig,
+        vehicle: VehicleProfile,
+        thrust_input: ThrustInput | None = None,
+    ) -> None:
+        self.config = config
+        self.mass_kg = vehicle.mass_kg
+        self.thrust_input: ThrustInput = (
+            thrust_input if thrust_input is not None else StaticThrustInput(vehicle)
+        )
+        self.filter = TensionKalmanFilter(
+            config.transition(),
+            config.process_noise(),
+            config.measurement_variance_n2(vehicle.mass_kg),
+            config.initial_variance_n2,
+        )
+        self.health = TensionHealth()
+        self._time_s = math.nan
+        self._last_update_s = math.nan
+        self._attitude_time_s = math.nan
+        self._rotation: FloatArray = np.eye(3)
+        self._pwm_time_s = math.nan
+        self._thrust_n = math.nan
+
+    def on_attitude(self, sample: AttitudeSample) -> None:
+        """Store the latest attitude (rejected and counted when not finite)."""
+        values = (sample.time_s, sample.roll_rad, sample.pitch_rad, sample.yaw_rad)
+        if not all(math.isfinite(v) for v in values):
+            self.health.nonfinite_rejected += 1
+            return
+        self._attitude_time_s = sample.time_s
+        self._rotation = rotation_body_to_ned(sample.roll_rad, sample.pitch_rad, sample.yaw_rad)
+
+    def on_pwm(self, sample: PwmSample) -> None:
+        """Store the total thrust of the latest motor outputs (rejected when not finite)."""
+        if not math.isfinite(sample.time_s) or not np.isfinite(sample.pwm_us).all():
+            self.health.nonfinite_rejected += 1
+            return
+        thrust_n = self.thrust_input.total_thrust_n(sample.pwm_us, sample.time_s)
+        if not math.isfinite(thrust_n):
+            self.health.nonfinite_rejected += 1
+            return
+        self._pwm_time_s = sample.time_s
+        self._thrust_n = thrust_n
+
+    def on_imu(self, sample: ImuSample) -> TensionEstimate | None:
+        """Step the filter at the IMU time and fuse an observation when inputs are fresh.
+
+        Returns ``None`` when the sample is rejected (non-finite or out of order).
+        """
+        t = sample.time_s
+        f = sample.specific_force_body_mps2
+        health = self.health
+        if not (math.isfinite(t) and np.isfinite(f).all()):
+            health.nonfinite_rejected += 1
+            return None
+        if math.isfinite(self._time_s) and t < self._time_s:
+            health.out_of_order += 1
+            return None
+        self._time_s = t
+        observation = self._observe(t, f)
+        kf = self.filter
+        updated = False
+        if observation is not None:
+            gap = t - self._last_update_s
+            if not kf.started or not gap <= self.config.max_gap_s:
+                kf.restart(observation)
+                health.restarts += 1
+            else:
+                kf.predict()
+                kf.update(observation)
+            self._last_update_s = t
+            health.updates += 1
+            updated = True
+        return TensionEstimate(
+            time_s=t,
+            tension_ned_n=kf.tension_ned_n if kf.started else _NAN3.copy(),
+            variance_n2=kf.variance_n2 if kf.started else math.inf,
+            last_update_s=self._last_update_s,
+            observation_ned_n=observation if observation is not None else _NAN3.copy(),
+            updated=updated,
+            health=health.copy(),
+        )
+
+    def _observe(self, t: float, f: FloatArray) -> FloatArray | None:
+        cfg, health = self.config, self.health
+        if not abs(t - self._attitude_time_s) <= cfg.attitude_staleness_s:
+            health.stale_attitude += 1
+            return None
+        if not abs(t - self._pwm_time_s) <= cfg.pwm_staleness_s:
+            health.stale_pwm += 1
+            return None
+        observation = observe_tension_ned_n(f, self._rotation, self._thrust_n, self.mass_kg)
+        if not np.isfinite(observation).all():
+            health.nonfinite_rejected += 1
+            return None
+        if float(np.linalg.norm(observation)) > cfg.max_observed_tension_n:
+            health.absurd_rejected += 1
+            return None
+        return observation

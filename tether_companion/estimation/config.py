@@ -9,6 +9,9 @@ Interpretations of the paper's numbers (argued in ``docs/estimation.md``):
 * Accelerometer noise: the paper writes ``sigma_acc^2 = 0.01 m/s^2`` while its measurement is
   in units of g. ``accel_noise.unit: mps2_squared`` reads 0.01 as (m/s^2)^2 (sigma 0.1 m/s^2),
   ``g_squared`` as g^2 (sigma 0.98 m/s^2).
+* Initial tension: the paper gives none (its ``x0`` has three components); by default the
+  4-state filter takes it from the first IMU tick, as the magnitude of the specific force
+  that thrust does not explain (``|m R^T a - R^T (0, 0, -T)|``).
 * Initial state: the paper's ``x0 = (1.5, 2.5, 1.5)`` is a drone 1.5 m *above* the anchor;
   in NED that is ``p_d = -1.5`` m.
 """
@@ -80,7 +83,7 @@ class Gate:
         doc="gate probability mass; 1.0 disables the gate",
     )
     max_consecutive_rejections: int = spec(
-        40, minimum=0, doc="after this many rejections in a row the next sample is fused (0: never)"
+        5, minimum=0, doc="after this many rejections in a row the next sample is fused (0: never)"
     )
 
 
@@ -128,7 +131,9 @@ class EstimatorConfig:
     initial_position_ned_m: tuple[float, float, float] = spec(
         (1.5, 2.5, -1.5), doc="x0 position, NED relative to the anchor [m]"
     )
-    initial_tension_n: float = spec(1.0, minimum=0.0, doc="x0 tension (4-state) [N]")
+    initial_tension_n: float | None = spec(
+        None, minimum=0.0, doc="x0 tension (4-state) [N]; null: measured from the first IMU tick"
+    )
     initial_position_variance_m2: tuple[float, float, float] = spec(
         (1.0, 1.0, 1.0), exclusive_minimum=0.0, doc="P0 diagonal, position [m^2]"
     )
@@ -164,7 +169,7 @@ class EstimatorConfig:
         """Initial state, shape (n,)."""
         values = list(self.initial_position_ned_m)
         if self.kind == "four_state":
-            values.append(self.initial_tension_n)
+            values.append(0.0 if self.initial_tension_n is None else self.initial_tension_n)
         return np.asarray(values, dtype=float)
 
     def p0(self) -> FloatArray:

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.ekf import FUSED, GATED, NONFINITE, ExtendedKalmanFilter
 from tether_companion.estimation.tether_models import (
+    F_C,
     POSITION,
     FourStateModel,
     ThreeStateModel,
@@ -182,6 +183,10 @@ class TetherEstimator:
         self._thrust_n = math.nan
         self._tension_time_s = math.nan
         self._known_tension_n = math.nan
+        self._tension_from_measurement = (
+            model_cls is FourStateModel and config.initial_tension_n is None
+        )
+        self._needs_tension_init = self._tension_from_measurement
 
     # ------------------------------------------------------------------ inputs
     @property
@@ -315,6 +320,8 @@ class TetherEstimator:
         ):
             health.stale_tension += 1
             return False
+        if self._needs_tension_init:
+            self._initialise_tension(accel)
         x = self.filter.x
         if x[0] * x[0] + x[1] * x[1] + x[2] * x[2] < model.min_cable_length_m**2:
             health.near_anchor += 1
@@ -338,7 +345,22 @@ class TetherEstimator:
             health.nonfinite_rejected += 1
         return False
 
+    def _initialise_tension(self, accel: FloatArray) -> None:
+        """Set the 4-state tension to the magnitude of the unexplained specific force [N].
+
+        The body-frame specific force minus the thrust's is the cable's force per unit mass;
+        its magnitude times the mass is the tension, whatever the direction.
+        """
+        cable_body = accel.copy()
+        cable_body[2] += self._thrust_n / self.model.mass_kg
+        x = self.filter.x.copy()
+        x[F_C] = self.model.mass_kg * float(np.linalg.norm(cable_body))
+        self.filter.x = x
+        self._needs_tension_init = False
+
     def _sync_filter_counters(self) -> None:
+        if self.filter.resets != self.health.resets:  # the filter restarted: measure again
+            self._needs_tension_init = self._tension_from_measurement
         self.health.resets = self.filter.resets
         self.health.pd_repairs = self.filter.pd_repairs
 

@@ -1,0 +1,136 @@
+"""MAVLink telemetry logs (.tlog): what a ground station records from the link.
+
+Read with pymavlink's ``mavutil`` (each record is an 8-byte big-endian wall-clock stamp and one
+MAVLink packet). Signals come from the flight controller's own time stamps:
+
+- accelerometer: ``HIGHRES_IMU`` (PX4, m/s^2) or else ``RAW_IMU`` / ``SCALED_IMU``
+  (ArduPilot, milli-g), instance 0;
+- attitude: ``ATTITUDE`` (rad);
+- motors: ``SERVO_OUTPUT_RAW`` port 0, ``servo1_raw`` .. ``servo4_raw`` (us);
+- height: ``DISTANCE_SENSOR`` facing down (cm), optional.
+
+Only messages from the system that sends ``ATTITUDE`` most are used (other systems, such as
+ArduPilot SITL's tether simulator, share the link).
+"""
+
+from __future__ import annotations
+
+import os
+from collections import Counter, defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pymavlink import mavutil
+
+from tether_companion.errors import InputError
+from tether_companion.mavlink import units
+from tether_companion.sysid.logs.flightlog import N_MOTORS, FlightLog, make_series
+
+WANTED = ("HIGHRES_IMU", "RAW_IMU", "SCALED_IMU", "ATTITUDE", "SERVO_OUTPUT_RAW", "DISTANCE_SENSOR")
+_UINT32_SPAN = 2**32
+IMU_DECODERS = {
+    "HIGHRES_IMU": units.imu_from_highres_imu,
+    "RAW_IMU": units.imu_from_raw_imu,
+    "SCALED_IMU": units.imu_from_scaled_imu,
+}
+"""IMU messages in order of preference and their SI decoders."""
+
+
+def _unwrap_uint32_us(stamps_us: list[int]) -> np.ndarray:
+    """Undo the wrap of a uint32 microsecond clock (every ~71.6 min) [us]."""
+    raw = np.asarray(stamps_us, dtype=np.int64)
+    wraps = np.cumsum(np.concatenate(([0], np.diff(raw) < -_UINT32_SPAN // 2)))
+    return (raw + wraps * _UINT32_SPAN).astype(float)
+
+
+def _read_messages(path: Path) -> tuple[dict[str, list[Any]], bool]:
+    """All wanted messages of the main system, by type, and whether the file ends mid-record."""
+    source = str(path)
+    try:
+        link = mavutil.mavlink_connection(source, dialect="ardupilotmega", robust_parsing=True)
+    except OSError as exc:
+        raise InputError(f"{source}: cannot open ({exc.strerror})") from None
+    by_system: dict[tuple[int, int], dict[str, list[Any]]] = defaultdict(lambda: defaultdict(list))
+    try:
+        while True:
+            msg = link.recv_match(type=list(WANTED))
+            if msg is None:
+                break
+            by_system[(msg.get_srcSystem(), msg.get_srcComponent())][msg.get_type()].append(msg)
+        consumed = link.f.tell()
+    finally:
+        link.close()
+    truncated = consumed < os.path.getsize(source) or bool(link.mav.buf_len())
+    if not by_system:
+        raise InputError(
+            f"{source}: no IMU, ATTITUDE or SERVO_OUTPUT_RAW message found (not a MAVLink .tlog?)"
+        )
+    attitude_counts = Counter({key: len(msgs["ATTITUDE"]) for key, msgs in by_system.items()})
+    main, _ = attitude_counts.most_common(1)[0]
+    return by_system[main], truncated
+
+
+def load_tlog(path: Path) -> FlightLog:
+    """Read a MAVLink .tlog into a :class:`FlightLog` (see module docstring).
+
+    Raises
+    ------
+    InputError
+        When the file cannot be read or lacks IMU, ATTITUDE or SERVO_OUTPUT_RAW messages.
+    """
+    source = str(path)
+    messages, truncated = _read_messages(path)
+    notes = (
+        ("file ends in a partial record (truncated); the partial record was dropped",)
+        if truncated
+        else ()
+    )
+    suffix = " (the file is truncated)" if truncated else ""
+
+    def need(*names: str) -> tuple[str, list[Any]]:
+        for name in names:
+            if messages.get(name):
+                return name, messages[name]
+        raise InputError(f"{source}: no {' or '.join(names)} message in the log{suffix}")
+
+    imu_name, imu_msgs = need(*IMU_DECODERS)
+    imu = [IMU_DECODERS[imu_name](m) for m in imu_msgs if getattr(m, "id", 0) == 0]
+    _, att_msgs = need("ATTITUDE")
+    _, servo_msgs = need("SERVO_OUTPUT_RAW")
+    servo_msgs = [m for m in servo_msgs if m.port == 0]
+    pwm = [[getattr(m, f"servo{i + 1}_raw") for i in range(N_MOTORS)] for m in servo_msgs]
+    ranges = [
+        sample
+        for m in messages.get("DISTANCE_SENSOR", [])
+        if m.orientation == units.DOWNWARD_ORIENTATION
+        and (sample := units.range_from_distance_sensor(m)) is not None
+    ]
+    height = None
+    if len(ranges) >= 2:
+        height = make_series(
+            source, "DISTANCE_SENSOR", [r.time_s for r in ranges], [r.distance_m for r in ranges], 1
+        )
+    attitude = [units.attitude_from_attitude(m) for m in att_msgs]
+    return FlightLog(
+        source=source,
+        pwm_us=make_series(
+            source,
+            "SERVO_OUTPUT_RAW",
+            _unwrap_uint32_us([m.time_usec for m in servo_msgs]) * 1e-6,
+            pwm,
+            N_MOTORS,
+        ),
+        specific_force_body_mps2=make_series(
+            source, imu_name, [x.time_s for x in imu], [x.specific_force_body_mps2 for x in imu], 3
+        ),
+        euler_rad=make_series(
+            source,
+            "ATTITUDE",
+            [a.time_s for a in attitude],
+            [[a.roll_rad, a.pitch_rad, a.yaw_rad] for a in attitude],
+            3,
+        ),
+        height_m=height,
+        notes=notes,
+    )

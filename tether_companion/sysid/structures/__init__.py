@@ -1,0 +1,1 @@
+"""Model structures of the paper's section 5.3, each ``fit(experiments, context)``."""

@@ -1,0 +1,189 @@
+"""Position from tension and catenary (Martins 2019 section 6): estimator and geometry."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tether_companion.config import ConfigError, from_mapping
+from tether_companion.estimation.catenary_position import (
+    INCONSISTENT,
+    KNOWN_LENGTH,
+    LOWEST_POINT_AT_ANCHOR,
+    NO_LENGTH,
+    NO_TENSION,
+    STALE_TENSION,
+    UNOBSERVABLE,
+    CatenaryPositionConfig,
+    CatenaryPositionEstimator,
+    position_from_force_ned_m,
+)
+from tether_companion.estimation.tension_kf import TensionEstimate, TensionHealth
+from tether_companion.physics.cable import CatenaryCable, ElasticCable
+from tether_companion.physics.catenary import (
+    end_tensions,
+    force_on_drone_ned_n,
+    solve_known_length,
+    solve_lowest_point_at_anchor,
+)
+
+W = 0.05 * 9.80665  # N/m
+
+
+def _estimate(force, time_s=1.0, last_update_s=1.0, variance=0.01):
+    return TensionEstimate(
+        time_s=time_s,
+        tension_ned_n=np.asarray(force, dtype=float),
+        variance_n2=variance,
+        last_update_s=last_update_s,
+        observation_ned_n=np.asarray(force, dtype=float),
+        updated=True,
+        health=TensionHealth(),
+    )
+
+
+def _sim_cable(length_m):
+    """The simulator's catenary cable (independent implementation, ground contact), made
+    practically inextensible."""
+    elastic = ElasticCable(length_m, 1e9, 0.0, W / 9.80665)
+    return CatenaryCable(elastic, W / 9.80665)
+
+
+@pytest.mark.parametrize(
+    "position",
+    [
+        (4.0, 0.0, -3.0),
+        (2.0, -3.0, -1.0),
+        (-3.0, 2.5, -6.0),
+        (0.5, 0.2, -4.5),
+    ],
+)
+@pytest.mark.parametrize("slack", [1.001, 1.04, 1.3])
+def test_known_length_free_cable_round_trip(position, slack):
+    """Thesis case 2 (anchor above the lowest point, free curve) inverts exactly; with the
+    anchor on the ground the same holds whenever the lowest point is behind the anchor."""
+    p = np.array(position)
+    length = slack * np.linalg.norm(p)
+    force = force_on_drone_ned_n(p, length, W)
+    got = position_from_force_ned_m(force, KNOWN_LENGTH, W, length, anchor_on_ground=False)
+    assert np.allclose(got, p, atol=1e-7)
+    if solve_known_length(math.hypot(p[0], p[1]), -p[2], length).s1_m >= 0.0:
+        got = position_from_force_ned_m(force, KNOWN_LENGTH, W, length, anchor_on_ground=True)
+        assert np.allclose(got, p, atol=1e-7)
+
+
+@pytest.mark.parametrize(
+    ("position", "length"),
+    [((4.0, 0.0, -3.0), 6.5), ((3.0, 3.0, -2.0), 5.5), ((-1.0, 0.0, -5.0), 5.8)],
+)
+def test_known_length_grounded_cable_against_simulator_cable(position, length):
+    """A slack cable lying on the ground near the anchor: the estimator's grounded branch
+    inverts the simulator's CatenaryCable force (written independently)."""
+    p = np.array(position)
+    cable = _sim_cable(length)
+    force = np.array(cable.force_on_drone_ned_n(p, np.zeros(3)))
+    assert length >= solve_lowest_point_at_anchor(math.hypot(*p[:2]), -p[2]).length_m
+    got = position_from_force_ned_m(force, KNOWN_LENGTH, W, length, anchor_on_ground=True)
+    assert np.allclose(got, p, atol=1e-6)
+    # the thesis' free case 2 (anchor above the lowest point) would misplace it
+    free = position_from_force_ned_m(force, KNOWN_LENGTH, W, length, anchor_on_ground=False)
+    assert np.linalg.norm(free - p) > 0.1
+
+
+def test_known_length_taut_cable_against_simulator_cable():
+    p = np.array([4.0, 0.0, -3.0])
+    cable = _sim_cable(5.2)
+    force = np.array(cable.force_on_drone_ned_n(p, np.zeros(3)))
+    got = position_from_force_ned_m(force, KNOWN_LENGTH, W, 5.2)
+    assert np.allclose(got, p, atol=1e-5)
+
+
+def test_lowest_point_at_anchor_round_trip():
+    p = np.array([3.0, -4.0, -2.0])
+    curve = solve_lowest_point_at_anchor(5.0, 2.0)
+    t = end_tensions(curve, W)
+    pull = t.horizontal_n
+    force = np.array([-pull * 3.0 / 5.0, pull * 4.0 / 5.0, -t.on_drone_vertical_n])
+    got = position_from_force_ned_m(force, LOWEST_POINT_AT_ANCHOR, W)
+    assert np.allclose(got, p, atol=1e-9)
+
+
+def test_vertical_takeoff_limits():
+    """No horizontal pull: straight above the anchor (eqs. 63-64, 70-71)."""
+    got = position_from_force_ned_m(np.array([0.0, 0.0, 2.0 * W]), LOWEST_POINT_AT_ANCHOR, W)
+    assert np.allclose(got, [0.0, 0.0, -2.0])
+    got = position_from_force_ned_m(np.array([0.0, 0.0, 3.0 * W]), KNOWN_LENGTH, W, 5.0, False)
+    assert np.allclose(got, [0.0, 0.0, -1.0])  # z = |s2| - |s1| = 3 - 2
+
+
+def test_grounded_cable_without_horizontal_pull_is_unobservable():
+    """Enough cable to lie on the ground and rise straight up: the pull is vertical and says
+    nothing about where the drone is horizontally."""
+    p = np.array([3.0, 3.0, -2.0])
+    cable = _sim_cable(8.0)
+    force = np.array(cable.force_on_drone_ned_n(p, np.zeros(3)))
+    assert math.hypot(force[0], force[1]) == 0.0
+    est = CatenaryPositionEstimator(CatenaryPositionConfig(weight_per_length_n_per_m=W))
+    est.set_paid_out_length_m(8.0, 1.0)
+    assert est.on_tension(_estimate(force)).status == UNOBSERVABLE
+
+
+def test_estimator_outputs_position_and_covariance():
+    p = np.array([4.0, 1.0, -3.0])
+    length = 5.1
+    est = CatenaryPositionEstimator(
+        CatenaryPositionConfig(case=KNOWN_LENGTH, weight_per_length_n_per_m=W)
+    )
+    assert solve_known_length(math.hypot(4.0, 1.0), 3.0, length).s1_m > 0.0  # free hanging
+    est.set_paid_out_length_m(length, 0.5)
+    out = est.on_tension(_estimate(force_on_drone_ned_n(p, length, W)))
+    assert out.valid and np.allclose(out.position_ned_m, p, atol=1e-6)
+    cov = out.covariance_m2
+    assert np.allclose(cov, cov.T) and np.all(np.linalg.eigvalsh(cov) >= -1e-12)
+    # covariance = variance * J J^T, J checked against a coarser independent difference
+    force = force_on_drone_ned_n(p, length, W)
+    h = 1e-3
+    jac = np.column_stack(
+        [
+            (
+                position_from_force_ned_m(force + h * e, KNOWN_LENGTH, W, length)
+                - position_from_force_ned_m(force - h * e, KNOWN_LENGTH, W, length)
+            )
+            / (2 * h)
+            for e in np.eye(3)
+        ]
+    )
+    assert np.allclose(cov, 0.01 * jac @ jac.T, rtol=1e-3, atol=1e-9)
+
+
+def test_estimator_refuses_bad_inputs():
+    cfg = CatenaryPositionConfig(
+        case=KNOWN_LENGTH, weight_per_length_n_per_m=W, max_tension_age_s=0.3, max_length_age_s=2.0
+    )
+    est = CatenaryPositionEstimator(cfg)
+    good = force_on_drone_ned_n(np.array([3.0, 0.0, -3.0]), 5.0, W)
+    assert est.on_tension(_estimate([math.nan, 0.0, 1.0])).status == NO_TENSION
+    assert est.on_tension(_estimate(good, time_s=2.0, last_update_s=1.0)).status == STALE_TENSION
+    est.set_paid_out_length_m(5.0, 0.0)
+    assert est.on_tension(_estimate(good, time_s=3.0, last_update_s=3.0)).status == NO_LENGTH
+    est.set_paid_out_length_m(-1.0, 3.0)
+    est.set_paid_out_length_m(math.nan, 3.0)
+    assert est.rejected >= 2 and est.length_m == 5.0
+    est.set_paid_out_length_m(5.0, 3.0)
+    assert est.on_tension(_estimate(good, time_s=3.0, last_update_s=3.0)).valid
+    # cable pulling the drone up with the anchor on the ground: geometry cannot explain it
+    out = est.on_tension(_estimate([-1.0, 0.0, -2.0], time_s=3.0, last_update_s=3.0))
+    assert out.status == INCONSISTENT and not np.isfinite(out.position_ned_m).any()
+    case1 = CatenaryPositionEstimator(CatenaryPositionConfig(case=LOWEST_POINT_AT_ANCHOR))
+    assert case1.on_tension(_estimate([-1.0, 0.0, -0.5])).status == INCONSISTENT
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [("weight_per_length_n_per_m", 0.0), ("case", "both"), ("max_tension_age_s", -1.0)],
+)
+def test_config_bad_values(key, value):
+    with pytest.raises(ConfigError):
+        from_mapping(CatenaryPositionConfig, {key: value}, source="catenary.yaml")

@@ -1,0 +1,245 @@
+"""Drone position from the tether's pull and the catenary shape (Martins 2019, section 6).
+
+Fed by the tension filter (:class:`~tether_companion.estimation.tension_kf.TensionEstimate`)
+and, for the known-length case, by the paid-out length of the winch, this estimator turns the
+force of the cable on the drone into the drone's NED position relative to the anchor:
+
+* ``lowest_point_at_anchor`` (section 6.1, eqs. 57-64): a ground controller keeps the
+  tether's lowest point at the anchor;
+* ``known_length`` (section 6.2, eqs. 65-71): the paid-out length ``L`` is known. With
+  ``anchor_on_ground`` (the usual ground station, and the simulator's cable), a cable whose
+  free catenary would dip below the anchor lies on the ground from the anchor to a touchdown
+  point instead and rises from there as a case-1 catenary: for ``s2 <= L`` the drone is at
+  ``r = (L - s2) + a asinh(s2/a)``, ``z = sqrt(a^2 + s2^2) - a``; for ``s2 > L`` the cable
+  hangs free with its lowest point behind the anchor (the thesis' case 2). The two branches
+  meet at ``s2 = L``. Without ``anchor_on_ground`` the free case-2 curve is used throughout
+  (anchor raised above the lowest point, as the thesis' experiments with ``z_i = 0.754 m``).
+
+The horizontal direction of the drone from the anchor is that of the **negated** horizontal
+force on the drone (the cable pulls toward the anchor). Cable stretch is ignored.
+
+A cable lying on the ground with (almost) no horizontal pull rises straight up from wherever
+it leaves the ground: its pull says nothing about the drone's horizontal position, and the
+estimator reports ``unobservable`` rather than guess (the thesis' ``a -> 0`` limit would put
+the drone over the anchor).
+
+The position covariance is the tension covariance mapped through the Jacobian of the
+position with respect to the force (central differences): ``J Sigma_T J^T``.
+
+Pure and synchronous. The service can run it beside or instead of the tether EKF.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.config import spec
+from tether_companion.estimation.tension_kf import TensionEstimate
+from tether_companion.physics.catenary import (
+    curve_from_tension_known_length,
+    curve_from_tension_lowest_point_at_anchor,
+    drone_point,
+)
+
+FloatArray = NDArray[np.float64]
+
+LOWEST_POINT_AT_ANCHOR = "lowest_point_at_anchor"
+KNOWN_LENGTH = "known_length"
+
+OK = "ok"
+NO_TENSION = "no_tension"
+STALE_TENSION = "stale_tension"
+NO_LENGTH = "no_length"
+INCONSISTENT = "inconsistent"
+UNOBSERVABLE = "unobservable"
+
+
+@dataclass(frozen=True)
+class CatenaryPositionConfig:
+    """Settings of the catenary position estimator."""
+
+    case: str = spec(
+        KNOWN_LENGTH,
+        choices=(LOWEST_POINT_AT_ANCHOR, KNOWN_LENGTH),
+        doc="which extra information fixes the curve (Martins section 6.1 or 6.2)",
+    )
+    weight_per_length_n_per_m: float = spec(
+        0.164, exclusive_minimum=0.0, doc="cable weight per length w = rho g [N/m]"
+    )
+    anchor_on_ground: bool = spec(
+        True, doc="known_length: slack cable lies on the ground at the anchor's level"
+    )
+    default_length_m: float = spec(
+        10.0, exclusive_minimum=0.0, doc="known_length: paid-out length until one is reported [m]"
+    )
+    max_tension_age_s: float = spec(
+        0.3, exclusive_minimum=0.0, doc="tension estimates older than this are not used [s]"
+    )
+    max_length_age_s: float = spec(
+        5.0, exclusive_minimum=0.0, doc="paid-out length reports older than this are not used [s]"
+    )
+    min_horizontal_tension_n: float = spec(
+        0.02,
+        minimum=0.0,
+        doc="known_length on the ground: a weaker horizontal pull leaves the drone's horizontal "
+        "position unobservable [N]",
+    )
+    jacobian_step_n: float = spec(
+        1e-4, exclusive_minimum=0.0, doc="force step of the central-difference Jacobian [N]"
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class CatenaryPosition:
+    """Output of :class:`CatenaryPositionEstimator` at one tension tick.
+
+    Attributes
+    ----------
+    time_s
+        Time of the tension estimate [s].
+    position_ned_m
+        Drone position relative to the anchor, NED, shape (3,) [m]; ``nan`` when invalid.
+    covariance_m2
+        Position covariance, shape (3, 3) [m^2]; ``nan`` when invalid.
+    status
+        ``ok`` or why no position was produced (``no_tension``, ``stale_tension``,
+        ``no_length``, ``inconsistent``: the geometry cannot explain the force,
+        ``unobservable``: a slack cable lying on the ground with no horizontal pull).
+    """
+
+    time_s: float
+    position_ned_m: FloatArray
+    covariance_m2: FloatArray
+    status: str
+
+    @property
+    def valid(self) -> bool:
+        """Whether a position was produced."""
+        return self.status == OK
+
+
+def position_from_force_ned_m(
+    force_on_drone_ned_n: FloatArray,
+    case: str,
+    weight_per_length_n_per_m: float,
+    length_m: float = math.nan,
+    anchor_on_ground: bool = True,
+) -> FloatArray:
+    """Drone position (NED, anchor origin) [m], shape (3,), from the cable's force on it.
+
+    Parameters
+    ----------
+    force_on_drone_ned_n
+        Force of the cable on the drone, NED, shape (3,) [N].
+    case
+        ``lowest_point_at_anchor`` or ``known_length``.
+    weight_per_length_n_per_m
+        Cable weight per length [N/m].
+    length_m
+        Paid-out length [m] (``known_length`` only).
+    anchor_on_ground
+        ``known_length`` only: see the module docstring.
+
+    Raises
+    ------
+    ValueError
+        Inputs the geometry cannot explain (see
+        :func:`~tether_companion.physics.catenary.curve_from_tension_lowest_point_at_anchor`).
+    """
+    fn, fe, fd = (float(v) for v in force_on_drone_ned_n)
+    horizontal_n = math.hypot(fn, fe)
+    w = weight_per_length_n_per_m
+    if case == LOWEST_POINT_AT_ANCHOR:
+        r, z = drone_point(curve_from_tension_lowest_point_at_anchor(horizontal_n, fd, w))
+    else:
+        curve = curve_from_tension_known_length(horizontal_n, fd, length_m, w)
+        if anchor_on_ground and curve.s2_m <= length_m:
+            grounded = length_m - curve.s2_m
+            rise = curve_from_tension_lowest_point_at_anchor(horizontal_n, fd, w)
+            r, z = drone_point(rise)
+            r += grounded
+        else:
+            r, z = drone_point(curve)
+    if horizontal_n > 0.0:
+        return np.array((-r * fn / horizontal_n, -r * fe / horizontal_n, -z))
+    return np.array((0.0, 0.0, -z))
+
+
+class CatenaryPositionEstimator:
+    """Position from the filtered tension and the catenary (see the module docstring).
+
+    Parameters
+    ----------
+    config
+        Which case, the cable's weight per length, staleness bounds.
+    """
+
+    def __init__(self, config: CatenaryPositionConfig) -> None:
+        self.config = config
+        self._length_m = config.default_length_m
+        self._length_time_s = math.nan
+        self.rejected = 0
+
+    @property
+    def length_m(self) -> float:
+        """Paid-out length in use [m]."""
+        return self._length_m
+
+    def set_paid_out_length_m(self, length_m: float, time_s: float) -> None:
+        """Report the winch's paid-out length [m] at ``time_s`` [s] (refused if not > 0)."""
+        if not (math.isfinite(length_m) and math.isfinite(time_s) and length_m > 0.0):
+            self.rejected += 1
+            return
+        self._length_m = float(length_m)
+        self._length_time_s = float(time_s)
+
+    def on_tension(self, estimate: TensionEstimate) -> CatenaryPosition:
+        """The position at the time of ``estimate``."""
+        cfg = self.config
+        t = estimate.time_s
+        if not estimate.valid:
+            return self._invalid(t, NO_TENSION)
+        if not estimate.age_s(t) <= cfg.max_tension_age_s:
+            return self._invalid(t, STALE_TENSION)
+        length = math.nan
+        if cfg.case == KNOWN_LENGTH:
+            length = self._length_m
+            reported = self._length_time_s
+            if math.isfinite(reported) and not t - reported <= cfg.max_length_age_s:
+                return self._invalid(t, NO_LENGTH)
+        force = estimate.tension_ned_n
+        if (
+            cfg.case == KNOWN_LENGTH
+            and cfg.anchor_on_ground
+            and math.hypot(force[0], force[1]) < cfg.min_horizontal_tension_n
+            and force[2] < cfg.weight_per_length_n_per_m * length
+        ):
+            return self._invalid(t, UNOBSERVABLE)
+        try:
+            position = self._position(force, length)
+            jacobian = np.empty((3, 3))
+            step = cfg.jacobian_step_n
+            for j in range(3):
+                delta = np.zeros(3)
+                delta[j] = step
+                jacobian[:, j] = (
+                    self._position(force + delta, length) - self._position(force - delta, length)
+                ) / (2.0 * step)
+        except ValueError:
+            return self._invalid(t, INCONSISTENT)
+        covariance = estimate.variance_n2 * (jacobian @ jacobian.T)
+        return CatenaryPosition(t, position, 0.5 * (covariance + covariance.T), OK)
+
+    def _position(self, force: FloatArray, length_m: float) -> FloatArray:
+        cfg = self.config
+        return position_from_force_ned_m(
+            force, cfg.case, cfg.weight_per_length_n_per_m, length_m, cfg.anchor_on_ground
+        )
+
+    def _invalid(self, time_s: float, status: str) -> CatenaryPosition:
+        self.rejected += 1
+        return CatenaryPosition(time_s, np.full(3, math.nan), np.full((3, 3), math.nan), status)

@@ -326,7 +326,8 @@ class CatenaryCable(_CableBase):
       of such a lightly loaded cable (``T/k``, below a millimetre for the defaults) is ignored.
     - otherwise: the stretch ``e`` solves ``k e = T_cat(L + e)``, with ``T_cat(L')`` the drone
       end tension of the inextensible catenary of length ``L'`` (case 2); for ``d > L`` the
-      axial damper of the elastic line is added along the chord.
+      axial damper of the elastic line is added along the chord (``tension_n`` is then the
+      magnitude of the resulting force).
 
     The ``d`` component of the force is ``w s2`` (downward pull of the cable beyond the lowest
     point); the horizontal component ``w a`` points toward the anchor.
@@ -434,7 +435,7 @@ class CatenaryCable(_CableBase):
             fn -= damper * pn / chord
             fe -= damper * pe / chord
             fd -= damper * pd / chord
-            tension += damper
+            tension = math.sqrt(fn * fn + fe * fe + fd * fd)
         self.tension_n = tension
         return fn, fe, fd
 

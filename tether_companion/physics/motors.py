@@ -7,7 +7,8 @@ order lag of time constant ``tau`` (the vehicle profile's ``motor_time_constant_
 
 The flight controller holds its PWM outputs between updates (zero-order hold), so over a step
 ``h`` with constant ``f_ss`` the lag has the exact solution
-``f_i(t + h) = f_ss + (f_i(t) - f_ss) exp(-h / tau)``, used by :class:`MotorLag`.
+``f_i(t + h) = f_ss + (f_i(t) - f_ss) exp(-h / tau)``: :class:`MotorLag` gives the decay factor,
+:class:`tether_companion.physics.rigid_body.RigidBody` applies it.
 """
 
 from __future__ import annotations
@@ -39,11 +40,6 @@ class MotorLag:
     def decay(self, dt_s: float) -> float:
         """``exp(-dt/tau)``: the fraction of a thrust error left after ``dt_s`` seconds."""
         return math.exp(-dt_s / self.time_constant_s)
-
-    def advance(self, thrust_n: ArrayLike, steady_state_n: ArrayLike, dt_s: float) -> FloatArray:
-        """Motor thrusts [N], shape (n,), ``dt_s`` seconds later with constant targets (n,) [N]."""
-        target = np.asarray(steady_state_n, dtype=float)
-        return target + (np.asarray(thrust_n, dtype=float) - target) * self.decay(dt_s)
 
 
 class MotorMixer:

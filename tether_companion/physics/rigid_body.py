@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.constants import GRAVITY_MPS2
+from tether_companion.physics.motors import MotorLag
 from tether_companion.physics.vehicle import VehicleProfile
 
 FloatArray = NDArray[np.float64]
@@ -113,7 +114,7 @@ class RigidBody:
         self._gyro = ((jy - jz) / jx, (jz - jx) / jy, (jx - jy) / jz)
         self._inv_inertia = (1.0 / jx, 1.0 / jy, 1.0 / jz)
         self._drag = float(vehicle.drag_coefficient_n_s_per_m)
-        self._tau_s = float(vehicle.motor_time_constant_s)
+        self._lag = MotorLag(vehicle.motor_time_constant_s)
         allocation = vehicle.allocation_matrix()
         self._allocation_rows = tuple(tuple(float(a) for a in row) for row in allocation)
         self.tug_force_ned_n: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -234,8 +235,8 @@ class RigidBody:
         """
         if dt_s != self._decay_dt:
             self._decay_dt = dt_s
-            self._decay_half = math.exp(-0.5 * dt_s / self._tau_s)
-            self._decay_full = math.exp(-dt_s / self._tau_s)
+            self._decay_half = self._lag.decay(0.5 * dt_s)
+            self._decay_full = self._lag.decay(dt_s)
         fss = steady_state_thrusts_n
         if fss is not self._targets_ref:
             self._targets_ref = fss

@@ -1,0 +1,63 @@
+"""Motor mixing (quad X), saturation, PWM outputs and the first-order lag."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tether_companion.physics.motors import MotorLag, MotorMixer
+from tether_companion.physics.vehicle import load_vehicle
+
+
+@pytest.fixture(params=["default-quad", "crazyflie"])
+def mixer(request: pytest.FixtureRequest) -> MotorMixer:
+    return MotorMixer(load_vehicle(request.param))
+
+
+def test_mixing_reproduces_the_requested_wrench(mixer: MotorMixer) -> None:
+    hover = 0.6 * mixer.max_thrust_n * mixer.n_motors
+    torque = np.array([0.02, -0.01, 0.005]) * mixer.max_thrust_n * mixer.vehicle.arm_length_m
+    thrusts = mixer.motor_thrusts_n(hover, torque)
+    assert mixer.wrench(thrusts) == pytest.approx([hover, *torque], rel=1e-9, abs=1e-15)
+
+
+def test_quad_x_signs_follow_ardupilot_layout() -> None:
+    mixer = MotorMixer(load_vehicle("default-quad"))
+    thrusts = mixer.motor_thrusts_n(20.0, (0.5, 0.0, 0.0))  # roll right: left motors push more
+    # motors 2 (back-left) and 3 (front-left) have y < 0
+    assert thrusts[1] > thrusts[0] and thrusts[2] > thrusts[3]
+    thrusts = mixer.motor_thrusts_n(20.0, (0.0, 0.5, 0.0))  # pitch up: front motors push more
+    assert thrusts[0] > thrusts[1] and thrusts[2] > thrusts[3]
+    thrusts = mixer.motor_thrusts_n(20.0, (0.0, 0.0, 0.1))  # yaw right: ccw motors 1, 2
+    assert thrusts[0] > thrusts[2] and thrusts[1] > thrusts[3]
+
+
+def test_saturation_keeps_motors_in_range_and_torque_direction(mixer: MotorMixer) -> None:
+    collective = 0.9 * mixer.max_thrust_n * mixer.n_motors
+    torque = np.array([1.0, 0.5, 0.2]) * mixer.max_thrust_n * mixer.vehicle.arm_length_m
+    thrusts = mixer.motor_thrusts_n(collective, torque)
+    assert np.all(thrusts >= mixer.min_thrust_n - 1e-12)
+    assert np.all(thrusts <= mixer.max_thrust_n + 1e-12)
+    got = mixer.wrench(thrusts)[1:]
+    # scaled down uniformly: same direction
+    assert got / np.linalg.norm(got) == pytest.approx(torque / np.linalg.norm(torque), rel=1e-9)
+
+
+def test_pwm_outputs_are_whole_microseconds_inverting_the_curve(mixer: MotorMixer) -> None:
+    thrusts = np.array([0.3, 0.5, 0.55, 0.7]) * mixer.max_thrust_n
+    pwm = mixer.pwm_us(thrusts)
+    assert np.all(pwm == np.round(pwm))
+    back = mixer.curve.thrust_n(pwm)
+    slope = mixer.max_thrust_n * 4.0 / (mixer.curve.pwm_max_us - mixer.curve.pwm_min_us)
+    assert np.all(np.abs(back - thrusts) <= 0.5 * slope)
+    assert np.all(mixer.idle_pwm_us() == mixer.curve.pwm_min_us)
+
+
+def test_motor_lag_matches_exponential_and_refuses_bad_tau() -> None:
+    lag = MotorLag(0.05)
+    assert lag.decay(0.1) == pytest.approx(math.exp(-2.0), rel=1e-15)
+    assert lag.decay(0.0) == 1.0
+    with pytest.raises(ValueError, match="> 0"):
+        MotorLag(0.0)

@@ -117,8 +117,9 @@ class RigidBody:
         self._lag = MotorLag(vehicle.motor_time_constant_s)
         allocation = vehicle.allocation_matrix()
         self._allocation_rows = tuple(tuple(float(a) for a in row) for row in allocation)
-        self.tug_force_ned_n: tuple[float, float, float] = (0.0, 0.0, 0.0)
-        self.wind_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self._tug_force_ned_n: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self._wind_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self._constant_force_ned_n = (0.0, 0.0, self.mass_kg * self.gravity_mps2)
         self.x: list[float] = [0.0] * N_RIGID_STATES
         self._motor_n: list[float] = [0.0] * self.n_motors
         self._wrench: list[float] = [0.0] * 4
@@ -127,6 +128,37 @@ class RigidBody:
         self.landed = False
         self._decay_dt = math.nan
         self._decay_half = self._decay_full = 1.0
+
+    # ------------------------------------------------------------------ constant forces
+    @property
+    def tug_force_ned_n(self) -> tuple[float, float, float]:
+        """Extra constant NED force on the drone [N] (a tug on the line)."""
+        return self._tug_force_ned_n
+
+    @tug_force_ned_n.setter
+    def tug_force_ned_n(self, force_ned_n: Sequence[float]) -> None:
+        self._tug_force_ned_n = tuple(float(f) for f in force_ned_n)  # type: ignore[assignment]
+        self._update_constant_force()
+
+    @property
+    def wind_ned_m_s(self) -> tuple[float, float, float]:
+        """Wind velocity, NED [m/s]."""
+        return self._wind_ned_m_s
+
+    @wind_ned_m_s.setter
+    def wind_ned_m_s(self, wind_ned_m_s: Sequence[float]) -> None:
+        self._wind_ned_m_s = tuple(float(w) for w in wind_ned_m_s)  # type: ignore[assignment]
+        self._update_constant_force()
+
+    def _update_constant_force(self) -> None:
+        """Gravity + tug + the wind's share of the drag, NED [N], precomputed for the RK4."""
+        c = self._drag
+        tug, wind = self._tug_force_ned_n, self._wind_ned_m_s
+        self._constant_force_ned_n = (
+            tug[0] + c * wind[0],
+            tug[1] + c * wind[1],
+            tug[2] + c * wind[2] + self.mass_kg * self.gravity_mps2,
+        )
 
     # ------------------------------------------------------------------ state access
     @property
@@ -198,13 +230,11 @@ class RigidBody:
         ve = r01 * u + r11 * v + r21 * w
         vd = -sp * u + r12 * v + r22 * w
         fn, fe, fd = self.external_force(pn, pe, pd, vn, ve, vd)
-        tug = self.tug_force_ned_n
-        wind = self.wind_ned_m_s
+        bn, be, bd = self._constant_force_ned_n
         c = self._drag
-        m = self.mass_kg
-        fn += tug[0] - c * (vn - wind[0])
-        fe += tug[1] - c * (ve - wind[1])
-        fd += tug[2] - c * (vd - wind[2]) + m * self.gravity_mps2
+        fn += bn - c * vn
+        fe += be - c * ve
+        fd += bd - c * vd
         im = self._inv_mass
         ax = (r00 * fn + r01 * fe - sp * fd) * im
         ay = (r10 * fn + r11 * fe + r12 * fd) * im

@@ -108,6 +108,7 @@ class Simulator:
         self._steps = 0
         self._events = sorted(scenario.events, key=lambda e: e.time_s)
         self._next_event = 0
+        self._next_event_s = self._events[0].time_s if self._events else math.inf
         self._tug_end_s = math.inf
         self._pwm_us = self.controller.idle()
         self._steady_thrust_n = self._thrusts_for(self._pwm_us)
@@ -164,12 +165,8 @@ class Simulator:
         """One physics step: events, controller (at its rate), RK4 with motor lag, cable, ground."""
         t = self.time_s
         dt = self.physics_dt_s
-        while (
-            self._next_event < len(self._events)
-            and self._events[self._next_event].time_s <= t + 0.5 * dt
-        ):
-            self._apply_event(self._events[self._next_event])
-            self._next_event += 1
+        if self._next_event_s <= t + 0.5 * dt:
+            self._apply_due_events(t + 0.5 * dt)
         if t >= self._tug_end_s - 0.5 * dt:
             self.body.tug_force_ned_n = (0.0, 0.0, 0.0)
             self._tug_end_s = math.inf
@@ -184,6 +181,14 @@ class Simulator:
         target = round(time_s / self.physics_dt_s)
         while self._steps < target:
             self.step()
+
+    def _apply_due_events(self, until_s: float) -> None:
+        events = self._events
+        while self._next_event < len(events) and events[self._next_event].time_s <= until_s:
+            self._apply_event(events[self._next_event])
+            self._next_event += 1
+        more = self._next_event < len(events)
+        self._next_event_s = events[self._next_event].time_s if more else math.inf
 
     def _update_controller(self, t: float) -> None:
         if not self.armed:

@@ -98,6 +98,7 @@ def test_gate_rejects_outlier_then_yields_after_consecutive_rejections() -> None
     assert ekf.update("pos", np.array([ekf.x[0] + 0.01]), _linear(h), r).status == FUSED
 
 
+@pytest.mark.filterwarnings("ignore:invalid value:RuntimeWarning")
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
 def test_nonfinite_measurement_is_rejected_and_counted(bad: float) -> None:
     ekf = ExtendedKalmanFilter(np.ones(2), np.eye(2), np.eye(2))

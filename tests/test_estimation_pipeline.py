@@ -16,6 +16,7 @@ import pytest
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.pipeline import TetherEstimator
+from tether_companion.estimation.thrust_input import StaticThrustInput
 from tether_companion.frames import rotation_ned_to_body
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
@@ -169,3 +170,13 @@ def test_range_is_tilt_corrected_and_validated() -> None:
     estimator.on_range(RangeSample(0.0, 4.0))
     assert estimator.health.range_out_of_range == 3
     assert estimator.health.range_fused == 200
+
+
+def test_static_thrust_input_is_the_profile_curve(rng) -> None:
+    thrust_input = StaticThrustInput(VEHICLE)
+    for _ in range(50):
+        pwm = rng.uniform(900.0, 2100.0, 4)  # beyond both ends: clipped like the curve
+        expected = float(np.sum(VEHICLE.thrust_curve.thrust_n(pwm)))
+        assert thrust_input.total_thrust_n(pwm, 0.0) == pytest.approx(expected, rel=1e-12)
+    with pytest.raises(ValueError, match="expected 4"):
+        thrust_input.total_thrust_n(np.ones(3) * 1500.0, 0.0)

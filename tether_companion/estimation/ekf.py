@@ -238,20 +238,28 @@ class ExtendedKalmanFilter:
             status = self.sensors[sensor] = SensorStatus()
         z_pred, h_jac = measure(self.x)
         innovation = z - z_pred
-        # one reduction catches any NaN/inf (they propagate through the sum)
-        if not math.isfinite(float(innovation.sum()) + float(h_jac.sum()) + float(r.sum())):
-            status.nonfinite += 1
-            return UpdateResult(NONFINITE, math.nan)
         pht = self.P @ h_jac.T
         s = h_jac @ pht + r
-        if dpotrf(s, lower=1, clean=0)[1] != 0:  # Cholesky: is S positive definite?
+        m = innovation.size
+        if m == 1:  # scalar measurement: no factorisation needed
+            s_value = float(s[0, 0])
+            positive_definite = s_value > 0.0
+        else:
+            positive_definite = dpotrf(s, lower=1, clean=0)[1] == 0  # Cholesky succeeded
+        if not positive_definite:
+            if not math.isfinite(float(s.sum())):
+                status.nonfinite += 1
+                return UpdateResult(NONFINITE, math.nan)
             status.singular += 1
             return UpdateResult(SINGULAR, math.nan)
-        s_inv = 1.0 / s if innovation.size == 1 else np.linalg.inv(s)
-        nis = float(innovation @ s_inv @ innovation)
+        if m == 1:
+            s_inv = np.array(((1.0 / s_value,),))
+            nis = float(innovation[0]) ** 2 / s_value
+        else:
+            s_inv = np.linalg.inv(s)
+            nis = float(innovation @ s_inv @ innovation)
         status.last_nis = nis
         status.last_innovation = innovation
-        m = innovation.size
         threshold = self._thresholds.get(m)
         if threshold is None:
             threshold = self._thresholds[m] = chi2_threshold(self.gate_probability, m)
@@ -263,14 +271,21 @@ class ExtendedKalmanFilter:
                 return UpdateResult(GATED, nis)
             status.forced += 1
         gain = pht @ s_inv
-        self.x = self.x + gain @ innovation
+        x = self.x + gain @ innovation
         # Joseph form: symmetric PSD by construction, unlike (I - K H) P under rounding
         a = self._eye - gain @ h_jac
         p = a @ self.P @ a.T + gain @ r @ gain.T
+        # NaN/inf anywhere in z, h(x), H or R reaches x or P: one reduction catches it, and
+        # the state is left untouched
+        if not math.isfinite(float(x.sum()) + float(p.sum())):
+            status.nonfinite += 1
+            return UpdateResult(NONFINITE, math.nan)
+        self.x = x
         self.P = 0.5 * (p + p.T)
         status.fused += 1
         status.consecutive_rejections = 0
-        self._check_health()
+        if dpotrf(self.P, lower=1, clean=0)[1] != 0:  # Cholesky failed: not PD
+            self._repair_covariance()
         return UpdateResult(FUSED, nis)
 
     # ------------------------------------------------------------------ diagnostics

@@ -16,7 +16,9 @@ and it returns an :class:`Estimate` per IMU tick.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import operator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -95,7 +97,14 @@ class EstimatorHealth:
 
     def copy(self) -> EstimatorHealth:
         """A snapshot."""
-        return EstimatorHealth(*(getattr(self, name) for name in self.__slots__))
+        return EstimatorHealth(*_HEALTH_VALUES(self))
+
+    def values(self) -> tuple:
+        """All fields in declaration order (a cheap snapshot)."""
+        return _HEALTH_VALUES(self)
+
+
+_HEALTH_VALUES = operator.attrgetter(*(f.name for f in dataclasses.fields(EstimatorHealth)))
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,8 +125,9 @@ class Estimate:
         Increments each time the filter restarts (for VISION_POSITION_ESTIMATE.reset_counter).
     accel_fused
         Whether this tick fused the accelerometer.
-    health
-        Snapshot of the pipeline's counters.
+    health_values
+        The pipeline's counters at this tick, in :class:`EstimatorHealth` field order; read
+        them as ``estimate.health`` (kept as a tuple: an estimate is made at every IMU tick).
     """
 
     time_s: float
@@ -126,7 +136,12 @@ class Estimate:
     covariance: FloatArray
     reset_counter: int
     accel_fused: bool
-    health: EstimatorHealth = field(repr=False)
+    health_values: tuple = field(repr=False)
+
+    @property
+    def health(self) -> EstimatorHealth:
+        """Snapshot of the pipeline's counters at this tick."""
+        return EstimatorHealth(*self.health_values)
 
     @property
     def position_covariance_m2(self) -> FloatArray:
@@ -201,12 +216,7 @@ class TetherEstimator:
 
     def on_attitude(self, sample: AttitudeSample) -> None:
         """Store the latest attitude (rejected and counted when not finite)."""
-        if not (
-            _finite(sample.time_s)
-            and _finite(sample.roll_rad)
-            and _finite(sample.pitch_rad)
-            and _finite(sample.yaw_rad)
-        ):
+        if not _finite(sample.time_s + sample.roll_rad + sample.pitch_rad + sample.yaw_rad):
             self.health.nonfinite_rejected += 1
             return
         self._attitude = sample
@@ -373,5 +383,5 @@ class TetherEstimator:
             covariance=self.filter.P.copy(),
             reset_counter=self.filter.resets,
             accel_fused=accel_fused,
-            health=self.health.copy(),
+            health_values=self.health.values(),
         )

@@ -37,29 +37,42 @@ POSITION = slice(P_N, P_D + 1)
 """Slice of the position block of either state vector."""
 
 
-def cable_direction(position_ned_m: FloatArray) -> tuple[FloatArray, float]:
-    """Unit vector from the anchor to the drone (NED), shape (3,), and the distance [m]."""
-    pn, pe, pd = float(position_ned_m[0]), float(position_ned_m[1]), float(position_ned_m[2])
-    length = math.sqrt(pn * pn + pe * pe + pd * pd)
-    return np.array((pn / length, pe / length, pd / length)), length
-
-
-def _accel_and_jacobians(
-    position_ned_m: FloatArray,
+def _accel_and_jacobian(
+    position_ned_m: list[float],
     tension_n: float,
     rotation_ned_to_body: FloatArray,
     thrust_n: float,
     mass_kg: float,
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """``h_acc`` [m/s^2] shape (3,), ``d h_acc/d p`` shape (3, 3), ``d h_acc/d f_c`` shape (3,)."""
-    u, length = cable_direction(position_ned_m)
-    ru = rotation_ned_to_body @ u
-    inv_m = 1.0 / mass_kg
-    accel = -tension_n * inv_m * ru
-    accel[2] -= thrust_n * inv_m
-    # R (I - u u^T) = R - (R u) u^T
-    d_position = (-tension_n * inv_m / length) * (rotation_ned_to_body - np.outer(ru, u))
-    return accel, d_position, -inv_m * ru
+    tension_column: bool,
+) -> tuple[FloatArray, FloatArray]:
+    """``h_acc`` [m/s^2] shape (3,) and its Jacobian, shape (3, 4) with the ``d/d f_c`` column
+    or (3, 3) without.
+
+    Written in scalars (the EKF evaluates it twice per IMU tick and numpy's per-call overhead
+    would dominate 3x3 arithmetic): with ``a = R u``,
+    ``h = -(f_c/m) a - (0, 0, T/m)``, ``dh/dp = -(f_c/(m |p|)) (R - a u^T)``, ``dh/df_c = -a/m``.
+    """
+    pn, pe, pd = position_ned_m
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_ned_to_body.tolist()
+    inv_length = 1.0 / math.sqrt(pn * pn + pe * pe + pd * pd)
+    un, ue, ud = pn * inv_length, pe * inv_length, pd * inv_length
+    a0 = r00 * un + r01 * ue + r02 * ud
+    a1 = r10 * un + r11 * ue + r12 * ud
+    a2 = r20 * un + r21 * ue + r22 * ud
+    k = -tension_n / mass_kg
+    kl = k * inv_length
+    accel = np.array((k * a0, k * a1, k * a2 - thrust_n / mass_kg))
+    rows = (
+        [kl * (r00 - a0 * un), kl * (r01 - a0 * ue), kl * (r02 - a0 * ud)],
+        [kl * (r10 - a1 * un), kl * (r11 - a1 * ue), kl * (r12 - a1 * ud)],
+        [kl * (r20 - a2 * un), kl * (r21 - a2 * ue), kl * (r22 - a2 * ud)],
+    )
+    if tension_column:
+        inv_m = -1.0 / mass_kg
+        rows[0].append(inv_m * a0)
+        rows[1].append(inv_m * a1)
+        rows[2].append(inv_m * a2)
+    return accel, np.array(rows)
 
 
 class FourStateModel:
@@ -93,13 +106,10 @@ class FourStateModel:
 
         ``tension_n`` is ignored: the tension is the state's fourth component.
         """
-        accel, d_position, d_tension = _accel_and_jacobians(
-            x[POSITION], float(x[F_C]), rotation_ned_to_body, thrust_n, self.mass_kg
+        pn, pe, pd, fc = x.tolist()
+        return _accel_and_jacobian(
+            (pn, pe, pd), fc, rotation_ned_to_body, thrust_n, self.mass_kg, True
         )
-        jac = np.empty((3, 4))
-        jac[:, :3] = d_position
-        jac[:, 3] = d_tension
-        return accel, jac
 
     def tension_n(self, x: FloatArray, known_tension_n: float = math.nan) -> float:
         """Tension of the state [N]."""
@@ -126,10 +136,9 @@ class ThreeStateModel:
     ) -> tuple[FloatArray, FloatArray]:
         """Specific force ``h_acc(x)`` [m/s^2] shape (3,) and its Jacobian shape (3, 3), given
         the known tension ``tension_n`` [N]."""
-        accel, d_position, _ = _accel_and_jacobians(
-            x, tension_n, rotation_ned_to_body, thrust_n, self.mass_kg
+        return _accel_and_jacobian(
+            x.tolist(), tension_n, rotation_ned_to_body, thrust_n, self.mass_kg, False
         )
-        return accel, d_position
 
     def tension_n(self, x: FloatArray, known_tension_n: float = math.nan) -> float:
         """The known tension [N] (the state has none)."""

@@ -28,11 +28,21 @@ class ThrustInput(Protocol):
 
 
 class StaticThrustInput:
-    """Sum of the vehicle profile's static thrust curve over the motors (no motor dynamics)."""
+    """Sum of the vehicle profile's static thrust curve over the motors (no motor dynamics).
+
+    Evaluates :meth:`ThrustCurve.thrust_n` with scalar arithmetic: it runs on every PWM
+    sample of every estimator, where numpy's per-call overhead dominates for 4 motors
+    (a test checks that both agree).
+    """
 
     def __init__(self, vehicle: VehicleProfile) -> None:
-        self.curve = vehicle.thrust_curve
+        curve = vehicle.thrust_curve
+        self.curve = curve
         self.n_motors = vehicle.n_motors
+        self._pwm_min_us = curve.pwm_min_us
+        self._per_us = 1.0 / (curve.pwm_max_us - curve.pwm_min_us)
+        self._full_scale = curve.command_full_scale
+        self._c0, self._c1, self._c2 = curve.coefficients_n
 
     def total_thrust_n(self, pwm_us: FloatArray, time_s: float) -> float:
         """Total thrust [N]; ``time_s`` is unused (the map is static).
@@ -44,4 +54,10 @@ class StaticThrustInput:
         """
         if len(pwm_us) != self.n_motors:
             raise ValueError(f"expected {self.n_motors} pulse widths, got {len(pwm_us)}")
-        return float(np.sum(self.curve.thrust_n(pwm_us)))
+        c1, c2 = self._c1, self._c2
+        total = self._c0 * self.n_motors
+        for pwm in pwm_us.tolist() if isinstance(pwm_us, np.ndarray) else pwm_us:
+            u = (pwm - self._pwm_min_us) * self._per_us
+            cmd = (0.0 if u < 0.0 else 1.0 if u > 1.0 else u) * self._full_scale
+            total += cmd * (c1 + c2 * cmd)
+        return total

@@ -1,0 +1,1 @@
+"""Benchmarks of ``tether-companion bench``: one module per benchmark (HELP, add_arguments, run)."""

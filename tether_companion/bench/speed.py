@@ -1,0 +1,199 @@
+"""``bench speed``: real-time factor of simulator + both EKFs, and the EKF step vs filterpy's.
+
+1. Flies the paper scenario (60 s) once with the simulator alone and once with the
+   simulator and both EKFs (the ``simulate`` path), and prints wall times and real-time
+   factors (simulated seconds per wall-clock second).
+2. Records the 4-state filter's inputs from a simulated run, then replays them through our
+   :class:`ExtendedKalmanFilter` and through ``filterpy.kalman.ExtendedKalmanFilter`` with
+   the same model, Q, R and Joseph-form update, and prints the cost per IMU step (predict +
+   accelerometer update + altimeter update) of each, their ratio, and the largest difference
+   between the two filters' estimates (they compute the same thing; gating is off here).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import time
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from tether_companion.estimation.config import EstimatorConfig, load_estimator_config
+from tether_companion.estimation.ekf import ExtendedKalmanFilter
+from tether_companion.estimation.runner import run_scenario
+from tether_companion.estimation.tether_models import FourStateModel, altimeter
+from tether_companion.estimation.thrust_input import StaticThrustInput
+from tether_companion.frames import rotation_ned_to_body
+from tether_companion.sim.scenario import Scenario, load_scenario
+from tether_companion.sim.simulator import Simulator
+
+HELP = "Real-time factor of simulator + EKFs, and EKF step cost against filterpy's EKF."
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Scenario, estimator config, JSON output."""
+    parser.add_argument(
+        "--scenario", default="paper-circle", help="scenario (default paper-circle)"
+    )
+    parser.add_argument(
+        "--config", default=None, help="estimator YAML (default configs/estimator.yaml)"
+    )
+    parser.add_argument("--json", action="store_true", help="print the results as JSON only")
+
+
+def _sim_only_s(scenario: Scenario) -> float:
+    """Wall time [s] of flying the scenario and reading every sensor at the IMU rate."""
+    sim = Simulator(scenario)
+    period = 1.0 / scenario.sensors.imu_rate_hz
+    started = time.perf_counter()
+    for k in range(1, int(scenario.duration_s / period + 1e-9) + 1):
+        sim.advance_to(k * period)
+        sim.read_attitude()
+        sim.read_pwm()
+        sim.read_imu()
+        sim.read_rangefinder()
+        sim.truth  # noqa: B018  (the runner reads truth every tick too)
+    return time.perf_counter() - started
+
+
+def _record(scenario: Scenario, ticks: int) -> list[tuple]:
+    """(dt, rotation, thrust, specific force, height or None) per IMU tick."""
+    sim = Simulator(scenario)
+    thrust_input = StaticThrustInput(sim.vehicle)
+    period = 1.0 / scenario.sensors.imu_rate_hz
+    rows = []
+    for k in range(1, ticks + 1):
+        sim.advance_to(k * period)
+        att, pwm, imu, rng = (
+            sim.read_attitude(),
+            sim.read_pwm(),
+            sim.read_imu(),
+            sim.read_rangefinder(),
+        )
+        rotation = rotation_ned_to_body(att.roll_rad, att.pitch_rad, att.yaw_rad)
+        height = None
+        if rng is not None:
+            height = rng.distance_m * np.cos(att.roll_rad) * np.cos(att.pitch_rad)
+        thrust = thrust_input.total_thrust_n(pwm.pwm_us, pwm.time_s)
+        rows.append((period, rotation, thrust, imu.specific_force_body_mps2, height))
+    return rows
+
+
+def _ours(
+    rows: list[tuple], config: EstimatorConfig, model: FourStateModel
+) -> tuple[float, np.ndarray]:
+    ekf = ExtendedKalmanFilter(config.x0(), config.p0(), config.q_density())
+    r_acc = np.eye(3) * config.accel_noise.variance_mps2_sq
+    r_alt = np.array([[config.altimeter_noise_variance_m2]])
+    out = np.empty((len(rows), 4))
+    started = time.perf_counter()
+    for i, (dt, rotation, thrust, accel, height) in enumerate(rows):
+        ekf.predict(dt)
+        ekf.update("accel", accel, lambda x, r=rotation, t=thrust: model.accel(x, r, t), r_acc)
+        if height is not None:
+            ekf.update("altimeter", np.array((height,)), altimeter, r_alt)
+        out[i] = ekf.x
+    return time.perf_counter() - started, out
+
+
+def _filterpy(
+    rows: list[tuple], config: EstimatorConfig, model: FourStateModel
+) -> tuple[float, np.ndarray]:
+    from filterpy.kalman import ExtendedKalmanFilter as FilterpyEKF
+
+    ekf = FilterpyEKF(dim_x=4, dim_z=3)
+    ekf.x = config.x0().reshape(4, 1)
+    ekf.P = config.p0()
+    ekf.F = np.eye(4)
+    r_acc = np.eye(3) * config.accel_noise.variance_mps2_sq
+    r_alt = np.array([[config.altimeter_noise_variance_m2]])
+    q_density = config.q_density()
+
+    def h_acc(x, rotation, thrust):
+        return model.accel(x.ravel(), rotation, thrust)[0].reshape(3, 1)
+
+    def jac_acc(x, rotation, thrust):
+        return model.accel(x.ravel(), rotation, thrust)[1]
+
+    def h_alt(x):
+        return np.array([[-x[2, 0]]])
+
+    def jac_alt(x):
+        return altimeter(x.ravel())[1]
+
+    out = np.empty((len(rows), 4))
+    started = time.perf_counter()
+    for i, (dt, rotation, thrust, accel, height) in enumerate(rows):
+        ekf.Q = q_density * dt
+        ekf.predict()
+        args = (rotation, thrust)
+        ekf.update(accel.reshape(3, 1), jac_acc, h_acc, R=r_acc, args=args, hx_args=args)
+        if height is not None:
+            ekf.update(np.array([[height]]), jac_alt, h_alt, R=r_alt)
+        out[i] = ekf.x.ravel()
+    return time.perf_counter() - started, out
+
+
+def run(args: argparse.Namespace) -> int:
+    """Time everything and print a table (or JSON)."""
+    console = Console(stderr=args.json)
+    scenario = load_scenario(args.scenario)
+    config = load_estimator_config(args.config)
+    console.print(f"flying {args.scenario} ({scenario.duration_s:g} s) ...")
+    sim_s = _sim_only_s(scenario)
+    started = time.perf_counter()
+    run_scenario(scenario, config)
+    full_s = time.perf_counter() - started
+
+    ungated = dataclasses.replace(config, gate=dataclasses.replace(config.gate, probability=1.0))
+    ticks = int(min(scenario.duration_s, 20.0) * scenario.sensors.imu_rate_hz)
+    rows = _record(scenario, ticks)
+    model = FourStateModel(Simulator(scenario).vehicle.mass_kg)
+    ours_s, ours_x = _ours(rows, ungated, model)
+    try:
+        theirs_s, theirs_x = _filterpy(rows, ungated, model)
+    except ImportError:
+        theirs_s, theirs_x = float("nan"), np.full_like(ours_x, np.nan)
+        console.print("filterpy is not installed (pip install -e '.[bench]'): no comparison")
+    results = {
+        "scenario": args.scenario,
+        "simulated_s": scenario.duration_s,
+        "sim_only_wall_s": sim_s,
+        "sim_only_real_time_factor": scenario.duration_s / sim_s,
+        "sim_and_both_ekfs_wall_s": full_s,
+        "sim_and_both_ekfs_real_time_factor": scenario.duration_s / full_s,
+        "ekf_steps": len(rows),
+        "ours_us_per_step": ours_s / len(rows) * 1e6,
+        "filterpy_us_per_step": theirs_s / len(rows) * 1e6,
+        "filterpy_over_ours": theirs_s / ours_s,
+        "max_state_difference": float(np.max(np.abs(ours_x - theirs_x))),
+    }
+    if args.json:
+        print(json.dumps(results, indent=2))
+        return 0
+    table = Table(title=f"bench speed ({args.scenario}, {scenario.duration_s:g} s simulated)")
+    table.add_column("measure")
+    table.add_column("value", justify="right")
+    table.add_row(
+        "simulator alone: wall time",
+        f"{sim_s:.2f} s ({results['sim_only_real_time_factor']:.1f}x real time)",
+    )
+    table.add_row(
+        "simulator + 3S + 4S EKFs: wall time",
+        f"{full_s:.2f} s ({results['sim_and_both_ekfs_real_time_factor']:.1f}x real time)",
+    )
+    table.add_row(
+        "EKF step (predict + accel + altimeter), ours", f"{results['ours_us_per_step']:.1f} us"
+    )
+    table.add_row(
+        "same step, filterpy ExtendedKalmanFilter", f"{results['filterpy_us_per_step']:.1f} us"
+    )
+    table.add_row("filterpy / ours (one run)", f"{results['filterpy_over_ours']:.2f}")
+    table.add_row(
+        "largest state difference ours vs filterpy", f"{results['max_state_difference']:.2e}"
+    )
+    console.print(table)
+    return 0

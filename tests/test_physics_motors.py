@@ -19,7 +19,7 @@ def mixer(request: pytest.FixtureRequest) -> MotorMixer:
 def test_mixing_reproduces_the_requested_wrench(mixer: MotorMixer) -> None:
     hover = 0.6 * mixer.max_thrust_n * mixer.n_motors
     torque = np.array([0.02, -0.01, 0.005]) * mixer.max_thrust_n * mixer.vehicle.arm_length_m
-    thrusts = mixer.motor_thrusts_n(hover, torque)
+    thrusts = mixer.motor_thrusts_n(hover, torque.tolist())
     assert mixer.wrench(thrusts) == pytest.approx([hover, *torque], rel=1e-9, abs=1e-15)
 
 
@@ -37,7 +37,7 @@ def test_quad_x_signs_follow_ardupilot_layout() -> None:
 def test_saturation_keeps_motors_in_range_and_torque_direction(mixer: MotorMixer) -> None:
     collective = 0.9 * mixer.max_thrust_n * mixer.n_motors
     torque = np.array([1.0, 0.5, 0.2]) * mixer.max_thrust_n * mixer.vehicle.arm_length_m
-    thrusts = mixer.motor_thrusts_n(collective, torque)
+    thrusts = np.array(mixer.motor_thrusts_n(collective, torque.tolist()))
     assert np.all(thrusts >= mixer.min_thrust_n - 1e-12)
     assert np.all(thrusts <= mixer.max_thrust_n + 1e-12)
     got = mixer.wrench(thrusts)[1:]
@@ -46,13 +46,24 @@ def test_saturation_keeps_motors_in_range_and_torque_direction(mixer: MotorMixer
 
 
 def test_pwm_outputs_are_whole_microseconds_inverting_the_curve(mixer: MotorMixer) -> None:
-    thrusts = np.array([0.3, 0.5, 0.55, 0.7]) * mixer.max_thrust_n
-    pwm = mixer.pwm_us(thrusts)
+    thrusts = (np.array([0.3, 0.5, 0.55, 0.7]) * mixer.max_thrust_n).tolist()
+    pwm = np.array(mixer.pwm_us(thrusts))
     assert np.all(pwm == np.round(pwm))
-    back = mixer.curve.thrust_n(pwm)
-    slope = mixer.max_thrust_n * 4.0 / (mixer.curve.pwm_max_us - mixer.curve.pwm_min_us)
-    assert np.all(np.abs(back - thrusts) <= 0.5 * slope)
-    assert np.all(mixer.idle_pwm_us() == mixer.curve.pwm_min_us)
+    # nearest whole microsecond in thrust: no neighbouring pulse is closer
+    for p, f in zip(pwm, thrusts, strict=True):
+        err = abs(float(mixer.curve.thrust_n(p)) - f)
+        assert err <= abs(float(mixer.curve.thrust_n(p - 1)) - f)
+        assert err <= abs(float(mixer.curve.thrust_n(p + 1)) - f)
+        assert p == pytest.approx(float(mixer.curve.pwm_for_thrust(f)), abs=1.0)
+    assert mixer.thrusts_for_pwm_us(pwm) == pytest.approx(mixer.curve.thrust_n(pwm).tolist())
+    # out of range: clipped to the end pulses
+    low, high = mixer.curve.pwm_min_us, mixer.curve.pwm_max_us
+    assert mixer.pwm_us([-1.0, 1e9]) == [low, high]
+    assert mixer.thrusts_for_pwm_us([low - 50, high + 50]) == [
+        mixer.min_thrust_n,
+        mixer.max_thrust_n,
+    ]
+    assert mixer.idle_pwm_us() == [low] * mixer.n_motors
 
 
 def test_motor_lag_matches_exponential_and_refuses_bad_tau() -> None:

@@ -14,6 +14,8 @@ The flight controller holds its PWM outputs between updates (zero-order hold), s
 from __future__ import annotations
 
 import math
+from bisect import bisect_left
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -47,44 +49,69 @@ class MotorMixer:
 
     Uses the Moore-Penrose inverse of the vehicle's allocation matrix
     (:meth:`VehicleProfile.allocation_matrix`, shape (4, n)), which for a quad X is the exact
-    inverse. Saturation: the collective thrust per motor is clipped to [0, f_max]; the torque
-    share is then scaled down uniformly (by the largest factor <= 1) so every motor stays in
-    [0, f_max]: attitude authority is kept in proportion, the collective is never traded away.
+    inverse. Saturation: the collective thrust per motor is clipped to [f_min, f_max]; the
+    torque share is then scaled down uniformly (by the largest factor <= 1) so every motor
+    stays in range: attitude authority is kept in proportion, the collective is never traded.
+
+    PWM outputs are whole microseconds. The thrust curve is tabulated once at every whole
+    microsecond in [pwm_min_us, pwm_max_us]; a thrust maps to the pulse whose steady-state
+    thrust is nearest, and a pulse maps back by table look-up (scalar, no arrays: this runs
+    at the controller's rate).
     """
 
     def __init__(self, vehicle: VehicleProfile) -> None:
         self.vehicle = vehicle
         self.curve = vehicle.thrust_curve
         self.n_motors = vehicle.n_motors
-        allocation = vehicle.allocation_matrix()
-        self.allocation = allocation
-        pseudo_inverse = np.linalg.pinv(allocation)
-        self._collective_column = pseudo_inverse[:, 0].copy()
-        self._torque_columns = pseudo_inverse[:, 1:].copy()
-        self.min_thrust_n = float(self.curve.thrust_n(self.curve.pwm_min_us))
-        self.max_thrust_n = self.curve.max_thrust_n
+        self.allocation = vehicle.allocation_matrix()
+        pseudo_inverse = np.linalg.pinv(self.allocation)
+        self._collective_share = pseudo_inverse[:, 0].tolist()
+        self._torque_rows = [tuple(row) for row in pseudo_inverse[:, 1:].tolist()]
+        first = math.ceil(self.curve.pwm_min_us)
+        last = math.floor(self.curve.pwm_max_us)
+        self._first_pwm_us = first
+        self._thrust_table_n: list[float] = self.curve.thrust_n(np.arange(first, last + 1)).tolist()
+        self.min_thrust_n = self._thrust_table_n[0]
+        self.max_thrust_n = self._thrust_table_n[-1]
 
-    def motor_thrusts_n(self, collective_n: float, torque_body_n_m: ArrayLike) -> FloatArray:
-        """Motor thrusts [N], shape (n,), for a collective thrust [N] and FRD torques (3,) [N m]."""
+    def motor_thrusts_n(self, collective_n: float, torque_body_n_m: Sequence[float]) -> list[float]:
+        """Motor thrusts [N], n values, for a collective thrust [N] and FRD torques (3,) [N m]."""
         f_min, f_max = self.min_thrust_n, self.max_thrust_n
-        collective = self._collective_column * collective_n
-        collective = np.clip(collective, f_min, f_max)
-        share = self._torque_columns @ np.asarray(torque_body_n_m, dtype=float)
+        tl, tm, tn = torque_body_n_m
+        base = [min(max(c * collective_n, f_min), f_max) for c in self._collective_share]
+        share = [a * tl + b * tm + c * tn for a, b, c in self._torque_rows]
         scale = 1.0
-        for base, delta in zip(collective.tolist(), share.tolist(), strict=True):
-            if delta > 0.0 and base + delta > f_max:
-                scale = min(scale, (f_max - base) / delta)
-            elif delta < 0.0 and base + delta < f_min:
-                scale = min(scale, (f_min - base) / delta)
-        return collective + max(scale, 0.0) * share
+        for b, d in zip(base, share, strict=True):
+            if d > 0.0 and b + d > f_max:
+                scale = min(scale, (f_max - b) / d)
+            elif d < 0.0 and b + d < f_min:
+                scale = min(scale, (f_min - b) / d)
+        scale = max(scale, 0.0)
+        return [b + scale * d for b, d in zip(base, share, strict=True)]
 
-    def pwm_us(self, motor_thrusts_n: ArrayLike) -> FloatArray:
-        """Whole-microsecond PWM pulses (n,) that make each motor's steady-state thrust [N]."""
-        return np.rint(self.curve.pwm_for_thrust(motor_thrusts_n))
+    def pwm_us(self, motor_thrusts_n: Sequence[float]) -> list[float]:
+        """Whole-microsecond PWM pulses whose steady-state thrusts are nearest the given [N]."""
+        table = self._thrust_table_n
+        last = len(table) - 1
+        pulses = []
+        for thrust in motor_thrusts_n:
+            i = bisect_left(table, thrust)
+            if i > last:
+                i = last
+            elif i > 0 and thrust - table[i - 1] <= table[i] - thrust:
+                i -= 1
+            pulses.append(float(self._first_pwm_us + i))
+        return pulses
 
-    def idle_pwm_us(self) -> FloatArray:
-        """PWM pulses (n,) [us] of stopped motors (``pwm_min_us`` on every output)."""
-        return np.full(self.n_motors, float(self.curve.pwm_min_us))
+    def thrusts_for_pwm_us(self, pwm_us: Sequence[float]) -> list[float]:
+        """Steady-state thrusts [N] of whole-microsecond pulses (clipped to the curve's range)."""
+        table = self._thrust_table_n
+        last = len(table) - 1
+        return [table[min(max(int(p) - self._first_pwm_us, 0), last)] for p in pwm_us]
+
+    def idle_pwm_us(self) -> list[float]:
+        """PWM pulses [us] of stopped motors (the lowest whole microsecond on every output)."""
+        return [float(self._first_pwm_us)] * self.n_motors
 
     def wrench(self, motor_thrusts_n: ArrayLike) -> FloatArray:
         """(collective [N], roll, pitch, yaw torque [N m]), (4,), of motor thrusts (n,) [N]."""

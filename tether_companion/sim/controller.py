@@ -22,14 +22,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-from numpy.typing import NDArray
-
 from tether_companion.config import spec
 from tether_companion.physics.motors import MotorMixer
 from tether_companion.physics.vehicle import VehicleProfile
 
-FloatArray = NDArray[np.float64]
 Vector3 = tuple[float, float, float]
 
 
@@ -153,7 +149,7 @@ class CascadedController:
         limit = self.config.max_integral_mps2
         self.integral_ned_mps2 = [_clamp(float(a), limit) for a in acceleration_ned_mps2]
 
-    def idle(self) -> FloatArray:
+    def idle(self) -> list[float]:
         """Motors stopped (disarmed or landed idle): reset and return pwm_min on every output."""
         self.reset()
         self.last_pwm_us = self.mixer.idle_pwm_us()
@@ -168,8 +164,8 @@ class CascadedController:
         body_rates_rad_s: Vector3,
         *,
         landed: bool = False,
-    ) -> FloatArray:
-        """One controller step; returns the PWM outputs (n_motors,) in whole microseconds."""
+    ) -> list[float]:
+        """One controller step; returns the PWM outputs (n_motors values) in whole microseconds."""
         c = self.config
         sp = self.setpoint
         roll, pitch, yaw = euler_rad

@@ -102,7 +102,6 @@ class Simulator:
         self.follow_trajectory = scenario.trajectory.kind != "none"
         self.navigation_position_override: tuple[float, float, float] | None = None
         self.armed = False
-        self._curve = self.vehicle.thrust_curve
         self._controller_steps = scenario.controller_steps
         self._controller_dt_s = self._controller_steps * self.physics_dt_s
         self._steps = 0
@@ -117,8 +116,8 @@ class Simulator:
         self._initialise()
 
     # ------------------------------------------------------------------ set-up
-    def _thrusts_for(self, pwm_us: FloatArray) -> list[float]:
-        return self._curve.thrust_n(pwm_us).tolist()
+    def _thrusts_for(self, pwm_us: list[float]) -> list[float]:
+        return self.controller.mixer.thrusts_for_pwm_us(pwm_us)
 
     def _initialise(self) -> None:
         init = self.scenario.initial
@@ -132,7 +131,7 @@ class Simulator:
             self.armed = init.armed
             return
         sp = self.trajectory.setpoint_at(0.0)
-        position = sp.position_ned_m if sp.position_ned_m is not None else (0.0, 0.0, -2.0)
+        position = sp.position_ned_m if sp.position_ned_m is not None else init.position_ned_m
         velocity = sp.velocity_ned_m_s or (0.0, 0.0, 0.0)
         accel = sp.acceleration_ned_mps2 or (0.0, 0.0, 0.0)
         yaw = sp.yaw_rad if sp.yaw_rad is not None else math.radians(init.yaw_deg)
@@ -151,7 +150,7 @@ class Simulator:
         per_motor = collective / n
         self.body.set_state(state + [per_motor] * n)
         self.controller.preload_integral((-cable[0] / m, -cable[1] / m, -cable[2] / m))
-        self._pwm_us = self.controller.mixer.pwm_us(np.full(n, per_motor))
+        self._pwm_us = self.controller.mixer.pwm_us([per_motor] * n)
         self._steady_thrust_n = self._thrusts_for(self._pwm_us)
         self.armed = True
 
@@ -206,7 +205,7 @@ class Simulator:
                 (x[9], x[10], x[11]),
                 landed=self.body.landed,
             )
-        if not np.array_equal(pwm, self._pwm_us):
+        if pwm != self._pwm_us:
             self._pwm_us = pwm
             self._steady_thrust_n = self._thrusts_for(pwm)
 
@@ -236,7 +235,7 @@ class Simulator:
             euler_rad=state[EULER].copy(),
             body_rates_rad_s=state[BODY_RATES].copy(),
             motor_thrust_n=state[N_RIGID_STATES:].copy(),
-            pwm_us=self._pwm_us.copy(),
+            pwm_us=np.array(self._pwm_us),
             cable_force_ned_n=np.array(cable),
             tension_n=self.cable.tension_n,
             specific_force_body_mps2=np.array(specific_force),
@@ -256,7 +255,7 @@ class Simulator:
 
     def read_pwm(self) -> PwmSample:
         """The PWM outputs now [us], whole microseconds, in the vehicle's motor order."""
-        return self.sensors.pwm(self.time_s, self._pwm_us)
+        return self.sensors.pwm(self.time_s, np.array(self._pwm_us))
 
     def read_rangefinder(self) -> RangeSample | None:
         """Downward rangefinder now (tilted beam, flat ground), or None when out of range."""

@@ -196,7 +196,14 @@ class RigidBody:
 
     # ------------------------------------------------------------------ dynamics
     def derivative(
-        self, x: Sequence[float], thrust_n: float, tau_l: float, tau_m: float, tau_n: float
+        self,
+        x: Sequence[float],
+        thrust_n: float,
+        tau_l: float,
+        tau_m: float,
+        tau_n: float,
+        slope: Sequence[float] | None = None,
+        step_s: float = 0.0,
     ) -> tuple[float, ...]:
         """Time derivative of the 12 rigid-body states (eqs. 3-6) for a given wrench.
 
@@ -208,8 +215,20 @@ class RigidBody:
             Collective thrust along body -z [N].
         tau_l, tau_m, tau_n
             Body torques about FRD x, y, z [N m].
+        slope, step_s
+            When given, the derivative is taken at ``x + step_s * slope`` (an RK4 stage),
+            formed here with scalars rather than as a new list.
         """
-        pn, pe, pd, u, v, w, phi, theta, psi, p, q, r = x
+        if slope is None:
+            pn, pe, pd, u, v, w, phi, theta, psi, p, q, r = x
+        else:
+            x0, x1, x2, x3, x4, x5, x6, x7, x8, x9, x10, x11 = x
+            s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, s10, s11 = slope
+            h = step_s
+            pn, pe, pd = x0 + h * s0, x1 + h * s1, x2 + h * s2
+            u, v, w = x3 + h * s3, x4 + h * s4, x5 + h * s5
+            phi, theta, psi = x6 + h * s6, x7 + h * s7, x8 + h * s8
+            p, q, r = x9 + h * s9, x10 + h * s10, x11 + h * s11
         cr = math.cos(phi)
         sr = math.sin(phi)
         cp = math.cos(theta)
@@ -288,13 +307,15 @@ class RigidBody:
         h = dt_s
         hh = 0.5 * h
         deriv = self.derivative
-        k1 = deriv(x, *w_0)
-        k2 = deriv([a + hh * b for a, b in zip(x, k1, strict=True)], *w_half)
-        k3 = deriv([a + hh * b for a, b in zip(x, k2, strict=True)], *w_half)
-        k4 = deriv([a + h * b for a, b in zip(x, k3, strict=True)], *w_full)
+        t0, l0, m0, n0 = w_0
+        th, lh, mh, nh = w_half
+        k1 = deriv(x, t0, l0, m0, n0)
+        k2 = deriv(x, th, lh, mh, nh, k1, hh)
+        k3 = deriv(x, th, lh, mh, nh, k2, hh)
+        k4 = deriv(x, *w_full, k3, h)
         h6 = h / 6.0
         self.x = [
-            a + h6 * (b1 + 2.0 * (b2 + b3) + b4)
+            a + h6 * (b1 + b4 + 2.0 * (b2 + b3))
             for a, b1, b2, b3, b4 in zip(x, k1, k2, k3, k4, strict=True)
         ]
         if self.x[POS_D] >= 0.0:
@@ -311,14 +332,7 @@ class RigidBody:
 
     def _touch_ground(self) -> None:
         x = self.x
-        u, v, w = x[VEL_U], x[VEL_V], x[VEL_W]
-        phi, theta = x[ROLL], x[PITCH]
-        # NED down velocity (third row of R^T (u, v, w))
-        vd = (
-            -math.sin(theta) * u
-            + math.sin(phi) * math.cos(theta) * v
-            + math.cos(phi) * math.cos(theta) * w
-        )
+        vd = self.velocity_ned_m_s()[2]
         x[POS_D] = 0.0
         if vd >= 0.0:
             self.landed = True
@@ -333,8 +347,16 @@ class RigidBody:
     # ------------------------------------------------------------------ outputs
     def velocity_ned_m_s(self) -> tuple[float, float, float]:
         """NED velocity [m/s] of the current state (eq. 3)."""
-        d = self.derivative(self.x, 0.0, 0.0, 0.0, 0.0)
-        return d[0], d[1], d[2]
+        _, _, _, u, v, w, phi, theta, psi = self.x[:9]
+        cr, sr = math.cos(phi), math.sin(phi)
+        cp, sp = math.cos(theta), math.sin(theta)
+        cy, sy = math.cos(psi), math.sin(psi)
+        # columns of R_v^b (eq. 2): v_ned = R^T (u, v, w)
+        return (
+            cp * cy * u + (sr * sp * cy - cr * sy) * v + (cr * sp * cy + sr * sy) * w,
+            cp * sy * u + (sr * sp * sy + cr * cy) * v + (cr * sp * sy - sr * cy) * w,
+            -sp * u + sr * cp * v + cr * cp * w,
+        )
 
     def specific_force_body_mps2(self) -> tuple[float, float, float]:
         """Noise-free accelerometer specific force, FRD body [m/s^2] (paper eq. 11, 20 in SI).

@@ -1,0 +1,231 @@
+"""The emulator's MAVLink parameters: the simulation's tunables, changeable in flight.
+
+Every parameter is a float on the wire (PARAM_VALUE); whole-number ones are sent with
+MAV_PARAM_TYPE_INT32 and their value cast to float, as ArduPilot does. A PARAM_SET outside a
+parameter's range, non-finite, or fractional for an integer parameter is refused: the reply
+is the unchanged value and a STATUSTEXT says why. docs/emulator.md lists them all.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from tether_companion.emulator.config import EmulatorConfig
+from tether_companion.mavlink.framing import MAVLinkMessage, dialect
+from tether_companion.physics.cable import CABLE_MODELS
+from tether_companion.sim.scenario import Scenario
+
+PARAM_ID_LEN = 16
+
+
+@dataclass(frozen=True)
+class ParamDef:
+    """One parameter: name (<= 16 characters), default, range, integer or not, meaning."""
+
+    name: str
+    default: float
+    minimum: float
+    maximum: float
+    doc: str
+    integer: bool = False
+
+    def check(self, value: float) -> str | None:
+        """Why ``value`` is refused, or None when it is acceptable."""
+        if not math.isfinite(value):
+            return "not a finite number"
+        if not self.minimum <= value <= self.maximum:
+            return f"outside [{self.minimum:g}, {self.maximum:g}]"
+        if self.integer and not float(value).is_integer():
+            return "must be a whole number"
+        return None
+
+
+NAV_SOURCE_GPS = 3
+"""EK3_SRC1_POSXY value for GPS: the emulator flies on true position."""
+NAV_SOURCE_EXTERNAL = 6
+"""EK3_SRC1_POSXY value for ExternalNav: the emulator flies on received estimates."""
+
+
+def parameter_definitions(scenario: Scenario, config: EmulatorConfig) -> list[ParamDef]:
+    """The parameter table, with defaults taken from the scenario and emulator settings."""
+    cable, sensors, faults = scenario.cable, scenario.sensors, config.faults
+    wind = scenario.wind.velocity_ned_m_s
+    models = ", ".join(f"{i} {name}" for i, name in enumerate(CABLE_MODELS))
+    return [
+        ParamDef("SYSID_THISMAV", config.system_id, 1, 255, "MAVLink system id (read only)", True),
+        ParamDef(
+            "EK3_SRC1_POSXY",
+            NAV_SOURCE_EXTERNAL if config.navigation == "vision" else NAV_SOURCE_GPS,
+            0,
+            6,
+            f"position source: {NAV_SOURCE_GPS} GPS (fly on truth), {NAV_SOURCE_EXTERNAL} "
+            "ExternalNav (fly on VISION_POSITION_ESTIMATE)",
+            True,
+        ),
+        ParamDef(
+            "VISO_TYPE", 1, 0, 1, "visual odometry: 0 none (estimates ignored), 1 MAVLink", True
+        ),
+        ParamDef("LAND_SPEED", 50, 30, 200, "descent speed in LAND [cm/s]", True),
+        ParamDef(
+            "DISARM_DELAY", 10, 0, 127, "auto-disarm after this long landed [s] (0 = never)", True
+        ),
+        ParamDef(
+            "TETH_MODEL",
+            CABLE_MODELS.index(cable.model),
+            0,
+            len(CABLE_MODELS) - 1,
+            f"cable model: {models} (a change re-attaches the cable)",
+            True,
+        ),
+        ParamDef(
+            "TETH_TENSION", cable.tension_n, 0.0, 100.0, "winch tension, constant_tension [N]"
+        ),
+        ParamDef(
+            "TETH_LENGTH",
+            cable.length_m,
+            cable.min_length_m,
+            cable.spool_length_m,
+            "paid-out length, elastic and catenary [m]",
+        ),
+        ParamDef(
+            "TETH_WINCH_RATE", cable.winch_rate_mps, -10.0, 10.0, "winch rate, + pays out [m/s]"
+        ),
+        ParamDef("TETH_STIFFNESS", cable.stiffness_n_per_m, 1e-3, 1e6, "axial stiffness [N/m]"),
+        ParamDef("TETH_DAMPING", cable.damping_n_s_per_m, 0.0, 1e4, "axial damping [N s/m]"),
+        ParamDef(
+            "TETH_DENSITY", cable.linear_density_kg_per_m, 0.0, 10.0, "cable mass per length [kg/m]"
+        ),
+        ParamDef("TETH_RELEASE", 0, 0, 1, "1 lets the tether go (TETH_MODEL re-attaches)", True),
+        ParamDef(
+            "SIM_ACC_NOISE",
+            sensors.accel_noise_std_mps2,
+            0.0,
+            50.0,
+            "accelerometer noise sigma [m/s^2]",
+        ),
+        ParamDef(
+            "SIM_GYR_NOISE", sensors.gyro_noise_std_rad_s, 0.0, 10.0, "gyro noise sigma [rad/s]"
+        ),
+        ParamDef(
+            "SIM_ATT_NOISE", sensors.attitude_noise_std_rad, 0.0, 1.0, "attitude noise sigma [rad]"
+        ),
+        ParamDef(
+            "SIM_RNG_NOISE", sensors.range_noise_std_m, 0.0, 10.0, "rangefinder noise sigma [m]"
+        ),
+        ParamDef(
+            "SIM_VIB_AMP",
+            sensors.accel_vibration_amplitude_mps2,
+            0.0,
+            100.0,
+            "accelerometer vibration amplitude [m/s^2]",
+        ),
+        ParamDef("SIM_WIND_N", wind[0], -30.0, 30.0, "wind velocity north [m/s]"),
+        ParamDef("SIM_WIND_E", wind[1], -30.0, 30.0, "wind velocity east [m/s]"),
+        ParamDef("SIM_WIND_D", wind[2], -30.0, 30.0, "wind velocity down [m/s]"),
+        ParamDef(
+            "EMU_DROP_PCT", 100 * faults.drop_probability, 0.0, 100.0, "sent frames dropped [%]"
+        ),
+        ParamDef(
+            "EMU_DUP_PCT",
+            100 * faults.duplicate_probability,
+            0.0,
+            100.0,
+            "sent frames duplicated [%]",
+        ),
+        ParamDef(
+            "EMU_CORRUPT_PCT",
+            100 * faults.corrupt_probability,
+            0.0,
+            100.0,
+            "sent frames with a flipped byte [%]",
+        ),
+        ParamDef("EMU_DELAY_MS", faults.delay_ms, 0.0, 5000.0, "extra latency of sent frames [ms]"),
+        ParamDef("EMU_JITTER_MS", faults.delay_jitter_ms, 0.0, 5000.0, "random extra latency [ms]"),
+        ParamDef("EMU_RNG_OOR", 0, 0, 1, "1 forces the rangefinder out of range", True),
+    ]
+
+
+class ParameterStore:
+    """Values of a parameter table, with the PARAM_VALUE encoding.
+
+    Parameters
+    ----------
+    definitions
+        The table (order = index on the wire).
+    apply
+        Called as ``apply(name, value)`` with the new value already stored; it may raise
+        ``ValueError`` to refuse it (the old value is restored and the message reported).
+    read_only
+        Names that cannot be set.
+    """
+
+    def __init__(
+        self,
+        definitions: Sequence[ParamDef],
+        apply: Callable[[str, float], None],
+        read_only: frozenset[str] = frozenset({"SYSID_THISMAV"}),
+    ) -> None:
+        self.definitions = {d.name: d for d in definitions}
+        self._names = [d.name for d in definitions]
+        self._index = {name: i for i, name in enumerate(self._names)}
+        self._values = {d.name: float(d.default) for d in definitions}
+        self._apply = apply
+        self._read_only = read_only
+        for name in self._names:
+            if len(name) > PARAM_ID_LEN:
+                raise ValueError(f"parameter name {name!r} is longer than 16 characters")
+
+    def __len__(self) -> int:
+        return len(self._names)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._values
+
+    @property
+    def names(self) -> list[str]:
+        """Names in wire order."""
+        return list(self._names)
+
+    def value(self, name: str) -> float:
+        """Current value of ``name``."""
+        return self._values[name]
+
+    def name_at(self, index: int) -> str | None:
+        """Name at wire index ``index``, or None."""
+        return self._names[index] if 0 <= index < len(self._names) else None
+
+    def set(self, name: str, value: float) -> str | None:
+        """Set ``name`` to ``value``; returns why it was refused, or None when it was taken."""
+        if name in self._read_only:
+            return "read only"
+        why = self.definitions[name].check(value)
+        if why is not None:
+            return why
+        previous = self._values[name]
+        self._values[name] = float(value)  # stored first: apply() may read the new value
+        try:
+            self._apply(name, float(value))
+        except ValueError as exc:
+            self._values[name] = previous
+            return str(exc)
+        return None
+
+    def force(self, name: str, value: float) -> None:
+        """Record a value changed by the emulator itself (no checks, no apply)."""
+        self._values[name] = float(value)
+
+    def message(self, name: str) -> MAVLinkMessage:
+        """PARAM_VALUE for ``name``."""
+        definition = self.definitions[name]
+        param_type = (
+            dialect.MAV_PARAM_TYPE_INT32 if definition.integer else dialect.MAV_PARAM_TYPE_REAL32
+        )
+        return dialect.MAVLink_param_value_message(
+            name.encode("ascii"),
+            self._values[name],
+            param_type,
+            len(self._names),
+            self._index[name],
+        )

@@ -15,6 +15,7 @@ BENCHMARKS: tuple[str, ...] = (
     "paper",
     "speed",
     "tension",
+    "catenary",
 )
 """Benchmark names, one per line, in the order ``bench --help`` lists them."""
 

@@ -43,6 +43,10 @@ from tether_companion.physics.catenary import (
     curve_from_tension_known_length,
     curve_from_tension_lowest_point_at_anchor,
     drone_point,
+    end_tensions,
+    plane_coordinates,
+    solve_known_length,
+    solve_lowest_point_at_anchor,
 )
 
 FloatArray = NDArray[np.float64]
@@ -167,6 +171,51 @@ def position_from_force_ned_m(
     if horizontal_n > 0.0:
         return np.array((-r * fn / horizontal_n, -r * fe / horizontal_n, -z))
     return np.array((0.0, 0.0, -z))
+
+
+def force_from_position_ned_n(
+    position_ned_m: FloatArray,
+    length_m: float,
+    weight_per_length_n_per_m: float,
+    anchor_on_ground: bool = True,
+) -> FloatArray:
+    """Force of the cable on a drone at ``position_ned_m`` (NED, anchor origin) [N], shape (3,).
+
+    The forward model that :func:`position_from_force_ned_m` (``known_length``) inverts: the
+    free case-2 catenary, or, with ``anchor_on_ground`` and a cable slack enough to touch the
+    ground, a grounded stretch from the anchor to a touchdown point ``t`` and a case-1
+    catenary from there (``t`` solves ``t + L1(X - t, H) = L`` by bisection; ``L1`` is the
+    case-1 length, increasing as ``t`` grows). Used for goal tensions (section 5.2).
+
+    Raises
+    ------
+    ValueError
+        Cable not longer than the anchor-drone distance, drone not above the ground (with
+        ``anchor_on_ground``), or invalid numbers.
+    """
+    horizontal, height, unit = plane_coordinates(position_ned_m)
+    w = weight_per_length_n_per_m
+    curve = solve_known_length(horizontal, height, length_m)
+    if anchor_on_ground and curve.s1_m < 0.0:
+        if height <= 0.0:
+            raise ValueError(f"the drone must be above the ground, got height {height!r} m")
+        if length_m >= horizontal + height:
+            curve = solve_lowest_point_at_anchor(0.0, height)  # lies on the ground, rises
+        else:
+            low, high = 0.0, horizontal
+            for _ in range(200):
+                mid = 0.5 * (low + high)
+                rest = solve_lowest_point_at_anchor(horizontal - mid, height).length_m
+                if mid + rest < length_m:
+                    low = mid
+                else:
+                    high = mid
+                if high - low <= 1e-12 * max(1.0, horizontal):
+                    break
+            curve = solve_lowest_point_at_anchor(horizontal - 0.5 * (low + high), height)
+    tensions = end_tensions(curve, w)
+    pull = tensions.on_drone_horizontal_n
+    return np.array((pull * unit[0], pull * unit[1], -tensions.on_drone_vertical_n))
 
 
 class CatenaryPositionEstimator:

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
@@ -221,7 +222,7 @@ _LABELS = {
 def _table2(results: dict, interpretation: str, window: str, title: str) -> Table:
     table = Table(title=title)
     table.add_column("RMSE")
-    table.add_column("f_c [N]", justify="right")
+    table.add_column(escape("f_c [N]"), justify="right")
     for name in ("3S ours", "3S paper", "4S ours", "4S paper"):
         table.add_column(name, justify="right")
     cells = results["table2"][interpretation]
@@ -231,7 +232,7 @@ def _table2(results: dict, interpretation: str, window: str, title: str) -> Tabl
             paper = PAPER_TABLE2[tension]
             ours3 = cell["3S"].get(quantity)
             row = [
-                _LABELS[quantity],
+                escape(_LABELS[quantity]),
                 f"{tension:g}",
                 "-" if ours3 is None else f"{ours3['mean']:.3f} ± {ours3['std']:.3f}",
                 f"{paper['3S'][quantity]:.3f}" if quantity in paper["3S"] else "-",
@@ -244,13 +245,13 @@ def _table2(results: dict, interpretation: str, window: str, title: str) -> Tabl
 
 def _sweep_table(results: dict, name: str) -> Table:
     table = Table(
-        title=f"Sweep of {name} (whole-run RMSE [m], mean over seeds; accel noise mps2_squared)"
+        title=escape(f"Sweep of {name} (whole-run RMSE [m], mean over seeds; accel mps2_squared)")
     )
     table.add_column(name, justify="right")
     for filt in ("3S", "4S"):
         for axis in ("N", "E", "D"):
             table.add_column(f"{filt} {axis}", justify="right")
-    table.add_column("4S f_c [N]", justify="right")
+    table.add_column(escape("4S f_c [N]"), justify="right")
     for value, cell in results[name][INTERPRETATIONS[0]].items():
         whole = cell["whole_run"]
         row = [value]

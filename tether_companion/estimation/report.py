@@ -6,6 +6,7 @@ import csv
 from pathlib import Path
 
 import numpy as np
+from rich.markup import escape
 from rich.table import Table
 
 from tether_companion.estimation.metrics import AXES
@@ -62,8 +63,8 @@ def rmse_table(table: dict[str, dict[str, float]], title: str) -> Table:
     out.add_column("3S (known tension)", justify="right")
     out.add_column("4S", justify="right")
     for key, label in ((AXES[0], "north [m]"), (AXES[1], "east [m]"), (AXES[2], "down [m]")):
-        out.add_row(label, f"{table['3S'][key]:.3f}", f"{table['4S'][key]:.3f}")
-    out.add_row("tension [N]", "-", f"{table['4S']['tension_n']:.3f}")
+        out.add_row(escape(label), f"{table['3S'][key]:.3f}", f"{table['4S'][key]:.3f}")
+    out.add_row(escape("tension [N]"), "-", f"{table['4S']['tension_n']:.3f}")
     return out
 
 
@@ -82,8 +83,12 @@ def write_plots(result: RunResult, directory: Path, label: str) -> list[Path]:
 
     fig = plt.figure(figsize=(14, 4.5))
     ax3d = fig.add_subplot(1, 3, 1, projection="3d")
-    for data, name, style in ((truth, "Truth", "k-"), (p3, "EKF3S", "b-"), (p4, "EKF4S", "r-")):
-        ax3d.plot(data[:, 1], data[:, 0], -data[:, 2], style, lw=0.8, label=name)
+    for data, name, style, width in (
+        (p3, "EKF3S", "b-", 0.6),
+        (p4, "EKF4S", "r-", 0.6),
+        (truth, "Truth", "k-", 1.5),
+    ):
+        ax3d.plot(data[:, 1], data[:, 0], -data[:, 2], style, lw=width, label=name)
     ax3d.set_xlabel("east [m]")
     ax3d.set_ylabel("north [m]")
     ax3d.set_zlabel("height [m]")
@@ -96,9 +101,9 @@ def write_plots(result: RunResult, directory: Path, label: str) -> list[Path]:
         start=2,
     ):
         ax = fig.add_subplot(1, 3, index)
-        for data, style in ((truth, "k-"), (p3, "b-"), (p4, "r-")):
+        for data, style, width in ((p3, "b-", 0.6), (p4, "r-", 0.6), (truth, "k-", 1.5)):
             y = -data[:, yi] if yi == 2 else data[:, yi]
-            ax.plot(data[:, xi], y, style, lw=0.8)
+            ax.plot(data[:, xi], y, style, lw=width)
         ax.set_xlabel(xlabel)
         ax.set_ylabel(ylabel)
         ax.set_title(title)

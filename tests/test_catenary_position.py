@@ -18,6 +18,7 @@ from tether_companion.estimation.catenary_position import (
     UNOBSERVABLE,
     CatenaryPositionConfig,
     CatenaryPositionEstimator,
+    force_from_position_ned_n,
     position_from_force_ned_m,
 )
 from tether_companion.estimation.tension_kf import TensionEstimate, TensionHealth
@@ -187,3 +188,29 @@ def test_estimator_refuses_bad_inputs():
 def test_config_bad_values(key, value):
     with pytest.raises(ConfigError):
         from_mapping(CatenaryPositionConfig, {key: value}, source="catenary.yaml")
+
+
+@pytest.mark.parametrize(
+    ("position", "length"),
+    [
+        ((4.0, 0.0, -3.0), 5.2),  # free hanging, lowest point behind the anchor
+        ((3.0, 3.0, -2.0), 5.5),  # partly on the ground
+        ((-1.0, 0.0, -5.0), 5.8),
+        ((3.0, 3.0, -2.0), 8.0),  # on the ground, then straight up
+        ((2.0, 1.0, -1.0), 2.5),
+    ],
+)
+def test_forward_force_matches_simulator_cable_and_inverts(position, length):
+    p = np.array(position)
+    want = np.array(_sim_cable(length).force_on_drone_ned_n(p, np.zeros(3)))
+    got = force_from_position_ned_n(p, length, W)
+    assert np.allclose(got, want, atol=1e-7)
+    if math.hypot(got[0], got[1]) > 0.0:
+        assert np.allclose(position_from_force_ned_m(got, KNOWN_LENGTH, W, length), p, atol=1e-6)
+
+
+def test_forward_force_bad_geometry():
+    with pytest.raises(ValueError, match="chord"):
+        force_from_position_ned_n(np.array([3.0, 0.0, -4.0]), 4.9, W)
+    with pytest.raises(ValueError, match="above the ground"):
+        force_from_position_ned_n(np.array([3.0, 0.0, 1.0]), 6.0, W)

@@ -148,9 +148,7 @@ def test_specific_force_in_tethered_hover_is_thrust_plus_cable_over_mass(
     roll = math.asin(thrust_ned[1] / collective)
     pitch = math.atan2(-thrust_ned[0], -thrust_ned[2])
     per_motor = collective / 4
-    body.set_state(
-        _state(vehicle, pn=2.0, pe=1.0, pd=-3.0, phi=roll, theta=pitch, motor=per_motor)
-    )
+    body.set_state(_state(vehicle, pn=2.0, pe=1.0, pd=-3.0, phi=roll, theta=pitch, motor=per_motor))
     d = body.derivative(body.state[:N_RIGID_STATES].tolist(), collective, 0.0, 0.0, 0.0)
     assert d[:6] == pytest.approx([0.0] * 6, abs=1e-12)  # at rest: an equilibrium
     specific = np.array(body.specific_force_body_mps2())
@@ -196,3 +194,19 @@ def test_set_state_refuses_wrong_size_and_non_finite(vehicle: VehicleProfile) ->
         body.set_state([0.0] * 12)
     with pytest.raises(ValueError, match="finite"):
         body.set_state([math.nan] + [0.0] * 15)
+
+
+def test_linear_drag_pulls_toward_the_wind_velocity() -> None:
+    draggy = VehicleProfile(drag_coefficient_n_s_per_m=0.3)
+    body = RigidBody(draggy)
+    body.wind_ned_m_s = (2.0, -1.0, 0.0)
+    x = _state(draggy, pd=-5.0, u=0.5, psi=math.pi / 2)[:N_RIGID_STATES]  # flying east
+    d = body.derivative(x, draggy.mass_kg * G, 0.0, 0.0, 0.0)
+    air_ned = np.array([0.0, 0.5, 0.0]) - [2.0, -1.0, 0.0]
+    accel_ned = -0.3 * air_ned / draggy.mass_kg
+    r = rotation_ned_to_body(0.0, 0.0, math.pi / 2)
+    # body frame: du/dt = (r v - q w) + f/m with zero rates
+    assert d[3:6] == pytest.approx(r @ accel_ned, abs=1e-12)
+    body.tug_force_ned_n = (0.0, 0.0, -3.0)
+    d = body.derivative(x, draggy.mass_kg * G, 0.0, 0.0, 0.0)
+    assert d[5] == pytest.approx((r @ accel_ned)[2] - 3.0 / draggy.mass_kg, abs=1e-12)

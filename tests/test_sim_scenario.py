@@ -58,8 +58,11 @@ BAD = [
     ("sensors: {imu_rate_hz: 0}\n", "sensors.imu_rate_hz", "> 0"),
     ("sensors: {range_min_m: 5, range_max_m: 1}\n", "sensors.range_max_m", "> range_min_m"),
     ("trajectory: {kind: circle, radius_m: 0}\n", "trajectory.radius_m", "> 0"),
-    ("trajectory: {kind: circle, mean_altitude_m: 1, altitude_amplitude_m: 2}\n",
-     "trajectory.altitude_amplitude_m", "above ground"),
+    (
+        "trajectory: {kind: circle, mean_altitude_m: 1, altitude_amplitude_m: 2}\n",
+        "trajectory.altitude_amplitude_m",
+        "above ground",
+    ),
     ("trajectory: {kind: waypoints}\n", "trajectory.waypoints_ned_m", "at least one"),
     ("trajectory: {kind: hover, position_ned_m: [0, 0]}\n", "trajectory.position_ned_m", "3 items"),
     ("physics_rate_hz: 0\n", "physics_rate_hz", ">= 500"),
@@ -69,12 +72,16 @@ BAD = [
     ("duration_s: .nan\n", "duration_s", "finite"),
     ("events: [{time_s: 1, kind: tug}]\n", "events[0].force_ned_n", "required"),
     ("events: [{time_s: 1, kind: release, tension_n: 3}]\n", "events[0].tension_n", "not used"),
-    ("cable: {model: elastic}\nevents: [{time_s: 1, kind: set_tension, tension_n: 3}]\n",
-     "events[0].kind", "constant_tension"),
+    (
+        "cable: {model: elastic}\nevents: [{time_s: 1, kind: set_tension, tension_n: 3}]\n",
+        "events[0].kind",
+        "constant_tension",
+    ),
     ("duration_s: 5\nevents: [{time_s: 9, kind: release}]\n", "events[0].time_s", "duration_s"),
     ("controller: {max_tilt_deg: 95}\n", "controller.max_tilt_deg", "<= 80"),
     ("wind: {velocity_ned_m_s: [1, 2, x]}\n", "wind.velocity_ned_m_s[2]", "number"),
     ("initial: {airborne: yes please}\n", "initial.airborne", "true or false"),
+    ("trajectory: {kind: none}\n", "initial.position_ned_m", "down must be < 0"),
 ]
 
 

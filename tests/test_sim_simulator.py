@@ -225,3 +225,24 @@ def test_scenario_events_run_at_their_time() -> None:
     assert sim.body.tug_force_ned_n == (0.0, 0.0, 3.0)
     sim.advance_to(1.3)
     assert sim.body.tug_force_ned_n == (0.0, 0.0, 0.0)
+
+
+def test_emulator_style_start_landed_without_trajectory_then_fly_setpoints() -> None:
+    base = load_scenario("hover")
+    scenario = replace(
+        base,
+        trajectory=replace(base.trajectory, kind="none"),
+        initial=replace(base.initial, airborne=False, armed=False, position_ned_m=(1.0, 0.0, 0.0)),
+    )
+    sim = Simulator(scenario)
+    assert sim.landed and not sim.armed and not sim.follow_trajectory
+    sim.advance_to(1.0)
+    assert sim.truth.position_ned_m == pytest.approx([1.0, 0.0, 0.0])
+    sim.arm()
+    sim.set_setpoint(Setpoint(position_ned_m=(1.0, 0.0, -2.0)))
+    sim.advance_to(8.0)
+    assert not sim.landed
+    assert sim.truth.position_ned_m == pytest.approx([1.0, 0.0, -2.0], abs=0.03)
+    sim.set_setpoint(Setpoint(position_ned_m=(1.0, 0.0, 0.0)))  # land
+    sim.advance_to(16.0)
+    assert sim.landed

@@ -51,15 +51,16 @@ class HomeConfig:
 class InitialConfig:
     """The ``initial`` section: how the run starts.
 
-    ``airborne: true`` starts armed at the trajectory's first set-point, moving with it, level,
-    the motors and the controller's integrators trimmed against gravity and the cable.
-    ``airborne: false`` starts landed at ``position_ned_m`` (its down is forced to 0), armed
-    only if ``armed`` is true.
+    ``airborne: true`` starts armed at the trajectory's first set-point (at ``position_ned_m``
+    for trajectory kind ``none``), moving with it, the attitude, the motors and the
+    controller's integrators trimmed against gravity and the cable. ``airborne: false`` starts
+    landed at ``position_ned_m`` (its down is forced to 0), armed only if ``armed`` is true.
     """
 
     airborne: bool = spec(True, doc="start in trimmed flight at the trajectory's start")
     position_ned_m: tuple[float, float, float] = spec(
-        (0.0, 0.0, 0.0), doc="landed start position (down ignored, on the ground) [m]"
+        (0.0, 0.0, 0.0),
+        doc="start position when landed (down ignored) or airborne with trajectory none [m]",
     )
     armed: bool = spec(True, doc="armed at the start (a landed start may wait for arm())")
     yaw_deg: float = spec(0.0, minimum=-180.0, maximum=180.0, doc="initial heading [deg]")
@@ -95,6 +96,14 @@ class Scenario:
                 "controller.rate_hz",
                 self.controller.rate_hz,
                 f"must divide physics_rate_hz ({self.physics_rate_hz}) into whole steps",
+            )
+        start = self.initial.position_ned_m
+        if self.initial.airborne and self.trajectory.kind == "none" and start[2] >= 0.0:
+            raise ConfigError(
+                "",
+                "initial.position_ned_m",
+                start,
+                "down must be < 0 to start airborne without a trajectory (or airborne: false)",
             )
         for i, event in enumerate(self.events):
             if event.kind == "set_tension" and self.cable.model != "constant_tension":

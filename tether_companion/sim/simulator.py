@@ -95,7 +95,7 @@ class Simulator:
         self.physics_dt_s = 1.0 / scenario.physics_rate_hz
         self.cable: CableModel = make_cable(scenario.cable, self.gravity_mps2)
         self.body = RigidBody(self.vehicle, self.cable.force_components, self.gravity_mps2)
-        self.body.wind_ned_m_s = tuple(float(v) for v in scenario.wind.velocity_ned_m_s)  # type: ignore[assignment]
+        self.body.wind_ned_m_s = scenario.wind.velocity_ned_m_s
         self.controller = CascadedController(scenario.controller, self.vehicle, self.gravity_mps2)
         self.trajectory = Trajectory(scenario.trajectory)
         self.sensors = SensorSuite(scenario.sensors, self.rng)

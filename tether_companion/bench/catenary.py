@@ -159,7 +159,7 @@ def run(args: argparse.Namespace) -> int:
     """Print the RMSE table (and the tension-based control table)."""
     console = Console()
     table = Table(
-        title=f"position RMSE on a catenary cable [m] (after {WARMUP_S:g} s, seed {args.seed})"
+        title=f"position RMSE on a catenary cable, m (after {WARMUP_S:g} s, seed {args.seed})"
     )
     for column in ("flight", "estimator", *AXES, "ticks without position"):
         table.add_column(column)

@@ -218,7 +218,7 @@ def run(args: argparse.Namespace) -> int:
     vehicle = load_vehicle("default-quad")
     configs = _configs(TensionFilterConfig())
     table = Table(title=f"tension step of {args.step_n:g} N on the north axis, filters at 200 Hz")
-    columns = ("source", "model", "process noise [N^2/step]", "settling [s]", "steady std [N]")
+    columns = ("source", "model", "process noise (N^2/step)", "settling (s)", "steady std (N)")
     for column in columns:
         table.add_column(column)
     noise = {
@@ -238,7 +238,7 @@ def run(args: argparse.Namespace) -> int:
     console.print(table)
     if args.sweep:
         sweep = Table(title="trade-off (synthetic): process noise vs settling and noise")
-        for column in ("model", "process noise [N^2/step]", "settling [s]", "steady std [N]"):
+        for column in ("model", "process noise (N^2/step)", "settling (s)", "steady std (N)"):
             sweep.add_column(column)
         for name, values in SWEEP_NOISE_N2.items():
             key = f"{name}_process_noise_n2"

@@ -223,11 +223,11 @@ def control_table(seed: int = 1) -> Table:
         f"last 4 s of 20 s per goal, seed {seed}"
     )
     for column in (
-        "goal N, E, D [m]",
-        "reached N, E, D [m]",
-        "error [m]",
-        "goal pull N, E, D [N]",
-        "reached pull N, E, D [N]",
+        "goal N, E, D (m)",
+        "reached N, E, D (m)",
+        "error (m)",
+        "goal pull N, E, D (N)",
+        "reached pull N, E, D (N)",
     ):
         table.add_column(column)
 

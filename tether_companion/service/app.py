@@ -1,0 +1,508 @@
+"""The companion service: an asyncio process around one :class:`EstimationSession`.
+
+Tasks (all named, all owned by :meth:`CompanionService.run`, all cancelled and awaited on the
+way out):
+
+* ``link``: opens the flight-controller link with exponential back-off (missing serial port,
+  refused TCP socket), then serves it until it closes: the receive loop records every frame,
+  hands every message to the session and sends what the session returns; the housekeeping
+  loop sends our HEARTBEAT, TIMESYNC requests, stream requests (MAV_CMD_SET_MESSAGE_INTERVAL,
+  then REQUEST_DATA_STREAM when that does not work), the EKF origin after every
+  flight-controller boot, and notices link loss and silent inputs;
+* ``watchdog``: ``WATCHDOG=1`` and ``STATUS=`` to systemd (only if systemd asked);
+* ``recording-sync``: fsyncs the .tlog from a worker thread every ``flush_interval_s``.
+
+Nothing in the receive path blocks: decoding, the EKF update and the reply happen inline
+within the datagram's callback turn, which is what keeps the IMU-to-estimate latency low.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+
+from tether_companion.config import ConfigError
+from tether_companion.mavlink.endpoints import Link, LinkClosed, open_link, parse_endpoint
+from tether_companion.mavlink.framing import MAVLinkMessage, dialect
+from tether_companion.mavlink.units import seconds_to_usec
+from tether_companion.physics.vehicle import VehicleProfile
+from tether_companion.service.clock import FcClock
+from tether_companion.service.config import ServiceConfig
+from tether_companion.service.ingest import ATTITUDE, IMU, INPUT_KINDS, PWM, RANGE, TENSION
+from tether_companion.service.publish import STALE, Publication
+from tether_companion.service.recording import RecordingLimits, TlogWriter
+from tether_companion.service.session import EstimationSession
+from tether_companion.service.systemd import SystemdNotifier
+
+HOUSEKEEPING_PERIOD_S = 0.05
+RATE_WINDOW_S = 1.0
+INPUT_SILENT_S = 0.5
+"""An input not heard for this long [s] (local time) while the link is up is re-requested."""
+ORIGIN_RETRY_S = 1.0
+ORIGIN_ATTEMPTS = 5
+INTERVAL_ATTEMPTS_BEFORE_FALLBACK = 2
+_MAV_RESULT_ACCEPTED = dialect.MAV_RESULT_ACCEPTED
+
+_STREAM_GROUPS = {
+    IMU: dialect.MAV_DATA_STREAM_RAW_SENSORS,
+    ATTITUDE: dialect.MAV_DATA_STREAM_EXTRA1,
+    PWM: dialect.MAV_DATA_STREAM_RC_CHANNELS,
+    RANGE: dialect.MAV_DATA_STREAM_EXTRA3,
+}
+"""ArduPilot's REQUEST_DATA_STREAM groups (SRx_RAW_SENS, SRx_EXTRA1, SRx_RC_CHAN, SRx_EXTRA3)."""
+
+
+@dataclass
+class StreamRequest:
+    """Bookkeeping of one input stream we ask the flight controller for."""
+
+    message_id: int
+    rate_hz: float
+    attempts: int = 0
+    last_request_s: float = -math.inf
+    last_count: int = 0
+    last_heard_s: float = -math.inf
+    acked: bool | None = None
+    """Result of the last SET_MESSAGE_INTERVAL (None: no COMMAND_ACK yet)."""
+
+
+@dataclass
+class ServiceState:
+    """What the status view and systemd STATUS show (updated by the service)."""
+
+    link_text: str = "starting"
+    link_up: bool = False
+    link_opens: int = 0
+    link_open_failures: int = 0
+    link_losses: int = 0
+    last_error: str = ""
+    fc_autopilot: int | None = None
+    fc_armed: bool = False
+    origin_sent: int = 0
+    origin_confirmed: bool = False
+    rates_hz: dict[str, float] = field(
+        default_factory=lambda: dict.fromkeys((*INPUT_KINDS, "published"), 0.0)
+    )
+    ages_s: dict[str, float] = field(default_factory=lambda: dict.fromkeys(INPUT_KINDS, math.inf))
+    sent_by_type: dict[str, int] = field(default_factory=dict)
+    received: int = 0
+
+
+class CompanionService:
+    """The live service: link management around an :class:`EstimationSession`.
+
+    Parameters
+    ----------
+    config
+        Validated configuration.
+    vehicle
+        Vehicle profile.
+    notifier
+        systemd notifier (default: from the environment).
+    open_link_fn
+        Opens the link (injected in tests); default opens ``config.link.connect``.
+    monotonic_s
+        Local clock [s].
+    on_publication
+        Called with every published estimate (e.g. a CSV writer).
+    """
+
+    def __init__(
+        self,
+        config: ServiceConfig,
+        vehicle: VehicleProfile,
+        *,
+        notifier: SystemdNotifier | None = None,
+        open_link_fn: Callable[[], Awaitable[Link]] | None = None,
+        monotonic_s: Callable[[], float] = time.monotonic,
+        on_publication: Callable[[Publication], None] | None = None,
+    ) -> None:
+        self.config = config
+        self.vehicle = vehicle
+        self.session = EstimationSession(config, vehicle)
+        self.notifier = notifier if notifier is not None else SystemdNotifier()
+        self.clock = FcClock()
+        self.state = ServiceState()
+        self.recorder: TlogWriter | None = None
+        self.link: Link | None = None
+        self._monotonic_s = monotonic_s
+        self._on_publication = on_publication
+        self._endpoint = parse_endpoint(config.link.connect, "connect", key="link.connect")
+        self._open_link_fn = open_link_fn or self._open_default_link
+        self._streams = self._stream_table()
+        self._timesync_pending: dict[int, float] = {}
+        self._fc_heard_s = -math.inf
+        self._next_heartbeat_s = -math.inf
+        self._next_timesync_s = -math.inf
+        self._origin_attempts = 0
+        self._origin_last_s = -math.inf
+        self._rate_counts: dict[str, int] = {}
+        self._rate_time_s = -math.inf
+        self._last_latest_fc_s = -math.inf
+
+    # ------------------------------------------------------------------ lifecycle
+    async def run(self, stop: asyncio.Event) -> None:
+        """Run until ``stop`` is set (SIGTERM/SIGINT), then shut down cleanly.
+
+        Raises
+        ------
+        ConfigError
+            When the recording directory cannot be created or written.
+        """
+        self._open_recording()
+        self.notifier.ready(status="started, connecting to the flight controller")
+        tasks = [
+            asyncio.create_task(self._supervise_link(stop), name="link"),
+            asyncio.create_task(self._watchdog(stop), name="watchdog"),
+        ]
+        if self.recorder is not None:
+            tasks.append(asyncio.create_task(self._sync_recording(stop), name="recording-sync"))
+        stopper = asyncio.create_task(stop.wait(), name="stop")
+        try:
+            done, _ = await asyncio.wait([*tasks, stopper], return_when=asyncio.FIRST_COMPLETED)
+            for task in done:
+                if task is not stopper and not task.cancelled() and task.exception() is not None:
+                    raise task.exception()  # type: ignore[misc]
+        finally:
+            self.notifier.stopping()
+            for task in (*tasks, stopper):
+                task.cancel()
+            await asyncio.gather(*tasks, stopper, return_exceptions=True)
+            if self.recorder is not None:
+                await asyncio.to_thread(self.recorder.close)
+            self.notifier.close()
+
+    def _open_recording(self) -> None:
+        rec = self.config.recording
+        if not rec.enabled:
+            return
+        limits = RecordingLimits(
+            max_file_bytes=int(rec.max_file_mb * 2**20),
+            max_total_bytes=int(rec.max_total_mb * 2**20),
+            flush_interval_s=rec.flush_interval_s,
+        )
+        try:
+            self.recorder = TlogWriter(rec.directory, limits)
+        except OSError as exc:
+            raise ConfigError(
+                "",
+                "recording.directory",
+                rec.directory,
+                f"cannot write there ({exc.strerror or exc})",
+            ) from None
+
+    async def _open_default_link(self) -> Link:
+        link_cfg = self.config.link
+        return await open_link(
+            self._endpoint, system_id=link_cfg.system_id, component_id=link_cfg.component_id
+        )
+
+    # ------------------------------------------------------------------ link supervision
+    async def _supervise_link(self, stop: asyncio.Event) -> None:
+        cfg = self.config.link
+        delay = cfg.retry_initial_s
+        while not stop.is_set():
+            try:
+                link = await self._open_link_fn()
+            except OSError as exc:
+                self.state.link_open_failures += 1
+                self.state.last_error = str(exc)
+                self.state.link_text = f"cannot open {self._endpoint} (retry in {delay:.1f} s)"
+                await _wait_or_stop(stop, delay)
+                delay = min(2.0 * delay, cfg.retry_max_s)
+                continue
+            delay = cfg.retry_initial_s
+            self.state.link_opens += 1
+            self.state.link_text = f"opened {self._endpoint}"
+            self.link = link
+            try:
+                await self._serve(link)
+            except LinkClosed:
+                self.state.last_error = f"{self._endpoint} closed"
+            finally:
+                self.link = None
+                self.state.link_up = False
+                await link.close()
+            self.state.link_text = f"{self._endpoint} closed (reopen in {delay:.1f} s)"
+            await _wait_or_stop(stop, delay)
+
+    async def _serve(self, link: Link) -> None:
+        """Receive and housekeep on one open link until it closes (LinkClosed)."""
+        self._reset_link_state()
+        housekeeping = asyncio.create_task(self._housekeeping(link), name="housekeeping")
+        try:
+            while True:
+                msg = await link.recv()
+                self._handle(link, msg, self._monotonic_s())
+                while (msg := link.recv_nowait()) is not None:
+                    self._handle(link, msg, self._monotonic_s())
+        finally:
+            housekeeping.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await housekeeping
+
+    def _reset_link_state(self) -> None:
+        self._fc_heard_s = -math.inf
+        self._next_heartbeat_s = -math.inf
+        self._streams = self._stream_table()
+        self._origin_attempts = 0
+        self.state.origin_confirmed = False
+
+    # ------------------------------------------------------------------ receive path
+    def _handle(self, link: Link, msg: MAVLinkMessage, now_s: float) -> None:
+        if self.recorder is not None:
+            self.recorder.write(bytes(msg.get_msgbuf()))
+        self.state.received += 1
+        session = self.session
+        if session.ingest.from_flight_controller(msg):
+            self._fc_heard_s = now_s
+            if not self.state.link_up:
+                self.state.link_up = True
+                ids = f"{self.config.link.fc_system_id}/{self.config.link.fc_component_id}"
+                self.state.link_text = f"flight controller {ids} on {self._endpoint}"
+            kind = msg.get_type()
+            if kind in ("HEARTBEAT", "TIMESYNC", "COMMAND_ACK", "GPS_GLOBAL_ORIGIN"):
+                self._handle_control(link, msg, kind, now_s)
+                return
+        step = session.on_message(msg)
+        if session.ingest.rebooted:
+            self._on_fc_reboot()
+        latest = session.ingest.latest_fc_s
+        if latest > self._last_latest_fc_s:
+            self._last_latest_fc_s = latest
+            self.clock.observe(latest, now_s)
+        for out in step.messages:
+            self._send(link, out)
+        if step.publication is not None and self._on_publication is not None:
+            self._on_publication(step.publication)
+
+    def _handle_control(self, link: Link, msg: MAVLinkMessage, kind: str, now_s: float) -> None:
+        if kind == "HEARTBEAT":
+            self.state.fc_autopilot = msg.autopilot
+            self.state.fc_armed = bool(msg.base_mode & dialect.MAV_MODE_FLAG_SAFETY_ARMED)
+        elif kind == "TIMESYNC":
+            if msg.tc1 == 0:
+                fc_now = self.clock.fc_now_s(now_s)
+                if fc_now is not None:  # answer in the FC's own time base: its offset stays ~0
+                    self._send(link, dialect.MAVLink_timesync_message(int(fc_now * 1e9), msg.ts1))
+            else:
+                sent = self._timesync_pending.pop(msg.ts1, None)
+                if sent is not None:
+                    self.clock.observe_timesync(msg.tc1 * 1e-9, sent, now_s)
+        elif kind == "COMMAND_ACK":
+            if msg.command == dialect.MAV_CMD_SET_MESSAGE_INTERVAL:
+                for stream in self._streams.values():
+                    if stream.last_request_s > -math.inf and stream.acked is None:
+                        stream.acked = msg.result == _MAV_RESULT_ACCEPTED
+        elif kind == "GPS_GLOBAL_ORIGIN":
+            self.state.origin_confirmed = True
+
+    def _on_fc_reboot(self) -> None:
+        """The flight controller restarted: new clock, new origin, streams asked for again."""
+        self.clock.reset()
+        self._last_latest_fc_s = -math.inf
+        self._streams = self._stream_table()
+        self._origin_attempts = 0
+        self.state.origin_confirmed = False
+        self._timesync_pending.clear()
+
+    def _send(self, link: Link, msg: MAVLinkMessage) -> None:
+        frame = link.encoder.encode(msg)
+        link.send_bytes(frame)
+        if self.recorder is not None:
+            self.recorder.write(frame)
+        kind = msg.get_type()
+        self.state.sent_by_type[kind] = self.state.sent_by_type.get(kind, 0) + 1
+
+    # ------------------------------------------------------------------ housekeeping
+    async def _housekeeping(self, link: Link) -> None:
+        while True:
+            now = self._monotonic_s()
+            self._housekeep(link, now)
+            await asyncio.sleep(HOUSEKEEPING_PERIOD_S)
+
+    def _housekeep(self, link: Link, now_s: float) -> None:
+        cfg = self.config.link
+        if now_s >= self._next_heartbeat_s:
+            self._next_heartbeat_s = now_s + 1.0 / cfg.heartbeat_hz
+            status = (
+                dialect.MAV_STATE_ACTIVE
+                if self.session.publisher.health == "ok"
+                else dialect.MAV_STATE_STANDBY
+            )
+            self._send(
+                link,
+                dialect.MAVLink_heartbeat_message(
+                    dialect.MAV_TYPE_ONBOARD_CONTROLLER,
+                    dialect.MAV_AUTOPILOT_INVALID,
+                    0,
+                    0,
+                    status,
+                    3,
+                ),
+            )
+        if cfg.timesync_hz > 0 and now_s >= self._next_timesync_s:
+            self._next_timesync_s = now_s + 1.0 / cfg.timesync_hz
+            stamp_ns = int(now_s * 1e9)
+            self._timesync_pending = {
+                k: v for k, v in self._timesync_pending.items() if now_s - v < 5.0
+            }
+            self._timesync_pending[stamp_ns] = now_s
+            self._send(link, dialect.MAVLink_timesync_message(0, stamp_ns))
+        self._update_rates(now_s)
+        fc_present = now_s - self._fc_heard_s < cfg.link_timeout_s
+        if not fc_present:
+            if self.state.link_up:
+                self.state.link_up = False
+                self.state.link_losses += 1
+                self.state.link_text = (
+                    f"link lost: nothing from the flight controller for {cfg.link_timeout_s:g} s"
+                )
+                for msg in self.session.publisher.set_health(STALE):
+                    self._send(link, msg)
+            return
+        self._request_streams(link, now_s)
+        self._send_origin(link, now_s)
+        imu = self._streams[IMU]
+        if now_s - imu.last_heard_s > INPUT_SILENT_S:
+            for msg in self.session.publisher.set_health(STALE):
+                self._send(link, msg)
+
+    def _stream_table(self) -> dict[str, StreamRequest]:
+        streams = self.config.streams
+        imu_id = (
+            dialect.MAVLINK_MSG_ID_RAW_IMU
+            if self.config.link.autopilot == "ardupilot"
+            else dialect.MAVLINK_MSG_ID_HIGHRES_IMU
+        )
+        table = {
+            IMU: StreamRequest(imu_id, streams.imu_hz),
+            ATTITUDE: StreamRequest(dialect.MAVLINK_MSG_ID_ATTITUDE, streams.attitude_hz),
+            PWM: StreamRequest(dialect.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW, streams.servo_hz),
+        }
+        if streams.rangefinder_hz > 0:
+            table[RANGE] = StreamRequest(
+                dialect.MAVLINK_MSG_ID_DISTANCE_SENSOR, streams.rangefinder_hz
+            )
+        return table
+
+    def _request_streams(self, link: Link, now_s: float) -> None:
+        """Ask for every input not heard recently; fall back to REQUEST_DATA_STREAM."""
+        cfg = self.config.link
+        accepted = self.session.ingest.counters.accepted
+        for kind, stream in self._streams.items():
+            count = accepted[kind]
+            if count != stream.last_count:
+                stream.last_count = count
+                stream.last_heard_s = now_s
+            silent = now_s - stream.last_heard_s > INPUT_SILENT_S
+            if not silent or now_s - stream.last_request_s < cfg.stream_request_interval_s:
+                continue
+            stream.attempts += 1
+            stream.last_request_s = now_s
+            stream.acked = None
+            self._send(
+                link,
+                dialect.MAVLink_command_long_message(
+                    cfg.fc_system_id,
+                    cfg.fc_component_id,
+                    dialect.MAV_CMD_SET_MESSAGE_INTERVAL,
+                    0,
+                    float(stream.message_id),
+                    1e6 / stream.rate_hz,
+                    0.0,
+                    0.0,
+                    0.0,
+                    0.0,
+                    0.0,
+                ),
+            )
+            if stream.attempts > INTERVAL_ATTEMPTS_BEFORE_FALLBACK and kind in _STREAM_GROUPS:
+                self._send(
+                    link,
+                    dialect.MAVLink_request_data_stream_message(
+                        cfg.fc_system_id,
+                        cfg.fc_component_id,
+                        _STREAM_GROUPS[kind],
+                        max(1, round(stream.rate_hz)),
+                        1,
+                    ),
+                )
+
+    def _send_origin(self, link: Link, now_s: float) -> None:
+        """SET_GPS_GLOBAL_ORIGIN after each FC boot until GPS_GLOBAL_ORIGIN answers (bounded)."""
+        origin = self.config.origin
+        if (
+            not origin.send
+            or self.state.origin_confirmed
+            or self._origin_attempts >= ORIGIN_ATTEMPTS
+        ):
+            return
+        if now_s - self._origin_last_s < ORIGIN_RETRY_S:
+            return
+        self._origin_attempts += 1
+        self._origin_last_s = now_s
+        self.state.origin_sent += 1
+        fc_now = self.clock.fc_now_s(now_s)
+        self._send(
+            link,
+            dialect.MAVLink_set_gps_global_origin_message(
+                self.config.link.fc_system_id,
+                round(origin.latitude_deg * 1e7),
+                round(origin.longitude_deg * 1e7),
+                round(origin.altitude_m * 1e3),
+                seconds_to_usec(fc_now) if fc_now is not None else 0,
+            ),
+        )
+
+    def _update_rates(self, now_s: float) -> None:
+        elapsed = now_s - self._rate_time_s
+        if elapsed < RATE_WINDOW_S:
+            return
+        counts = dict(self.session.ingest.counters.accepted)
+        counts["published"] = self.session.publisher.counters.published
+        if math.isfinite(self._rate_time_s):
+            for key, value in counts.items():
+                self.state.rates_hz[key] = (value - self._rate_counts.get(key, value)) / elapsed
+        self._rate_counts = counts
+        self._rate_time_s = now_s
+        for kind, stream in self._streams.items():
+            self.state.ages_s[kind] = now_s - stream.last_heard_s
+        self.state.ages_s[TENSION] = math.inf
+
+    # ------------------------------------------------------------------ systemd, recording
+    async def _watchdog(self, stop: asyncio.Event) -> None:
+        interval = self.notifier.watchdog_interval_s or self.config.watchdog_interval_s or None
+        status_every_s = 5.0
+        next_status = 0.0
+        while not stop.is_set():
+            now = self._monotonic_s()
+            if interval:
+                self.notifier.watchdog()
+            if now >= next_status:
+                next_status = now + status_every_s
+                self.notifier.status(self.status_line())
+            await _wait_or_stop(stop, min(interval or status_every_s, status_every_s))
+
+    async def _sync_recording(self, stop: asyncio.Event) -> None:
+        assert self.recorder is not None
+        while not stop.is_set():
+            await _wait_or_stop(stop, self.config.recording.flush_interval_s)
+            await asyncio.to_thread(self.recorder.sync)
+
+    def status_line(self) -> str:
+        """One line for ``systemctl status`` and logs."""
+        pub = self.session.publisher
+        return (
+            f"{self.state.link_text}; IMU {self.state.rates_hz[IMU]:.0f} Hz; "
+            f"published {self.state.rates_hz['published']:.1f} Hz; health {pub.health}"
+        )
+
+
+async def _wait_or_stop(stop: asyncio.Event, timeout_s: float) -> None:
+    with contextlib.suppress(asyncio.TimeoutError):
+        await asyncio.wait_for(stop.wait(), timeout=timeout_s)

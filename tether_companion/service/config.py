@@ -1,0 +1,351 @@
+"""Typed configuration of the companion service (``configs/companion.yaml``).
+
+Every section is a frozen dataclass validated by :mod:`tether_companion.config`: an unknown key
+or a value out of range stops the service at start with a message naming the file, the key,
+the value and what is allowed (exit code 2). ``tether-companion run --help`` and
+``docs/config-reference.md`` list every key (generated with :func:`config_reference`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from tether_companion.config import ConfigError, describe, from_mapping, read_yaml, spec
+from tether_companion.estimation.config import EstimatorConfig
+from tether_companion.mavlink.endpoints import parse_endpoint
+from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
+
+MAV_COMP_ID_ONBOARD_COMPUTER = 191
+
+
+@dataclass(frozen=True)
+class LinkConfig:
+    """The MAVLink link to the flight controller and who is who on it."""
+
+    connect: str = spec(
+        "serial:/dev/ttyAMA0:921600",
+        doc="flight-controller endpoint: serial:/dev/X:BAUD, udp:HOST:PORT, tcp:HOST:PORT, "
+        "udpin:, tcpin:",
+    )
+    autopilot: str = spec(
+        "ardupilot",
+        choices=("ardupilot", "px4"),
+        doc="flavour: which IMU message and units to decode",
+    )
+    fc_system_id: int = spec(1, minimum=1, maximum=255, doc="flight controller's MAVLink system id")
+    fc_component_id: int = spec(1, minimum=1, maximum=255, doc="flight controller's component id")
+    system_id: int = spec(
+        1, minimum=1, maximum=255, doc="our system id (the vehicle's, as for any onboard component)"
+    )
+    component_id: int = spec(
+        MAV_COMP_ID_ONBOARD_COMPUTER,
+        minimum=1,
+        maximum=255,
+        doc="our component id (191 = MAV_COMP_ID_ONBOARD_COMPUTER)",
+    )
+    heartbeat_hz: float = spec(1.0, minimum=0.2, maximum=10.0, doc="our HEARTBEAT rate [Hz]")
+    timesync_hz: float = spec(
+        1.0, minimum=0.0, maximum=10.0, doc="TIMESYNC request rate [Hz] (0 = off)"
+    )
+    link_timeout_s: float = spec(
+        2.0,
+        exclusive_minimum=0.0,
+        maximum=60.0,
+        doc="no message from the flight controller for this long = link lost [s]",
+    )
+    retry_initial_s: float = spec(
+        0.5, exclusive_minimum=0.0, doc="first back-off after a failed open [s]"
+    )
+    retry_max_s: float = spec(
+        10.0, exclusive_minimum=0.0, doc="longest back-off between open attempts [s]"
+    )
+    stream_request_interval_s: float = spec(
+        1.0,
+        exclusive_minimum=0.0,
+        doc="re-send stream requests this often while an input is missing [s]",
+    )
+
+    def validate(self) -> None:
+        """The endpoint parses; back-off bounds in order."""
+        parse_endpoint(self.connect, "connect", key="connect")
+        if self.retry_max_s < self.retry_initial_s:
+            raise ConfigError(
+                "",
+                "retry_max_s",
+                self.retry_max_s,
+                f"must be >= retry_initial_s ({self.retry_initial_s})",
+            )
+
+
+@dataclass(frozen=True)
+class StreamsConfig:
+    """Rates at which the flight controller is asked to send the inputs [Hz]."""
+
+    imu_hz: float = spec(
+        200.0, minimum=10.0, maximum=1000.0, doc="RAW_IMU (ArduPilot) / HIGHRES_IMU (PX4) [Hz]"
+    )
+    attitude_hz: float = spec(100.0, minimum=5.0, maximum=1000.0, doc="ATTITUDE [Hz]")
+    servo_hz: float = spec(100.0, minimum=5.0, maximum=1000.0, doc="SERVO_OUTPUT_RAW [Hz]")
+    rangefinder_hz: float = spec(
+        20.0, minimum=0.0, maximum=200.0, doc="DISTANCE_SENSOR [Hz] (0 = not requested)"
+    )
+
+
+@dataclass(frozen=True)
+class OriginConfig:
+    """Where the ground station (tether anchor) is: sent as the EKF origin after every FC boot."""
+
+    latitude_deg: float = spec(
+        0.0, minimum=-90.0, maximum=90.0, doc="anchor latitude [deg] (WGS84)"
+    )
+    longitude_deg: float = spec(
+        0.0, minimum=-180.0, maximum=180.0, doc="anchor longitude [deg] (WGS84)"
+    )
+    altitude_m: float = spec(0.0, minimum=-500.0, maximum=9000.0, doc="anchor altitude AMSL [m]")
+    send: bool = spec(True, doc="send SET_GPS_GLOBAL_ORIGIN after each flight-controller boot")
+
+
+@dataclass(frozen=True)
+class InputLimitsConfig:
+    """Plausibility bounds: samples outside them are dropped and counted as absurd."""
+
+    max_specific_force_mps2: float = spec(
+        16.0 * 9.80665,
+        exclusive_minimum=0.0,
+        doc="largest accelerometer magnitude accepted [m/s^2] (16 g)",
+    )
+    max_angular_rate_rad_s: float = spec(
+        35.0, exclusive_minimum=0.0, doc="largest gyro rate accepted [rad/s] (2000 deg/s)"
+    )
+    pwm_min_us: float = spec(800.0, minimum=0.0, doc="smallest motor pulse width accepted [us]")
+    pwm_max_us: float = spec(2200.0, minimum=0.0, doc="largest motor pulse width accepted [us]")
+    range_min_m: float = spec(
+        0.05, minimum=0.0, doc="rangefinder readings below this are dropped [m]"
+    )
+    range_max_m: float = spec(
+        40.0, exclusive_minimum=0.0, doc="rangefinder readings above this are dropped [m]"
+    )
+
+    def validate(self) -> None:
+        """Bounds in order."""
+        if self.pwm_max_us <= self.pwm_min_us:
+            raise ConfigError(
+                "", "pwm_max_us", self.pwm_max_us, f"must be > pwm_min_us ({self.pwm_min_us})"
+            )
+        if self.range_max_m <= self.range_min_m:
+            raise ConfigError(
+                "", "range_max_m", self.range_max_m, f"must be > range_min_m ({self.range_min_m})"
+            )
+
+
+@dataclass(frozen=True)
+class TensionConfig:
+    """Where the cable tension comes from when the 3-state estimator is chosen."""
+
+    source: str = spec(
+        "estimate",
+        choices=("estimate", "config", "message"),
+        doc="estimate (4-state EKF), config (known_tension_n), "
+        "message (NAMED_VALUE_FLOAT from a load cell)",
+    )
+    known_tension_n: float = spec(
+        4.0, exclusive_minimum=0.0, maximum=500.0, doc="tension when source = config [N]"
+    )
+    message_name: str = spec(
+        "TENSION", doc="NAMED_VALUE_FLOAT name carrying the measured tension [N]"
+    )
+    sensor_system_id: int = spec(1, minimum=1, maximum=255, doc="system id of the tension sensor")
+    sensor_component_id: int = spec(
+        1, minimum=0, maximum=255, doc="component id of the tension sensor"
+    )
+
+    def validate(self) -> None:
+        """NAMED_VALUE_FLOAT names are at most 10 characters."""
+        if not 1 <= len(self.message_name) <= 10:
+            raise ConfigError(
+                "",
+                "message_name",
+                self.message_name,
+                "must be 1 to 10 characters (NAMED_VALUE_FLOAT name)",
+            )
+
+
+@dataclass(frozen=True)
+class PublishConfig:
+    """What is sent to the flight controller and when."""
+
+    rate_hz: float = spec(
+        30.0,
+        minimum=1.0,
+        maximum=200.0,
+        doc="VISION_POSITION_ESTIMATE rate [Hz] (flight-controller time)",
+    )
+    covariance: str = spec(
+        "ekf",
+        choices=("ekf", "unknown"),
+        doc="ekf: position variances from the EKF; "
+        "unknown: covariance[0] = NaN (ArduPilot then uses VISO_POS_M_NSE)",
+    )
+    attitude_variance_rad2: float = spec(
+        1.0,
+        exclusive_minimum=0.0,
+        maximum=10.0,
+        doc="roll/pitch/yaw variance sent [rad^2] (large: the attitude is the FC's own)",
+    )
+    odometry: bool = spec(False, doc="also send ODOMETRY (PX4; velocity marked unknown)")
+    tension_rate_hz: float = spec(
+        10.0, minimum=0.0, maximum=50.0, doc="NAMED_VALUE_FLOAT tension rate [Hz] (0 = off)"
+    )
+    tension_name: str = spec("TETH_TENS", doc="NAMED_VALUE_FLOAT name of the published tension")
+    statustext: bool = spec(True, doc="send STATUSTEXT when the health changes")
+    on_unhealthy: str = spec(
+        "stop",
+        choices=("stop", "inflate"),
+        doc="when stale/diverged/slack: stop sending, or send with inflated_variance_m2",
+    )
+    inflated_variance_m2: float = spec(
+        100.0, exclusive_minimum=0.0, maximum=1e4, doc="position variance sent when unhealthy [m^2]"
+    )
+    max_position_variance_m2: float = spec(
+        0.5,
+        exclusive_minimum=0.0,
+        doc="an estimate whose largest position variance reaches this is not healthy [m^2]",
+    )
+    slack_tension_n: float = spec(
+        0.3,
+        minimum=0.0,
+        doc="estimated tension below this = slack tether, position unobservable [N]",
+    )
+    jump_m: float = spec(
+        1.0,
+        exclusive_minimum=0.0,
+        doc="a move this large between two publications raises reset_counter [m]",
+    )
+
+    def validate(self) -> None:
+        """NAMED_VALUE_FLOAT names are at most 10 characters."""
+        if not 1 <= len(self.tension_name) <= 10:
+            raise ConfigError(
+                "",
+                "tension_name",
+                self.tension_name,
+                "must be 1 to 10 characters (NAMED_VALUE_FLOAT name)",
+            )
+
+
+@dataclass(frozen=True)
+class RecordingConfig:
+    """The .tlog flight recording."""
+
+    enabled: bool = spec(True, doc="record received and sent MAVLink to .tlog files")
+    directory: str = spec("/var/lib/tether-companion/recordings", doc="where the .tlog files go")
+    max_file_mb: float = spec(64.0, minimum=0.1, doc="rotate to a new file beyond this size [MiB]")
+    max_total_mb: float = spec(
+        2048.0, minimum=0.2, doc="delete the oldest recordings beyond this total [MiB]"
+    )
+    flush_interval_s: float = spec(
+        1.0,
+        exclusive_minimum=0.0,
+        maximum=10.0,
+        doc="flush + fsync period: at most this much is lost on a power cut [s]",
+    )
+
+    def validate(self) -> None:
+        """The total must hold at least two files (the current one and one finished)."""
+        if self.max_total_mb < 2 * self.max_file_mb:
+            raise ConfigError(
+                "",
+                "max_total_mb",
+                self.max_total_mb,
+                f"must be >= 2 * max_file_mb ({2 * self.max_file_mb})",
+            )
+
+
+@dataclass(frozen=True)
+class ServiceConfig:
+    """The whole companion configuration (one YAML file)."""
+
+    vehicle: str = spec(
+        "default-quad", doc="vehicle profile: a name in configs/vehicles/ or a YAML path"
+    )
+    link: LinkConfig = spec(default_factory=LinkConfig)
+    streams: StreamsConfig = spec(default_factory=StreamsConfig)
+    origin: OriginConfig = spec(default_factory=OriginConfig)
+    inputs: InputLimitsConfig = spec(default_factory=InputLimitsConfig)
+    estimator: EstimatorConfig = spec(default_factory=EstimatorConfig)
+    tension: TensionConfig = spec(default_factory=TensionConfig)
+    publish: PublishConfig = spec(default_factory=PublishConfig)
+    recording: RecordingConfig = spec(default_factory=RecordingConfig)
+    watchdog_interval_s: float = spec(
+        0.0,
+        minimum=0.0,
+        doc="WATCHDOG=1 period when systemd gives no WATCHDOG_USEC [s] (0 = only when asked)",
+    )
+
+    def validate(self) -> None:
+        """The 3-state estimator needs a tension source; the 4-state one estimates it."""
+        kind = self.estimator.kind
+        if kind == "three_state" and self.tension.source == "estimate":
+            raise ConfigError(
+                "",
+                "tension.source",
+                self.tension.source,
+                "must be 'config' or 'message' with estimator.kind three_state",
+            )
+        if kind == "four_state" and self.tension.source != "estimate":
+            raise ConfigError(
+                "",
+                "tension.source",
+                self.tension.source,
+                "must be 'estimate' with estimator.kind four_state",
+            )
+
+
+def load_service_config(path: str | Path | None, overrides: dict | None = None) -> ServiceConfig:
+    """Read the service YAML (or use defaults when ``path`` is None) and apply overrides.
+
+    Parameters
+    ----------
+    path
+        YAML file; None means every default.
+    overrides
+        Nested mapping merged over the file's content (e.g. ``{"link": {"connect": ...}}`` from
+        the command line) before validation.
+
+    Raises
+    ------
+    ConfigError
+        On a missing file, bad YAML, an unknown key or an out-of-range value.
+    """
+    data: dict = {} if path is None else _plain(read_yaml(path))
+    for section, values in (overrides or {}).items():
+        if isinstance(values, dict):
+            merged = dict(data.get(section) or {})
+            merged.update(values)
+            data[section] = merged
+        else:
+            data[section] = values
+    return from_mapping(ServiceConfig, data, source=str(path) if path is not None else "<defaults>")
+
+
+def load_vehicle_for(config: ServiceConfig) -> VehicleProfile:
+    """The vehicle profile the config names (ConfigError naming ``vehicle`` when missing)."""
+    try:
+        return load_vehicle(config.vehicle)
+    except ConfigError as exc:
+        raise ConfigError(
+            exc.source, f"vehicle{'.' + exc.key if exc.key else ''}", exc.value, exc.allowed
+        ) from None
+
+
+def config_reference() -> str:
+    """Markdown table of every key of :class:`ServiceConfig` (for docs/config-reference.md)."""
+    lines = ["| key | type | default | meaning |", "| --- | --- | --- | --- |"]
+    for key, type_name, default, text in describe(ServiceConfig):
+        lines.append(f"| `{key}` | {type_name} | `{default}` | {text.replace('|', '/')} |")
+    return "\n".join(lines) + "\n"
+
+
+def _plain(data: object) -> dict:
+    return dict(data) if isinstance(data, dict) else dict(data or {})  # type: ignore[arg-type]

@@ -1,0 +1,261 @@
+"""Decoded MAVLink messages to checked SI samples; everything refused is dropped and counted.
+
+Pure and synchronous (the live service and replay share it). For each message:
+
+1. wrong sender: only the configured flight controller's system/component id (and the
+   tension sensor's, for its NAMED_VALUE_FLOAT) are accepted;
+2. type: the flavour's IMU message (ArduPilot RAW_IMU in milli-g, PX4 HIGHRES_IMU in m/s^2),
+   ATTITUDE, SERVO_OUTPUT_RAW, downward DISTANCE_SENSOR; anything else is not an input;
+3. values: NaN/inf is ``nonfinite``; outside the plausibility bounds is ``absurd``; a
+   rangefinder reading outside its valid range is ``out_of_range``;
+4. time: per message type the flight-controller stamp must increase; an equal stamp is a
+   ``duplicate``, an older one ``out_of_order``, unless the stamps of ``REBOOT_CONFIRMATIONS``
+   consecutive inputs all went back by more than ``REBOOT_BACKSTEP_S``: then the flight
+   controller rebooted, which :attr:`Ingest.reboots` counts and the caller acts on.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tether_companion.mavlink.framing import MAVLinkMessage
+from tether_companion.mavlink.units import (
+    DOWNWARD_ORIENTATION,
+    attitude_from_attitude,
+    imu_from_highres_imu,
+    imu_from_raw_imu,
+    pwm_from_servo_output_raw,
+)
+from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
+from tether_companion.service.config import InputLimitsConfig, LinkConfig, TensionConfig
+
+REBOOT_BACKSTEP_S = 1.0
+"""A stamp this far [s] behind the latest one is a reboot candidate (less: out of order)."""
+REBOOT_CONFIRMATIONS = 3
+"""Consecutive backstepped inputs needed to declare a reboot (one corrupt stamp is not)."""
+_UINT32_US = 1 << 32
+IMU = "imu"
+ATTITUDE = "attitude"
+PWM = "pwm"
+RANGE = "range"
+TENSION = "tension"
+INPUT_KINDS = (IMU, ATTITUDE, PWM, RANGE, TENSION)
+
+
+@dataclass(frozen=True, slots=True)
+class TensionReading:
+    """A measured cable tension from a load cell [N] at flight-controller time [s]."""
+
+    time_s: float
+    tension_n: float
+
+
+Sample = ImuSample | AttitudeSample | PwmSample | RangeSample | TensionReading
+
+
+@dataclass
+class IngestCounters:
+    """Why messages were dropped (monotonic counts; shown by --status)."""
+
+    messages: int = 0
+    wrong_system: int = 0
+    not_input: int = 0
+    nonfinite: int = 0
+    absurd: int = 0
+    out_of_range: int = 0
+    duplicate: int = 0
+    out_of_order: int = 0
+    reboots: int = 0
+    accepted: dict[str, int] = field(default_factory=lambda: dict.fromkeys(INPUT_KINDS, 0))
+
+    @property
+    def dropped(self) -> int:
+        """Inputs refused for their content or time (not counting other systems' traffic)."""
+        return self.nonfinite + self.absurd + self.out_of_range + self.duplicate + self.out_of_order
+
+
+class Ingest:
+    """Turn messages into samples, checking sender, values and time order.
+
+    Parameters
+    ----------
+    link
+        Flavour and the flight controller's ids.
+    limits
+        Plausibility bounds.
+    tension
+        Tension-sensor settings (source ``message`` enables NAMED_VALUE_FLOAT decoding).
+    n_motors
+        Motors in the vehicle profile (SERVO_OUTPUT_RAW channels 1..n).
+    """
+
+    def __init__(
+        self, link: LinkConfig, limits: InputLimitsConfig, tension: TensionConfig, n_motors: int
+    ) -> None:
+        self.link = link
+        self.limits = limits
+        self.tension = tension
+        self.n_motors = n_motors
+        self.counters = IngestCounters()
+        self.latest_fc_s = -math.inf
+        self._latest_by_kind: dict[str, float] = {}
+        self._backsteps = 0
+        self._imu_type = "RAW_IMU" if link.autopilot == "ardupilot" else "HIGHRES_IMU"
+        self._tension_name = (
+            tension.message_name.encode("ascii") if tension.source == "message" else None
+        )
+        self.rebooted = False
+        """True right after the message that confirmed a reboot (cleared on the next call)."""
+
+    def from_flight_controller(self, msg: MAVLinkMessage) -> bool:
+        """Whether ``msg`` was sent by the configured flight controller."""
+        return (
+            msg.get_srcSystem() == self.link.fc_system_id
+            and msg.get_srcComponent() == self.link.fc_component_id
+        )
+
+    def decode(self, msg: MAVLinkMessage) -> Sample | None:
+        """The checked SI sample carried by ``msg``, or None (not an input, or dropped)."""
+        self.rebooted = False
+        counters = self.counters
+        counters.messages += 1
+        kind_name = msg.get_type()
+        if kind_name == "NAMED_VALUE_FLOAT" and self._tension_name is not None:
+            return self._tension(msg)
+        if not self.from_flight_controller(msg):
+            counters.wrong_system += 1
+            return None
+        if kind_name == self._imu_type:
+            return self._checked(IMU, self._imu(msg))
+        if kind_name == "ATTITUDE":
+            return self._checked(ATTITUDE, self._attitude(msg))
+        if kind_name == "SERVO_OUTPUT_RAW":
+            return self._checked(PWM, self._pwm(msg))
+        if kind_name == "DISTANCE_SENSOR":
+            return self._checked(RANGE, self._range(msg))
+        counters.not_input += 1
+        return None
+
+    # ------------------------------------------------------------------ per message
+    def _imu(self, msg: MAVLinkMessage) -> ImuSample | None:
+        if (
+            getattr(msg, "id", 0) != 0
+        ):  # only the first IMU (ArduPilot sends others as SCALED_IMU2/3)
+            self.counters.not_input += 1
+            return None
+        sample = imu_from_raw_imu(msg) if self._imu_type == "RAW_IMU" else imu_from_highres_imu(msg)
+        force = sample.specific_force_body_mps2
+        rate = sample.angular_rate_body_rad_s
+        if not (np.isfinite(force).all() and np.isfinite(rate).all()):
+            self.counters.nonfinite += 1
+            return None
+        if (
+            float(force @ force) > self.limits.max_specific_force_mps2**2
+            or np.abs(rate).max() > self.limits.max_angular_rate_rad_s
+        ):
+            self.counters.absurd += 1
+            return None
+        return sample
+
+    def _attitude(self, msg: MAVLinkMessage) -> AttitudeSample | None:
+        sample = attitude_from_attitude(msg)
+        angles = (sample.roll_rad, sample.pitch_rad, sample.yaw_rad)
+        if not all(math.isfinite(a) for a in angles):
+            self.counters.nonfinite += 1
+            return None
+        if (
+            abs(sample.roll_rad) > math.pi + 1e-3
+            or abs(sample.pitch_rad) > 0.5 * math.pi + 1e-3
+            or abs(sample.yaw_rad) > 2.0 * math.pi
+        ):
+            self.counters.absurd += 1
+            return None
+        return sample
+
+    def _pwm(self, msg: MAVLinkMessage) -> PwmSample | None:
+        if msg.port != 0:  # channels 9-16 come as port 1; motors are on 1..n of port 0
+            self.counters.not_input += 1
+            return None
+        sample = pwm_from_servo_output_raw(
+            msg, self.n_motors, time_s=self._unwrap_uint32_us(msg.time_usec)
+        )
+        pwm = sample.pwm_us
+        if pwm.min() < self.limits.pwm_min_us or pwm.max() > self.limits.pwm_max_us:
+            self.counters.absurd += 1
+            return None
+        return sample
+
+    def _range(self, msg: MAVLinkMessage) -> RangeSample | None:
+        if msg.orientation != DOWNWARD_ORIENTATION:
+            self.counters.not_input += 1
+            return None
+        distance_m = msg.current_distance * 0.01
+        in_sensor_range = msg.min_distance <= msg.current_distance <= msg.max_distance
+        if (
+            not in_sensor_range
+            or not self.limits.range_min_m <= distance_m <= self.limits.range_max_m
+        ):
+            self.counters.out_of_range += 1
+            return None
+        return RangeSample(time_s=msg.time_boot_ms * 1e-3, distance_m=distance_m)
+
+    def _tension(self, msg: MAVLinkMessage) -> TensionReading | None:
+        name = msg.name if isinstance(msg.name, bytes) else str(msg.name).encode("ascii", "replace")
+        if name.rstrip(b"\0") != self._tension_name:
+            self.counters.not_input += 1
+            return None
+        if (
+            msg.get_srcSystem() != self.tension.sensor_system_id
+            or msg.get_srcComponent() != self.tension.sensor_component_id
+        ):
+            self.counters.wrong_system += 1
+            return None
+        value = float(msg.value)
+        if not math.isfinite(value):
+            self.counters.nonfinite += 1
+            return None
+        if value < 0.0 or value > 10.0 * self.tension.known_tension_n + 1000.0:
+            self.counters.absurd += 1
+            return None
+        return self._checked(
+            TENSION, TensionReading(time_s=msg.time_boot_ms * 1e-3, tension_n=value)
+        )
+
+    # ------------------------------------------------------------------ time checks
+    def _checked(self, kind: str, sample: Sample | None) -> Sample | None:
+        if sample is None:
+            return None
+        t = sample.time_s
+        counters = self.counters
+        if t < self.latest_fc_s - REBOOT_BACKSTEP_S:
+            self._backsteps += 1
+            if self._backsteps < REBOOT_CONFIRMATIONS:
+                counters.out_of_order += 1
+                return None
+            counters.reboots += 1
+            self.rebooted = True
+            self._latest_by_kind.clear()
+            self.latest_fc_s = -math.inf
+        self._backsteps = 0
+        previous = self._latest_by_kind.get(kind, -math.inf)
+        if t == previous:
+            counters.duplicate += 1
+            return None
+        if t < previous:
+            counters.out_of_order += 1
+            return None
+        self._latest_by_kind[kind] = t
+        self.latest_fc_s = max(self.latest_fc_s, t)
+        counters.accepted[kind] += 1
+        return sample
+
+    def _unwrap_uint32_us(self, time_usec: int) -> float:
+        """SERVO_OUTPUT_RAW's uint32 microseconds to seconds near the latest stamp [s]."""
+        if not math.isfinite(self.latest_fc_s):
+            return time_usec * 1e-6
+        latest_us = self.latest_fc_s * 1e6
+        wraps = round((latest_us - time_usec) / _UINT32_US)
+        return (time_usec + max(0, wraps) * _UINT32_US) * 1e-6

@@ -1,0 +1,312 @@
+"""What the service sends to the flight controller for each estimate, and when.
+
+Pure and synchronous: :class:`Publisher` turns the estimator's :class:`Estimate` (at IMU rate)
+plus the flight controller's own attitude into the messages to send, decimated to
+``publish.rate_hz`` in the flight controller's time base, so the live service and replay send
+exactly the same thing for the same input.
+
+Choices, with the reasons:
+
+* ``usec`` is the flight-controller time of the IMU sample the estimate was computed at (time
+  since FC boot): ArduPilot maps it onto its own clock with its jitter correction and PX4 with
+  the TIMESYNC offset (which our TIMESYNC answers make ~0), and both then fuse the measurement
+  at the right point of their delayed-state horizon.
+* Roll, pitch and yaw are the flight controller's own ATTITUDE (ArduPilot refuses to arm when
+  they differ from its estimate by more than 10 degrees); we estimate no attitude.
+* Covariance: the MAVLink spec has only one "unknown" marker, NaN in entry 0, which voids the
+  whole matrix; with ``covariance: ekf`` we fill the position block from the EKF (m^2) and put a
+  large finite variance (``attitude_variance_rad2``) on the attitude diagonal, meaning "this
+  attitude is yours, do not trust it as a measurement". Entries must be finite: ArduPilot
+  computes ``angErr = cbrt(c15^2 + c18^2 + c20^2)`` and would get NaN from NaN entries. ArduPilot
+  reads ``posErr = cbrt(c0^2 + c6^2 + c11^2)`` and clamps it to [VISO_POS_M_NSE, 100] m; PX4
+  (EKF2_EV_NOISE_MD = 0) uses each variance, floored at EKF2_EVP_NOISE^2.
+* Never NaN: an estimate with a non-finite position is never sent. When the estimate is not
+  healthy (diverged, slack tether) the publisher stops or sends a large covariance
+  (``on_unhealthy``). Stale inputs produce no estimate at all, so nothing is sent.
+* ``reset_counter`` (uint8, wraps) goes up on every estimator restart, on a jump larger than
+  ``jump_m`` between two publications, on resuming after a pause and after a flight-controller
+  reboot, so the autopilot resets its position state instead of fighting a step.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.estimation.pipeline import Estimate
+from tether_companion.mavlink.framing import MAVLinkMessage, dialect
+from tether_companion.mavlink.units import (
+    POSE_DIM,
+    PoseEstimate,
+    odometry_message,
+    seconds_to_boot_ms,
+    vision_position_estimate_message,
+)
+from tether_companion.samples import AttitudeSample
+from tether_companion.service.config import PublishConfig
+
+FloatArray = NDArray[np.float64]
+
+OK = "ok"
+CONVERGING = "converging"
+DIVERGED = "diverged"
+SLACK = "slack"
+STALE = "stale"
+NO_ATTITUDE = "no_attitude"
+HEALTH_STATES = (OK, CONVERGING, DIVERGED, SLACK, STALE, NO_ATTITUDE)
+"""Health of the published position, worst cases last in the status text."""
+
+_HEALTH_TEXT = {
+    OK: "position OK",
+    CONVERGING: "converging, position withheld",
+    DIVERGED: "estimate diverged",
+    SLACK: "tether slack, position unobservable",
+    STALE: "inputs stale, no estimate",
+    NO_ATTITUDE: "no attitude from FC",
+}
+_STATUSTEXT_PREFIX = "TETHER: "
+_RESUME_GAP_S = 0.5
+"""A pause in publication longer than this counts as a reset when publication resumes [s]."""
+
+
+def assess_health(
+    estimate: Estimate, config: PublishConfig, has_tension_state: bool, ever_ok: bool
+) -> str:
+    """Health of one estimate (one of :data:`HEALTH_STATES`, never STALE/NO_ATTITUDE here).
+
+    Parameters
+    ----------
+    estimate
+        The estimator's output.
+    config
+        Publication thresholds (variance bound, slack tension).
+    has_tension_state
+        True for the 4-state model (a near-zero estimated tension then means a slack tether).
+    ever_ok
+        Whether this estimator run was healthy before: a too-large variance before the first
+        healthy estimate is ``converging``, after it ``diverged``.
+    """
+    position = estimate.position_ned_m
+    covariance = estimate.covariance
+    if not (
+        np.all(np.isfinite(position))
+        and np.all(np.isfinite(covariance))
+        and math.isfinite(estimate.tension_n)
+    ):
+        return DIVERGED
+    variances = np.diag(estimate.position_covariance_m2)
+    if np.any(variances <= 0.0) or float(variances.max()) >= config.max_position_variance_m2:
+        return DIVERGED if ever_ok else CONVERGING
+    if has_tension_state and estimate.tension_n < config.slack_tension_n:
+        return SLACK
+    return OK
+
+
+@dataclass(frozen=True, slots=True)
+class Publication:
+    """One published estimate, as written to the estimates CSV (units in the names)."""
+
+    time_usec: int
+    position_ned_m: tuple[float, float, float]
+    tension_n: float
+    position_variance_m2: tuple[float, float, float]
+    tension_variance_n2: float
+    health: str
+    reset_counter: int
+
+    CSV_HEADER = (
+        "time_usec,north_m,east_m,down_m,tension_n,var_north_m2,var_east_m2,var_down_m2,"
+        "var_tension_n2,health,reset_counter"
+    )
+
+    def csv_row(self) -> str:
+        """One CSV line (no newline), ``repr``-exact floats."""
+        values = (
+            str(self.time_usec),
+            *(repr(v) for v in self.position_ned_m),
+            repr(self.tension_n),
+            *(repr(v) for v in self.position_variance_m2),
+            repr(self.tension_variance_n2),
+            self.health,
+            str(self.reset_counter),
+        )
+        return ",".join(values)
+
+
+@dataclass
+class PublisherCounters:
+    """What the publisher did (monotonic counts; visible in --status)."""
+
+    estimates: int = 0
+    published: int = 0
+    withheld: int = 0
+    inflated: int = 0
+    resets: int = 0
+    health_changes: int = 0
+    by_health: dict[str, int] = field(default_factory=lambda: dict.fromkeys(HEALTH_STATES, 0))
+
+
+class Publisher:
+    """Decimate estimates to ``rate_hz`` and build the messages to send.
+
+    Parameters
+    ----------
+    config
+        The ``publish`` section.
+    has_tension_state
+        True for the 4-state estimator (slack detection on the estimated tension).
+    """
+
+    def __init__(self, config: PublishConfig, has_tension_state: bool) -> None:
+        self.config = config
+        self.has_tension_state = has_tension_state
+        self.counters = PublisherCounters()
+        self.reset_counter = 0
+        self.health = CONVERGING
+        self.last: Publication | None = None
+        self._period_s = 1.0 / config.rate_hz
+        self._tension_period_s = (
+            1.0 / config.tension_rate_hz if config.tension_rate_hz > 0 else math.inf
+        )
+        self._next_due_s = -math.inf
+        self._next_tension_s = -math.inf
+        self._last_sent_s = -math.inf
+        self._last_sent_position: FloatArray | None = None
+        self._estimator_resets: int | None = None
+        self._ever_ok = False
+
+    def restart(self) -> None:
+        """A new estimator run (flight-controller reboot): raise reset_counter, reset timing."""
+        self._bump_reset()
+        self._next_due_s = -math.inf
+        self._next_tension_s = -math.inf
+        self._last_sent_s = -math.inf
+        self._last_sent_position = None
+        self._estimator_resets = None
+        self._ever_ok = False
+
+    def set_health(self, health: str) -> list[MAVLinkMessage]:
+        """Record a health state decided outside the estimate (stale inputs); STATUSTEXT if new."""
+        return self._health_transition(health)
+
+    def on_estimate(
+        self, estimate: Estimate, attitude: AttitudeSample | None, *, inputs_stale: bool = False
+    ) -> tuple[list[MAVLinkMessage], Publication | None]:
+        """Messages to send for this estimate (often none: decimation) and the CSV record.
+
+        Parameters
+        ----------
+        estimate
+            The estimator output at one IMU tick (flight-controller time ``time_s``).
+        attitude
+            The flight controller's latest ATTITUDE (roll/pitch/yaw to echo back).
+        inputs_stale
+            The tick could not fuse the accelerometer because the attitude, PWM or known
+            tension was missing or too old: the estimate is a prediction only.
+        """
+        self.counters.estimates += 1
+        out: list[MAVLinkMessage] = []
+        t = estimate.time_s
+        if self._estimator_resets is not None and estimate.reset_counter != self._estimator_resets:
+            self._bump_reset()
+            self._ever_ok = False
+        self._estimator_resets = estimate.reset_counter
+        health = assess_health(estimate, self.config, self.has_tension_state, self._ever_ok)
+        if inputs_stale and health in (OK, CONVERGING):
+            health = STALE
+        if attitude is None and health == OK:
+            health = NO_ATTITUDE
+        self._ever_ok = self._ever_ok or health == OK
+        out += self._health_transition(health)
+        self.counters.by_health[health] += 1
+        if (
+            t >= self._next_tension_s
+            and math.isfinite(estimate.tension_n)
+            and self._tension_period_s < math.inf
+        ):
+            self._next_tension_s = _next_due(self._next_tension_s, t, self._tension_period_s)
+            name = self.config.tension_name.encode("ascii")
+            out.append(
+                dialect.MAVLink_named_value_float_message(
+                    seconds_to_boot_ms(t), name, float(estimate.tension_n)
+                )
+            )
+        if t < self._next_due_s:
+            return out, None
+        self._next_due_s = _next_due(self._next_due_s, t, self._period_s)
+        position = estimate.position_ned_m
+        finite = bool(np.all(np.isfinite(position)))
+        send_inflated = health != OK and self.config.on_unhealthy == "inflate" and finite
+        if attitude is None or not finite or (health != OK and not send_inflated):
+            self.counters.withheld += 1
+            return out, None
+        if t - self._last_sent_s > _RESUME_GAP_S and self._last_sent_position is not None:
+            self._bump_reset()
+        elif (
+            self._last_sent_position is not None
+            and float(np.linalg.norm(position - self._last_sent_position)) > self.config.jump_m
+        ):
+            self._bump_reset()
+        self._last_sent_s = t
+        self._last_sent_position = position.copy()
+        pose_cov = self._pose_covariance(estimate, inflated=send_inflated)
+        pose = PoseEstimate(
+            time_s=t,
+            position_ned_m=position,
+            euler_rad=(attitude.roll_rad, attitude.pitch_rad, attitude.yaw_rad),
+            covariance=pose_cov,
+            reset_counter=self.reset_counter,
+        )
+        out.append(vision_position_estimate_message(pose))
+        if self.config.odometry:
+            out.append(odometry_message(pose))
+        self.counters.published += 1
+        self.counters.inflated += int(send_inflated)
+        variances = np.diag(estimate.covariance)
+        publication = Publication(
+            time_usec=int(round(t * 1e6)),
+            position_ned_m=(float(position[0]), float(position[1]), float(position[2])),
+            tension_n=float(estimate.tension_n),
+            position_variance_m2=(float(variances[0]), float(variances[1]), float(variances[2])),
+            tension_variance_n2=float(variances[3]) if variances.shape[0] > 3 else 0.0,
+            health=health,
+            reset_counter=self.reset_counter,
+        )
+        self.last = publication
+        return out, publication
+
+    def _pose_covariance(self, estimate: Estimate, *, inflated: bool) -> FloatArray | None:
+        if self.config.covariance == "unknown":
+            return None
+        pose = np.zeros((POSE_DIM, POSE_DIM))
+        if inflated:
+            pose[:3, :3] = np.eye(3) * self.config.inflated_variance_m2
+        else:
+            block = estimate.position_covariance_m2
+            pose[:3, :3] = 0.5 * (block + block.T)
+        pose[3:, 3:] = np.eye(3) * self.config.attitude_variance_rad2
+        return pose
+
+    def _bump_reset(self) -> None:
+        self.reset_counter = (self.reset_counter + 1) & 0xFF
+        self.counters.resets += 1
+
+    def _health_transition(self, health: str) -> list[MAVLinkMessage]:
+        if health == self.health:
+            return []
+        self.health = health
+        self.counters.health_changes += 1
+        if not self.config.statustext:
+            return []
+        severity = dialect.MAV_SEVERITY_INFO if health == OK else dialect.MAV_SEVERITY_WARNING
+        text = (_STATUSTEXT_PREFIX + _HEALTH_TEXT[health])[:50].encode("ascii")
+        return [dialect.MAVLink_statustext_message(severity, text, 0, 0)]
+
+
+def _next_due(previous_due_s: float, now_s: float, period_s: float) -> float:
+    """Next deadline keeping the phase (average rate exact); restart the phase after a gap."""
+    due = previous_due_s + period_s
+    return due if now_s - previous_due_s < period_s else now_s + period_s - 1e-9

@@ -1,0 +1,218 @@
+"""Replay a flight log through the same :class:`EstimationSession` as the live service.
+
+Sources:
+
+* a MAVLink telemetry log (``.tlog``, e.g. the service's own recording): every frame goes
+  through the same framing, ingest, estimator and publisher as live, so a recording replays
+  to the estimates the live run sent;
+* an ArduPilot dataflash log (``.bin``): IMU (m/s^2, rad/s), ATT (degrees), RCOU (us) and
+  RFND (m) are turned into samples directly (they are already in SI units or close) and fed to
+  the same session.
+
+Replay runs as fast as the CPU allows and writes one CSV row per published estimate (see
+:class:`~tether_companion.service.publish.Publication`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TextIO
+
+import numpy as np
+
+from tether_companion.errors import InputError
+from tether_companion.frames import wrap_pi
+from tether_companion.mavlink.framing import FrameParser, MAVLinkMessage
+from tether_companion.physics.vehicle import VehicleProfile
+from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
+from tether_companion.service.config import ServiceConfig
+from tether_companion.service.ingest import ATTITUDE, IMU, PWM, Sample
+from tether_companion.service.publish import Publication
+from tether_companion.service.recording import read_tlog
+from tether_companion.service.session import EstimationSession
+
+DATAFLASH_DOWNWARD = 25
+"""RFND ``Orient`` of a downward rangefinder (ROTATION_PITCH_270)."""
+_REQUIRED = (IMU, ATTITUDE, PWM)
+_MAVLINK_NAMES = {"ardupilot": {IMU: "RAW_IMU"}, "px4": {IMU: "HIGHRES_IMU"}}
+_COMMON_NAMES = {ATTITUDE: "ATTITUDE", PWM: "SERVO_OUTPUT_RAW"}
+_DATAFLASH_NAMES = {IMU: "IMU", ATTITUDE: "ATT", PWM: "RCOU"}
+
+
+@dataclass(frozen=True)
+class ReplaySummary:
+    """What a replay did."""
+
+    source: str
+    inputs: dict[str, int]
+    published: int
+    fc_time_span_s: float
+    ingest_dropped: int
+
+
+def replay_log(
+    path: str | Path,
+    config: ServiceConfig,
+    vehicle: VehicleProfile,
+    out: TextIO,
+    *,
+    allow_truncated: bool = False,
+) -> ReplaySummary:
+    """Run the pipeline on a .tlog or .bin log and write the estimates CSV to ``out``.
+
+    Raises
+    ------
+    InputError
+        When the log is missing, truncated, of an unknown kind, or lacks IMU, attitude or
+        motor-output messages from the configured flight controller (the message names them).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: no such log file")
+    session = EstimationSession(config, vehicle)
+    out.write(Publication.CSV_HEADER + "\n")
+    suffix = path.suffix.lower()
+    if suffix == ".tlog":
+        steps = (session.on_message(msg) for msg in _tlog_messages(path, allow_truncated))
+    elif suffix in (".bin", ".log"):
+        dataflash = DataflashSource(path, vehicle.n_motors, allow_truncated=allow_truncated)
+        steps = (session.on_sample(sample) for sample in dataflash)
+    else:
+        raise InputError(
+            f"{path}: unknown log kind {suffix!r}; "
+            "expected a .tlog (MAVLink) or .bin (ArduPilot dataflash)"
+        )
+    first_s = last_s = math.nan
+    published = 0
+    for step in steps:
+        if step.publication is not None:
+            out.write(step.publication.csv_row() + "\n")
+            published += 1
+            last_s = step.publication.time_usec * 1e-6
+            first_s = last_s if math.isnan(first_s) else first_s
+    accepted = (
+        dict(session.ingest.counters.accepted) if suffix == ".tlog" else dict(dataflash.counts)
+    )
+    _check_inputs(path, config, accepted, suffix)
+    return ReplaySummary(
+        source=str(path),
+        inputs=accepted,
+        published=published,
+        fc_time_span_s=(last_s - first_s) if published else 0.0,
+        ingest_dropped=session.ingest.counters.dropped,
+    )
+
+
+def _check_inputs(path: Path, config: ServiceConfig, accepted: dict[str, int], suffix: str) -> None:
+    missing = [kind for kind in _REQUIRED if accepted.get(kind, 0) == 0]
+    if not missing:
+        return
+    if suffix == ".tlog":
+        names = {**_COMMON_NAMES, **_MAVLINK_NAMES[config.link.autopilot]}
+        who = f" from system {config.link.fc_system_id} component {config.link.fc_component_id}"
+    else:
+        names, who = _DATAFLASH_NAMES, ""
+    found = ", ".join(f"{names[k]} x{accepted[k]}" for k in _REQUIRED if accepted.get(k, 0))
+    raise InputError(
+        f"{path}: lacks {', '.join(names[k] for k in missing)} messages{who} "
+        f"(found: {found or 'none of the inputs'}); "
+        "the estimator needs IMU, attitude and motor outputs"
+    )
+
+
+def _tlog_messages(path: Path, allow_truncated: bool) -> Iterator[MAVLinkMessage]:
+    parser = FrameParser()
+    for _stamp_us, frame in read_tlog(path, allow_truncated=allow_truncated):
+        yield from parser.feed(frame)
+        parser.end_datagram()
+
+
+class DataflashSource:
+    """Samples from an ArduPilot dataflash log: first IMU instance, ATT, RCOU, downward RFND.
+
+    Parameters
+    ----------
+    path
+        The ``.bin`` file.
+    n_motors
+        RCOU channels C1..Cn that are motors (vehicle profile).
+    allow_truncated
+        Replay a log whose last message is cut off instead of refusing it.
+
+    Attributes
+    ----------
+    counts
+        Samples read per input kind (filled while iterating).
+    """
+
+    def __init__(self, path: Path, n_motors: int, *, allow_truncated: bool = False) -> None:
+        self.path = path
+        self.n_motors = n_motors
+        self.allow_truncated = allow_truncated
+        self.counts = dict.fromkeys(_REQUIRED, 0)
+
+    def __iter__(self) -> Iterator[Sample]:
+        from pymavlink import DFReader
+
+        path = self.path
+        try:
+            with (
+                contextlib.redirect_stdout(io.StringIO()),
+                contextlib.redirect_stderr(io.StringIO()),
+            ):
+                reader = DFReader.DFReader_binary(str(path), zero_time_base=False)
+        except Exception as exc:  # noqa: BLE001 - pymavlink raises assorted errors on non-logs
+            raise InputError(f"{path}: not a readable ArduPilot dataflash log ({exc})") from None
+        counts = self.counts
+        channels = [f"C{i + 1}" for i in range(self.n_motors)]
+        while True:
+            with (
+                contextlib.redirect_stdout(io.StringIO()),
+                contextlib.redirect_stderr(io.StringIO()),
+            ):
+                msg = reader.recv_match(type=["IMU", "ATT", "RCOU", "RFND"])
+            if msg is None:
+                break
+            kind = msg.get_type()
+            time_s = msg.TimeUS * 1e-6
+            if kind == "IMU":
+                if getattr(msg, "I", 0) != 0:
+                    continue
+                counts[IMU] += 1
+                yield ImuSample(
+                    time_s=time_s,
+                    specific_force_body_mps2=np.array([msg.AccX, msg.AccY, msg.AccZ], dtype=float),
+                    angular_rate_body_rad_s=np.array([msg.GyrX, msg.GyrY, msg.GyrZ], dtype=float),
+                )
+            elif kind == "ATT":
+                counts[ATTITUDE] += 1
+                yield AttitudeSample(
+                    time_s=time_s,
+                    roll_rad=math.radians(msg.Roll),
+                    pitch_rad=math.radians(msg.Pitch),
+                    yaw_rad=wrap_pi(math.radians(msg.Yaw)),
+                )
+            elif kind == "RCOU":
+                try:
+                    pwm = np.array([getattr(msg, name) for name in channels], dtype=float)
+                except AttributeError:
+                    raise InputError(
+                        f"{path}: RCOU has fewer than {self.n_motors} channels"
+                    ) from None
+                counts[PWM] += 1
+                yield PwmSample(time_s=time_s, pwm_us=pwm)
+            elif (
+                kind == "RFND" and getattr(msg, "Orient", DATAFLASH_DOWNWARD) == DATAFLASH_DOWNWARD
+            ):
+                yield RangeSample(time_s=time_s, distance_m=float(msg.Dist))
+        if reader.remaining > 0 and not self.allow_truncated:
+            raise InputError(
+                f"{path}: truncated: the last {reader.remaining} bytes "
+                "do not hold a complete message "
+                "(use --allow-truncated to replay what is complete)"
+            )

@@ -1,0 +1,102 @@
+"""One estimation session: ingest -> tether EKF -> publisher, pure and synchronous.
+
+The live service feeds it the messages it receives, replay feeds it the messages of a .tlog
+(or the samples of a dataflash log); both get the same estimates and the same messages to send
+for the same input, because nothing here reads a wall clock.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from tether_companion.estimation.pipeline import Estimate, TetherEstimator
+from tether_companion.mavlink.framing import MAVLinkMessage
+from tether_companion.physics.vehicle import VehicleProfile
+from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
+from tether_companion.service.config import ServiceConfig
+from tether_companion.service.ingest import Ingest, Sample, TensionReading
+from tether_companion.service.publish import Publication, Publisher
+
+
+@dataclass
+class Step:
+    """What one input produced: messages to send and the publication record, if any."""
+
+    messages: list[MAVLinkMessage] = field(default_factory=list)
+    publication: Publication | None = None
+    estimate: Estimate | None = None
+
+
+class EstimationSession:
+    """Ingest, estimator and publisher for one configuration.
+
+    Parameters
+    ----------
+    config
+        The service configuration (estimator kind, tension source, limits, publication).
+    vehicle
+        The vehicle profile (mass, thrust curve, motor count).
+    """
+
+    def __init__(self, config: ServiceConfig, vehicle: VehicleProfile) -> None:
+        self.config = config
+        self.vehicle = vehicle
+        self.ingest = Ingest(config.link, config.inputs, config.tension, vehicle.n_motors)
+        self.publisher = Publisher(
+            config.publish, has_tension_state=config.estimator.kind == "four_state"
+        )
+        self.estimator = TetherEstimator(config.estimator, vehicle)
+        self.attitude: AttitudeSample | None = None
+        self.last_estimate: Estimate | None = None
+        self.boots = 0
+        """Flight-controller reboots seen (each restarts the estimator)."""
+
+    def restart(self) -> None:
+        """Start a fresh estimator run (after a flight-controller reboot)."""
+        self.boots += 1
+        self.estimator = TetherEstimator(self.config.estimator, self.vehicle)
+        self.publisher.restart()
+        self.attitude = None
+        self.last_estimate = None
+
+    def on_message(self, msg: MAVLinkMessage) -> Step:
+        """Process one received message (any sender, any type)."""
+        sample = self.ingest.decode(msg)
+        if self.ingest.rebooted:
+            self.restart()
+        if sample is None:
+            return Step()
+        return self.on_sample(sample)
+
+    def on_sample(self, sample: Sample) -> Step:
+        """Process one checked sample (from :meth:`on_message` or a dataflash log)."""
+        estimator = self.estimator
+        if isinstance(sample, ImuSample):
+            return self._tick(sample)
+        if isinstance(sample, AttitudeSample):
+            self.attitude = sample
+            estimator.on_attitude(sample)
+        elif isinstance(sample, PwmSample):
+            estimator.on_pwm(sample)
+        elif isinstance(sample, RangeSample):
+            estimator.on_range(sample)
+        elif isinstance(sample, TensionReading):
+            estimator.set_known_tension_n(sample.tension_n, sample.time_s)
+        return Step()
+
+    def _tick(self, sample: ImuSample) -> Step:
+        estimator = self.estimator
+        if self.config.tension.source == "config":
+            estimator.set_known_tension_n(self.config.tension.known_tension_n, sample.time_s)
+        health = estimator.health
+        stale_before = health.stale_attitude + health.stale_pwm + health.stale_tension
+        estimate = estimator.on_imu(sample)
+        if estimate is None:
+            return Step()
+        health = estimator.health
+        stale = health.stale_attitude + health.stale_pwm + health.stale_tension > stale_before
+        self.last_estimate = estimate
+        messages, publication = self.publisher.on_estimate(
+            estimate, self.attitude, inputs_stale=stale
+        )
+        return Step(messages=messages, publication=publication, estimate=estimate)

@@ -1,0 +1,111 @@
+"""The ``--status`` live view: rates, staleness, estimate, covariance, drops, health (rich)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+
+import numpy as np
+from rich.console import Console, Group
+from rich.live import Live
+from rich.table import Table
+from rich.text import Text
+
+from tether_companion.service.app import CompanionService
+from tether_companion.service.ingest import INPUT_KINDS
+from tether_companion.service.publish import OK
+
+_HEALTH_STYLE = {
+    OK: "bold green",
+    "converging": "yellow",
+    "stale": "bold red",
+    "diverged": "bold red",
+}
+
+
+def render(service: CompanionService) -> Group:
+    """One frame of the live view for the service's current state."""
+    state = service.state
+    session = service.session
+    publisher = session.publisher
+    health_style = _HEALTH_STYLE.get(publisher.health, "bold yellow")
+    head = Text.assemble(
+        ("tether-companion  ", "bold"),
+        (state.link_text, "green" if state.link_up else "red"),
+        "  health: ",
+        (publisher.health, health_style),
+        f"  reset_counter {publisher.reset_counter}",
+    )
+
+    inputs = Table(title="inputs", expand=False)
+    for column in ("input", "rate [Hz]", "age [s]", "accepted"):
+        inputs.add_column(column, justify="right")
+    accepted = session.ingest.counters.accepted
+    for kind in INPUT_KINDS:
+        age = state.ages_s.get(kind, math.inf)
+        inputs.add_row(
+            kind,
+            f"{state.rates_hz.get(kind, 0.0):.1f}",
+            "-" if math.isinf(age) else f"{age:.2f}",
+            str(accepted[kind]),
+        )
+    inputs.add_row(
+        "published",
+        f"{state.rates_hz.get('published', 0.0):.1f}",
+        "",
+        str(publisher.counters.published),
+    )
+
+    counters = session.ingest.counters
+    link = service.link
+    framing = link.framing.as_dict() if link is not None else {}
+    drops = Table(title="dropped and counted", expand=False)
+    drops.add_column("why")
+    drops.add_column("count", justify="right")
+    for name in (
+        "wrong_system",
+        "nonfinite",
+        "absurd",
+        "out_of_range",
+        "duplicate",
+        "out_of_order",
+        "reboots",
+    ):
+        drops.add_row(name.replace("_", " "), str(getattr(counters, name)))
+    for name in ("garbage_bytes", "bad_crc", "unknown_id", "truncated"):
+        drops.add_row(name.replace("_", " "), str(framing.get(name, 0)))
+    drops.add_row("withheld estimates", str(publisher.counters.withheld))
+
+    estimate = Table(title="estimate (NED from the anchor)", expand=False)
+    for column in ("", "north", "east", "down", "tension"):
+        estimate.add_column(column, justify="right")
+    last = session.last_estimate
+    if last is not None:
+        variance = np.diag(last.covariance)
+        sigma = np.sqrt(np.clip(variance, 0.0, None))
+        estimate.add_row(
+            "value [m, N]", *(f"{v:+.2f}" for v in last.position_ned_m), f"{last.tension_n:.2f}"
+        )
+        tension_sigma = f"{sigma[3]:.3f}" if sigma.shape[0] > 3 else "known"
+        estimate.add_row("1-sigma", *(f"{s:.3f}" for s in sigma[:3]), tension_sigma)
+        estimate.add_row("FC time [s]", f"{last.time_s:.3f}", "", "", "")
+    else:
+        estimate.add_row("no estimate yet", "", "", "", "")
+    sent = ", ".join(f"{k} {v}" for k, v in sorted(state.sent_by_type.items()))
+    return Group(head, inputs, estimate, drops, Text(f"sent: {sent}"))
+
+
+async def live_status(
+    service: CompanionService, stop: asyncio.Event, refresh_hz: float = 4.0
+) -> None:
+    """Redraw the view ``refresh_hz`` times a second until ``stop`` is set."""
+    console = Console()
+    with Live(
+        render(service), console=console, refresh_per_second=refresh_hz, transient=False
+    ) as live:
+        while not stop.is_set():
+            live.update(render(service))
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(stop.wait(), timeout=1.0 / refresh_hz)
+        live.update(render(service))

@@ -268,3 +268,27 @@ def test_end_tensions_bad_weight(w):
     curve = solve_known_length(1.0, 1.0, 2.0)
     with pytest.raises(ValueError, match="weight_per_length_n_per_m"):
         end_tensions(curve, w)
+
+
+@pytest.mark.parametrize(
+    ("alpha", "beta", "gamma"),
+    [(-2.0, 0.0, -3.0), (1.5, 0.2, 4.0), (-0.1, 0.0, -1e-6), (3.0, 3.0, 1.0 + 1e-3)],
+)
+def test_cardano_real_root_matches_numpy(alpha, beta, gamma):
+    from tether_companion.physics.catenary import _cardano_real_root
+
+    roots = np.roots([1.0, alpha, beta, gamma])
+    real = roots[np.abs(roots.imag) < 1e-7].real
+    got = _cardano_real_root(alpha, beta, gamma)
+    assert np.min(np.abs(real - got)) < 1e-6 * max(1.0, abs(got))
+
+
+def test_thesis_printed_cardano_signs_have_no_positive_root():
+    """Eq. 25's coefficients as printed (alpha, gamma > 0) give a negative real root only:
+    the sign correction in docs/catenary.md is needed for a usable guess."""
+    from tether_companion.physics.catenary import _cardano_real_root
+
+    x, dy = 2.0, 1.0
+    printed = _cardano_real_root(x**2 / (2 * dy), 0.0, x**4 / (24 * dy))
+    assert printed < 0.0
+    assert initial_guess_lowest_point_at_anchor(x, dy) > 0.0

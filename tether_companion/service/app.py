@@ -391,7 +391,12 @@ class CompanionService:
         return table
 
     def _request_streams(self, link: Link, now_s: float) -> None:
-        """Ask for every input not heard recently; fall back to REQUEST_DATA_STREAM."""
+        """Set every input's rate once per FC boot, and again while it stays silent.
+
+        MAV_CMD_SET_MESSAGE_INTERVAL first; after ``INTERVAL_ATTEMPTS_BEFORE_FALLBACK``
+        silent retries also REQUEST_DATA_STREAM for its group (old firmware, or a ground
+        station that keeps resetting the rates).
+        """
         cfg = self.config.link
         accepted = self.session.ingest.counters.accepted
         for kind, stream in self._streams.items():
@@ -400,7 +405,11 @@ class CompanionService:
                 stream.last_count = count
                 stream.last_heard_s = now_s
             silent = now_s - stream.last_heard_s > INPUT_SILENT_S
-            if not silent or now_s - stream.last_request_s < cfg.stream_request_interval_s:
+            first = stream.attempts == 0  # always set the configured rate once per FC boot
+            if (
+                not (first or silent)
+                or now_s - stream.last_request_s < cfg.stream_request_interval_s
+            ):
                 continue
             stream.attempts += 1
             stream.last_request_s = now_s

@@ -85,8 +85,8 @@ class StreamsConfig:
     imu_hz: float = spec(
         200.0, minimum=10.0, maximum=1000.0, doc="RAW_IMU (ArduPilot) / HIGHRES_IMU (PX4) [Hz]"
     )
-    attitude_hz: float = spec(100.0, minimum=5.0, maximum=1000.0, doc="ATTITUDE [Hz]")
-    servo_hz: float = spec(100.0, minimum=5.0, maximum=1000.0, doc="SERVO_OUTPUT_RAW [Hz]")
+    attitude_hz: float = spec(200.0, minimum=5.0, maximum=1000.0, doc="ATTITUDE [Hz]")
+    servo_hz: float = spec(200.0, minimum=5.0, maximum=1000.0, doc="SERVO_OUTPUT_RAW [Hz]")
     rangefinder_hz: float = spec(
         20.0, minimum=0.0, maximum=200.0, doc="DISTANCE_SENSOR [Hz] (0 = not requested)"
     )

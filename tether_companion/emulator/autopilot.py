@@ -920,7 +920,12 @@ class FlightController:
     def _global_to_local(
         self, frame: int, lat_e7: float, lon_e7: float, alt_m: float
     ) -> tuple[float, float, float] | None:
-        """A global target (degE7, altitude [m] per frame) in the EKF frame, None if invalid."""
+        """A global target in the EKF frame [m], None if invalid.
+
+        Latitude and longitude are degE7 integers in every frame (COMMAND_INT's x/y and
+        SET_POSITION_TARGET_GLOBAL_INT's lat_int/lon_int); the frame only says whether the
+        altitude [m] is above mean sea level (GLOBAL*) or above home (RELATIVE_ALT, TERRAIN).
+        """
         if not (math.isfinite(lat_e7) and math.isfinite(lon_e7) and math.isfinite(alt_m)):
             return None
         if frame == dialect.MAV_FRAME_GLOBAL_INT or frame == dialect.MAV_FRAME_GLOBAL:
@@ -934,12 +939,6 @@ class FlightController:
             alt_amsl = self.home.alt_m + alt_m
         else:
             return None
-        if frame in (
-            dialect.MAV_FRAME_GLOBAL,
-            dialect.MAV_FRAME_GLOBAL_RELATIVE_ALT,
-            dialect.MAV_FRAME_GLOBAL_TERRAIN_ALT,
-        ):
-            lat_e7, lon_e7 = lat_e7 * 1e7, lon_e7 * 1e7
         try:
             point = geo.Geodetic(lat_e7 * 1e-7, lon_e7 * 1e-7, alt_amsl)
         except ValueError:

@@ -76,6 +76,8 @@ class LockstepPeer:
         self._controller_encoder = FrameEncoder(config.system_id, config.component_id)
         self.received: list[MAVLinkMessage] = []
         """Every message the controller sent to this peer, decoded (clear it at will)."""
+        self.collecting = True
+        """False: drop what the controller sends instead of framing and decoding it (speed)."""
         _PEERS.setdefault(controller, []).append(self)
 
     def send(self, msg: MAVLinkMessage) -> None:
@@ -99,7 +101,7 @@ class LockstepPeer:
         peers = _PEERS.get(self.controller, [self])
         for link_id, msg in self.controller.drain():
             for peer in peers:
-                if link_id is None or link_id == peer.link_id:
+                if peer.collecting and (link_id is None or link_id == peer.link_id):
                     frame = peer._controller_encoder.encode(msg)
                     peer.received.extend(peer._from_controller.feed(frame))
         return self.received[before:]

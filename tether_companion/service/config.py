@@ -349,3 +349,7 @@ def config_reference() -> str:
 
 def _plain(data: object) -> dict:
     return dict(data) if isinstance(data, dict) else dict(data or {})  # type: ignore[arg-type]
+
+
+if __name__ == "__main__":  # python -m tether_companion.service.config > table for the docs
+    print(config_reference(), end="")

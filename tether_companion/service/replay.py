@@ -210,6 +210,11 @@ class DataflashSource:
                 kind == "RFND" and getattr(msg, "Orient", DATAFLASH_DOWNWARD) == DATAFLASH_DOWNWARD
             ):
                 yield RangeSample(time_s=time_s, distance_m=float(msg.Dist))
+        if sum(counts.values()) == 0 and reader.remaining > 0:
+            raise InputError(
+                f"{path}: not an ArduPilot dataflash log (no IMU, ATT or RCOU message "
+                f"could be read from its {reader.data_len} bytes)"
+            )
         if reader.remaining > 0 and not self.allow_truncated:
             raise InputError(
                 f"{path}: truncated: the last {reader.remaining} bytes "

@@ -1,0 +1,170 @@
+"""The publisher: rate in FC time, covariance layout, never NaN, reset_counter, health texts."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from tether_companion.estimation.pipeline import Estimate, EstimatorHealth
+from tether_companion.mavlink.units import urt_to_covariance
+from tether_companion.samples import AttitudeSample
+from tether_companion.service.config import PublishConfig
+from tether_companion.service.publish import CONVERGING, DIVERGED, OK, SLACK, STALE, Publisher
+
+ATTITUDE = AttitudeSample(0.0, 0.05, -0.1, 1.2)
+HEALTH_VALUES = tuple(
+    getattr(EstimatorHealth(), f.name) for f in dataclasses.fields(EstimatorHealth)
+)
+P_GOOD = np.array(
+    [[0.04, 0.01, 0.0, 0.0], [0.01, 0.03, 0.0, 0.0], [0.0, 0.0, 0.02, 0.0], [0.0, 0.0, 0.0, 0.01]]
+)
+
+
+def _estimate(
+    t: float, position=(2.0, 1.0, -3.0), tension=4.0, covariance=P_GOOD, resets=0
+) -> Estimate:
+    return Estimate(
+        time_s=t,
+        position_ned_m=np.array(position, dtype=float),
+        tension_n=tension,
+        covariance=np.array(covariance, dtype=float),
+        reset_counter=resets,
+        accel_fused=True,
+        health_values=HEALTH_VALUES,
+    )
+
+
+def _feed(publisher: Publisher, estimates, attitude=ATTITUDE, **kw):
+    sent = []
+    for e in estimates:
+        messages, _ = publisher.on_estimate(e, attitude, **kw)
+        sent += messages
+    return sent
+
+
+def _of(messages, kind):
+    return [m for m in messages if m.get_type() == kind]
+
+
+def test_rate_is_exact_in_fc_time_from_200hz_ticks() -> None:
+    publisher = Publisher(PublishConfig(rate_hz=30.0), has_tension_state=True)
+    sent = _feed(publisher, [_estimate(5.0 + k * 0.005) for k in range(2000)])  # 10 s
+    vision = _of(sent, "VISION_POSITION_ESTIMATE")
+    assert len(vision) in (300, 301)
+    usec = np.array([m.usec for m in vision])
+    assert np.all(np.diff(usec) <= 35_000) and usec[0] == 5_000_000
+    named = _of(sent, "NAMED_VALUE_FLOAT")
+    assert (
+        len(named) in (100, 101)
+        and named[0].name == "TETH_TENS"
+        and named[0].value == pytest.approx(4.0)
+    )
+
+
+def test_message_carries_fc_attitude_and_ekf_covariance() -> None:
+    publisher = Publisher(PublishConfig(attitude_variance_rad2=0.5), has_tension_state=True)
+    (vision,) = _of(_feed(publisher, [_estimate(7.25)]), "VISION_POSITION_ESTIMATE")
+    assert vision.usec == 7_250_000
+    assert (vision.x, vision.y, vision.z) == pytest.approx((2.0, 1.0, -3.0))
+    assert (vision.roll, vision.pitch, vision.yaw) == pytest.approx((0.05, -0.1, 1.2))
+    cov = vision.covariance
+    assert len(cov) == 21
+    assert (cov[0], cov[1], cov[6], cov[11]) == pytest.approx(
+        (0.04, 0.01, 0.03, 0.02)
+    )  # x-x, x-y, y-y, z-z
+    assert (cov[15], cov[18], cov[20]) == pytest.approx((0.5, 0.5, 0.5))  # roll, pitch, yaw
+    assert all(math.isfinite(c) for c in cov)
+    full = urt_to_covariance(cov)
+    assert np.all(np.linalg.eigvalsh(full) > 0)
+
+
+def test_unknown_covariance_mode_marks_nan_in_first_entry_only() -> None:
+    publisher = Publisher(PublishConfig(covariance="unknown"), has_tension_state=True)
+    (vision,) = _of(_feed(publisher, [_estimate(1.0)]), "VISION_POSITION_ESTIMATE")
+    assert math.isnan(vision.covariance[0]) and all(c == 0.0 for c in vision.covariance[1:])
+    assert all(
+        math.isfinite(v)
+        for v in (vision.x, vision.y, vision.z, vision.roll, vision.pitch, vision.yaw)
+    )
+
+
+def test_never_nan_and_withheld_when_unhealthy() -> None:
+    publisher = Publisher(PublishConfig(), has_tension_state=True)
+    nan_pos = _estimate(1.0, position=(math.nan, 0.0, -2.0))
+    sent = _feed(publisher, [nan_pos])
+    assert not _of(sent, "VISION_POSITION_ESTIMATE") and publisher.health == DIVERGED
+    inflate = Publisher(PublishConfig(on_unhealthy="inflate"), has_tension_state=True)
+    assert not _of(_feed(inflate, [nan_pos]), "VISION_POSITION_ESTIMATE")  # inflate, but never NaN
+
+
+def test_converging_then_ok_then_diverged_with_statustext() -> None:
+    publisher = Publisher(PublishConfig(max_position_variance_m2=0.5), has_tension_state=True)
+    wide = np.diag([0.9, 0.9, 0.9, 1.0])
+    sent = _feed(publisher, [_estimate(1.0, covariance=wide)])
+    assert publisher.health == CONVERGING and not _of(sent, "VISION_POSITION_ESTIMATE")
+    sent = _feed(publisher, [_estimate(2.0)])
+    assert publisher.health == OK and len(_of(sent, "VISION_POSITION_ESTIMATE")) == 1
+    assert [m.text for m in _of(sent, "STATUSTEXT")] == ["TETHER: position OK"]
+    sent = _feed(publisher, [_estimate(3.0, covariance=wide)])
+    assert publisher.health == DIVERGED and not _of(sent, "VISION_POSITION_ESTIMATE")
+    (text,) = _of(sent, "STATUSTEXT")
+    assert text.severity == 4 and "diverged" in text.text
+
+
+def test_slack_tether_stops_or_inflates() -> None:
+    stop = Publisher(PublishConfig(slack_tension_n=0.3), has_tension_state=True)
+    assert not _of(_feed(stop, [_estimate(1.0, tension=0.1)]), "VISION_POSITION_ESTIMATE")
+    assert stop.health == SLACK
+    inflate = Publisher(
+        PublishConfig(on_unhealthy="inflate", inflated_variance_m2=50.0), has_tension_state=True
+    )
+    (vision,) = _of(_feed(inflate, [_estimate(1.0, tension=0.1)]), "VISION_POSITION_ESTIMATE")
+    assert (vision.covariance[0], vision.covariance[6], vision.covariance[11]) == (50.0, 50.0, 50.0)
+    three_state = Publisher(
+        PublishConfig(), has_tension_state=False
+    )  # known tension: no slack test
+    assert _of(_feed(three_state, [_estimate(1.0, tension=0.1)]), "VISION_POSITION_ESTIMATE")
+
+
+def test_stale_inputs_and_missing_attitude_withhold() -> None:
+    publisher = Publisher(PublishConfig(), has_tension_state=True)
+    assert not _of(
+        _feed(publisher, [_estimate(1.0)], inputs_stale=True), "VISION_POSITION_ESTIMATE"
+    )
+    assert publisher.health == STALE
+    publisher = Publisher(PublishConfig(), has_tension_state=True)
+    assert not _of(_feed(publisher, [_estimate(1.0)], attitude=None), "VISION_POSITION_ESTIMATE")
+
+
+def test_reset_counter_on_estimator_reset_jump_pause_and_restart() -> None:
+    publisher = Publisher(PublishConfig(rate_hz=10.0, jump_m=1.0), has_tension_state=True)
+    t = [1.0]
+
+    def publish(**kw) -> int:
+        t[0] += 0.1
+        (vision,) = _of(_feed(publisher, [_estimate(t[0], **kw)]), "VISION_POSITION_ESTIMATE")
+        return vision.reset_counter
+
+    assert publish() == 0
+    assert publish(position=(2.1, 1.0, -3.0)) == 0  # 10 cm: no reset
+    assert publish(position=(3.5, 1.0, -3.0)) == 1  # 1.4 m jump
+    assert publish(position=(3.5, 1.0, -3.0), resets=1) == 2  # the estimator restarted
+    t[0] += 2.0
+    assert publish(position=(3.5, 1.0, -3.0), resets=1) == 3  # resumed after a pause
+    publisher.restart()
+    assert publish(position=(3.5, 1.0, -3.0)) == 4  # flight-controller reboot
+    publisher.reset_counter = 255
+    assert publish(position=(9.5, 1.0, -3.0)) == 0  # uint8 wraps
+
+
+def test_config_names_key_value_and_range() -> None:
+    from tether_companion.config import ConfigError, from_mapping
+
+    with pytest.raises(ConfigError, match=r"rate_hz = 500.*<= 200"):
+        from_mapping(PublishConfig, {"rate_hz": 500})
+    with pytest.raises(ConfigError, match=r"tension_name = 'WAY_TOO_LONG_NAME'.*10 characters"):
+        from_mapping(PublishConfig, {"tension_name": "WAY_TOO_LONG_NAME"})
+    assert dataclasses.replace(PublishConfig(), rate_hz=50.0).rate_hz == 50.0

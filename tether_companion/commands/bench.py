@@ -16,6 +16,7 @@ BENCHMARKS: tuple[str, ...] = (
     "speed",
     "tension",
     "catenary",
+    "emulator",
 )
 """Benchmark names, one per line, in the order ``bench --help`` lists them."""
 

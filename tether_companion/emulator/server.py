@@ -31,6 +31,10 @@ MAX_LAG_S = 0.1
 """Emulator time may fall this far behind the wall clock (x speed) before it slips [s]."""
 MAX_ADVANCE_S = 0.05
 """Longest single advance of emulator time between looks at the network [s]."""
+SPIN_S = 0.0015
+"""The last part of each wait is spent polling the clock instead of sleeping [s]: the event
+loop's timers wake up to 1 ms late (epoll's millisecond timeout is rounded up), which alone
+would put 1 ms of jitter on a 200 Hz stream. Costs ~20% of a core at 200 Hz."""
 
 
 @dataclass
@@ -183,7 +187,11 @@ class EmulatorServer:
                 wait_s = (next_s - self._target_time_s()) / self.speed
                 if wait_s > 0.0:
                     self.counters.sleeps += 1
-                    await asyncio.sleep(wait_s)
+                    deadline = time.monotonic() + wait_s
+                    if wait_s > SPIN_S:
+                        await asyncio.sleep(wait_s - SPIN_S)
+                    while time.monotonic() < deadline:
+                        pass
                 else:
                     if -wait_s * self.speed > MAX_LAG_S:
                         self.counters.slips += 1

@@ -7,6 +7,7 @@ import asyncio
 import dataclasses
 import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -196,7 +197,8 @@ def run(args: argparse.Namespace) -> int:
 async def _serve(controller: FlightController, endpoints: list, args: argparse.Namespace) -> None:
     async with EmulatorServer(controller, endpoints, speed=args.speed) as server:
         loop = asyncio.get_running_loop()
-        for sig in (signal.SIGINT, signal.SIGTERM):
+        handled = threading.current_thread() is threading.main_thread()
+        for sig in (signal.SIGINT, signal.SIGTERM) if handled else ():
             loop.add_signal_handler(sig, server.stop)
         for index, endpoint in enumerate(endpoints):
             where = server.local_address(index)
@@ -218,7 +220,7 @@ async def _serve(controller: FlightController, endpoints: list, args: argparse.N
         finally:
             if status is not None:
                 status.cancel()
-            for sig in (signal.SIGINT, signal.SIGTERM):
+            for sig in (signal.SIGINT, signal.SIGTERM) if handled else ():
                 loop.remove_signal_handler(sig)
 
 

@@ -293,17 +293,16 @@ async def _mavsdk_flight() -> None:
                 await action.arm()
                 assert await _first(telemetry.subscribe_armed())
                 await action.takeoff()
-                altitude = 0.0
-                for _ in range(200):
+                altitude, deadline = 0.0, time.monotonic() + 60.0
+                while altitude <= 4.8 and time.monotonic() < deadline:
                     altitude = (await _first(telemetry.subscribe_position())).relative_altitude_m
-                    if altitude > 4.8:
-                        break
                     await asyncio.sleep(0.05)
                 assert altitude == pytest.approx(5.0, abs=0.25)
 
                 target = geo.ned_to_geodetic(controller.home, [3.0, 2.0, -5.0])
                 await action.goto_location(target.lat_deg, target.lon_deg, target.alt_m, 0.0)
-                for _ in range(200):
+                deadline = time.monotonic() + 60.0
+                while time.monotonic() < deadline:
                     position = await _first(telemetry.subscribe_position())
                     reached = geo.geodetic_to_ned(
                         controller.home,
@@ -321,9 +320,8 @@ async def _mavsdk_flight() -> None:
                 )
 
                 await action.land()
-                for _ in range(400):
-                    if not await _first(telemetry.subscribe_armed()):
-                        break
+                deadline = time.monotonic() + 90.0
+                while time.monotonic() < deadline and await _first(telemetry.subscribe_armed()):
                     await asyncio.sleep(0.05)
                 assert not controller.armed and controller.sim.landed
                 np.testing.assert_allclose(
@@ -336,4 +334,4 @@ async def _mavsdk_flight() -> None:
 
 
 def test_mavsdk_connects_arms_takes_off_flies_lands_and_disarms() -> None:
-    asyncio.run(asyncio.wait_for(_mavsdk_flight(), 120.0))
+    asyncio.run(asyncio.wait_for(_mavsdk_flight(), 240.0))

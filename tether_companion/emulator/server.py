@@ -45,6 +45,8 @@ class ServerCounters:
     """Times emulator time was re-anchored because the machine fell behind."""
     encode_errors: int = 0
     """Messages that could not be framed (a field out of its wire range): not sent."""
+    handler_errors: int = 0
+    """Received messages whose handling raised an unexpected error (dropped; should stay 0)."""
     sleeps: int = 0
 
 
@@ -133,7 +135,10 @@ class EmulatorServer:
         try:
             while True:
                 msg = await link.recv()
-                controller.handle(msg, link_id)
+                try:
+                    controller.handle(msg, link_id)
+                except Exception:  # noqa: BLE001 - one bad message must not stop the link
+                    self.counters.handler_errors += 1
                 self._flush()
         except LinkClosed:
             return

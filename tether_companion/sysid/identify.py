@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tether_companion.sysid.input_map import InputMap, quadratic_shape
+from tether_companion.sysid.input_map import quadratic_shape
 from tether_companion.sysid.metrics import DEFAULT_K_STEPS, Metrics, evaluate
 from tether_companion.sysid.processing import IdData
 from tether_companion.sysid.structures.arx import ArxOrders, fit_arx
@@ -67,10 +67,10 @@ def identify(
     of the linear structures (:mod:`tether_companion.sysid.input_map`): ``"quadratic"``
     (Hammerstein, the static fit's curve shape) or ``"pwm"`` (PWM as is, as in the paper).
     """
-    input_map = InputMap()
+    input_map = None
     if input_kind == "quadratic":
         static = fit_static(estimation, FitContext.from_data(estimation, pwm_range_us))
-        input_map = quadratic_shape(static.curve)
+        input_map = quadratic_shape(static.curve.coefficients_n, pwm_range_us)
     context = FitContext.from_data(estimation, pwm_range_us, input_map)
     orders = selected_orders(estimation, context)
     results = []
@@ -94,7 +94,9 @@ def selected_orders(estimation: Sequence[IdData], context: FitContext) -> ArxOrd
     return ArxOrders(na=na, nb=model.b.shape[1] - nk, nk=nk)
 
 
-def best_result(results: Sequence[StructureResult]) -> StructureResult | None:
-    """The successful result with the highest k-step-ahead validation Fit%."""
-    ok = [r for r in results if r.ok and np.isfinite(r.metrics.fit_prediction_pct)]
-    return max(ok, key=lambda r: r.metrics.fit_prediction_pct) if ok else None
+def best_result(results: Sequence[StructureResult], by: str) -> StructureResult | None:
+    """The successful result with the highest validation Fit% of ``by``: ``"prediction"``
+    (k steps ahead, the paper's Table 1) or ``"simulation"`` (from inputs alone)."""
+    attribute = "fit_prediction_pct" if by == "prediction" else "fit_simulation_pct"
+    ok = [r for r in results if r.ok and np.isfinite(getattr(r.metrics, attribute))]
+    return max(ok, key=lambda r: getattr(r.metrics, attribute)) if ok else None

@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tether_companion.physics.thrust import ThrustCurve
+from tether_companion.config import ConfigError, spec
+from tether_companion.sysid.processing import IdData, normalised_command
 
 FloatArray = NDArray[np.float64]
 
@@ -25,27 +26,37 @@ INPUT_MAPS = ("quadratic", "pwm")
 
 @dataclass(frozen=True)
 class InputMap:
-    """Map PWM [us] to the linear model's inputs.
+    """Map PWM [us] to the linear model's inputs (see module docstring)."""
 
-    Attributes
-    ----------
-    kind
-        ``"pwm"`` (identity, inputs in us) or ``"quadratic"`` (static thrust per motor [N]).
-    curve
-        For ``"quadratic"``: the curve whose ``c1, c2`` shape the map (``c0`` is dropped:
-        a constant belongs to the operating point).
-    """
+    kind: str = spec("pwm", choices=INPUT_MAPS, doc="'pwm' (us) or 'quadratic' (N per motor)")
+    pwm_min_us: float = spec(1000.0, minimum=500.0, maximum=2500.0, doc="PWM at zero command [us]")
+    pwm_max_us: float = spec(2000.0, minimum=500.0, maximum=2500.0, doc="PWM at full command [us]")
+    coefficients_n: tuple[float, float] = spec(
+        (1.0, 0.0), doc="(c1, c2) of v = c1 cmd + c2 cmd^2 [N] (quadratic only)"
+    )
 
-    kind: str = "pwm"
-    curve: ThrustCurve | None = None
+    def validate(self) -> None:
+        """The PWM span must not be empty."""
+        if self.pwm_max_us <= self.pwm_min_us:
+            raise ConfigError(
+                "", "pwm_max_us", self.pwm_max_us, f"must be > pwm_min_us ({self.pwm_min_us})"
+            )
 
-    def __call__(self, pwm_us: FloatArray) -> FloatArray:
-        """Model inputs, same shape as ``pwm_us``."""
+    def inputs(self, data: IdData) -> FloatArray:
+        """Model inputs from processed data, shape (n, 4): PWM, or ``c1 cmd + c2 cmd^2`` built
+        from the separately filtered ``cmd`` and ``cmd^2``."""
+        if self.kind == "pwm":
+            return data.pwm_us
+        c1, c2 = self.coefficients_n
+        return c1 * data.command + c2 * data.command_sq
+
+    def map_pwm(self, pwm_us: FloatArray) -> FloatArray:
+        """Model inputs from raw pulse widths [us] (any shape)."""
         pwm = np.asarray(pwm_us, dtype=float)
-        if self.kind == "pwm" or self.curve is None:
+        if self.kind == "pwm":
             return pwm
-        cmd = self.curve.command(pwm)
-        _, c1, c2 = self.curve.coefficients_n
+        cmd = normalised_command(pwm, (self.pwm_min_us, self.pwm_max_us))
+        c1, c2 = self.coefficients_n
         return cmd * (c1 + c2 * cmd)
 
     @property
@@ -55,26 +66,19 @@ class InputMap:
 
     def to_mapping(self) -> dict[str, Any]:
         """Plain data for the thrust-model YAML file."""
-        if self.kind == "pwm" or self.curve is None:
-            return {"kind": "pwm"}
-        c0, c1, c2 = self.curve.coefficients_n
         return {
-            "kind": "quadratic",
-            "pwm_min_us": float(self.curve.pwm_min_us),
-            "pwm_max_us": float(self.curve.pwm_max_us),
-            "coefficients_n": [float(c1), float(c2)],
+            "kind": self.kind,
+            "pwm_min_us": float(self.pwm_min_us),
+            "pwm_max_us": float(self.pwm_max_us),
+            "coefficients_n": [float(c) for c in self.coefficients_n],
         }
 
 
-def quadratic_shape(curve: ThrustCurve) -> InputMap:
-    """The quadratic input map shaped by ``curve`` (falls back to ``cmd`` when c1 = c2 = 0)."""
-    _, c1, c2 = curve.coefficients_n
+def quadratic_shape(
+    coefficients_n: tuple[float, float, float], pwm_range_us: tuple[float, float]
+) -> InputMap:
+    """The quadratic map shaped by a static curve's ``(c0, c1, c2)`` (``cmd`` if c1 = c2 = 0)."""
+    _, c1, c2 = coefficients_n
     if c1 == 0.0 and c2 == 0.0:
         c1 = 1.0
-    shaped = ThrustCurve(
-        pwm_min_us=curve.pwm_min_us,
-        pwm_max_us=curve.pwm_max_us,
-        command_full_scale=1.0,
-        coefficients_n=(0.0, c1, c2),
-    )
-    return InputMap(kind="quadratic", curve=shaped)
+    return InputMap("quadratic", pwm_range_us[0], pwm_range_us[1], (float(c1), float(c2)))

@@ -26,12 +26,21 @@ from numpy.typing import NDArray
 from scipy.signal import lfilter, lfilter_zi
 
 from tether_companion.sysid.input_map import InputMap
+from tether_companion.sysid.processing import IdData
 
 FloatArray = NDArray[np.float64]
 
 
-def _steady_filter(b: FloatArray, a: FloatArray, x: FloatArray) -> FloatArray:
-    """``lfilter(b, a, x)`` started in steady state for the constant input ``x[0]``."""
+def steady_filter(b: FloatArray, a: FloatArray, x: FloatArray) -> FloatArray:
+    """``lfilter(b, a, x)`` started in steady state for the constant input ``x[0]``.
+
+    Parameters
+    ----------
+    b, a
+        Numerator and denominator in powers of ``q^-1``.
+    x
+        Input, shape (n,).
+    """
     n = max(len(a), len(b))
     if n == 1:
         return lfilter(b, a, x)
@@ -82,25 +91,28 @@ class PolynomialModel:
     dt_s: float = 0.01
     input_map: InputMap = field(default_factory=InputMap)
 
-    def deterministic(self, pwm_us: FloatArray) -> FloatArray:
-        """``G(q) (map(pwm) - u0)`` [N, relative to ``y0_n``], shape (n,); PWM shape (n, m)."""
-        du = self.input_map(pwm_us) - self.u0
-        return sum(_steady_filter(self.b[i], self.f, du[:, i]) for i in range(self.b.shape[0]))
+    def response(self, du: FloatArray) -> FloatArray:
+        """``G(q) du`` [N], shape (n,), for input deviations ``du = u - u0``, shape (n, m),
+        started in steady state."""
+        return sum(steady_filter(self.b[i], self.f, du[:, i]) for i in range(self.b.shape[0]))
 
-    def simulate(self, pwm_us: FloatArray) -> FloatArray:
+    def simulate(self, data: IdData) -> FloatArray:
         """Pure simulation: thrust [N], shape (n,), from the inputs alone."""
-        return self.y0_n + self.deterministic(pwm_us)
+        return self.y0_n + self.response(self.input_map.inputs(data) - self.u0)
 
-    def predict(self, pwm_us: FloatArray, thrust_n: FloatArray, k: int) -> FloatArray:
-        """k-step-ahead prediction [N], shape (n,), from inputs and measured outputs.
+    def predict(self, data: IdData, k: int) -> FloatArray:
+        """k-step-ahead prediction [N], shape (n,), from inputs and measured thrust.
 
         ``y_hat(t)`` uses measured thrust up to ``t - k`` and inputs up to ``t``.
         """
-        y = np.asarray(thrust_n, dtype=float) - self.y0_n
-        error = self.deterministic(pwm_us) - y
+        du = self.input_map.inputs(data) - self.u0
+        return self.y0_n + self.predict_deviation(du, data.thrust_n - self.y0_n, k)
+
+    def predict_deviation(self, du: FloatArray, dy: FloatArray, k: int) -> FloatArray:
+        """k-step-ahead prediction of ``y - y0`` from ``du = u - u0`` (n, m) and ``dy`` (n,)."""
+        error = self.response(du) - dy
         h_bar = impulse_response(self.c, self.d, k)
-        weighted = _steady_filter(np.convolve(h_bar, self.d), self.c, error)
-        return self.y0_n + y + weighted
+        return dy + steady_filter(np.convolve(h_bar, self.d), self.c, error)
 
     @property
     def n_params(self) -> int:

@@ -60,7 +60,7 @@ def _pooled(
     """Measured and predicted (k steps; None = simulation) thrust over all experiments."""
     measured, predicted = [], []
     for e in experiments:
-        out = model.simulate(e.pwm_us) if k is None else model.predict(e.pwm_us, e.thrust_n, k)
+        out = model.simulate(e) if k is None else model.predict(e, k)
         measured.append(e.thrust_n[warmup:])
         predicted.append(out[warmup:])
     return np.concatenate(measured), np.concatenate(predicted)

@@ -10,7 +10,6 @@ characters and column names (pymavlink ``DFReader`` conventions: ``Q`` uint64, `
 from __future__ import annotations
 
 import struct
-from pathlib import Path
 from typing import BinaryIO
 
 HEADER = b"\xa3\x95"
@@ -73,11 +72,3 @@ def declare_identification_messages(writer: DataflashWriter) -> None:
     writer.declare("ATT", "Qfff", ("TimeUS", "Roll", "Pitch", "Yaw"))
     writer.declare("RCOU", "QHHHH", ("TimeUS", "C1", "C2", "C3", "C4"))
     writer.declare("RFND", "QBf", ("TimeUS", "Instance", "Dist"))
-
-
-def open_dataflash(path: Path) -> tuple[BinaryIO, DataflashWriter]:
-    """Create ``path`` and return the open stream and a writer with the messages declared."""
-    stream = path.open("wb")
-    writer = DataflashWriter(stream)
-    declare_identification_messages(writer)
-    return stream, writer

@@ -50,8 +50,8 @@ class FitContext:
         input_map: InputMap | None = None,
     ) -> FitContext:
         """Operating point from the pooled estimation experiments."""
-        input_map = input_map or InputMap()
-        mapped = np.concatenate([input_map(e.pwm_us) for e in experiments])
+        input_map = input_map or InputMap(pwm_min_us=pwm_range_us[0], pwm_max_us=pwm_range_us[1])
+        mapped = np.concatenate([input_map.inputs(e) for e in experiments])
         thrust = np.concatenate([e.thrust_n for e in experiments])
         return cls(
             u0=mapped.mean(axis=0),
@@ -64,7 +64,7 @@ class FitContext:
 
     def centred(self, data: IdData) -> tuple[FloatArray, FloatArray]:
         """``(map(pwm) - u0, thrust - y0)`` of one experiment, shapes (n, 4) and (n,)."""
-        return self.input_map(data.pwm_us) - self.u0, data.thrust_n - self.y0_n
+        return self.input_map.inputs(data) - self.u0, data.thrust_n - self.y0_n
 
     def model(
         self,
@@ -98,12 +98,12 @@ class FittedModel(Protocol):
         """Number of estimated parameters (for Akaike's FPE)."""
         ...
 
-    def simulate(self, pwm_us: FloatArray) -> FloatArray:
-        """Thrust [N], shape (n,), from inputs [us], shape (n, 4), alone."""
+    def simulate(self, data: IdData) -> FloatArray:
+        """Thrust [N], shape (n,), from the motor inputs alone."""
         ...
 
-    def predict(self, pwm_us: FloatArray, thrust_n: FloatArray, k: int) -> FloatArray:
-        """k-step-ahead predicted thrust [N], shape (n,)."""
+    def predict(self, data: IdData, k: int) -> FloatArray:
+        """k-step-ahead predicted thrust [N], shape (n,), from inputs and measured thrust."""
         ...
 
     def to_mapping(self) -> dict[str, Any]:
@@ -124,13 +124,13 @@ class LinearFit:
         """Free parameters of the polynomial model."""
         return self.model.n_params
 
-    def simulate(self, pwm_us: FloatArray) -> FloatArray:
+    def simulate(self, data: IdData) -> FloatArray:
         """See :meth:`PolynomialModel.simulate`."""
-        return self.model.simulate(pwm_us)
+        return self.model.simulate(data)
 
-    def predict(self, pwm_us: FloatArray, thrust_n: FloatArray, k: int) -> FloatArray:
+    def predict(self, data: IdData, k: int) -> FloatArray:
         """See :meth:`PolynomialModel.predict`."""
-        return self.model.predict(pwm_us, thrust_n, k)
+        return self.model.predict(data, k)
 
     def to_mapping(self) -> dict[str, Any]:
         """The input paths as a state-space model about the operating point."""

@@ -3,8 +3,9 @@
 Output error: ``y = sum_i B_i/F u_i + e``; Box-Jenkins adds a noise model,
 ``y = sum_i B_i/F u_i + C/D e``. The parameters minimise the sum of squared one-step
 prediction errors ``e = (D/C) (y - sum_i B_i/F u_i)`` (for output error, the simulation
-error) with ``scipy.optimize.least_squares``, started from the ARX fit of the same ``nb``,
-``nk`` (its ``A`` as ``F``) and zero noise coefficients. A candidate with a pole of ``1/F``
+error) with ``scipy.optimize.least_squares``. Output error starts from the ARX fit of the
+same ``nb``, ``nk`` (its ``A`` as ``F``); Box-Jenkins from the output-error fit and an ARMA
+model of its residual. A candidate with a pole of ``1/F``
 or ``1/C`` outside the unit circle gets a large constant residual, steering the search back
 to stable models.
 """
@@ -16,6 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
+from scipy.signal import lfilter
 
 from tether_companion.sysid.linear_model import PolynomialModel
 from tether_companion.sysid.processing import IdData
@@ -43,56 +45,89 @@ def _unpack(
     return f, b, c, d
 
 
-def fit_prediction_error(
-    experiments: Sequence[IdData],
-    context: FitContext,
-    structure: str,
-    orders: ArxOrders,
-    noise_order: int = 0,
-) -> LinearFit:
-    """Fit output error (``noise_order = 0``) or Box-Jenkins (``nc = nd = noise_order``).
-
-    Raises
-    ------
-    ArithmeticError
-        When the optimiser fails or ends at an unstable model.
-    """
-    start = estimate_arx(experiments, context, orders)[0].model
-    m = start.b.shape[0]
-    nf, nb, nk, nc = orders.na, orders.nb, orders.nk, noise_order
-    theta0 = np.concatenate((start.f[1:], start.b[:, nk:].ravel(), np.zeros(2 * nc)))
-    centred = [context.centred(e) for e in experiments]
+def _search(
+    centred: Sequence[tuple[FloatArray, FloatArray]],
+    theta0: FloatArray,
+    shape: tuple[int, int, int, int, int],
+    dt_s: float,
+    max_nfev: int,
+) -> FloatArray:
+    """Parameters minimising the one-step prediction error from ``theta0``."""
+    m, nf, nb, nk, nc = shape
     total = sum(len(y) for _, y in centred)
 
     def residuals(theta: FloatArray) -> FloatArray:
         f, b, c, d = _unpack(theta, m, nf, nb, nk, nc)
         if not (_stable(f) and _stable(c)):
             return np.full(total, _UNSTABLE_RESIDUAL)
-        model = PolynomialModel(f=f, b=b, c=c, d=d, u0=np.zeros(m), y0_n=0.0, dt_s=context.dt_s)
-        return np.concatenate([model.predict(u, y, 1) - y for u, y in centred])
+        model = PolynomialModel(f=f, b=b, c=c, d=d, u0=np.zeros(m), dt_s=dt_s)
+        return np.concatenate([model.predict_deviation(u, y, 1) - y for u, y in centred])
 
-    result = least_squares(
-        residuals, theta0, method="trf", x_scale="jac", max_nfev=200 * len(theta0)
-    )
-    f, b, c, d = _unpack(result.x, m, nf, nb, nk, nc)
+    result = least_squares(residuals, theta0, method="trf", x_scale="jac", max_nfev=max_nfev)
+    f, _, c, _ = _unpack(result.x, m, nf, nb, nk, nc)
     if not np.all(np.isfinite(result.x)) or not (_stable(f) and _stable(c)):
         raise ArithmeticError(
-            f"{structure}: prediction-error search ended at an unstable model ({result.message})"
+            f"prediction-error search ended at an unstable model ({result.message})"
         )
-    noise = f" nc=nd={nc}" if nc else ""
-    model = context.model(f, b, c, d)
-    return LinearFit(structure, f"nb={nb} nf={nf} nk={nk}{noise}", model)
+    return result.x
+
+
+def _noise_model(residuals: Sequence[FloatArray], nc: int) -> FloatArray:
+    """``(c_1..c_nc, d_1..d_nc)`` of an ARMA model ``w = C/D e`` of the output-error residual."""
+    total = sum(len(w) for w in residuals)
+
+    def innovations(theta: FloatArray) -> FloatArray:
+        c = np.concatenate(([1.0], theta[:nc]))
+        d = np.concatenate(([1.0], theta[nc:]))
+        if not _stable(c):
+            return np.full(total, _UNSTABLE_RESIDUAL)
+        return np.concatenate([lfilter(d, c, w) for w in residuals])
+
+    return least_squares(innovations, np.zeros(2 * nc), method="trf").x
 
 
 def fit_output_error(
     experiments: Sequence[IdData], context: FitContext, orders: ArxOrders
 ) -> LinearFit:
-    """Output-error model with ``nf = orders.na``."""
-    return fit_prediction_error(experiments, context, "oe", orders, noise_order=0)
+    """Output-error model with ``nf = orders.na``, started from the ARX fit of the same orders.
+
+    Raises
+    ------
+    ArithmeticError
+        When the search ends at an unstable model.
+    """
+    start = estimate_arx(experiments, context, orders)[0].model
+    m = start.b.shape[0]
+    shape = (m, orders.na, orders.nb, orders.nk, 0)
+    theta0 = np.concatenate((start.f[1:], start.b[:, orders.nk :].ravel()))
+    centred = [context.centred(e) for e in experiments]
+    theta = _search(centred, theta0, shape, context.dt_s, 100 * len(theta0))
+    f, b, _, _ = _unpack(theta, *shape)
+    label = f"nb={orders.nb} nf={orders.na} nk={orders.nk}"
+    return LinearFit("oe", label, context.model(f, b))
 
 
 def fit_box_jenkins(
     experiments: Sequence[IdData], context: FitContext, orders: ArxOrders, noise_order: int = 2
 ) -> LinearFit:
-    """Box-Jenkins model with ``nf = orders.na`` and ``nc = nd = noise_order``."""
-    return fit_prediction_error(experiments, context, "bj", orders, noise_order=noise_order)
+    """Box-Jenkins model with ``nf = orders.na`` and ``nc = nd = noise_order``.
+
+    Started from the output-error fit and an ARMA model of its residual, then all parameters
+    are refined together for a bounded number of evaluations.
+
+    Raises
+    ------
+    ArithmeticError
+        When the search ends at an unstable model.
+    """
+    oe = fit_output_error(experiments, context, orders).model
+    centred = [context.centred(e) for e in experiments]
+    residuals = [y - oe.response(u) for u, y in centred]
+    noise = _noise_model(residuals, noise_order)
+    m = oe.b.shape[0]
+    shape = (m, orders.na, orders.nb, orders.nk, noise_order)
+    theta0 = np.concatenate((oe.f[1:], oe.b[:, orders.nk :].ravel(), noise))
+    theta = _search(centred, theta0, shape, context.dt_s, 10 * len(theta0))
+    f, b, c, d = _unpack(theta, *shape)
+    label = f"nb={orders.nb} nf={orders.na} nk={orders.nk} nc=nd={noise_order}"
+    return LinearFit("bj", label, context.model(f, b, c, d))

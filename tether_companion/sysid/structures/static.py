@@ -39,13 +39,13 @@ class StaticFit:
         """Three curve coefficients."""
         return 3
 
-    def simulate(self, pwm_us: FloatArray) -> FloatArray:
-        """Total thrust [N], shape (n,), summed over the motors' curves."""
-        return np.sum(self.curve.thrust_n(pwm_us), axis=1)
+    def simulate(self, data: IdData) -> FloatArray:
+        """Total thrust [N], shape (n,): ``n c0 + c1 sum cmd_i + c2 sum cmd_i^2`` (filtered)."""
+        return _design(data) @ np.asarray(self.curve.coefficients_n)
 
-    def predict(self, pwm_us: FloatArray, thrust_n: FloatArray, k: int) -> FloatArray:
+    def predict(self, data: IdData, k: int) -> FloatArray:
         """A static model ignores past outputs: the prediction is the simulation."""
-        return self.simulate(pwm_us)
+        return self.simulate(data)
 
     def to_mapping(self) -> dict[str, Any]:
         """The curve in the vehicle profile's ``thrust_curve`` format."""
@@ -59,17 +59,18 @@ class StaticFit:
         }
 
 
+def _design(data: IdData) -> FloatArray:
+    """Regressors ``(n_motors, sum cmd_i, sum cmd_i^2)``, shape (n, 3)."""
+    n_motors = data.command.shape[1]
+    return np.column_stack(
+        [np.full(len(data), float(n_motors)), data.command.sum(axis=1), data.command_sq.sum(axis=1)]
+    )
+
+
 def fit_static(experiments: Sequence[IdData], context: FitContext) -> StaticFit:
     """Least-squares shared quadratic curve (see module docstring)."""
-    shape = ThrustCurve(
-        pwm_min_us=context.pwm_min_us, pwm_max_us=context.pwm_max_us, command_full_scale=1.0
-    )
-    pwm = np.concatenate([e.pwm_us for e in experiments])
+    design = np.vstack([_design(e) for e in experiments])
     thrust = np.concatenate([e.thrust_n for e in experiments])
-    cmd = shape.command(pwm)
-    design = np.column_stack(
-        [np.full(len(thrust), pwm.shape[1]), cmd.sum(axis=1), (cmd**2).sum(axis=1)]
-    )
     result = lsq_linear(design, thrust, bounds=(0.0, np.inf))
     if not result.success:
         raise ArithmeticError(f"static curve least squares failed: {result.message}")
@@ -80,4 +81,4 @@ def fit_static(experiments: Sequence[IdData], context: FitContext) -> StaticFit:
         command_full_scale=1.0,
         coefficients_n=coefficients,
     )
-    return StaticFit(curve=curve, n_motors=pwm.shape[1])
+    return StaticFit(curve=curve, n_motors=experiments[0].command.shape[1])

@@ -23,12 +23,13 @@ length (one-step error on the estimation data) wins. The result is held in polyn
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
-from scipy.signal import lfilter, ss2tf
+from scipy.signal import BadCoefficients, lfilter, ss2tf
 
 from tether_companion.sysid.processing import IdData
 from tether_companion.sysid.structures.base import FitContext, LinearFit
@@ -138,7 +139,10 @@ def identify_state_space(
 def _tf(
     a: FloatArray, b: FloatArray, c: FloatArray, d: FloatArray, j: int
 ) -> tuple[FloatArray, FloatArray]:
-    num, den = ss2tf(a, b, c, d, input=j)
+    with warnings.catch_warnings():
+        # ss2tf warns when a leading numerator coefficient is ~0 (no direct feedthrough)
+        warnings.simplefilter("ignore", BadCoefficients)
+        num, den = ss2tf(a, b, c, d, input=j)
     return num[0], den
 
 
@@ -175,9 +179,7 @@ def fit_state_space(
             failures.append(f"n={n}: unstable A")
             continue
         fit = _polynomial(context, a, b, c, d, k)
-        errors = np.concatenate(
-            [fit.model.predict(e.pwm_us, e.thrust_n, 1) - e.thrust_n for e in experiments]
-        )
+        errors = np.concatenate([fit.model.predict(e, 1) - e.thrust_n for e in experiments])
         if not np.all(np.isfinite(errors)):
             failures.append(f"n={n}: prediction not finite")
             continue

@@ -1,0 +1,151 @@
+"""``tether-companion sysid``: identify a thrust model from flight logs (paper section 5)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from rich.console import Console
+
+from tether_companion.config import from_mapping
+from tether_companion.errors import InputError
+from tether_companion.physics.vehicle import load_vehicle
+from tether_companion.sysid.flight import FlightPlan, record_identification_flight
+from tether_companion.sysid.identify import STRUCTURES, best_result, identify
+from tether_companion.sysid.input_map import INPUT_MAPS
+from tether_companion.sysid.logs import load_flight_log
+from tether_companion.sysid.metrics import DEFAULT_K_STEPS
+from tether_companion.sysid.processing import ProcessingOptions, prepare
+from tether_companion.sysid.report import plot_validation, results_table
+from tether_companion.sysid.thrust_model import model_file_mapping, save_thrust_model
+
+HELP = "Identify a PWM-to-thrust model from flight logs (.tlog, .bin, .ulg, .csv)."
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Logs, structures, processing options, output file, emulated identification flight."""
+    parser.add_argument(
+        "logs", nargs="*", metavar="LOG", help="flight logs (.tlog, .bin, .ulg, .csv)"
+    )
+    parser.add_argument(
+        "--vehicle", default="default-quad", help="vehicle profile (mass, PWM range)"
+    )
+    parser.add_argument(
+        "--structure",
+        action="append",
+        choices=tuple(STRUCTURES),
+        help="structure to fit (repeat; default: all)",
+    )
+    parser.add_argument(
+        "--input-map", choices=INPUT_MAPS, default="quadratic", help="input of the linear models"
+    )
+    parser.add_argument(
+        "--k-steps", type=int, default=DEFAULT_K_STEPS, help="prediction horizon [samples]"
+    )
+    parser.add_argument("--rate-hz", type=float, default=100.0, help="resampling rate [Hz]")
+    parser.add_argument("--cutoff-hz", type=float, default=10.0, help="low-pass cut-off [Hz]")
+    parser.add_argument(
+        "--estimation-fraction", type=float, default=0.6, help="share used for estimation"
+    )
+    parser.add_argument(
+        "--cable-tension-n",
+        type=float,
+        default=0.0,
+        help="known constant tether tension during the flight [N] (0: untethered or slack)",
+    )
+    parser.add_argument("--out", type=Path, help="write the chosen model to this YAML file")
+    parser.add_argument(
+        "--write",
+        choices=tuple(STRUCTURES),
+        help="structure to write (default: best simulation Fit%%)",
+    )
+    parser.add_argument(
+        "--plot", type=Path, metavar="PNG", help="save measured vs model thrust plots"
+    )
+    parser.add_argument(
+        "--fly-emulated",
+        type=Path,
+        metavar="OUT",
+        help="first fly the section 5.1 identification flight in the simulator, record it to "
+        "OUT (.tlog, .bin or .csv) and identify from it",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="noise seed of the emulated flight")
+    parser.add_argument(
+        "--fly-tension-n", type=float, default=0.0, help="cable tension in the emulated flight [N]"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Fit, print the table, write the model; 0 on success."""
+    console = Console()
+    vehicle = load_vehicle(args.vehicle)
+    if args.k_steps < 1:
+        raise InputError(f"--k-steps must be >= 1, got {args.k_steps}")
+    options = from_mapping(
+        ProcessingOptions,
+        {
+            "rate_hz": args.rate_hz,
+            "cutoff_hz": args.cutoff_hz,
+            "estimation_fraction": args.estimation_fraction,
+            "cable_tension_n": args.cable_tension_n,
+        },
+        source="command line",
+    )
+    logs = list(args.logs)
+    if args.fly_emulated is not None:
+        plan = from_mapping(
+            FlightPlan, {"cable_tension_n": args.fly_tension_n}, source="command line"
+        )
+        record_identification_flight(args.fly_emulated, plan, seed=args.seed)
+        console.print(
+            f"identification flight recorded to {args.fly_emulated} ({plan.duration_s:.0f} s)"
+        )
+        logs.append(args.fly_emulated)
+    if not logs:
+        raise InputError("give at least one LOG, or --fly-emulated OUT to fly one in the simulator")
+    pwm_range = (vehicle.thrust_curve.pwm_min_us, vehicle.thrust_curve.pwm_max_us)
+    datasets = [
+        prepare(load_flight_log(path), vehicle.mass_kg, pwm_range, options) for path in logs
+    ]
+    for data in datasets:
+        console.print(
+            f"{data.source}: airborne {data.airborne_s[0]:.1f}-{data.airborne_s[1]:.1f} s, "
+            f"{len(data.estimation)} estimation + {len(data.validation)} validation samples"
+        )
+    estimation = [d.estimation for d in datasets]
+    validation = [d.validation for d in datasets]
+    structures = args.structure or tuple(STRUCTURES)
+    results = identify(estimation, validation, pwm_range, structures, args.k_steps, args.input_map)
+    best = best_result(results, "prediction")
+    if args.write is not None:
+        written = next((r for r in results if r.structure == args.write and r.ok), None)
+        if written is None:
+            raise InputError(f"--write {args.write}: that structure was not fitted or failed")
+    else:
+        written = best_result(results, "simulation")
+    console.print(
+        results_table(
+            results,
+            args.k_steps,
+            best.structure if best else None,
+            written.structure if written and args.out else None,
+        )
+    )
+    if written is None:
+        console.print("[red]every structure failed: no model to write[/red]")
+        return 1
+    if args.out is not None:
+        mapping = model_file_mapping(written.model.to_mapping(), vars(written.metrics))
+        header = (
+            f"Thrust model identified by tether-companion sysid from {', '.join(map(str, logs))}\n"
+            f"vehicle {vehicle.name}; structure {written.structure} ({written.model.orders})"
+        )
+        try:
+            save_thrust_model(args.out, mapping, header)
+        except OSError as exc:
+            raise InputError(f"{args.out}: cannot write ({exc.strerror})") from None
+        console.print(f"wrote {written.structure} model to {args.out}")
+    if args.plot is not None:
+        plot_validation(args.plot, results, validation[0], args.k_steps)
+        console.print(f"plot saved to {args.plot}")
+    return 0

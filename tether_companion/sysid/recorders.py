@@ -1,0 +1,192 @@
+"""Write flight samples as a log file: MAVLink .tlog, ArduPilot dataflash .bin or CSV.
+
+The three formats the loaders read (:mod:`tether_companion.sysid.logs`), written from typed
+SI samples, so a simulated identification flight can be identified like a real one.
+
+- .tlog: each record is the wall-clock stamp [us] as 8 big-endian bytes and one MAVLink 2
+  packet (what ground stations record); RAW_IMU in milli-g (ArduPilot), ATTITUDE,
+  SERVO_OUTPUT_RAW, DISTANCE_SENSOR in cm and a 1 Hz HEARTBEAT, encoded by
+  :mod:`tether_companion.mavlink.units`.
+- .bin: IMU, ATT (degrees), RCOU, RFND records (:mod:`...logs.dataflash_writer`).
+- .csv: the columns of :mod:`tether_companion.sysid.logs.csvlog`.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import struct
+from pathlib import Path
+from typing import BinaryIO, Protocol, TextIO
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.errors import InputError
+from tether_companion.mavlink import units
+from tether_companion.mavlink.framing import FrameEncoder, dialect
+from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
+from tether_companion.sysid.logs import csvlog
+from tether_companion.sysid.logs.dataflash_writer import (
+    DataflashWriter,
+    declare_identification_messages,
+)
+
+FloatArray = NDArray[np.float64]
+
+TLOG_EPOCH_US = 1_700_000_000_000_000
+"""Wall-clock stamp [us since 1970] given to flight-controller time 0 in written .tlogs."""
+_RAD_TO_DEG = 180.0 / math.pi
+
+
+class Recorder(Protocol):
+    """Something that stores one tick of samples."""
+
+    def write(
+        self,
+        imu: ImuSample,
+        attitude: AttitudeSample,
+        body_rates_rad_s: FloatArray,
+        pwm: PwmSample,
+        rangefinder: RangeSample | None,
+    ) -> None:
+        """Store the samples of one tick."""
+        ...
+
+    def close(self) -> None:
+        """Flush and close the file."""
+        ...
+
+
+class TlogRecorder:
+    """MAVLink 2 telemetry log as a ground station records it (see module docstring)."""
+
+    def __init__(self, path: Path, range_limits_m: tuple[float, float], system_id: int = 1) -> None:
+        self._file: BinaryIO = path.open("wb")
+        self._encoder = FrameEncoder(system_id, 1)
+        self._range_limits_m = range_limits_m
+        self._next_heartbeat_s = 0.0
+
+    def _put(self, time_s: float, msg: units.MAVLinkMessage) -> None:
+        stamp = TLOG_EPOCH_US + int(round(time_s * 1e6))
+        self._file.write(struct.pack(">Q", stamp) + self._encoder.encode(msg))
+
+    def write(
+        self,
+        imu: ImuSample,
+        attitude: AttitudeSample,
+        body_rates_rad_s: FloatArray,
+        pwm: PwmSample,
+        rangefinder: RangeSample | None,
+    ) -> None:
+        """Store RAW_IMU, ATTITUDE, SERVO_OUTPUT_RAW, DISTANCE_SENSOR (and a HEARTBEAT at 1 Hz)."""
+        if imu.time_s >= self._next_heartbeat_s:
+            heartbeat = dialect.MAVLink_heartbeat_message(
+                dialect.MAV_TYPE_QUADROTOR, dialect.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 0, 3
+            )
+            self._put(imu.time_s, heartbeat)
+            self._next_heartbeat_s = imu.time_s + 1.0
+        self._put(imu.time_s, units.raw_imu_message(imu))
+        self._put(attitude.time_s, units.attitude_message(attitude, body_rates_rad_s))
+        self._put(pwm.time_s, units.servo_output_raw_message(pwm))
+        if rangefinder is not None:
+            lo, hi = self._range_limits_m
+            msg = units.distance_sensor_message(
+                rangefinder.time_s, rangefinder.distance_m, min_distance_m=lo, max_distance_m=hi
+            )
+            self._put(rangefinder.time_s, msg)
+
+    def close(self) -> None:
+        """Close the file."""
+        self._file.close()
+
+
+class DataflashRecorder:
+    """ArduPilot dataflash log with IMU, ATT, RCOU and RFND records."""
+
+    def __init__(self, path: Path) -> None:
+        self._file: BinaryIO = path.open("wb")
+        self._writer = DataflashWriter(self._file)
+        declare_identification_messages(self._writer)
+
+    def write(
+        self,
+        imu: ImuSample,
+        attitude: AttitudeSample,
+        body_rates_rad_s: FloatArray,
+        pwm: PwmSample,
+        rangefinder: RangeSample | None,
+    ) -> None:
+        """Store one IMU, ATT, RCOU and (when in range) RFND record."""
+        gyro, acc = imu.angular_rate_body_rad_s, imu.specific_force_body_mps2
+        self._writer.write("IMU", _us(imu.time_s), 0, *gyro.tolist(), *acc.tolist())
+        angles = (attitude.roll_rad, attitude.pitch_rad, attitude.yaw_rad)
+        self._writer.write("ATT", _us(attitude.time_s), *(a * _RAD_TO_DEG for a in angles))
+        self._writer.write("RCOU", _us(pwm.time_s), *(int(round(p)) for p in pwm.pwm_us[:4]))
+        if rangefinder is not None:
+            self._writer.write("RFND", _us(rangefinder.time_s), 0, rangefinder.distance_m)
+
+    def close(self) -> None:
+        """Close the file."""
+        self._file.close()
+
+
+class CsvRecorder:
+    """CSV with the documented columns; ``height_m`` empty when the rangefinder is out of range."""
+
+    def __init__(self, path: Path) -> None:
+        self._file: TextIO = path.open("w", newline="", encoding="utf-8")
+        self._csv = csv.writer(self._file)
+        self._csv.writerow([*csvlog.REQUIRED_COLUMNS, csvlog.HEIGHT_COLUMN])
+
+    def write(
+        self,
+        imu: ImuSample,
+        attitude: AttitudeSample,
+        body_rates_rad_s: FloatArray,
+        pwm: PwmSample,
+        rangefinder: RangeSample | None,
+    ) -> None:
+        """Store one row, all signals stamped with the IMU time."""
+        height = "" if rangefinder is None else f"{rangefinder.distance_m:.4f}"
+        self._csv.writerow(
+            [
+                f"{imu.time_s:.6f}",
+                *(f"{p:.0f}" for p in pwm.pwm_us[:4]),
+                *(f"{a:.5f}" for a in imu.specific_force_body_mps2),
+                *(f"{a:.6f}" for a in (attitude.roll_rad, attitude.pitch_rad, attitude.yaw_rad)),
+                height,
+            ]
+        )
+
+    def close(self) -> None:
+        """Close the file."""
+        self._file.close()
+
+
+def _us(time_s: float) -> int:
+    return int(round(time_s * 1e6))
+
+
+def open_recorder(path: str | Path, range_limits_m: tuple[float, float]) -> Recorder:
+    """A recorder for ``path``'s extension (.tlog, .bin or .csv); close it when done
+    (``contextlib.closing``).
+
+    Raises
+    ------
+    InputError
+        For another extension or a path that cannot be created.
+    """
+    path = Path(path)
+    kinds = {
+        ".tlog": lambda: TlogRecorder(path, range_limits_m),
+        ".bin": lambda: DataflashRecorder(path),
+        ".csv": lambda: CsvRecorder(path),
+    }
+    make = kinds.get(path.suffix.lower())
+    if make is None:
+        raise InputError(f"{path}: cannot record a {path.suffix!r} file; use .tlog, .bin or .csv")
+    try:
+        return make()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot create ({exc.strerror})") from None

@@ -1,0 +1,106 @@
+"""Printing identification results: the paper's Table 1 as a rich table, and a plot."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from rich.table import Table
+
+from tether_companion.errors import InputError
+from tether_companion.sysid.identify import StructureResult
+from tether_companion.sysid.processing import IdData
+
+BEST_MARK = "*"
+WRITTEN_MARK = "->"
+
+
+def results_table(
+    results: Sequence[StructureResult],
+    k_steps: int,
+    best: str | None,
+    written: str | None,
+    title: str = "Thrust-model identification (validation data)",
+) -> Table:
+    """Table 1: Fit% of the k-step prediction and of simulation, FPE, MSE per structure.
+
+    ``best`` (highest k-step Fit%) is marked with ``*``; ``written`` (the model saved to the
+    output file) with ``->``. A failed structure shows its error instead of numbers.
+    """
+    table = Table(title=title)
+    table.add_column("", no_wrap=True)
+    table.add_column("Structure")
+    table.add_column("Orders")
+    table.add_column(f"Fit% {k_steps}-step", justify="right")
+    table.add_column("Fit% sim", justify="right")
+    table.add_column("FPE [N^2]", justify="right")
+    table.add_column("MSE [N^2]", justify="right")
+    for result in results:
+        mark = " ".join(
+            m
+            for m, name in ((BEST_MARK, best), (WRITTEN_MARK, written))
+            if name == result.structure
+        )
+        if not result.ok:
+            table.add_row(
+                mark, result.structure, f"[red]failed: {result.error}[/red]", "-", "-", "-", "-"
+            )
+            continue
+        metrics = result.metrics
+        table.add_row(
+            mark,
+            result.structure,
+            result.model.orders,
+            f"{metrics.fit_prediction_pct:.2f}",
+            f"{metrics.fit_simulation_pct:.2f}",
+            f"{metrics.fpe_n2:.4g}",
+            f"{metrics.mse_n2:.4g}",
+        )
+    table.caption = (
+        f"{BEST_MARK} best {k_steps}-step-ahead Fit% (Table 1's criterion); "
+        f"{WRITTEN_MARK} written model (best simulation Fit% unless chosen: the estimator runs it "
+        "from PWM alone). FPE and MSE: one-step errors on the estimation data."
+    )
+    return table
+
+
+def plot_validation(
+    path: str | Path, results: Sequence[StructureResult], validation: IdData, k_steps: int
+) -> None:
+    """Save a figure of measured vs simulated and k-step-predicted thrust on validation data.
+
+    Raises
+    ------
+    InputError
+        When matplotlib (the ``plot`` extra) is not installed or the file cannot be written.
+    """
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise InputError("--plot needs matplotlib: pip install 'tether-companion[plot]'") from None
+    ok = [r for r in results if r.ok]
+    fig, axes = plt.subplots(2, 1, sharex=True, figsize=(11, 7))
+    t = validation.time_s
+    for ax, label in zip(axes, ("simulation", f"{k_steps}-step prediction"), strict=True):
+        ax.plot(t, validation.thrust_n, color="black", linewidth=1.5, label="measured")
+        for result in ok:
+            predicted = (
+                result.model.simulate(validation)
+                if label == "simulation"
+                else result.model.predict(validation, k_steps)
+            )
+            ax.plot(t, predicted, linewidth=0.8, label=result.structure)
+        ax.set_ylabel("total thrust [N]")
+        ax.set_title(label)
+        ax.legend(loc="upper right", ncol=4, fontsize="small")
+    axes[-1].set_xlabel("flight-controller time [s]")
+    fig.tight_layout()
+    try:
+        fig.savefig(path)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write the plot ({exc.strerror})") from None
+    finally:
+        plt.close(fig)

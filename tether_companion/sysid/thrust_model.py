@@ -1,0 +1,223 @@
+"""Identified thrust models as the estimator's :class:`ThrustInput`, and their YAML files.
+
+``tether-companion sysid --out thrust.yaml`` writes one of two kinds:
+
+- ``kind: static``: a per-motor quadratic ``thrust_curve`` in the vehicle profile's format
+  (it can be pasted into ``configs/vehicles/*.yaml``);
+- ``kind: linear``: a discrete state-space model of the motor dynamics about an operating
+  point, ``x(k+1) = A x + B (v - v0)``, ``T = T0 + C x + D (v - v0)``, sampled every
+  ``sample_time_s``, with ``v`` the PWM mapped by ``input_map`` (PWM itself, or each motor's
+  static thrust). ARX, output error, Box-Jenkins, state-space, transfer-function and process
+  models are all written this way (their input paths; the noise model only serves
+  prediction from measured thrust, which the estimator does not have).
+
+:func:`load_thrust_model` reads either into an object with
+``total_thrust_n(pwm_us, time_s) -> float``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from numpy.typing import NDArray
+
+from tether_companion.config import ConfigError, from_mapping, read_yaml, spec
+from tether_companion.physics.thrust import ThrustCurve
+from tether_companion.sysid.input_map import InputMap
+
+FloatArray = NDArray[np.float64]
+
+MAX_GAP_STEPS = 100
+"""A pause longer than this many model samples restarts the model in steady state."""
+
+
+@dataclass(frozen=True)
+class StaticModelFile:
+    """Schema of a ``kind: static`` thrust-model file."""
+
+    kind: str = spec("static", choices=("static",), doc="model kind")
+    structure: str = spec("static", doc="structure the model came from")
+    n_motors: int = spec(4, minimum=1, maximum=16, doc="number of motors")
+    thrust_curve: ThrustCurve = spec(default_factory=ThrustCurve, doc="per-motor curve")
+    metrics: dict[str, float] = spec(default_factory=dict, doc="identification metrics")
+
+
+@dataclass(frozen=True)
+class LinearModelFile:
+    """Schema of a ``kind: linear`` thrust-model file (see module docstring)."""
+
+    input_operating_point: tuple[float, ...] = spec(doc="v0, one per motor")
+    thrust_operating_point_n: float = spec(doc="T0 [N]")
+    a: tuple[tuple[float, ...], ...] = spec(doc="A, n x n")
+    b: tuple[tuple[float, ...], ...] = spec(doc="B, n x n_motors")
+    c: tuple[tuple[float, ...], ...] = spec(doc="C, 1 x n")
+    d: tuple[tuple[float, ...], ...] = spec(doc="D, 1 x n_motors")
+    kind: str = spec("linear", choices=("linear",), doc="model kind")
+    structure: str = spec("arx", doc="structure the model came from")
+    orders: str = spec("", doc="orders, for the record")
+    sample_time_s: float = spec(
+        0.01, exclusive_minimum=0.0, maximum=1.0, doc="model sample time [s]"
+    )
+    input_map: InputMap = spec(default_factory=InputMap, doc="PWM to model input")
+    metrics: dict[str, float] = spec(default_factory=dict, doc="identification metrics")
+
+    def validate(self) -> None:
+        """Matrix shapes must agree and the model must be stable (all |eig(A)| < 1)."""
+        n, m = len(self.a), len(self.input_operating_point)
+        checks = (
+            ("a", self.a, (n, n)),
+            ("b", self.b, (n, m)),
+            ("c", self.c, (1, n)),
+            ("d", self.d, (1, m)),
+        )
+        for key, rows, (r, cols) in checks:
+            if len(rows) != r or any(len(row) != cols for row in rows):
+                raise ConfigError("", key, rows, f"must be a {r} x {cols} matrix")
+        if n and np.max(np.abs(np.linalg.eigvals(np.array(self.a)))) >= 1.0:
+            raise ConfigError("", "a", self.a, "the model must be stable (all |eig(A)| < 1)")
+
+
+class StaticCurveThrust:
+    """Sum of one static curve over the motors (no dynamics)."""
+
+    def __init__(self, curve: ThrustCurve, n_motors: int) -> None:
+        self.curve = curve
+        self.n_motors = n_motors
+
+    def total_thrust_n(self, pwm_us: FloatArray, time_s: float) -> float:
+        """Total thrust [N] for pulse widths ``pwm_us`` (shape (n_motors,)) [us].
+
+        Raises
+        ------
+        ValueError
+            When the number of pulse widths is not the motor count.
+        """
+        pwm = np.asarray(pwm_us, dtype=float)
+        if pwm.shape != (self.n_motors,):
+            raise ValueError(f"expected {self.n_motors} pulse widths, got shape {pwm.shape}")
+        return float(np.sum(self.curve.thrust_n(pwm)))
+
+
+@dataclass
+class LinearThrust:
+    """A discrete linear thrust model run on PWM samples arriving at any times.
+
+    The model steps every ``sample_time_s``. Between steps the PWM is held (as the flight
+    controller holds its outputs), and each step's input is the time average of the mapped
+    PWM over the step, which also keeps fast output chatter from aliasing. The first sample,
+    a jump back in time or a pause longer than ``MAX_GAP_STEPS`` steps restarts the model in
+    steady state for the current PWM. The output uses the state at the last step boundary
+    (at most one sample old) plus the direct term.
+    """
+
+    spec: LinearModelFile
+    _a: FloatArray = field(init=False, repr=False)
+    _b: FloatArray = field(init=False, repr=False)
+    _c: FloatArray = field(init=False, repr=False)
+    _d: FloatArray = field(init=False, repr=False)
+    _v0: FloatArray = field(init=False, repr=False)
+    _x: FloatArray | None = field(default=None, init=False, repr=False)
+    _held: FloatArray | None = field(default=None, init=False, repr=False)
+    _sum: FloatArray | None = field(default=None, init=False, repr=False)
+    _last_s: float = field(default=math.nan, init=False, repr=False)
+    _boundary_s: float = field(default=math.nan, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self._a = np.array(self.spec.a, dtype=float).reshape(len(self.spec.a), -1)
+        self._b = np.array(self.spec.b, dtype=float).reshape(self._a.shape[0], -1)
+        self._c = np.array(self.spec.c, dtype=float).reshape(1, -1)
+        self._d = np.array(self.spec.d, dtype=float).reshape(1, -1)
+        self._v0 = np.array(self.spec.input_operating_point, dtype=float)
+
+    @property
+    def n_motors(self) -> int:
+        """Number of PWM inputs."""
+        return int(self._v0.shape[0])
+
+    def _restart(self, v: FloatArray, time_s: float) -> None:
+        n = self._a.shape[0]
+        self._x = np.linalg.solve(np.eye(n) - self._a, self._b @ (v - self._v0))
+        self._sum = np.zeros_like(v)
+        self._last_s = time_s
+        self._boundary_s = time_s + self.spec.sample_time_s
+
+    def total_thrust_n(self, pwm_us: FloatArray, time_s: float) -> float:
+        """Total thrust [N] for pulse widths ``pwm_us`` (shape (n_motors,)) at ``time_s`` [s].
+
+        Raises
+        ------
+        ValueError
+            When the number of pulse widths is wrong or an input is not finite.
+        """
+        pwm = np.asarray(pwm_us, dtype=float)
+        if pwm.shape != (self.n_motors,) or not (
+            np.all(np.isfinite(pwm)) and math.isfinite(time_s)
+        ):
+            raise ValueError(f"expected {self.n_motors} finite pulse widths and a finite time")
+        v = self.spec.input_map.map_pwm(pwm)
+        dt = self.spec.sample_time_s
+        if self._x is None or time_s < self._last_s or time_s - self._last_s > MAX_GAP_STEPS * dt:
+            self._restart(v, time_s)
+        else:
+            self._advance(time_s)
+        self._held = v
+        thrust = self.spec.thrust_operating_point_n + self._c @ self._x + self._d @ (v - self._v0)
+        return max(float(thrust[0]), 0.0)
+
+    def _advance(self, time_s: float) -> None:
+        """Integrate the held input up to ``time_s``, stepping at every boundary passed."""
+        dt = self.spec.sample_time_s
+        while self._last_s < time_s:
+            end = min(time_s, self._boundary_s)
+            self._sum = self._sum + self._held * (end - self._last_s)
+            self._last_s = end
+            if end >= self._boundary_s - 1e-12:
+                self._x = self._a @ self._x + self._b @ (self._sum / dt - self._v0)
+                self._sum = np.zeros_like(self._sum)
+                self._boundary_s += dt
+
+
+def model_file_mapping(model_mapping: dict[str, Any], metrics: dict[str, float]) -> dict[str, Any]:
+    """A fitted model's ``to_mapping()`` with its metrics added, ready for YAML."""
+    return {**model_mapping, "metrics": {k: float(v) for k, v in metrics.items()}}
+
+
+def save_thrust_model(path: str | Path, mapping: dict[str, Any], header: str) -> None:
+    """Write a thrust-model mapping as YAML with a comment ``header`` (one or more lines)."""
+    comment = "".join(f"# {line}\n" for line in header.splitlines())
+    Path(path).write_text(comment + yaml.safe_dump(mapping, sort_keys=False), encoding="utf-8")
+
+
+def thrust_input_from_mapping(
+    data: dict[str, Any], source: str = ""
+) -> StaticCurveThrust | LinearThrust:
+    """Build the :class:`ThrustInput` a thrust-model mapping describes.
+
+    Raises
+    ------
+    ConfigError
+        When ``kind`` is missing or unknown, or any field is invalid.
+    """
+    kind = data.get("kind")
+    if kind == "static":
+        static = from_mapping(StaticModelFile, data, source=source)
+        return StaticCurveThrust(static.thrust_curve, static.n_motors)
+    if kind == "linear":
+        return LinearThrust(from_mapping(LinearModelFile, data, source=source))
+    raise ConfigError(source, "kind", kind, "must be 'static' or 'linear'")
+
+
+def load_thrust_model(path: str | Path) -> StaticCurveThrust | LinearThrust:
+    """Read a thrust-model YAML file (written by ``tether-companion sysid --out``).
+
+    Raises
+    ------
+    ConfigError
+        When the file is missing, not YAML, or describes an invalid or unstable model.
+    """
+    return thrust_input_from_mapping(dict(read_yaml(path)), source=str(path))

@@ -571,6 +571,7 @@ class FlightController:
         frame: int | None,
         link_id: int,
     ) -> None:
+        self._after_ack.clear()
         handler = _COMMANDS.get(command)
         if handler is None:
             self._ack(msg, command, _UNSUPPORTED, link_id)

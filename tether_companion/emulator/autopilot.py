@@ -214,6 +214,7 @@ class FlightController:
     def _boot(self) -> None:
         """Start (or restart) the flight controller's software state."""
         self._boot_sim_s = self.sim.time_s
+        self._cache_step = -1  # messages built before the boot carry the old clock
         self.mode = CopterMode.STABILIZE
         self.failsafe = False
         self.nav.reset()

@@ -29,7 +29,6 @@ EARTH_RADIUS_M: float = 6378137.0
 """WGS-84 equatorial radius [m] (ArduPilot's RADIUS_OF_EARTH)."""
 _M_PER_DEG: float = math.radians(1.0) * EARTH_RADIUS_M
 INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
-UINT16_HEADING_UNKNOWN = 65535
 
 
 @dataclass(frozen=True, slots=True)

@@ -193,8 +193,8 @@ class EmulatorServer:
                 if wait_s > 0.0:
                     self.counters.sleeps += 1
                     deadline = time.monotonic() + wait_s
-                    if wait_s > SPIN_S:
-                        await asyncio.sleep(wait_s - SPIN_S)
+                    # always yield once, so sockets are read even when every wait is short
+                    await asyncio.sleep(max(wait_s - SPIN_S, 0.0))
                     while time.monotonic() < deadline:
                         pass
                 else:

@@ -30,6 +30,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
+import socket
 import termios
 from collections import OrderedDict
 from dataclasses import dataclass, fields
@@ -62,6 +63,11 @@ _FORMS = (
 MAX_UDP_PEERS = 16
 """A listening UDP link replies to at most this many peers (the most recently heard)."""
 WRITE_BUFFER_LIMIT_BYTES = 1 << 20
+UDP_BUFFER_BYTES = 1 << 21
+"""Receive buffer asked for on UDP sockets (the kernel caps it at net.core.rmem_max)."""
+UDP_MAX_DATAGRAM = 65535
+MAX_DATAGRAMS_PER_READ = 256
+"""Datagrams read per readiness before other callbacks get their turn."""
 READ_CHUNK_BYTES = 4096
 DEFAULT_RX_QUEUE = 4096
 
@@ -162,7 +168,7 @@ class LinkCounters:
     send_no_peer: int = 0
     """Frames not sent because a listening link had heard from no peer yet."""
     send_dropped: int = 0
-    """Frames dropped because a stream's write buffer was over its limit."""
+    """Frames dropped because the write buffer (TCP, serial) or socket buffer (UDP) was full."""
     send_errors: int = 0
     """Errors reported by the socket (e.g. ICMP port unreachable on UDP)."""
     rx_overflow: int = 0
@@ -335,30 +341,62 @@ async def open_link(
 # --- UDP ------------------------------------------------------------------------------------
 
 
-class _UdpLink(Link, asyncio.DatagramProtocol):
-    """UDP: listening (reply to every peer heard from) or connected to one address."""
+class _UdpLink(Link):
+    """UDP: listening (reply to every peer heard from) or connected to one address.
+
+    A plain non-blocking socket watched with ``loop.add_reader`` rather than asyncio's
+    datagram transport: that transport reads one datagram per event-loop iteration, so a
+    busy loop (a 200 Hz x 4-stream flight controller, an EKF, the emulator in the same
+    process) falls behind and the kernel drops datagrams. Here every readiness drains the
+    socket, up to :data:`MAX_DATAGRAMS_PER_READ`.
+    """
 
     def __init__(self, endpoint: Endpoint, encoder: FrameEncoder, rx_queue_size: int) -> None:
-        Link.__init__(self, endpoint, encoder, rx_queue_size)
+        super().__init__(endpoint, encoder, rx_queue_size)
         self._parser = FrameParser(self.framing)
-        self._transport: asyncio.DatagramTransport | None = None
+        self._sock: socket.socket | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
         self._peers: OrderedDict[tuple[str, int], None] = OrderedDict()
 
     @classmethod
     async def open(cls, endpoint: Endpoint, encoder: FrameEncoder, rx_queue_size: int) -> Link:
         link = cls(endpoint, encoder, rx_queue_size)
         loop = asyncio.get_running_loop()
-        address = (endpoint.host, endpoint.port)
-        if endpoint.role == "listen":
-            await loop.create_datagram_endpoint(lambda: link, local_addr=address)
-        else:
-            await loop.create_datagram_endpoint(lambda: link, remote_addr=address)
+        infos = await loop.getaddrinfo(endpoint.host, endpoint.port, type=socket.SOCK_DGRAM)
+        if not infos:
+            raise OSError(0, f"cannot resolve {endpoint.host}")
+        family, _, _, _, address = infos[0]
+        sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            sock.setblocking(False)
+            with contextlib.suppress(OSError):  # best effort: the kernel may cap it
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_BUFFER_BYTES)
+            if endpoint.role == "listen":
+                sock.bind(address)
+            else:
+                sock.connect(address)
+        except OSError:
+            sock.close()
+            raise
+        link._sock, link._loop = sock, loop
+        loop.add_reader(sock.fileno(), link._read_ready)
         return link
 
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        self._transport = transport  # type: ignore[assignment]
+    def _read_ready(self) -> None:
+        sock = self._sock
+        if sock is None:
+            return
+        for _ in range(MAX_DATAGRAMS_PER_READ):
+            try:
+                data, addr = sock.recvfrom(UDP_MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:  # e.g. ICMP port unreachable reported on a connected socket
+                self.counters.send_errors += 1
+                continue
+            self._datagram(data, addr)
 
-    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+    def _datagram(self, data: bytes, addr: tuple[str, int]) -> None:
         messages = self._parser.feed(data)
         self._parser.end_datagram()
         if messages and self.endpoint.role == "listen":
@@ -371,25 +409,30 @@ class _UdpLink(Link, asyncio.DatagramProtocol):
                     self._peers.popitem(last=False)
         self._deliver(messages)
 
-    def error_received(self, exc: Exception) -> None:
-        self.counters.send_errors += 1
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        self._mark_closed()
-
     def _write(self, frame: bytes) -> int:
-        transport = self._transport
-        if transport is None or transport.is_closing():
+        sock = self._sock
+        if sock is None:
             return 0
         if self.endpoint.role == "connect":
-            transport.sendto(frame)
-            return 1
+            return self._send_to(sock, frame, None)
         if not self._peers:
             self.counters.send_no_peer += 1
             return 0
-        for addr in self._peers:
-            transport.sendto(frame, addr)
-        return len(self._peers)
+        return sum(self._send_to(sock, frame, addr) for addr in self._peers)
+
+    def _send_to(self, sock: socket.socket, frame: bytes, addr: tuple[str, int] | None) -> int:
+        try:
+            if addr is None:
+                sock.send(frame)
+            else:
+                sock.sendto(frame, addr)
+        except (BlockingIOError, InterruptedError):
+            self.counters.send_dropped += 1
+            return 0
+        except OSError:
+            self.counters.send_errors += 1
+            return 0
+        return 1
 
     @property
     def peers(self) -> list[tuple[str, int]]:
@@ -398,14 +441,17 @@ class _UdpLink(Link, asyncio.DatagramProtocol):
 
     @property
     def local_address(self) -> tuple[str, int] | None:
-        if self._transport is None:
+        if self._sock is None:
             return None
-        return self._transport.get_extra_info("sockname")[:2]
+        return self._sock.getsockname()[:2]
 
     async def close(self) -> None:
         self._mark_closed()
-        if self._transport is not None:
-            self._transport.close()
+        sock, self._sock = self._sock, None
+        if sock is not None:
+            if self._loop is not None and not self._loop.is_closed():
+                self._loop.remove_reader(sock.fileno())
+            sock.close()
 
 
 # --- TCP ------------------------------------------------------------------------------------

@@ -256,3 +256,28 @@ def test_pymavlink_mavutil_interoperates() -> None:
             await server.close()
 
     asyncio.run(main())
+
+
+def test_udp_link_drains_a_burst_in_one_loop_turn() -> None:
+    """A busy loop gets few turns: each readiness must read every queued datagram, not one."""
+
+    async def main() -> None:
+        link = await open_link(
+            parse_endpoint("udp:127.0.0.1:0", "listen"), system_id=1, component_id=1
+        )
+        sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            encoder = FrameEncoder(9, 1)
+            for i in range(200):
+                sender.sendto(encoder.encode(heartbeat(i)), link.local_address)
+            for _ in range(3):  # a few loop turns, far fewer than 200
+                await asyncio.sleep(0)
+            received = []
+            while (msg := link.recv_nowait()) is not None:
+                received.append(msg.custom_mode)
+            assert received == list(range(200))
+        finally:
+            sender.close()
+            await link.close()
+
+    asyncio.run(main())

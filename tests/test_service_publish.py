@@ -50,7 +50,7 @@ def _of(messages, kind):
 
 
 def test_rate_is_exact_in_fc_time_from_200hz_ticks() -> None:
-    publisher = Publisher(PublishConfig(rate_hz=30.0), has_tension_state=True)
+    publisher = Publisher(PublishConfig(settle_s=0.0, rate_hz=30.0), has_tension_state=True)
     sent = _feed(publisher, [_estimate(5.0 + k * 0.005) for k in range(2000)])  # 10 s
     vision = _of(sent, "VISION_POSITION_ESTIMATE")
     assert len(vision) in (300, 301)
@@ -65,7 +65,9 @@ def test_rate_is_exact_in_fc_time_from_200hz_ticks() -> None:
 
 
 def test_message_carries_fc_attitude_and_ekf_covariance() -> None:
-    publisher = Publisher(PublishConfig(attitude_variance_rad2=0.5), has_tension_state=True)
+    publisher = Publisher(
+        PublishConfig(settle_s=0.0, attitude_variance_rad2=0.5), has_tension_state=True
+    )
     (vision,) = _of(_feed(publisher, [_estimate(7.25)]), "VISION_POSITION_ESTIMATE")
     assert vision.usec == 7_250_000
     assert (vision.x, vision.y, vision.z) == pytest.approx((2.0, 1.0, -3.0))
@@ -82,7 +84,7 @@ def test_message_carries_fc_attitude_and_ekf_covariance() -> None:
 
 
 def test_unknown_covariance_mode_marks_nan_in_first_entry_only() -> None:
-    publisher = Publisher(PublishConfig(covariance="unknown"), has_tension_state=True)
+    publisher = Publisher(PublishConfig(settle_s=0.0, covariance="unknown"), has_tension_state=True)
     (vision,) = _of(_feed(publisher, [_estimate(1.0)]), "VISION_POSITION_ESTIMATE")
     assert math.isnan(vision.covariance[0]) and all(c == 0.0 for c in vision.covariance[1:])
     assert all(
@@ -92,16 +94,18 @@ def test_unknown_covariance_mode_marks_nan_in_first_entry_only() -> None:
 
 
 def test_never_nan_and_withheld_when_unhealthy() -> None:
-    publisher = Publisher(PublishConfig(), has_tension_state=True)
+    publisher = Publisher(PublishConfig(settle_s=0.0), has_tension_state=True)
     nan_pos = _estimate(1.0, position=(math.nan, 0.0, -2.0))
     sent = _feed(publisher, [nan_pos])
     assert not _of(sent, "VISION_POSITION_ESTIMATE") and publisher.health == DIVERGED
-    inflate = Publisher(PublishConfig(on_unhealthy="inflate"), has_tension_state=True)
+    inflate = Publisher(PublishConfig(settle_s=0.0, on_unhealthy="inflate"), has_tension_state=True)
     assert not _of(_feed(inflate, [nan_pos]), "VISION_POSITION_ESTIMATE")  # inflate, but never NaN
 
 
 def test_converging_then_ok_then_diverged_with_statustext() -> None:
-    publisher = Publisher(PublishConfig(max_position_variance_m2=0.5), has_tension_state=True)
+    publisher = Publisher(
+        PublishConfig(settle_s=0.0, max_position_variance_m2=0.5), has_tension_state=True
+    )
     wide = np.diag([0.9, 0.9, 0.9, 1.0])
     sent = _feed(publisher, [_estimate(1.0, covariance=wide)])
     assert publisher.health == CONVERGING and not _of(sent, "VISION_POSITION_ESTIMATE")
@@ -115,32 +119,35 @@ def test_converging_then_ok_then_diverged_with_statustext() -> None:
 
 
 def test_slack_tether_stops_or_inflates() -> None:
-    stop = Publisher(PublishConfig(slack_tension_n=0.3), has_tension_state=True)
+    stop = Publisher(PublishConfig(settle_s=0.0, slack_tension_n=0.3), has_tension_state=True)
     assert not _of(_feed(stop, [_estimate(1.0, tension=0.1)]), "VISION_POSITION_ESTIMATE")
     assert stop.health == SLACK
     inflate = Publisher(
-        PublishConfig(on_unhealthy="inflate", inflated_variance_m2=50.0), has_tension_state=True
+        PublishConfig(settle_s=0.0, on_unhealthy="inflate", inflated_variance_m2=50.0),
+        has_tension_state=True,
     )
     (vision,) = _of(_feed(inflate, [_estimate(1.0, tension=0.1)]), "VISION_POSITION_ESTIMATE")
     assert (vision.covariance[0], vision.covariance[6], vision.covariance[11]) == (50.0, 50.0, 50.0)
     three_state = Publisher(
-        PublishConfig(), has_tension_state=False
+        PublishConfig(settle_s=0.0), has_tension_state=False
     )  # known tension: no slack test
     assert _of(_feed(three_state, [_estimate(1.0, tension=0.1)]), "VISION_POSITION_ESTIMATE")
 
 
 def test_stale_inputs_and_missing_attitude_withhold() -> None:
-    publisher = Publisher(PublishConfig(), has_tension_state=True)
+    publisher = Publisher(PublishConfig(settle_s=0.0), has_tension_state=True)
     assert not _of(
         _feed(publisher, [_estimate(1.0)], inputs_stale=True), "VISION_POSITION_ESTIMATE"
     )
     assert publisher.health == STALE
-    publisher = Publisher(PublishConfig(), has_tension_state=True)
+    publisher = Publisher(PublishConfig(settle_s=0.0), has_tension_state=True)
     assert not _of(_feed(publisher, [_estimate(1.0)], attitude=None), "VISION_POSITION_ESTIMATE")
 
 
 def test_reset_counter_on_estimator_reset_jump_pause_and_restart() -> None:
-    publisher = Publisher(PublishConfig(rate_hz=10.0, jump_m=1.0), has_tension_state=True)
+    publisher = Publisher(
+        PublishConfig(settle_s=0.0, rate_hz=10.0, jump_m=1.0), has_tension_state=True
+    )
     t = [1.0]
 
     def publish(**kw) -> int:
@@ -168,3 +175,11 @@ def test_config_names_key_value_and_range() -> None:
     with pytest.raises(ConfigError, match=r"tension_name = 'WAY_TOO_LONG_NAME'.*10 characters"):
         from_mapping(PublishConfig, {"tension_name": "WAY_TOO_LONG_NAME"})
     assert dataclasses.replace(PublishConfig(), rate_hz=50.0).rate_hz == 50.0
+
+
+def test_first_position_only_after_settling() -> None:
+    publisher = Publisher(PublishConfig(settle_s=1.0, rate_hz=10.0), has_tension_state=True)
+    sent = _feed(publisher, [_estimate(5.0 + k * 0.1) for k in range(10)])  # healthy for 0.9 s
+    assert not _of(sent, "VISION_POSITION_ESTIMATE") and publisher.health == CONVERGING
+    sent = _feed(publisher, [_estimate(6.0)])
+    assert len(_of(sent, "VISION_POSITION_ESTIMATE")) == 1 and publisher.health == OK

@@ -237,9 +237,9 @@ class CompanionService:
         try:
             while True:
                 msg = await link.recv()
-                self._handle(link, msg, self._monotonic_s())
+                self.handle_message(link, msg, self._monotonic_s())
                 while (msg := link.recv_nowait()) is not None:
-                    self._handle(link, msg, self._monotonic_s())
+                    self.handle_message(link, msg, self._monotonic_s())
         finally:
             housekeeping.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -253,7 +253,11 @@ class CompanionService:
         self.state.origin_confirmed = False
 
     # ------------------------------------------------------------------ receive path
-    def _handle(self, link: Link, msg: MAVLinkMessage, now_s: float) -> None:
+    def handle_message(self, link: Link, msg: MAVLinkMessage, now_s: float) -> None:
+        """Record, process and answer one received message (``now_s``: local time [s]).
+
+        Public so that a lock-step harness can drive the service without sockets.
+        """
         if self.recorder is not None:
             self.recorder.write(bytes(msg.get_msgbuf()))
         self.state.received += 1
@@ -322,10 +326,13 @@ class CompanionService:
     async def _housekeeping(self, link: Link) -> None:
         while True:
             now = self._monotonic_s()
-            self._housekeep(link, now)
+            self.housekeep(link, now)
             await asyncio.sleep(HOUSEKEEPING_PERIOD_S)
 
-    def _housekeep(self, link: Link, now_s: float) -> None:
+    def housekeep(self, link: Link, now_s: float) -> None:
+        """Periodic duties at local time ``now_s`` [s]: heartbeat, TIMESYNC, rates, stream
+        requests, origin, link-loss and silent-input detection (public for lock-step use).
+        """
         cfg = self.config.link
         if now_s >= self._next_heartbeat_s:
             self._next_heartbeat_s = now_s + 1.0 / cfg.heartbeat_hz

@@ -212,6 +212,12 @@ class PublishConfig:
         exclusive_minimum=0.0,
         doc="an estimate whose largest position variance reaches this is not healthy [m^2]",
     )
+    settle_s: float = spec(
+        1.0,
+        minimum=0.0,
+        maximum=60.0,
+        doc="an estimator run must stay healthy this long before its first position is sent [s]",
+    )
     slack_tension_n: float = spec(
         0.3,
         minimum=0.0,
@@ -274,6 +280,12 @@ class ServiceConfig:
     origin: OriginConfig = spec(default_factory=OriginConfig)
     inputs: InputLimitsConfig = spec(default_factory=InputLimitsConfig)
     estimator: EstimatorConfig = spec(default_factory=EstimatorConfig)
+    thrust_dynamics: str = spec(
+        "motor_lag",
+        choices=("motor_lag", "static"),
+        doc="motor_lag: static curve through the profile's motor_time_constant_s "
+        "(needed when the autopilot flies on the estimate); static: the paper's map",
+    )
     tension: TensionConfig = spec(default_factory=TensionConfig)
     publish: PublishConfig = spec(default_factory=PublishConfig)
     recording: RecordingConfig = spec(default_factory=RecordingConfig)
@@ -286,6 +298,14 @@ class ServiceConfig:
     def validate(self) -> None:
         """The 3-state estimator needs a tension source; the 4-state one estimates it."""
         kind = self.estimator.kind
+        if self.estimator.thrust_model is not None:
+            raise ConfigError(
+                "",
+                "estimator.thrust_model",
+                self.estimator.thrust_model,
+                "identified thrust models are not supported by the service yet; use "
+                "thrust_dynamics (motor_lag or static)",
+            )
         if kind == "three_state" and self.tension.source == "estimate":
             raise ConfigError(
                 "",

@@ -177,6 +177,7 @@ class Publisher:
         self._last_sent_position: FloatArray | None = None
         self._estimator_resets: int | None = None
         self._ever_ok = False
+        self._ok_since_s = math.inf
 
     def restart(self) -> None:
         """A new estimator run (flight-controller reboot): raise reset_counter, reset timing."""
@@ -187,6 +188,7 @@ class Publisher:
         self._last_sent_position = None
         self._estimator_resets = None
         self._ever_ok = False
+        self._ok_since_s = math.inf
 
     def set_health(self, health: str) -> list[MAVLinkMessage]:
         """Record a health state decided outside the estimate (stale inputs); STATUSTEXT if new."""
@@ -213,13 +215,21 @@ class Publisher:
         if self._estimator_resets is not None and estimate.reset_counter != self._estimator_resets:
             self._bump_reset()
             self._ever_ok = False
+            self._ok_since_s = math.inf
         self._estimator_resets = estimate.reset_counter
         health = assess_health(estimate, self.config, self.has_tension_state, self._ever_ok)
         if inputs_stale and health in (OK, CONVERGING):
             health = STALE
         if attitude is None and health == OK:
             health = NO_ATTITUDE
-        self._ever_ok = self._ever_ok or health == OK
+        if health == OK and not self._ever_ok:  # settle: OK for settle_s before the first send
+            self._ok_since_s = min(self._ok_since_s, t)
+            if t - self._ok_since_s < self.config.settle_s:
+                health = CONVERGING
+            else:
+                self._ever_ok = True
+        elif not self._ever_ok:
+            self._ok_since_s = math.inf
         out += self._health_transition(health)
         self.counters.by_health[health] += 1
         if (

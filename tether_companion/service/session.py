@@ -16,6 +16,7 @@ from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, Range
 from tether_companion.service.config import ServiceConfig
 from tether_companion.service.ingest import Ingest, Sample, TensionReading
 from tether_companion.service.publish import Publication, Publisher
+from tether_companion.service.thrust import MotorLagThrustInput
 
 
 @dataclass
@@ -45,7 +46,7 @@ class EstimationSession:
         self.publisher = Publisher(
             config.publish, has_tension_state=config.estimator.kind == "four_state"
         )
-        self.estimator = TetherEstimator(config.estimator, vehicle)
+        self.estimator = self._new_estimator()
         self.attitude: AttitudeSample | None = None
         self.last_estimate: Estimate | None = None
         self.boots = 0
@@ -54,10 +55,15 @@ class EstimationSession:
     def restart(self) -> None:
         """Start a fresh estimator run (after a flight-controller reboot)."""
         self.boots += 1
-        self.estimator = TetherEstimator(self.config.estimator, self.vehicle)
+        self.estimator = self._new_estimator()
         self.publisher.restart()
         self.attitude = None
         self.last_estimate = None
+
+    def _new_estimator(self) -> TetherEstimator:
+        lag = self.config.thrust_dynamics == "motor_lag"
+        thrust = MotorLagThrustInput(self.vehicle) if lag else None
+        return TetherEstimator(self.config.estimator, self.vehicle, thrust)
 
     def on_message(self, msg: MAVLinkMessage) -> Step:
         """Process one received message (any sender, any type)."""

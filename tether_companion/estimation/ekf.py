@@ -274,14 +274,17 @@ class ExtendedKalmanFilter:
         x = self.x + gain @ innovation
         # Joseph form: symmetric PSD by construction, unlike (I - K H) P under rounding
         a = self._eye - gain @ h_jac
-        p = a @ self.P @ a.T + gain @ r @ gain.T
+        p = (a @ self.P) @ a.T
+        p += (gain @ r) @ gain.T
         # NaN/inf anywhere in z, h(x), H or R reaches x or P: one reduction catches it, and
         # the state is left untouched
         if not math.isfinite(float(x.sum()) + float(p.sum())):
             status.nonfinite += 1
             return UpdateResult(NONFINITE, math.nan)
+        p += p.T
+        p *= 0.5
         self.x = x
-        self.P = 0.5 * (p + p.T)
+        self.P = p
         status.fused += 1
         status.consecutive_rejections = 0
         if dpotrf(self.P, lower=1, clean=0)[1] != 0:  # Cholesky failed: not PD

@@ -13,6 +13,7 @@ import math
 import numpy as np
 import pytest
 
+from tether_companion.config import ConfigError
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.pipeline import TetherEstimator
@@ -180,3 +181,15 @@ def test_static_thrust_input_is_the_profile_curve(rng) -> None:
         assert thrust_input.total_thrust_n(pwm, 0.0) == pytest.approx(expected, rel=1e-12)
     with pytest.raises(ValueError, match="expected 4"):
         thrust_input.total_thrust_n(np.ones(3) * 1500.0, 0.0)
+
+
+def test_identified_thrust_model_file_is_used_and_bad_file_refused(tmp_path) -> None:
+    model = tmp_path / "thrust.yaml"
+    model.write_text("kind: static\nn_motors: 4\nthrust_curve: {coefficients_n: [0.0, 1.0, 0.0]}\n")
+    config = dataclasses.replace(EstimatorConfig(), thrust_model=str(model))
+    estimator = TetherEstimator(config, VEHICLE)
+    pwm = np.full(4, 1500.0)  # u = 0.5 -> 0.5 N per motor on this linear curve
+    assert estimator.thrust_input.total_thrust_n(pwm, 0.0) == pytest.approx(2.0)
+    missing = dataclasses.replace(EstimatorConfig(), thrust_model=str(tmp_path / "none.yaml"))
+    with pytest.raises(ConfigError, match="file not found"):
+        TetherEstimator(missing, VEHICLE)

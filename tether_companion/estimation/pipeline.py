@@ -149,6 +149,21 @@ class Estimate:
         return self.covariance[POSITION, POSITION]
 
 
+def _default_thrust_input(config: EstimatorConfig, vehicle: VehicleProfile) -> ThrustInput:
+    """The identified model of ``config.thrust_model`` if set, else the profile's static curve.
+
+    Raises
+    ------
+    ConfigError
+        When the thrust-model file is missing or invalid.
+    """
+    if config.thrust_model is None:
+        return StaticThrustInput(vehicle)
+    from tether_companion.sysid.thrust_model import load_thrust_model  # sysid builds on us
+
+    return load_thrust_model(config.thrust_model)
+
+
 def _finite(value: float) -> bool:
     return math.isfinite(value)
 
@@ -163,7 +178,8 @@ class TetherEstimator:
     vehicle
         Vehicle profile (mass, thrust curve, motor count).
     thrust_input
-        PWM-to-thrust map; default :class:`StaticThrustInput` of ``vehicle``.
+        PWM-to-thrust map; default: the model file of ``config.thrust_model`` (written by
+        ``tether-companion sysid``), else :class:`StaticThrustInput` of ``vehicle``.
     """
 
     def __init__(
@@ -175,7 +191,7 @@ class TetherEstimator:
         self.config = config
         self.vehicle = vehicle
         self.thrust_input: ThrustInput = (
-            thrust_input if thrust_input is not None else StaticThrustInput(vehicle)
+            thrust_input if thrust_input is not None else _default_thrust_input(config, vehicle)
         )
         model_cls = FourStateModel if config.kind == "four_state" else ThreeStateModel
         self.model = model_cls(vehicle.mass_kg, config.min_cable_length_m)

@@ -13,6 +13,7 @@ the accelerometer reads the specific force ``R (T_vec + F_cable) / m = R (0, 0, 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import time
 from dataclasses import dataclass
@@ -22,7 +23,7 @@ from numpy.typing import NDArray
 
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.frames import rotation_ned_to_body
-from tether_companion.mavlink.endpoints import Link
+from tether_companion.mavlink.endpoints import Link, LinkClosed
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.mavlink.units import (
     attitude_message,
@@ -202,7 +203,19 @@ class FakeFlightController:
         self.streaming = False
 
     async def run(self, duration_fc_s: float) -> None:
-        """Serve for ``duration_fc_s`` of flight-controller time once streaming started."""
+        """Serve for ``duration_fc_s`` of flight-controller time once streaming started.
+
+        A receive task answers and time-stamps what the companion sends the moment it arrives.
+        """
+        receiver = asyncio.create_task(self._receive(), name="fake-fc-rx")
+        try:
+            await self._stream(duration_fc_s)
+        finally:
+            receiver.cancel()
+            with contextlib.suppress(asyncio.CancelledError, LinkClosed):
+                await receiver
+
+    async def _stream(self, duration_fc_s: float) -> None:
         d = dialect
         next_heartbeat = 0.0
         streamed = 0.0
@@ -210,7 +223,6 @@ class FakeFlightController:
         start = time.monotonic()
         wakeups = 0
         while streamed < duration_fc_s:
-            self._drain()
             now = time.monotonic()
             if now >= next_heartbeat:
                 next_heartbeat = now + 1.0
@@ -239,41 +251,43 @@ class FakeFlightController:
             wakeups += 1
             delay = start + wakeups * self.TICK_S * ticks_per_wakeup / self.speed - time.monotonic()
             await asyncio.sleep(max(0.0, delay))
-        self._drain()
+        await asyncio.sleep(0.05)  # let the last replies arrive
 
-    def _drain(self) -> None:
+    async def _receive(self) -> None:
+        while True:
+            msg = await self.link.recv()
+            self._on_message(msg, time.monotonic())
+
+    def _on_message(self, msg: MAVLinkMessage, arrival_s: float) -> None:
         d = dialect
         log = self.log
-        while (msg := self.link.recv_nowait()) is not None:
-            kind = msg.get_type()
-            if kind == "VISION_POSITION_ESTIMATE":
-                log.vision.append(msg)
-                log.vision_arrival_s[msg.usec] = time.monotonic()
-            elif kind == "COMMAND_LONG":
-                log.commands.append(msg)
-                if (
-                    msg.command == d.MAV_CMD_SET_MESSAGE_INTERVAL
-                    and int(msg.param1) == d.MAVLINK_MSG_ID_RAW_IMU
-                ):
-                    self.streaming = True
-                self.link.send(d.MAVLink_command_ack_message(msg.command, d.MAV_RESULT_ACCEPTED))
-            elif kind == "REQUEST_DATA_STREAM":
+        kind = msg.get_type()
+        if kind == "VISION_POSITION_ESTIMATE":
+            log.vision.append(msg)
+            log.vision_arrival_s[msg.usec] = arrival_s
+        elif kind == "COMMAND_LONG":
+            log.commands.append(msg)
+            if (
+                msg.command == d.MAV_CMD_SET_MESSAGE_INTERVAL
+                and int(msg.param1) == d.MAVLINK_MSG_ID_RAW_IMU
+            ):
                 self.streaming = True
-            elif kind == "SET_GPS_GLOBAL_ORIGIN":
-                log.origins.append(msg)
-                self.link.send(
-                    d.MAVLink_gps_global_origin_message(
-                        msg.latitude, msg.longitude, msg.altitude, 0
-                    )
-                )
-            elif kind == "HEARTBEAT":
-                log.heartbeats.append(msg)
-            elif kind == "STATUSTEXT":
-                log.statustexts.append(msg)
-            elif kind == "NAMED_VALUE_FLOAT":
-                log.named_values.append(msg)
-            elif kind == "TIMESYNC":
-                if msg.tc1 == 0:
-                    self.link.send(d.MAVLink_timesync_message(int(self.time_s * 1e9), msg.ts1))
-                else:
-                    log.timesync_replies.append(msg)
+            self.link.send(d.MAVLink_command_ack_message(msg.command, d.MAV_RESULT_ACCEPTED))
+        elif kind == "REQUEST_DATA_STREAM":
+            self.streaming = True
+        elif kind == "SET_GPS_GLOBAL_ORIGIN":
+            log.origins.append(msg)
+            self.link.send(
+                d.MAVLink_gps_global_origin_message(msg.latitude, msg.longitude, msg.altitude, 0)
+            )
+        elif kind == "HEARTBEAT":
+            log.heartbeats.append(msg)
+        elif kind == "STATUSTEXT":
+            log.statustexts.append(msg)
+        elif kind == "NAMED_VALUE_FLOAT":
+            log.named_values.append(msg)
+        elif kind == "TIMESYNC":
+            if msg.tc1 == 0:
+                self.link.send(d.MAVLink_timesync_message(int(self.time_s * 1e9), msg.ts1))
+            else:
+                log.timesync_replies.append(msg)

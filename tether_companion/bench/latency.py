@@ -1,0 +1,149 @@
+"""``bench latency``: IMU arrival -> VISION_POSITION_ESTIMATE latency and CPU use of the service.
+
+The service runs as its own process (``tether-companion run``, the shipped configuration) and
+this process plays the flight controller over real UDP on 127.0.0.1: RAW_IMU, ATTITUDE and
+SERVO_OUTPUT_RAW at 200 Hz and DISTANCE_SENSOR at 20 Hz of a hovering tethered drone, in real
+time. A VISION_POSITION_ESTIMATE carries the ``time_usec`` of the IMU sample it was computed at,
+so each one is matched to the moment that RAW_IMU left here; the latency is its arrival back
+here minus that send time (both loopback hops, the service's decode + EKF + encode, and this
+process's own wake-up: an upper bound on the service's share). CPU is the service process's
+user + system time over the measurement window from ``/proc/PID/stat``, as a share of one core.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+from rich.console import Console
+from rich.table import Table
+
+from tether_companion.config import ConfigError
+from tether_companion.mavlink.endpoints import open_link, parse_endpoint
+from tether_companion.resources import CONFIGS_DIR, PROJECT_ROOT
+from tether_companion.service.config import load_service_config, load_vehicle_for
+from tether_companion.service.synthetic import FakeFlightController, HoverStreams
+
+HELP = "latency from IMU arrival to VISION_POSITION_ESTIMATE, and service CPU at 200 Hz input"
+WARMUP_S = 3.0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``bench latency``."""
+    parser.add_argument(
+        "--duration", type=float, default=30.0, help="measured seconds (default 30)"
+    )
+    parser.add_argument(
+        "--publish-hz",
+        type=float,
+        default=None,
+        help="VISION_POSITION_ESTIMATE rate (default: the config's 30 Hz)",
+    )
+    parser.add_argument(
+        "--config", default=str(CONFIGS_DIR / "companion.yaml"), help="service YAML"
+    )
+    parser.add_argument("--seed", type=int, default=1, help="accelerometer noise seed")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the benchmark and print the table."""
+    if not args.duration > 0:
+        raise ConfigError("", "--duration", args.duration, "must be > 0")
+    result = asyncio.run(_measure(args))
+    _print(result, args)
+    return 0
+
+
+def _cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+async def _measure(args: argparse.Namespace) -> dict:
+    data = yaml.safe_load(Path(args.config).read_text()) or {}
+    if args.publish_hz is not None:
+        data.setdefault("publish", {})["rate_hz"] = args.publish_hz
+    config = load_service_config(args.config)  # validates the file as given
+    vehicle = load_vehicle_for(config)
+    fc_link = await open_link(
+        parse_endpoint("udpin:127.0.0.1:0", "listen"), system_id=1, component_id=1
+    )
+    port = fc_link.local_address[1]
+    with tempfile.TemporaryDirectory(prefix="tether-bench-") as scratch:
+        config_path = Path(scratch) / "companion.yaml"
+        config_path.write_text(yaml.safe_dump(data))
+        env = dict(
+            os.environ,
+            PYTHONPATH=os.pathsep.join(
+                filter(None, (str(PROJECT_ROOT), os.environ.get("PYTHONPATH")))
+            ),
+        )
+        service = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "tether_companion.cli", "run", "--config", str(config_path),
+            "--connect", f"udp:127.0.0.1:{port}", "--no-record",
+            env=env, stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.PIPE,
+        )  # fmt: skip
+        try:
+            streams = HoverStreams(
+                vehicle, np.array([2.0, 1.0, -3.0]), 4.0, rng=np.random.default_rng(args.seed)
+            )
+            fc = FakeFlightController(fc_link, streams, speed=1.0)
+            await fc.run(WARMUP_S)
+            cpu0, wall0, first_usec = (
+                _cpu_seconds(service.pid),
+                time.monotonic(),
+                int(fc.time_s * 1e6),
+            )
+            await fc.run(args.duration)
+            cpu1, wall1 = _cpu_seconds(service.pid), time.monotonic()
+        finally:
+            service.terminate()
+            _, err = await service.communicate()
+            await fc_link.close()
+    latencies = [
+        arrival - fc.imu_sent_s[usec]
+        for usec, arrival in fc.log.vision_arrival_s.items()
+        if usec >= first_usec and usec in fc.imu_sent_s
+    ]
+    imu_sent = sum(1 for usec in fc.imu_sent_s if usec >= first_usec)
+    return {
+        "latency_ms": np.array(latencies) * 1e3,
+        "imu_sent": imu_sent,
+        "cpu_share": (cpu1 - cpu0) / (wall1 - wall0),
+        "wall_s": wall1 - wall0,
+        "rate_hz": len(latencies) / (wall1 - wall0),
+        "service_exit": service.returncode,
+        "service_err": err.decode(errors="replace")[-500:],
+    }
+
+
+def _print(result: dict, args: argparse.Namespace) -> None:
+    console = Console()
+    lat = result["latency_ms"]
+    table = Table(title="service latency and CPU (200 Hz IMU over UDP loopback, real time)")
+    for column in ("measure", "value", "target"):
+        table.add_column(column)
+    table.add_row("IMU messages sent (measured window)", f"{result['imu_sent']}", "")
+    table.add_row(
+        "VISION_POSITION_ESTIMATE received", f"{lat.size} ({result['rate_hz']:.1f} Hz)", ""
+    )
+    if lat.size:
+        p50, p90, p99 = np.percentile(lat, [50, 90, 99])
+        table.add_row("latency p50 (IMU sent -> estimate back)", f"{p50:.3f} ms", "")
+        table.add_row("latency p90", f"{p90:.3f} ms", "")
+        table.add_row("latency p99", f"{p99:.3f} ms", "< 2 ms")
+        table.add_row("latency max", f"{lat.max():.3f} ms", "")
+    table.add_row(
+        "service CPU (user + system)", f"{100 * result['cpu_share']:.1f} % of one core", "< 10 %"
+    )
+    table.add_row("measured window", f"{result['wall_s']:.1f} s after {WARMUP_S:g} s warm-up", "")
+    console.print(table)
+    if not lat.size:
+        console.print(f"[red]no estimates came back[/red]; service stderr: {result['service_err']}")

@@ -16,7 +16,7 @@ from tether_companion import __version__
 from tether_companion.config import ConfigError
 from tether_companion.errors import InputError
 
-COMMANDS: tuple[str, ...] = ("run", "replay", "simulate", "bench", "emulate", "sysid")
+COMMANDS: tuple[str, ...] = ("demo", "run", "replay", "simulate", "bench", "emulate", "sysid")
 """Command names, in the order ``--help`` lists them; module ``commands/<name>.py`` each."""
 
 EXIT_USAGE = 2

@@ -17,6 +17,7 @@ BENCHMARKS: tuple[str, ...] = (
     "tension",
     "catenary",
     "emulator",
+    "latency",
 )
 """Benchmark names, one per line, in the order ``bench --help`` lists them."""
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tether_companion.sysid.input_map import quadratic_shape
+from tether_companion.sysid.input_map import InputMap
 from tether_companion.sysid.metrics import DEFAULT_K_STEPS, Metrics, evaluate
 from tether_companion.sysid.processing import IdData
 from tether_companion.sysid.structures.arx import ArxOrders, fit_arx
@@ -65,12 +65,9 @@ def identify(
     The ARX orders are selected first (minimum description length) and reused as the
     ``nb``/``nf``/``nk`` of output error and Box-Jenkins. ``input_kind`` is the input map
     of the linear structures (:mod:`tether_companion.sysid.input_map`): ``"quadratic"``
-    (Hammerstein, the static fit's curve shape) or ``"pwm"`` (PWM as is, as in the paper).
+    (Hammerstein: ``cmd`` and ``cmd^2`` of every motor) or ``"pwm"`` (PWM as is, as in the paper).
     """
-    input_map = None
-    if input_kind == "quadratic":
-        static = fit_static(estimation, FitContext.from_data(estimation, pwm_range_us))
-        input_map = quadratic_shape(static.curve.coefficients_n, pwm_range_us)
+    input_map = InputMap(input_kind, *pwm_range_us)
     context = FitContext.from_data(estimation, pwm_range_us, input_map)
     orders = selected_orders(estimation, context)
     results = []

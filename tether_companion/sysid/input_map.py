@@ -2,10 +2,11 @@
 
 A rotor's thrust grows with the square of its speed, so thrust is close to quadratic in the
 throttle command (Martins eq. 6). A linear model from PWM to thrust fits that curve only
-near one operating point. Feeding the linear dynamics with each motor's *static* thrust
-``v_i = c1 cmd_i + c2 cmd_i^2`` (``cmd`` the normalised throttle in [0, 1]; the shape
-``c1, c2`` from the static per-motor fit) leaves them only the motor lag to learn. The
-identity map (``kind = "pwm"``) feeds the PWM itself [us], as in the paper.
+near one operating point. With ``kind = "quadratic"`` the linear dynamics get two inputs per
+motor, the normalised throttle ``cmd_i`` in [0, 1] and ``cmd_i^2``: every motor's
+``lag(c0 + c1 cmd_i + c2 cmd_i^2)`` is then exactly a linear system of these inputs, and the
+curve's coefficients are estimated together with the dynamics. ``kind = "pwm"`` feeds the
+PWM itself [us], as in the paper.
 """
 
 from __future__ import annotations
@@ -28,12 +29,9 @@ INPUT_MAPS = ("quadratic", "pwm")
 class InputMap:
     """Map PWM [us] to the linear model's inputs (see module docstring)."""
 
-    kind: str = spec("pwm", choices=INPUT_MAPS, doc="'pwm' (us) or 'quadratic' (N per motor)")
+    kind: str = spec("pwm", choices=INPUT_MAPS, doc="'pwm' (us) or 'quadratic' (cmd and cmd^2)")
     pwm_min_us: float = spec(1000.0, minimum=500.0, maximum=2500.0, doc="PWM at zero command [us]")
     pwm_max_us: float = spec(2000.0, minimum=500.0, maximum=2500.0, doc="PWM at full command [us]")
-    coefficients_n: tuple[float, float] = spec(
-        (1.0, 0.0), doc="(c1, c2) of v = c1 cmd + c2 cmd^2 [N] (quadratic only)"
-    )
 
     def validate(self) -> None:
         """The PWM span must not be empty."""
@@ -43,26 +41,23 @@ class InputMap:
             )
 
     def inputs(self, data: IdData) -> FloatArray:
-        """Model inputs from processed data, shape (n, 4): PWM, or ``c1 cmd + c2 cmd^2`` built
-        from the separately filtered ``cmd`` and ``cmd^2``."""
+        """Model inputs from processed data: PWM, shape (n, 4), or ``[cmd, cmd^2]``, shape
+        (n, 8), from the separately filtered ``cmd`` and ``cmd^2``."""
         if self.kind == "pwm":
             return data.pwm_us
-        c1, c2 = self.coefficients_n
-        return c1 * data.command + c2 * data.command_sq
+        return np.hstack([data.command, data.command_sq])
 
     def map_pwm(self, pwm_us: FloatArray) -> FloatArray:
-        """Model inputs from raw pulse widths [us] (any shape)."""
+        """Model inputs from one PWM sample, shape (n_motors,) [us] -> (n_inputs,)."""
         pwm = np.asarray(pwm_us, dtype=float)
         if self.kind == "pwm":
             return pwm
         cmd = normalised_command(pwm, (self.pwm_min_us, self.pwm_max_us))
-        c1, c2 = self.coefficients_n
-        return cmd * (c1 + c2 * cmd)
+        return np.concatenate([cmd, cmd * cmd])
 
-    @property
-    def unit(self) -> str:
-        """Unit of the mapped inputs."""
-        return "us" if self.kind == "pwm" else "N"
+    def inputs_per_motor(self) -> int:
+        """Model inputs per motor: 1 (pwm) or 2 (quadratic)."""
+        return 1 if self.kind == "pwm" else 2
 
     def to_mapping(self) -> dict[str, Any]:
         """Plain data for the thrust-model YAML file."""
@@ -70,15 +65,4 @@ class InputMap:
             "kind": self.kind,
             "pwm_min_us": float(self.pwm_min_us),
             "pwm_max_us": float(self.pwm_max_us),
-            "coefficients_n": [float(c) for c in self.coefficients_n],
         }
-
-
-def quadratic_shape(
-    coefficients_n: tuple[float, float, float], pwm_range_us: tuple[float, float]
-) -> InputMap:
-    """The quadratic map shaped by a static curve's ``(c0, c1, c2)`` (``cmd`` if c1 = c2 = 0)."""
-    _, c1, c2 = coefficients_n
-    if c1 == 0.0 and c2 == 0.0:
-        c1 = 1.0
-    return InputMap("quadratic", pwm_range_us[0], pwm_range_us[1], (float(c1), float(c2)))

@@ -7,9 +7,10 @@
 - ``kind: linear``: a discrete state-space model of the motor dynamics about an operating
   point, ``x(k+1) = A x + B (v - v0)``, ``T = T0 + C x + D (v - v0)``, sampled every
   ``sample_time_s``, with ``v`` the PWM mapped by ``input_map`` (PWM itself, or each motor's
-  static thrust). ARX, output error, Box-Jenkins, state-space, transfer-function and process
-  models are all written this way (their input paths; the noise model only serves
-  prediction from measured thrust, which the estimator does not have).
+  normalised throttle and its square). ARX, output error, Box-Jenkins, state-space,
+  transfer-function and process models are all written this way (their input paths; the
+  noise model only serves prediction from measured thrust, which the estimator does not
+  have).
 
 :func:`load_thrust_model` reads either into an object with
 ``total_thrust_n(pwm_us, time_s) -> float``.
@@ -51,12 +52,12 @@ class StaticModelFile:
 class LinearModelFile:
     """Schema of a ``kind: linear`` thrust-model file (see module docstring)."""
 
-    input_operating_point: tuple[float, ...] = spec(doc="v0, one per motor")
+    input_operating_point: tuple[float, ...] = spec(doc="v0, one per model input")
     thrust_operating_point_n: float = spec(doc="T0 [N]")
     a: tuple[tuple[float, ...], ...] = spec(doc="A, n x n")
-    b: tuple[tuple[float, ...], ...] = spec(doc="B, n x n_motors")
+    b: tuple[tuple[float, ...], ...] = spec(doc="B, n x n_inputs")
     c: tuple[tuple[float, ...], ...] = spec(doc="C, 1 x n")
-    d: tuple[tuple[float, ...], ...] = spec(doc="D, 1 x n_motors")
+    d: tuple[tuple[float, ...], ...] = spec(doc="D, 1 x n_inputs")
     kind: str = spec("linear", choices=("linear",), doc="model kind")
     structure: str = spec("arx", doc="structure the model came from")
     orders: str = spec("", doc="orders, for the record")
@@ -69,6 +70,13 @@ class LinearModelFile:
     def validate(self) -> None:
         """Matrix shapes must agree and the model must be stable (all |eig(A)| < 1)."""
         n, m = len(self.a), len(self.input_operating_point)
+        if m % self.input_map.inputs_per_motor():
+            raise ConfigError(
+                "",
+                "input_operating_point",
+                m,
+                f"needs {self.input_map.inputs_per_motor()} values per motor",
+            )
         checks = (
             ("a", self.a, (n, n)),
             ("b", self.b, (n, m)),
@@ -111,8 +119,8 @@ class LinearThrust:
     controller holds its outputs), and each step's input is the time average of the mapped
     PWM over the step, which also keeps fast output chatter from aliasing. The first sample,
     a jump back in time or a pause longer than ``MAX_GAP_STEPS`` steps restarts the model in
-    steady state for the current PWM. The output uses the state at the last step boundary
-    (at most one sample old) plus the direct term.
+    steady state for the current PWM. The output interpolates the state between the last
+    step boundary and the next (predicted from the input so far), plus the direct term.
     """
 
     spec: LinearModelFile
@@ -137,7 +145,7 @@ class LinearThrust:
     @property
     def n_motors(self) -> int:
         """Number of PWM inputs."""
-        return int(self._v0.shape[0])
+        return int(self._v0.shape[0]) // self.spec.input_map.inputs_per_motor()
 
     def _restart(self, v: FloatArray, time_s: float) -> None:
         n = self._a.shape[0]
@@ -166,8 +174,22 @@ class LinearThrust:
         else:
             self._advance(time_s)
         self._held = v
-        thrust = self.spec.thrust_operating_point_n + self._c @ self._x + self._d @ (v - self._v0)
+        thrust = (
+            self.spec.thrust_operating_point_n
+            + self._c @ self._state_now()
+            + self._d @ (v - self._v0)
+        )
         return max(float(thrust[0]), 0.0)
+
+    def _state_now(self) -> FloatArray:
+        """State interpolated between the last boundary and the next, which is predicted from
+        the input average so far (removes most of the half-sample latency of a sampled model)."""
+        dt = self.spec.sample_time_s
+        elapsed = dt - (self._boundary_s - self._last_s)
+        if elapsed <= 0.0:
+            return self._x
+        upcoming = self._a @ self._x + self._b @ (self._sum / elapsed - self._v0)
+        return self._x + (elapsed / dt) * (upcoming - self._x)
 
     def _advance(self, time_s: float) -> None:
         """Integrate the held input up to ``time_s``, stepping at every boundary passed."""

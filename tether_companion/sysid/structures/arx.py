@@ -76,7 +76,7 @@ def estimate_arx(
     target = np.concatenate([p[1] for p in pieces])
     theta, *_ = np.linalg.lstsq(phi, target, rcond=None)
     loss = float(np.mean((target - phi @ theta) ** 2))
-    m = experiments[0].pwm_us.shape[1]
+    m = len(context.u0)
     a = np.concatenate(([1.0], theta[: orders.na]))
     b = np.zeros((m, orders.nk + orders.nb))
     b[:, orders.nk :] = theta[orders.na :].reshape(m, orders.nb)

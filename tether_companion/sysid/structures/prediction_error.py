@@ -45,6 +45,40 @@ def _unpack(
     return f, b, c, d
 
 
+def _shift(x: FloatArray, lag: int) -> FloatArray:
+    """``x(t - lag)`` with zeros before the start."""
+    if lag == 0:
+        return x
+    return np.concatenate([np.zeros(lag), x[:-lag]])
+
+
+def _jacobian_block(
+    u: FloatArray, y: FloatArray, polys: tuple[FloatArray, ...], shape: tuple[int, ...]
+) -> FloatArray:
+    """Jacobian of the residual ``r = (D/C)(G u - y)`` of one experiment (zero initial state).
+
+    ``dr/db_ij = (D/(C F)) u_i(t-nk-j)``, ``dr/df_j = -(D/(C F)) g(t-j)`` with ``g = G u``,
+    ``dr/dc_j = -(1/C) r(t-j)``, ``dr/dd_j = (1/C) s(t-j)`` with ``s = g - y``.
+    """
+    f, b, c, d = polys
+    m, nf, nb, nk, nc = shape
+    g = sum(lfilter(b[i], f, u[:, i]) for i in range(m))
+    s = g - y
+    r = lfilter(d, c, s)
+    cf = np.convolve(c, f)
+    columns = []
+    w = lfilter(d, cf, g)
+    columns += [-_shift(w, j) for j in range(1, nf + 1)]
+    for i in range(m):
+        z = lfilter(d, cf, u[:, i])
+        columns += [_shift(z, nk + j) for j in range(nb)]
+    if nc:
+        rc, sc = lfilter([1.0], c, r), lfilter([1.0], c, s)
+        columns += [-_shift(rc, j) for j in range(1, nc + 1)]
+        columns += [_shift(sc, j) for j in range(1, nc + 1)]
+    return np.column_stack(columns)
+
+
 def _search(
     centred: Sequence[tuple[FloatArray, FloatArray]],
     theta0: FloatArray,
@@ -52,19 +86,28 @@ def _search(
     dt_s: float,
     max_nfev: int,
 ) -> FloatArray:
-    """Parameters minimising the one-step prediction error from ``theta0``."""
+    """Parameters minimising the one-step prediction error from ``theta0`` (analytic
+    Jacobian, see :func:`_jacobian_block`)."""
     m, nf, nb, nk, nc = shape
     total = sum(len(y) for _, y in centred)
 
     def residuals(theta: FloatArray) -> FloatArray:
-        f, b, c, d = _unpack(theta, m, nf, nb, nk, nc)
+        f, b, c, d = _unpack(theta, *shape)
         if not (_stable(f) and _stable(c)):
             return np.full(total, _UNSTABLE_RESIDUAL)
         model = PolynomialModel(f=f, b=b, c=c, d=d, u0=np.zeros(m), dt_s=dt_s)
         return np.concatenate([model.predict_deviation(u, y, 1) - y for u, y in centred])
 
-    result = least_squares(residuals, theta0, method="trf", x_scale="jac", max_nfev=max_nfev)
-    f, _, c, _ = _unpack(result.x, m, nf, nb, nk, nc)
+    def jacobian(theta: FloatArray) -> FloatArray:
+        polys = _unpack(theta, *shape)
+        if not (_stable(polys[0]) and _stable(polys[2])):
+            return np.zeros((total, theta.shape[0]))
+        return np.vstack([_jacobian_block(u, y, polys, shape) for u, y in centred])
+
+    result = least_squares(
+        residuals, theta0, jac=jacobian, method="trf", x_scale="jac", max_nfev=max_nfev
+    )
+    f, _, c, _ = _unpack(result.x, *shape)
     if not np.all(np.isfinite(result.x)) or not (_stable(f) and _stable(c)):
         raise ArithmeticError(
             f"prediction-error search ended at an unstable model ({result.message})"

@@ -125,3 +125,54 @@ def test_service_process_notifies_ready_watchdog_and_stops_on_sigterm(
     assert any(m.startswith("STATUS=") for m in messages)
     recordings = list(record_dir.glob("*.tlog"))
     assert len(recordings) == 1 and recordings[0].stat().st_size > 0  # heartbeats were recorded
+
+
+UNIT = PROJECT_ROOT / "configs" / "tether-companion.service"
+
+
+def _unit_settings() -> dict[str, list[str]]:
+    settings: dict[str, list[str]] = {}
+    for line in UNIT.read_text().splitlines():
+        if "=" in line and not line.startswith(("#", "[")):
+            key, _, value = line.partition("=")
+            settings.setdefault(key.strip(), []).append(value.strip())
+    return settings
+
+
+def test_unit_file_is_a_sandboxed_notify_service() -> None:
+    from tether_companion.service.config import load_service_config
+
+    unit = _unit_settings()
+    assert unit["Type"] == ["notify"] and unit["Restart"] == ["on-failure"]
+    assert unit["WatchdogSec"] == ["10s"] and unit["User"] == ["tether-companion"]
+    for key, value in (
+        ("NoNewPrivileges", "yes"),
+        ("ProtectSystem", "strict"),
+        ("ProtectHome", "yes"),
+        ("PrivateTmp", "yes"),
+        ("CapabilityBoundingSet", ""),
+        ("SupplementaryGroups", "dialout"),
+    ):
+        assert unit[key] == [value], key
+    shipped = load_service_config(PROJECT_ROOT / "configs" / "companion.yaml")
+    assert shipped.recording.directory.startswith(unit["ReadWritePaths"][0])
+    assert any(shipped.link.connect.split(":")[1] in allow for allow in unit["DeviceAllow"])
+
+
+@pytest.mark.skipif(
+    subprocess.run(["which", "systemd-analyze"], capture_output=True).returncode != 0,
+    reason="systemd-analyze is not installed on this machine",
+)
+def test_systemd_analyze_security_rates_the_unit_ok(tmp_path: Path) -> None:
+    unit = tmp_path / "tether-companion.service"
+    unit.write_text(UNIT.read_text())
+    result = subprocess.run(
+        ["systemd-analyze", "security", "--offline=yes", "--no-pager", str(unit)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    last = result.stdout.strip().splitlines()[-1]
+    assert "Overall exposure level" in last, result.stdout + result.stderr
+    exposure = float(last.split(":")[1].split()[0])
+    assert exposure <= 2.0, last  # systemd calls < 2 "OK"; an unsandboxed service scores 9.6

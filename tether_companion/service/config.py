@@ -284,7 +284,8 @@ class ServiceConfig:
         "motor_lag",
         choices=("motor_lag", "static"),
         doc="motor_lag: static curve through the profile's motor_time_constant_s "
-        "(needed when the autopilot flies on the estimate); static: the paper's map",
+        "(needed when the autopilot flies on the estimate); static: the paper's map; "
+        "ignored when estimator.thrust_model names an identified model",
     )
     tension: TensionConfig = spec(default_factory=TensionConfig)
     publish: PublishConfig = spec(default_factory=PublishConfig)
@@ -298,14 +299,6 @@ class ServiceConfig:
     def validate(self) -> None:
         """The 3-state estimator needs a tension source; the 4-state one estimates it."""
         kind = self.estimator.kind
-        if self.estimator.thrust_model is not None:
-            raise ConfigError(
-                "",
-                "estimator.thrust_model",
-                self.estimator.thrust_model,
-                "identified thrust models are not supported by the service yet; use "
-                "thrust_dynamics (motor_lag or static)",
-            )
         if kind == "three_state" and self.tension.source == "estimate":
             raise ConfigError(
                 "",

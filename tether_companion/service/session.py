@@ -61,7 +61,8 @@ class EstimationSession:
         self.last_estimate = None
 
     def _new_estimator(self) -> TetherEstimator:
-        lag = self.config.thrust_dynamics == "motor_lag"
+        identified = self.config.estimator.thrust_model is not None  # the estimator loads it
+        lag = self.config.thrust_dynamics == "motor_lag" and not identified
         thrust = MotorLagThrustInput(self.vehicle) if lag else None
         return TetherEstimator(self.config.estimator, self.vehicle, thrust)
 

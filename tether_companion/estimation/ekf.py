@@ -93,9 +93,7 @@ class SensorStatus:
     last_nis
         Normalised innovation squared of the last finite sample (dimensionless).
     last_innovation
-        Innovation ``z - h(x)`` of the last finite sample, shape (m,), sensor units.
-    last_fused_time_s
-        Filter time of the last fused sample [s] (``nan`` before the first).
+        Innovation ``z - h(x)`` of the last sample that reached the gate, shape (m,).
     """
 
     fused: int = 0
@@ -106,7 +104,6 @@ class SensorStatus:
     consecutive_rejections: int = 0
     last_nis: float = math.nan
     last_innovation: FloatArray = field(default_factory=lambda: np.zeros(0))
-    last_fused_time_s: float = math.nan
 
 
 @dataclass(frozen=True, slots=True)

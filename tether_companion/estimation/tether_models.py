@@ -88,7 +88,6 @@ class FourStateModel:
     """
 
     n = 4
-    state_names = ("p_n_m", "p_e_m", "p_d_m", "f_c_n")
     has_tension_state = True
 
     def __init__(self, mass_kg: float, min_cable_length_m: float = 0.1) -> None:
@@ -120,7 +119,6 @@ class ThreeStateModel:
     """The 3-state model of the authors' earlier work: position only, tension known."""
 
     n = 3
-    state_names = ("p_n_m", "p_e_m", "p_d_m")
     has_tension_state = False
 
     def __init__(self, mass_kg: float, min_cable_length_m: float = 0.1) -> None:
@@ -150,6 +148,3 @@ def altimeter(x: FloatArray) -> tuple[FloatArray, FloatArray]:
     jac = np.zeros((1, x.size))
     jac[0, P_D] = -1.0
     return np.array((-x[P_D],)), jac
-
-
-TetherModel = FourStateModel | ThreeStateModel

@@ -97,3 +97,15 @@ def test_bad_estimator_config_and_seed_exit_2(tmp_path, capsys) -> None:
         main(["simulate", scenario, "--seed", "-4"])
     assert info.value.code == 2
     assert "must be >= 0" in capsys.readouterr().err
+
+
+def test_simulate_says_so_when_matplotlib_is_missing(tmp_path, capsys, monkeypatch) -> None:
+    from tether_companion.commands import simulate
+
+    def no_matplotlib(*args, **kwargs):
+        raise ImportError("No module named 'matplotlib'")
+
+    monkeypatch.setattr(simulate, "write_plots", no_matplotlib)
+    scenario = _short_scenario(tmp_path, 0.5)
+    assert main(["simulate", scenario, "--plots", str(tmp_path / "plots")]) == 0
+    assert "matplotlib is not installed" in capsys.readouterr().out

@@ -87,3 +87,25 @@ def split(data: IdData, fraction: float = 0.6) -> tuple[IdData, IdData]:
     """Estimation and validation parts."""
     k = int(fraction * len(data))
     return data.part(0, k), data.part(k, len(data))
+
+
+def log_signals(
+    duration_s: float = 40.0, rate_hz: float = 50.0, ground_s: float = 3.0, constant: bool = False
+) -> dict[str, np.ndarray]:
+    """Signals of a simple flight for log-format tests (all on one clock, SI units).
+
+    On the ground for ``ground_s`` (motors at 1100 us, height 0), then airborne at 1.5 m with
+    PWM steps of each motor (unless ``constant``) and a static quadratic thrust
+    ``f = 0.5 u + 7.5 u^2`` per motor, accelerometer ``z = -T / 1.5 kg``.
+    """
+    t = np.arange(int(duration_s * rate_hz)) / rate_hz + 0.5
+    airborne = t >= t[0] + ground_s
+    pwm = np.full((t.size, 4), 1100.0)
+    steps = 40.0 * np.sign(np.sin(2.0 * np.pi * np.outer(t, [0.3, 0.4, 0.5, 0.7])))
+    pwm[airborne] = 1668.0 + (0.0 if constant else steps[airborne])
+    u = (pwm - 1000.0) / 1000.0
+    thrust = np.where(airborne, np.sum(0.5 * u + 7.5 * u * u, axis=1), 1.5 * 9.80665)
+    accel = np.column_stack([0.05 * np.sin(t), -0.03 * np.cos(t), -thrust / 1.5])
+    euler = np.column_stack([0.02 * np.sin(0.5 * t), -0.01 * np.cos(0.3 * t), 0.1 * t % 3.0])
+    height = np.where(airborne, 1.5, 0.0)
+    return {"time_s": t, "pwm_us": pwm, "accel_mps2": accel, "euler_rad": euler, "height_m": height}

@@ -50,7 +50,9 @@ class ProcessingOptions:
         0.6, minimum=0.2, maximum=0.9, doc="share of samples used for estimation"
     )
     airborne_height_m: float = spec(
-        0.3, exclusive_minimum=0.0, doc="height above the log's lowest that counts as airborne [m]"
+        0.3,
+        exclusive_minimum=0.0,
+        doc="height above ground (0 or the lowest reading) counted as airborne [m]",
     )
     airborne_pwm_us: float = spec(
         1150.0,
@@ -183,10 +185,16 @@ def _airborne(log: FlightLog, time_s: FloatArray, options: ProcessingOptions) ->
     for series in streams:
         gap |= _gaps(series, time_s, options.max_gap_s)
     if log.height_m is not None:
-        height = np.interp(time_s, log.height_m.time_s, log.height_m.values[:, 0])
-        lowest = float(np.min(log.height_m.values))
-        airborne = (height > lowest + options.airborne_height_m) & ~_gaps(
-            log.height_m, time_s, options.max_gap_s
+        # ground is 0 (rangefinder, or barometer zeroed at take-off) or the lowest reading when
+        # it drifts below; times without a height reading nearby are not counted as airborne
+        series = log.height_m
+        height = np.interp(time_s, series.time_s, series.values[:, 0])
+        ground = min(float(np.min(series.values)), 0.0)
+        covered = (time_s >= series.time_s[0]) & (time_s <= series.time_s[-1])
+        airborne = (
+            (height > ground + options.airborne_height_m)
+            & covered
+            & ~_gaps(series, time_s, options.max_gap_s)
         )
     else:
         pwm = _interpolate(log.pwm_us.time_s, log.pwm_us.values, time_s)

@@ -43,13 +43,13 @@ def _read_messages(path: Path) -> dict[str, list[Any]]:
     with contextlib.redirect_stderr(io.StringIO()):
         try:
             reader = DFReader.DFReader_binary(source)
-        except (OSError, ValueError, IndexError, KeyError) as exc:
+        except Exception as exc:  # noqa: BLE001 - DFReader raises many kinds on bad bytes
             raise InputError(f"{source}: not a readable dataflash log ({exc})") from None
         try:
             while True:
                 try:
                     msg = reader.recv_match(type=list(WANTED))
-                except (ValueError, IndexError, KeyError, TypeError) as exc:
+                except Exception as exc:  # noqa: BLE001 - as above
                     raise InputError(
                         f"{source}: corrupt or truncated dataflash record ({exc})"
                     ) from None

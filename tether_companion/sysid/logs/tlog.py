@@ -15,7 +15,6 @@ ArduPilot SITL's tether simulator, share the link).
 
 from __future__ import annotations
 
-import os
 from collections import Counter, defaultdict
 from pathlib import Path
 from typing import Any
@@ -29,6 +28,8 @@ from tether_companion.sysid.logs.flightlog import N_MOTORS, FlightLog, make_seri
 
 WANTED = ("HIGHRES_IMU", "RAW_IMU", "SCALED_IMU", "ATTITUDE", "SERVO_OUTPUT_RAW", "DISTANCE_SENSOR")
 _UINT32_SPAN = 2**32
+_STAMP_BYTES = 8
+_MAGIC_V1, _MAGIC_V2 = 0xFE, 0xFD
 IMU_DECODERS = {
     "HIGHRES_IMU": units.imu_from_highres_imu,
     "RAW_IMU": units.imu_from_raw_imu,
@@ -44,24 +45,55 @@ def _unwrap_uint32_us(stamps_us: list[int]) -> np.ndarray:
     return (raw + wraps * _UINT32_SPAN).astype(float)
 
 
+def ends_mid_record(data: bytes) -> bool:
+    """True when the last tlog record (8-byte stamp + MAVLink packet) is cut short.
+
+    Walks the records by their packet lengths (MAVLink 2: payload + 12 bytes, + 13 signature
+    bytes when signed; MAVLink 1: payload + 8); stops without a verdict at bytes that are not
+    a packet start.
+    """
+    position = 0
+    while position < len(data):
+        if position + _STAMP_BYTES + 2 > len(data):
+            return True
+        magic, payload = data[position + _STAMP_BYTES], data[position + _STAMP_BYTES + 1]
+        if magic == _MAGIC_V2:
+            incompat = (
+                data[position + _STAMP_BYTES + 2] if position + _STAMP_BYTES + 2 < len(data) else 0
+            )
+            size = payload + 12 + (13 if incompat & 1 else 0)
+        elif magic == _MAGIC_V1:
+            size = payload + 8
+        else:
+            return False
+        position += _STAMP_BYTES + size
+    return position > len(data)
+
+
 def _read_messages(path: Path) -> tuple[dict[str, list[Any]], bool]:
     """All wanted messages of the main system, by type, and whether the file ends mid-record."""
     source = str(path)
     try:
-        link = mavutil.mavlink_connection(source, dialect="ardupilotmega", robust_parsing=True)
+        # the streaming reader (mavlink_connection picks an mmap reader for .tlog files
+        # that fails on a file cut mid-record)
+        link = mavutil.mavlogfile(source, robust_parsing=True)
     except OSError as exc:
         raise InputError(f"{source}: cannot open ({exc.strerror})") from None
     by_system: dict[tuple[int, int], dict[str, list[Any]]] = defaultdict(lambda: defaultdict(list))
     try:
         while True:
-            msg = link.recv_match(type=list(WANTED))
+            try:
+                msg = link.recv_match(type=list(WANTED))
+            except Exception as exc:  # noqa: BLE001 - pymavlink raises many kinds on bad bytes
+                raise InputError(
+                    f"{source}: unreadable MAVLink data ({type(exc).__name__}: {exc})"
+                ) from None
             if msg is None:
                 break
             by_system[(msg.get_srcSystem(), msg.get_srcComponent())][msg.get_type()].append(msg)
-        consumed = link.f.tell()
     finally:
         link.close()
-    truncated = consumed < os.path.getsize(source) or bool(link.mav.buf_len())
+    truncated = ends_mid_record(path.read_bytes())
     if not by_system:
         raise InputError(
             f"{source}: no IMU, ATTITUDE or SERVO_OUTPUT_RAW message found (not a MAVLink .tlog?)"

@@ -365,7 +365,8 @@ class _UdpLink(Link):
         infos = await loop.getaddrinfo(endpoint.host, endpoint.port, type=socket.SOCK_DGRAM)
         if not infos:
             raise OSError(0, f"cannot resolve {endpoint.host}")
-        family, _, _, _, address = infos[0]
+        # IPv4 first: "localhost" must reach a peer bound to 127.0.0.1, as autopilots are
+        family, _, _, _, address = min(infos, key=lambda info: info[0] != socket.AF_INET)
         sock = socket.socket(family, socket.SOCK_DGRAM)
         try:
             sock.setblocking(False)

@@ -101,4 +101,5 @@ def test_docs_config_reference_is_generated_from_the_code() -> None:
     doc = (PROJECT_ROOT / "docs" / "config-reference.md").read_text(encoding="utf-8")
     rows = [r for r in config_reference().splitlines() if not r.startswith("| `estimator.")]
     missing = [r for r in rows if r not in doc]
-    assert not missing, "regenerate: python -m tether_companion.service.config\n" + "\n".join(missing)
+    hint = "regenerate: python -m tether_companion.service.config\n"
+    assert not missing, hint + "\n".join(missing)

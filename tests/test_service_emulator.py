@@ -143,3 +143,12 @@ def test_closed_loop_hover_on_received_estimates_holds_within_half_a_metre() -> 
     assert nav.used > 0.9 * 30.0 * 60.0  # it really navigated on our estimates
     assert nav.resets == 0 and controller.mode.name == "AUTO" and controller.armed
     assert max(deviations) < 0.5, max(deviations)
+
+
+def test_demo_command_flies_and_prints_the_emulator_score(capsys) -> None:
+    from tether_companion.cli import main
+
+    assert main(["demo", "--duration", "6", "--speed", "2", "--no-status"]) == 0
+    out = capsys.readouterr().out
+    assert "accuracy scored by the emulator" in out
+    assert "VISION_POSITION_ESTIMATE" in out and "RMSE north" in out

@@ -56,6 +56,10 @@ def test_clean_hover_converges(config) -> None:
     assert abs(last.tension_n - 4.0) < 0.5
     assert session.ingest.counters.dropped == 0
     assert session.ingest.counters.accepted[IMU] == 4000
+    # every IMU sample ticks the filter, every range sample is fused, although DISTANCE_SENSOR's
+    # millisecond stamps often land a hair after the microsecond IMU stamp of the same instant
+    health = session.estimator.health
+    assert health.imu_ticks == 4000 and health.out_of_order == 0 and health.range_fused == 400
 
 
 def test_bad_input_is_dropped_counted_and_harmless(config) -> None:

@@ -9,11 +9,13 @@ import socket
 
 import numpy as np
 import pytest
+from rich.console import Console
 
 from tether_companion.mavlink.endpoints import open_link, parse_endpoint
 from tether_companion.mavlink.framing import FrameEncoder, dialect
 from tether_companion.service.app import CompanionService
 from tether_companion.service.config import load_service_config, load_vehicle_for
+from tether_companion.service.status import render
 from tether_companion.service.synthetic import FakeFlightController, HoverStreams
 from tether_companion.service.systemd import SystemdNotifier
 
@@ -121,6 +123,20 @@ def test_service_talks_to_a_flight_controller_over_udp(tmp_path) -> None:
     assert service.session.ingest.counters.reboots == 1
     assert service.session.ingest.counters.wrong_system >= 1
     assert service.state.origin_confirmed
+    # the --status view shows all of it
+    console = Console(record=True, width=120)
+    console.print(render(service))
+    text = console.export_text()
+    for fragment in (
+        "health: ok",
+        "imu",
+        "published",
+        "wrong system",
+        "garbage bytes",
+        "1-sigma",
+        "VISION_POSITION_ESTIMATE",
+    ):
+        assert fragment in text, fragment
 
 
 def test_back_off_while_the_port_refuses_then_connect(tmp_path) -> None:

@@ -71,6 +71,14 @@ async def _demo(args: argparse.Namespace, duration_s: float, scratch: Path) -> s
     )
     async with emulator:
         overrides: dict = {"link": {"connect": f"udpout:127.0.0.1:{emulator.port}"}}
+        if args.config is None:  # ask for the rates the simulated flight controller's sensors have
+            sensors = load_scenario(args.scenario).sensors
+            overrides["streams"] = {
+                "imu_hz": sensors.imu_rate_hz,
+                "attitude_hz": sensors.attitude_rate_hz,
+                "servo_hz": sensors.pwm_rate_hz,
+                "rangefinder_hz": sensors.range_rate_hz,
+            }
         overrides["recording"] = (
             {"directory": args.record_dir} if args.record_dir else {"enabled": False}
         )

@@ -49,6 +49,7 @@ class EstimationSession:
         self.estimator = self._new_estimator()
         self.attitude: AttitudeSample | None = None
         self.last_estimate: Estimate | None = None
+        self._held_range: RangeSample | None = None
         self.boots = 0
         """Flight-controller reboots seen (each restarts the estimator)."""
 
@@ -59,6 +60,7 @@ class EstimationSession:
         self.publisher.restart()
         self.attitude = None
         self.last_estimate = None
+        self._held_range = None
 
     def _new_estimator(self) -> TetherEstimator:
         identified = self.config.estimator.thrust_model is not None  # the estimator loads it
@@ -76,7 +78,14 @@ class EstimationSession:
         return self.on_sample(sample)
 
     def on_sample(self, sample: Sample) -> Step:
-        """Process one checked sample (from :meth:`on_message` or a dataflash log)."""
+        """Process one checked sample (from :meth:`on_message` or a dataflash log).
+
+        The IMU drives the filter's time. A rangefinder sample stamped after the latest IMU tick
+        (DISTANCE_SENSOR carries milliseconds, RAW_IMU microseconds, and streams interleave) is
+        held and fused right after the first IMU tick that reaches its time, as offline, where
+        a range sample is handed over after the IMU sample of the same instant; fusing it at
+        once would move the filter ahead of the next IMU sample and make the pipeline drop it.
+        """
         estimator = self.estimator
         if isinstance(sample, ImuSample):
             return self._tick(sample)
@@ -86,7 +95,10 @@ class EstimationSession:
         elif isinstance(sample, PwmSample):
             estimator.on_pwm(sample)
         elif isinstance(sample, RangeSample):
-            estimator.on_range(sample)
+            if estimator.time_s >= sample.time_s:  # nan (no IMU yet) compares False: held
+                estimator.on_range(sample)
+            else:
+                self._held_range = sample
         elif isinstance(sample, TensionReading):
             estimator.set_known_tension_n(sample.tension_n, sample.time_s)
         return Step()
@@ -98,6 +110,10 @@ class EstimationSession:
         health = estimator.health
         stale_before = health.stale_attitude + health.stale_pwm + health.stale_tension
         estimate = estimator.on_imu(sample)
+        held = self._held_range
+        if held is not None and estimator.time_s >= held.time_s:
+            self._held_range = None
+            estimator.on_range(held)
         if estimate is None:
             return Step()
         health = estimator.health

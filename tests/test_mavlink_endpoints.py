@@ -105,7 +105,7 @@ def test_udp_listen_learns_peers_and_counts_garbage() -> None:
             msg = await asyncio.wait_for(server.recv(), TIMEOUT_S)
             assert (msg.get_srcSystem(), msg.custom_mode) == (255, 7)
             assert server.peers == [client.local_address]  # the junk sender is not a peer
-            assert server.framing.garbage_bytes == 8 and server.framing.truncated == 1
+            assert server.framing.garbage_bytes == 10 and server.framing.truncated == 1
             server.send(heartbeat(9))
             reply = await asyncio.wait_for(client.recv(), TIMEOUT_S)
             assert (reply.get_srcSystem(), reply.custom_mode) == (1, 9)

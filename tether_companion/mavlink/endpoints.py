@@ -399,7 +399,7 @@ class _UdpLink(Link):
 
     def _datagram(self, data: bytes, addr: tuple[str, int]) -> None:
         messages = self._parser.feed(data)
-        self._parser.end_datagram()
+        messages += self._parser.end_datagram()
         if messages and self.endpoint.role == "listen":
             if addr in self._peers:
                 self._peers.move_to_end(addr)

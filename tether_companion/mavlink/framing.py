@@ -46,6 +46,8 @@ _IFLAG_SIGNED = dialect.MAVLINK_IFLAG_SIGNED
 _CRC_LEN = 2
 _CRC = struct.Struct("<H")
 _MESSAGE_TYPES = dialect.mavlink_map
+_MAX_PAYLOAD = {msg_id: cls.unpacker.size for msg_id, cls in _MESSAGE_TYPES.items()}
+"""Largest payload of each message (all fields incl. extensions) [bytes]."""
 _MAX_BUFFER_BYTES = 1 << 16
 """A stream parser never holds more than this many unparsed bytes (a frame is <= 280)."""
 
@@ -63,7 +65,8 @@ class FramingCounters:
     bad_crc: int = 0
     """Frames of a known message id whose checksum did not match."""
     bad_header: int = 0
-    """MAVLink 2 start markers followed by unsupported incompatibility flags."""
+    """Start markers followed by unsupported incompatibility flags, or by a payload length
+    larger than the message id allows."""
     unknown_id: int = 0
     """Complete frames whose message id the dialect does not define (skipped whole). With no
     checksum to check, such a frame is believed only when a start marker (or the end of the
@@ -71,7 +74,7 @@ class FramingCounters:
     bad_payload: int = 0
     """Intact frames pymavlink could not turn into a message."""
     truncated: int = 0
-    """Partial frames left at the end of a datagram (UDP) and discarded."""
+    """Datagrams (UDP) that ended inside a frame: a cut frame or a stray start marker."""
 
     def as_dict(self) -> dict[str, int]:
         """The counters as a plain mapping (for status views and JSON)."""
@@ -104,6 +107,10 @@ class FrameParser:
         """Add ``data`` and return every message completed by it, in order."""
         self.counters.bytes_in += len(data)
         self._buf += data
+        return self._parse()
+
+    def _parse(self) -> list[MAVLinkMessage]:
+        """Frames in the buffer; an incomplete one stays for the next call."""
         out: list[MAVLinkMessage] = []
         buf = self._buf
         pos = 0
@@ -141,9 +148,15 @@ class FrameParser:
                     break
                 msg_id = buf[pos + 5]
                 incompat = 0
+            msg_type = _MESSAGE_TYPES.get(msg_id)
+            if msg_type is not None and buf[pos + 1] > _MAX_PAYLOAD[msg_id]:
+                # longer than the message can be: a stray marker, known without waiting
+                counters.bad_header += 1
+                counters.garbage_bytes += 1
+                pos += 1
+                continue
             if n - pos < frame_len:
                 break
-            msg_type = _MESSAGE_TYPES.get(msg_id)
             if msg_type is None:
                 # No checksum to verify: take it as a frame only if the next frame (or the end
                 # of the data) follows where its length says; otherwise it is a stray marker.
@@ -178,11 +191,22 @@ class FrameParser:
             buf.clear()
         return out
 
-    def end_datagram(self) -> None:
-        """Discard a partial frame left by the datagram just fed (counted as truncated)."""
+    def end_datagram(self) -> list[MAVLinkMessage]:
+        """Close the datagram just fed; returns frames recovered behind a false start marker.
+
+        A frame never spans two UDP datagrams, so bytes left waiting for "the rest of a frame"
+        are a truncated frame or a stray start marker (counted once as ``truncated``). The
+        parser drops the first byte and looks again, so a good frame behind a stray marker in
+        the same datagram is not lost.
+        """
+        out: list[MAVLinkMessage] = []
         if self._buf:
             self.counters.truncated += 1
-            self._buf.clear()
+        while self._buf:
+            del self._buf[0]
+            self.counters.garbage_bytes += 1
+            out.extend(self._parse())
+        return out
 
     @property
     def pending_bytes(self) -> int:

@@ -209,3 +209,31 @@ def test_clock_decays_to_follow_a_slower_fc_crystal() -> None:
     for local in np.arange(1.0, 1000.0, 1.0):
         clock.observe(100.0 + local * (1 - 50e-6), local)
     assert clock.offset_s(999.0) == pytest.approx(100.0 - 999.0 * 50e-6, abs=1e-3)
+
+
+def test_three_state_with_tension_from_a_load_cell_message() -> None:
+    """3-state EKF fed the tension by NAMED_VALUE_FLOAT "TENSION" (e.g. a load cell on the
+    flight controller); without those messages the estimate is stale and nothing is sent."""
+    overrides = {
+        "recording": {"enabled": False},
+        "estimator": {"kind": "three_state"},
+        "tension": {"source": "message", "message_name": "TENSION", "sensor_component_id": 1},
+    }
+    config = load_service_config(None, overrides)
+    frames = _hover_frames(config, 10.0)
+    fc = FrameEncoder(1, 1)
+    with_tension: list[bytes] = []
+    for i, frame in enumerate(frames):
+        with_tension.append(frame)
+        if i % 40 == 0:  # ~10 Hz, stamped with the flight-controller time of its neighbours
+            stamp_ms = 10_000 + i * 10_000 // len(frames)
+            with_tension.append(
+                fc.encode(dialect.MAVLink_named_value_float_message(stamp_ms, b"TENSION", 4.0))
+            )
+    session = _session(config)
+    publications = _run(session, with_tension)
+    assert session.ingest.counters.accepted["tension"] > 90
+    assert np.linalg.norm(np.array(publications[-1].position_ned_m) - POSITION) < 0.3
+    assert publications[-1].tension_n == 4.0
+    silent = _session(config)
+    assert _run(silent, frames) == [] and silent.estimator.health.stale_tension > 0

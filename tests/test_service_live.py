@@ -123,6 +123,7 @@ def test_service_talks_to_a_flight_controller_over_udp(tmp_path) -> None:
     assert service.session.ingest.counters.reboots == 1
     assert service.session.ingest.counters.wrong_system >= 1
     assert service.state.origin_confirmed
+    assert service.clock.timesync_rtt_s is not None and service.clock.timesync_rtt_s < 1.0
     # the --status view shows all of it
     console = Console(record=True, width=120)
     console.print(render(service))

@@ -183,3 +183,17 @@ def test_first_position_only_after_settling() -> None:
     assert not _of(sent, "VISION_POSITION_ESTIMATE") and publisher.health == CONVERGING
     sent = _feed(publisher, [_estimate(6.0)])
     assert len(_of(sent, "VISION_POSITION_ESTIMATE")) == 1 and publisher.health == OK
+
+
+def test_odometry_option_carries_pose_and_marks_velocity_unknown() -> None:
+    publisher = Publisher(PublishConfig(settle_s=0.0, odometry=True), has_tension_state=True)
+    sent = _feed(publisher, [_estimate(2.0)])
+    (odometry,) = _of(sent, "ODOMETRY")
+    (vision,) = _of(sent, "VISION_POSITION_ESTIMATE")
+    assert odometry.time_usec == vision.usec and (odometry.x, odometry.z) == pytest.approx(
+        (2.0, -3.0)
+    )
+    assert odometry.frame_id == 1  # MAV_FRAME_LOCAL_NED
+    assert all(math.isnan(v) for v in (odometry.vx, odometry.vy, odometry.vz))
+    assert math.isnan(odometry.velocity_covariance[0])
+    assert odometry.pose_covariance[0] == pytest.approx(0.04)

@@ -144,6 +144,8 @@ def _print(result: dict, args: argparse.Namespace) -> None:
         "service CPU (user + system)", f"{100 * result['cpu_share']:.1f} % of one core", "< 10 %"
     )
     table.add_row("measured window", f"{result['wall_s']:.1f} s after {WARMUP_S:g} s warm-up", "")
+    load = os.getloadavg()[0]
+    table.add_row("machine load average (1 min) / cores", f"{load:.1f} / {os.cpu_count()}", "")
     console.print(table)
     if not lat.size:
         console.print(f"[red]no estimates came back[/red]; service stderr: {result['service_err']}")

@@ -131,6 +131,16 @@ def test_learnt_pull_turns_with_the_anchor_direction():
     assert all(a.kind == NOTHING for a in actions)
 
 
+def test_pull_is_relearnt_when_guided_is_entered_again():
+    """Flown elsewhere in another mode, the cable pulls differently: no spurious following."""
+    modes = TensionModes(FOLLOW)
+    _run(modes, 0, 3, HOVER, lambda t: _cable_pull(HOVER, 4.0))
+    elsewhere = np.array([-1.0, 4.0, -6.0])
+    _run(modes, 3, 6, elsewhere, lambda t: _cable_pull(elsewhere, 7.0), mode="LOITER")
+    actions = _run(modes, 6, 9, elsewhere, lambda t: _cable_pull(elsewhere, 7.0))
+    assert all(a.kind == NOTHING for a in actions) and modes.state == IDLE
+
+
 def test_position_command_targets_ahead_along_the_pull():
     modes = TensionModes(replace(FOLLOW, command="position", position_lead_m=0.5))
     base = _cable_pull(HOVER)

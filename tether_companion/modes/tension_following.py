@@ -177,6 +177,8 @@ class TensionModes:
             self.state = INACTIVE
             return _NOTHING
         if self.state in (DISABLED, INACTIVE):
+            # (re-)entering: the cable's pull is learnt afresh where the drone is now
+            self._baseline = None
             self.state = LANDING if self.landing_flag else IDLE
 
         problem = self._input_problem(inputs)

@@ -140,6 +140,31 @@ def test_service_talks_to_a_flight_controller_over_udp(tmp_path) -> None:
         assert fragment in text, fragment
 
 
+def test_falls_back_to_request_data_stream_when_intervals_are_refused(tmp_path) -> None:
+    async def scenario() -> FakeFlightController:
+        fc_link = await open_link(
+            parse_endpoint("udpin:127.0.0.1:0", "listen"), system_id=1, component_id=1
+        )
+        config = _config(f"udpout:127.0.0.1:{fc_link.local_address[1]}", tmp_path)
+        streams = HoverStreams(load_vehicle_for(config), POSITION, 4.0)
+        fc = FakeFlightController(fc_link, streams, speed=4.0, message_interval_supported=False)
+
+        async def body(service: CompanionService) -> None:
+            await fc.run(3.0)
+
+        try:
+            await _with_service(config, body)
+        finally:
+            await fc_link.close()
+        return fc
+
+    fc = asyncio.run(scenario())
+    groups = {m.req_stream_id for m in fc.log.stream_requests}
+    assert {dialect.MAV_DATA_STREAM_RAW_SENSORS, dialect.MAV_DATA_STREAM_EXTRA1} <= groups
+    assert fc.log.stream_requests[0].req_message_rate == 200
+    assert fc.log.vision  # streaming started through the fallback and estimates came back
+
+
 def test_back_off_while_the_port_refuses_then_connect(tmp_path) -> None:
     probe = socket.socket()
     probe.bind(("127.0.0.1", 0))

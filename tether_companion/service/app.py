@@ -136,6 +136,7 @@ class CompanionService:
         self._open_link_fn = open_link_fn or self._open_default_link
         self._streams = self._stream_table()
         self._timesync_pending: dict[int, float] = {}
+        self._awaiting_ack: list[StreamRequest] = []
         self._fc_heard_s = -math.inf
         self._next_heartbeat_s = -math.inf
         self._next_timesync_s = -math.inf
@@ -252,6 +253,7 @@ class CompanionService:
         self._fc_heard_s = -math.inf
         self._next_heartbeat_s = -math.inf
         self._streams = self._stream_table()
+        self._awaiting_ack = []
         self._origin_attempts = 0
         self.state.origin_confirmed = False
 
@@ -301,10 +303,9 @@ class CompanionService:
                 if sent is not None:
                     self.clock.observe_timesync(msg.tc1 * 1e-9, sent, now_s)
         elif kind == "COMMAND_ACK":
-            if msg.command == dialect.MAV_CMD_SET_MESSAGE_INTERVAL:
-                for stream in self._streams.values():
-                    if stream.last_request_s > -math.inf and stream.acked is None:
-                        stream.acked = msg.result == _MAV_RESULT_ACCEPTED
+            if msg.command == dialect.MAV_CMD_SET_MESSAGE_INTERVAL and self._awaiting_ack:
+                stream = self._awaiting_ack.pop(0)  # the autopilot answers commands in order
+                stream.acked = msg.result == _MAV_RESULT_ACCEPTED
         elif kind == "GPS_GLOBAL_ORIGIN":
             self.state.origin_confirmed = True
 
@@ -313,6 +314,7 @@ class CompanionService:
         self.clock.reset()
         self._last_latest_fc_s = -math.inf
         self._streams = self._stream_table()
+        self._awaiting_ack = []
         self._origin_attempts = 0
         self.state.origin_confirmed = False
         self._timesync_pending.clear()
@@ -421,9 +423,11 @@ class CompanionService:
                 or now_s - stream.last_request_s < cfg.stream_request_interval_s
             ):
                 continue
+            refused = stream.acked is False  # DENIED/UNSUPPORTED/FAILED: no point waiting
             stream.attempts += 1
             stream.last_request_s = now_s
             stream.acked = None
+            self._awaiting_ack = [*self._awaiting_ack[-15:], stream]  # bounded if never acked
             self._send(
                 link,
                 dialect.MAVLink_command_long_message(
@@ -440,7 +444,8 @@ class CompanionService:
                     0.0,
                 ),
             )
-            if stream.attempts > INTERVAL_ATTEMPTS_BEFORE_FALLBACK and kind in _STREAM_GROUPS:
+            fallback = refused or stream.attempts > INTERVAL_ATTEMPTS_BEFORE_FALLBACK
+            if fallback and kind in _STREAM_GROUPS:
                 self._send(
                     link,
                     dialect.MAVLink_request_data_stream_message(

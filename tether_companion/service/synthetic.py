@@ -156,6 +156,7 @@ class FakeFcLog:
     statustexts: list[MAVLinkMessage]
     named_values: list[MAVLinkMessage]
     timesync_replies: list[MAVLinkMessage]
+    stream_requests: list[MAVLinkMessage]
     vision_arrival_s: dict[int, float]
     """Local monotonic arrival time of each VISION_POSITION_ESTIMATE, by its ``usec``."""
 
@@ -178,20 +179,30 @@ class FakeFlightController:
         Flight-controller seconds per real second.
     boot_time_s
         Flight-controller time at start (time since its boot) [s].
+    message_interval_supported
+        False: refuse MAV_CMD_SET_MESSAGE_INTERVAL (old firmware); stream on
+        REQUEST_DATA_STREAM only.
     """
 
     TICK_S = 0.005
 
     def __init__(
-        self, link: Link, streams: HoverStreams, *, speed: float = 1.0, boot_time_s: float = 5.0
+        self,
+        link: Link,
+        streams: HoverStreams,
+        *,
+        speed: float = 1.0,
+        boot_time_s: float = 5.0,
+        message_interval_supported: bool = True,
     ) -> None:
         self.link = link
+        self.message_interval_supported = message_interval_supported
         self.streams = streams
         self.speed = speed
         self.time_s = boot_time_s
         self.tick = 0
         self.streaming = False
-        self.log = FakeFcLog([], [], [], [], [], [], [], {})
+        self.log = FakeFcLog([], [], [], [], [], [], [], [], {})
         self.imu_sent_s: dict[int, float] = {}
         """Local monotonic send time of each RAW_IMU, by its ``time_usec``."""
         self.inject: list[bytes] = []
@@ -267,13 +278,15 @@ class FakeFlightController:
             log.vision_arrival_s[msg.usec] = arrival_s
         elif kind == "COMMAND_LONG":
             log.commands.append(msg)
-            if (
-                msg.command == d.MAV_CMD_SET_MESSAGE_INTERVAL
-                and int(msg.param1) == d.MAVLINK_MSG_ID_RAW_IMU
-            ):
-                self.streaming = True
-            self.link.send(d.MAVLink_command_ack_message(msg.command, d.MAV_RESULT_ACCEPTED))
+            result = d.MAV_RESULT_ACCEPTED
+            if msg.command == d.MAV_CMD_SET_MESSAGE_INTERVAL:
+                if not self.message_interval_supported:
+                    result = d.MAV_RESULT_UNSUPPORTED
+                elif int(msg.param1) == d.MAVLINK_MSG_ID_RAW_IMU:
+                    self.streaming = True
+            self.link.send(d.MAVLink_command_ack_message(msg.command, result))
         elif kind == "REQUEST_DATA_STREAM":
+            log.stream_requests.append(msg)
             self.streaming = True
         elif kind == "SET_GPS_GLOBAL_ORIGIN":
             log.origins.append(msg)

@@ -25,6 +25,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.linalg import lstsq
 from scipy.optimize import least_squares, minimize_scalar
 from scipy.signal import cont2discrete
 
@@ -36,6 +37,8 @@ FloatArray = NDArray[np.float64]
 
 MAX_DELAY = 5
 """Longest dead time tried by the process model [samples]."""
+MAX_TF_EVALUATIONS = 40
+"""Cap on the transfer-function pole search (it starts from the process model's pole)."""
 TIME_CONSTANT_BOUNDS_S = (1e-3, 5.0)
 """Search interval of the process model's time constant [s]."""
 
@@ -59,7 +62,8 @@ def _project(
     """Least-squares coefficients and residuals of stacked regressors and targets."""
     phi = np.vstack(regressors)
     y = np.concatenate(targets)
-    theta, *_ = np.linalg.lstsq(phi, y, rcond=None)
+    # QR with column pivoting: fast, and safe with the nearly collinear cmd and cmd^2 columns
+    theta, *_ = lstsq(phi, y, lapack_driver="gelsy", check_finite=False)
     return theta, y - phi @ theta
 
 
@@ -136,7 +140,9 @@ def fit_transfer_function(experiments: Sequence[IdData], context: FitContext) ->
     def residuals(log_a: FloatArray) -> FloatArray:
         return _project(_second_order_paths(centred, log_a, context.dt_s)[0], targets)[1]
 
-    result = least_squares(residuals, start, method="trf", x_scale="jac")
+    result = least_squares(
+        residuals, start, method="trf", x_scale="jac", max_nfev=MAX_TF_EVALUATIONS
+    )
     if not np.all(np.isfinite(result.x)):
         raise ArithmeticError(f"transfer function fit failed: {result.message}")
     regressors, num_s, num_1, den = _second_order_paths(centred, result.x, context.dt_s)

@@ -120,11 +120,18 @@ def _kalman_gain(a: FloatArray, c: FloatArray, residuals: Sequence[FloatArray]) 
 
 
 def identify_state_space(
-    experiments: Sequence[tuple[FloatArray, FloatArray]], order: int, block_rows: int = BLOCK_ROWS
+    experiments: Sequence[tuple[FloatArray, FloatArray]],
+    order: int,
+    basis: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """``(A, B, C, D, K)`` of the given order from centred ``(u, y)`` experiments."""
-    left, _ = observability_basis(experiments, block_rows)
-    gamma = left[:, :order]
+    """``(A, B, C, D, K)`` of the given order from centred ``(u, y)`` experiments.
+
+    ``basis``: the left singular vectors of :func:`observability_basis` when already known
+    (they do not depend on the order).
+    """
+    if basis is None:
+        basis, _ = observability_basis(experiments, BLOCK_ROWS)
+    gamma = basis[:, :order]
     c = gamma[:1]
     a, *_ = np.linalg.lstsq(gamma[:-1], gamma[1:], rcond=None)
     b, d = _input_matrices(a, c, experiments)
@@ -169,9 +176,13 @@ def fit_state_space(
     centred = [context.centred(e) for e in experiments]
     best: tuple[float, LinearFit] | None = None
     failures = []
+    try:
+        basis, _ = observability_basis(centred, BLOCK_ROWS)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        raise ArithmeticError(f"subspace identification failed: {exc}") from None
     for n in range(1, MAX_ORDER + 1) if order is None else (order,):
         try:
-            a, b, c, d, k = identify_state_space(centred, n)
+            a, b, c, d, k = identify_state_space(centred, n, basis)
         except (np.linalg.LinAlgError, ValueError) as exc:
             failures.append(f"n={n}: {exc}")
             continue

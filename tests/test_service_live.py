@@ -70,6 +70,8 @@ def test_service_talks_to_a_flight_controller_over_udp(tmp_path) -> None:
                 other.encode(dialect.MAVLink_attitude_message(1, 0.0, 0.0, 0.0, 0, 0, 0)),
             ]
             await fc.run(4.0)
+            await asyncio.sleep(2.5)  # the flight controller goes silent: link lost
+            assert not service.state.link_up and service.state.link_losses == 1
             fc.reboot()
             await fc.run(8.0)
 
@@ -125,11 +127,12 @@ def test_service_talks_to_a_flight_controller_over_udp(tmp_path) -> None:
     assert service.state.origin_confirmed
     assert service.clock.timesync_rtt_s is not None and service.clock.timesync_rtt_s < 1.0
     # the --status view shows all of it
-    console = Console(record=True, width=120)
+    console = Console(record=True, width=240)
     console.print(render(service))
     text = console.export_text()
     for fragment in (
         "health: ok",
+        "TIMESYNC rtt",
         "imu",
         "published",
         "wrong system",

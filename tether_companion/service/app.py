@@ -33,7 +33,7 @@ from tether_companion.mavlink.units import seconds_to_usec
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.service.clock import FcClock
 from tether_companion.service.config import ServiceConfig
-from tether_companion.service.ingest import ATTITUDE, IMU, INPUT_KINDS, PWM, RANGE, TENSION
+from tether_companion.service.ingest import ATTITUDE, IMU, INPUT_KINDS, PWM, RANGE
 from tether_companion.service.publish import STALE, Publication
 from tether_companion.service.recording import RecordingLimits, TlogWriter
 from tether_companion.service.session import EstimationSession
@@ -88,7 +88,8 @@ class ServiceState:
     rates_hz: dict[str, float] = field(
         default_factory=lambda: dict.fromkeys((*INPUT_KINDS, "published"), 0.0)
     )
-    ages_s: dict[str, float] = field(default_factory=lambda: dict.fromkeys(INPUT_KINDS, math.inf))
+    ages_s: dict[str, float] = field(default_factory=dict)
+    """Local seconds since each requested stream was last accepted."""
     sent_by_type: dict[str, int] = field(default_factory=dict)
     received: int = 0
 
@@ -145,6 +146,10 @@ class CompanionService:
         self._rate_counts: dict[str, int] = {}
         self._rate_time_s = -math.inf
         self._last_latest_fc_s = -math.inf
+
+    def monotonic_s(self) -> float:
+        """The service's local clock [s] (injected for lock-step use)."""
+        return self._monotonic_s()
 
     # ------------------------------------------------------------------ lifecycle
     async def run(self, stop: asyncio.Event) -> None:
@@ -496,7 +501,6 @@ class CompanionService:
         self._rate_time_s = now_s
         for kind, stream in self._streams.items():
             self.state.ages_s[kind] = now_s - stream.last_heard_s
-        self.state.ages_s[TENSION] = math.inf
 
     # ------------------------------------------------------------------ systemd, recording
     async def _watchdog(self, stop: asyncio.Event) -> None:

@@ -36,6 +36,7 @@ def render(service: CompanionService) -> Group:
         "  health: ",
         (publisher.health, health_style),
         f"  reset_counter {publisher.reset_counter}",
+        _clock_text(service),
     )
 
     inputs = Table(title="inputs", expand=False)
@@ -94,6 +95,16 @@ def render(service: CompanionService) -> Group:
         estimate.add_row("no estimate yet", "", "", "", "")
     sent = ", ".join(f"{k} {v}" for k, v in sorted(state.sent_by_type.items()))
     return Group(head, inputs, estimate, drops, Text(f"sent: {sent}"))
+
+
+def _clock_text(service: CompanionService) -> str:
+    clock = service.clock
+    offset = clock.offset_s(service.monotonic_s())
+    if offset is None:
+        return "  FC clock: not synchronised"
+    rtt = clock.timesync_rtt_s
+    rtt_text = "no TIMESYNC" if rtt is None else f"TIMESYNC rtt {rtt * 1e3:.1f} ms"
+    return f"  FC time {service.monotonic_s() + offset:.2f} s ({rtt_text})"
 
 
 async def live_status(

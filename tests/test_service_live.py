@@ -209,3 +209,22 @@ def test_back_off_while_the_port_refuses_then_connect(tmp_path) -> None:
 async def _until(predicate) -> None:
     while not predicate():
         await asyncio.sleep(0.02)
+
+
+def test_an_unexpected_handler_error_is_counted_not_fatal(tmp_path, capsys) -> None:
+    config = _config("udp:127.0.0.1:14550", tmp_path)
+    service = CompanionService(config, load_vehicle_for(config), notifier=SystemdNotifier({}))
+    calls = []
+
+    def broken(msg):
+        calls.append(msg)
+        raise RuntimeError("bug")
+
+    service.session.on_message = broken  # type: ignore[method-assign]
+    msg = dialect.MAVLink_attitude_message(1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    msg.pack(dialect.MAVLink(None, 1, 1))
+    service._handle_guarded(None, msg)  # type: ignore[arg-type]
+    service._handle_guarded(None, msg)  # type: ignore[arg-type]
+    assert len(calls) == 2 and service.state.handler_errors == 2
+    assert "RuntimeError" in service.state.last_error
+    assert capsys.readouterr().err.count("Traceback") == 1  # reported once, not per message

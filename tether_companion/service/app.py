@@ -23,6 +23,7 @@ import contextlib
 import gc
 import math
 import time
+import traceback
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 
@@ -92,6 +93,7 @@ class ServiceState:
     """Local seconds since each requested stream was last accepted."""
     sent_by_type: dict[str, int] = field(default_factory=dict)
     received: int = 0
+    handler_errors: int = 0
 
 
 class CompanionService:
@@ -246,13 +248,23 @@ class CompanionService:
         try:
             while True:
                 msg = await link.recv()
-                self.handle_message(link, msg, self._monotonic_s())
+                self._handle_guarded(link, msg)
                 while (msg := link.recv_nowait()) is not None:
-                    self.handle_message(link, msg, self._monotonic_s())
+                    self._handle_guarded(link, msg)
         finally:
             housekeeping.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await housekeeping
+
+    def _handle_guarded(self, link: Link, msg: MAVLinkMessage) -> None:
+        """One message; an unexpected error is counted and reported, never fatal in flight."""
+        try:
+            self.handle_message(link, msg, self._monotonic_s())
+        except Exception as exc:  # noqa: BLE001 - a bug must not take the position away
+            self.state.handler_errors += 1
+            self.state.last_error = f"error handling {msg.get_type()}: {exc!r}"
+            if self.state.handler_errors == 1:
+                traceback.print_exc()
 
     def _reset_link_state(self) -> None:
         self._fc_heard_s = -math.inf

@@ -77,6 +77,7 @@ def render(service: CompanionService) -> Group:
     for name in ("garbage_bytes", "bad_crc", "unknown_id", "truncated"):
         drops.add_row(name.replace("_", " "), str(framing.get(name, 0)))
     drops.add_row("withheld estimates", str(publisher.counters.withheld))
+    drops.add_row("handler errors", str(state.handler_errors))
 
     estimate = Table(title="estimate (NED from the anchor)", expand=False)
     for column in ("", "north", "east", "down", "tension"):

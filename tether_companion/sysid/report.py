@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+from rich.markup import escape
 from rich.table import Table
 
 from tether_companion.errors import InputError
@@ -33,8 +34,8 @@ def results_table(
     table.add_column("Orders")
     table.add_column(f"Fit% {k_steps}-step", justify="right")
     table.add_column("Fit% sim", justify="right")
-    table.add_column("FPE [N^2]", justify="right")
-    table.add_column("MSE [N^2]", justify="right")
+    table.add_column(escape("FPE [N^2]"), justify="right")
+    table.add_column(escape("MSE [N^2]"), justify="right")
     for result in results:
         mark = " ".join(
             m
@@ -42,9 +43,8 @@ def results_table(
             if name == result.structure
         )
         if not result.ok:
-            table.add_row(
-                mark, result.structure, f"[red]failed: {result.error}[/red]", "-", "-", "-", "-"
-            )
+            failure = f"[red]failed: {escape(str(result.error))}[/red]"
+            table.add_row(mark, result.structure, failure, "-", "-", "-", "-")
             continue
         metrics = result.metrics
         table.add_row(

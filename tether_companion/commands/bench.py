@@ -18,6 +18,7 @@ BENCHMARKS: tuple[str, ...] = (
     "catenary",
     "emulator",
     "latency",
+    "sysid",
 )
 """Benchmark names, one per line, in the order ``bench --help`` lists them."""
 

@@ -47,6 +47,10 @@ class ExternalNav:
     """The flight controller's view of an external position source."""
 
     def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything (construction, flight-controller reboot)."""
         self.counters = ExternalNavCounters()
         self.origin_set = False
         self.enabled = True
@@ -57,10 +61,6 @@ class ExternalNav:
         self._arrival_s = -math.inf
         self._reset_counter: int | None = None
         self._ignore_until_s = -math.inf
-
-    def reset(self) -> None:
-        """Forget everything (flight-controller reboot)."""
-        self.__init__()  # type: ignore[misc]
 
     def on_estimate(self, pose: PoseEstimate, now_s: float) -> bool:
         """Take an estimate received at ``now_s`` [s]; True when it is used for navigation."""

@@ -110,6 +110,47 @@ def write_csv(path, signals, drop_column=None, height=True):
     path.write_text("\n".join(rows) + "\n", encoding="utf-8")
 
 
+def write_ulog(path, signals):
+    """A PX4 ULog built by hand: header, FMT ('F'), add-logged ('A') and data ('D') messages
+    for sensor_combined, vehicle_attitude (quaternion w-x-y-z), actuator_outputs and
+    distance_sensor, as pyulog reads them."""
+    topics = [
+        ("sensor_combined", "uint64_t timestamp;float[3] accelerometer_m_s2;", "<Q3f"),
+        ("vehicle_attitude", "uint64_t timestamp;float[4] q;", "<Q4f"),
+        ("actuator_outputs", "uint64_t timestamp;float[16] output;", "<Q16f"),
+        ("distance_sensor", "uint64_t timestamp;float current_distance;", "<Qf"),
+    ]
+
+    def message(kind, payload):
+        return struct.pack("<HB", len(payload), ord(kind)) + payload
+
+    out = bytearray(b"ULog\x01\x12\x35\x01" + struct.pack("<Q", 0))
+    out += message("B", bytes(40))
+    for name, fields, _ in topics:
+        out += message("F", f"{name}:{fields}".encode())
+    for i, (name, _, _) in enumerate(topics):
+        out += message("A", struct.pack("<BH", 0, i) + name.encode())
+    for k, t in enumerate(signals["time_s"]):
+        us = int(t * 1e6)
+        r, p, y = signals["euler_rad"][k] / 2.0
+        cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+        q = (
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        )
+        rows = [
+            (us, *signals["accel_mps2"][k]),
+            (us, *q),
+            (us, *signals["pwm_us"][k], *([0.0] * 12)),
+            (us, signals["height_m"][k]),
+        ]
+        for i, ((_, _, fmt), row) in enumerate(zip(topics, rows, strict=True)):
+            out += message("D", struct.pack("<H", i) + struct.pack(fmt, *row))
+    path.write_bytes(bytes(out))
+
+
 @pytest.fixture(scope="module")
 def signals():
     return log_signals()
@@ -161,6 +202,14 @@ def test_hand_made_csv(tmp_path, signals):
     assert log.height_m is None
     # airborne from mean PWM above 1150 us instead of height
     assert prepare(log, MASS_KG, RANGE).airborne_s[0] > signals["time_s"][0] + 3.0
+
+
+def test_ulog_written_by_hand(tmp_path, signals):
+    path = tmp_path / "flight.ulg"
+    write_ulog(path, signals)
+    log = load_flight_log(path)
+    _check_log(log, signals, accel_tol=1e-5)
+    assert len(prepare(log, MASS_KG, RANGE).validation) > 0
 
 
 @pytest.mark.parametrize("suffix", [".tlog", ".bin", ".csv", ".ulg"])

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tether_companion.constants import GRAVITY_MPS2
-from tether_companion.frames import rotation_body_to_ned
+from tether_companion.frames import rotation_body_to_ned, wrap_pi
 from tether_companion.mavlink import geo, units
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample
@@ -165,7 +165,8 @@ def test_quaternion_matches_rotation_matrix(roll, pitch, yaw) -> None:
     )
     np.testing.assert_allclose(rot, rotation_body_to_ned(roll, pitch, yaw), atol=1e-12)
     back = units.euler_from_quaternion([w, x, y, z])
-    np.testing.assert_allclose(back, (roll, pitch, yaw), atol=1e-6)
+    differences = [wrap_pi(a - b) for a, b in zip(back, (roll, pitch, yaw), strict=True)]
+    np.testing.assert_allclose(differences, 0.0, atol=1e-6)  # -pi and pi are one angle
 
 
 def test_vision_position_estimate_round_trip() -> None:

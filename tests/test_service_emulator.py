@@ -93,6 +93,49 @@ def test_paper_circle_over_udp_matches_offline_ekf_and_replays_identically(tmp_p
     np.testing.assert_allclose(replayed, live, rtol=0, atol=1e-5)  # float32 on the wire
 
 
+def test_link_faults_and_an_in_flight_reboot(tmp_path) -> None:
+    """1 % of frames dropped, duplicated and corrupted, 3 ms of jitter (reordering), and a
+    flight-controller reboot at 20 s (it disarms: the drone falls): every bad input is dropped
+    and counted, the estimate stays as good as on a clean link before the reboot, the origin is
+    set again after it, and nothing wrong is sent while the drone lies on the ground."""
+    faults = ("--drop", "0.01", "--duplicate", "0.01", "--corrupt", "0.01", "--jitter-ms", "3")
+
+    async def fly() -> tuple[dict, CompanionService]:
+        emulator = EmulatorProcess(
+            "paper-circle",
+            duration_s=30.0,
+            score_path=tmp_path / "score.json",
+            speed=4.0,
+            extra_args=(*faults, "--reboot-at", "20"),
+        )
+        async with emulator:
+            overrides = {
+                "link": {"connect": f"udpout:127.0.0.1:{emulator.port}"},
+                "recording": {"enabled": False},
+                "streams": {"rangefinder_hz": 200.0},  # as the clean run above (RMSE ~0.16 m)
+            }
+            config = load_service_config(None, overrides)
+            service = CompanionService(
+                config, load_vehicle_for(config), notifier=SystemdNotifier({})
+            )
+            stop = asyncio.Event()
+            task = asyncio.create_task(service.run(stop), name="service")
+            try:
+                assert await asyncio.wait_for(emulator.wait(), timeout=120.0) == 0
+            finally:
+                stop.set()
+                await asyncio.wait_for(task, timeout=10.0)
+        return emulator.score(), service
+
+    score, service = asyncio.run(fly())
+    counters = service.session.ingest.counters
+    assert counters.reboots == 1 and service.state.origin_sent == 2
+    assert counters.duplicate > 0 and counters.out_of_order > 0
+    assert service.session.publisher.counters.by_health["motors_idle"] > 0
+    assert score["invalid"] == 0 and score["scored"] > 25.0 * 15.0
+    assert score["max_error_m"] < 1.0 and score["rmse_m"]["3d"] < 0.3
+
+
 class _LockstepLink:
     """The service's side of a lock-step link: frames go straight into the emulator."""
 

@@ -197,3 +197,10 @@ def test_odometry_option_carries_pose_and_marks_velocity_unknown() -> None:
     assert all(math.isnan(v) for v in (odometry.vx, odometry.vy, odometry.vz))
     assert math.isnan(odometry.velocity_covariance[0])
     assert odometry.pose_covariance[0] == pytest.approx(0.04)
+
+
+def test_motors_idle_withholds_the_position() -> None:
+    publisher = Publisher(PublishConfig(settle_s=0.0), has_tension_state=True)
+    assert not _of(_feed(publisher, [_estimate(1.0)], motors_idle=True), "VISION_POSITION_ESTIMATE")
+    assert publisher.health == "motors_idle"
+    assert _of(_feed(publisher, [_estimate(2.0)]), "VISION_POSITION_ESTIMATE")

@@ -218,6 +218,12 @@ class PublishConfig:
         maximum=60.0,
         doc="an estimator run must stay healthy this long before its first position is sent [s]",
     )
+    idle_thrust_fraction: float = spec(
+        0.25,
+        minimum=0.0,
+        maximum=1.0,
+        doc="total motor thrust below this fraction of the weight = on the ground, not sent",
+    )
     slack_tension_n: float = spec(
         0.3,
         minimum=0.0,

@@ -56,7 +56,8 @@ DIVERGED = "diverged"
 SLACK = "slack"
 STALE = "stale"
 NO_ATTITUDE = "no_attitude"
-HEALTH_STATES = (OK, CONVERGING, DIVERGED, SLACK, STALE, NO_ATTITUDE)
+MOTORS_IDLE = "motors_idle"
+HEALTH_STATES = (OK, CONVERGING, DIVERGED, SLACK, STALE, NO_ATTITUDE, MOTORS_IDLE)
 """Health of the published position, worst cases last in the status text."""
 
 _HEALTH_TEXT = {
@@ -66,6 +67,7 @@ _HEALTH_TEXT = {
     SLACK: "tether slack, position unobservable",
     STALE: "inputs stale, no estimate",
     NO_ATTITUDE: "no attitude from FC",
+    MOTORS_IDLE: "motors idle (landed?), position withheld",
 }
 _STATUSTEXT_PREFIX = "TETHER: "
 _RESUME_GAP_S = 0.5
@@ -195,7 +197,12 @@ class Publisher:
         return self._health_transition(health)
 
     def on_estimate(
-        self, estimate: Estimate, attitude: AttitudeSample | None, *, inputs_stale: bool = False
+        self,
+        estimate: Estimate,
+        attitude: AttitudeSample | None,
+        *,
+        inputs_stale: bool = False,
+        motors_idle: bool = False,
     ) -> tuple[list[MAVLinkMessage], Publication | None]:
         """Messages to send for this estimate (often none: decimation) and the CSV record.
 
@@ -208,6 +215,9 @@ class Publisher:
         inputs_stale
             The tick could not fuse the accelerometer because the attitude, PWM or known
             tension was missing or too old: the estimate is a prediction only.
+        motors_idle
+            The motors' thrust is far below the weight: the vehicle stands on something (the
+            ground after landing or a reboot) and the model (thrust + cable only) does not hold.
         """
         self.counters.estimates += 1
         out: list[MAVLinkMessage] = []
@@ -220,6 +230,8 @@ class Publisher:
         health = assess_health(estimate, self.config, self.has_tension_state, self._ever_ok)
         if inputs_stale and health in (OK, CONVERGING):
             health = STALE
+        if motors_idle and health != DIVERGED:
+            health = MOTORS_IDLE
         if attitude is None and health == OK:
             health = NO_ATTITUDE
         if health == OK and not self._ever_ok:  # settle: OK for settle_s before the first send

@@ -7,9 +7,12 @@ for the same input, because nothing here reads a wall clock.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
+from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.pipeline import Estimate, TetherEstimator
+from tether_companion.estimation.thrust_input import StaticThrustInput
 from tether_companion.mavlink.framing import MAVLinkMessage
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
@@ -50,6 +53,9 @@ class EstimationSession:
         self.attitude: AttitudeSample | None = None
         self.last_estimate: Estimate | None = None
         self._held_range: RangeSample | None = None
+        self._static_thrust = StaticThrustInput(vehicle)
+        self._static_thrust_n = math.nan
+        self._idle_thrust_n = config.publish.idle_thrust_fraction * vehicle.mass_kg * GRAVITY_MPS2
         self.boots = 0
         """Flight-controller reboots seen (each restarts the estimator)."""
 
@@ -94,6 +100,7 @@ class EstimationSession:
             estimator.on_attitude(sample)
         elif isinstance(sample, PwmSample):
             estimator.on_pwm(sample)
+            self._static_thrust_n = self._static_thrust.total_thrust_n(sample.pwm_us, sample.time_s)
         elif isinstance(sample, RangeSample):
             if estimator.time_s >= sample.time_s:  # nan (no IMU yet) compares False: held
                 estimator.on_range(sample)
@@ -120,6 +127,9 @@ class EstimationSession:
         stale = health.stale_attitude + health.stale_pwm + health.stale_tension > stale_before
         self.last_estimate = estimate
         messages, publication = self.publisher.on_estimate(
-            estimate, self.attitude, inputs_stale=stale
+            estimate,
+            self.attitude,
+            inputs_stale=stale,
+            motors_idle=self._static_thrust_n < self._idle_thrust_n,
         )
         return Step(messages=messages, publication=publication, estimate=estimate)

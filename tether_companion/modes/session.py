@@ -14,6 +14,11 @@ messages to send to the flight controller:
 * LAND: ``COMMAND_LONG MAV_CMD_DO_SET_MODE`` with the Copter custom mode LAND, repeated every
   ``land_period_s`` until the heartbeat reports LAND.
 
+Call :meth:`TensionModeSession.tick` at a steady rate of flight-controller time (e.g. 50 Hz)
+driven by **any** timestamped message (ATTITUDE as well as RAW_IMU) or a timer, not only by
+IMU samples: when the IMU stream stops, the tension estimate goes stale and the logic must
+still run to stop the drone and hand over to LAND (``tests/test_modes_e2e.py`` (c) shows it).
+
 Flight-mode names follow pymavlink's ArduCopter table (``mavutil.mode_mapping_acm``).
 """
 

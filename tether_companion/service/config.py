@@ -2,8 +2,8 @@
 
 Every section is a frozen dataclass validated by :mod:`tether_companion.config`: an unknown key
 or a value out of range stops the service at start with a message naming the file, the key,
-the value and what is allowed (exit code 2). ``tether-companion run --help`` and
-``docs/config-reference.md`` list every key (generated with :func:`config_reference`).
+the value and what is allowed (exit code 2). ``docs/config-reference.md`` lists every key
+(generated with :func:`config_reference`: ``python -m tether_companion.service.config``).
 """
 
 from __future__ import annotations

@@ -4,12 +4,17 @@ thrust signal with a tether."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from tether_companion.cli import main
 from tether_companion.constants import GRAVITY_MPS2
+from tether_companion.estimation.config import EstimatorConfig
+from tether_companion.estimation.pipeline import TetherEstimator
 from tether_companion.frames import rotation_ned_to_body
+from tether_companion.physics.vehicle import load_vehicle
 from tether_companion.sysid.flight import FlightPlan, record_identification_flight
 from tether_companion.sysid.identify import DYNAMIC_STRUCTURES, identify
 from tether_companion.sysid.logs import load_flight_log
@@ -17,11 +22,14 @@ from tether_companion.sysid.processing import ProcessingOptions, lowpass, prepar
 from tether_companion.sysid.thrust_model import LinearThrust, load_thrust_model
 from tether_companion.sysid.thrust_signal import total_thrust_n
 
+SHORT_PLAN = FlightPlan(cycle_amplitudes=(1.0, 0.6, 1.3))
+"""Three excitation cycles instead of four: a 66 s flight keeps the tests quick."""
+
 
 @pytest.fixture(scope="module")
 def slack_flight(tmp_path_factory):
     path = tmp_path_factory.mktemp("flight") / "identification.tlog"
-    simulator = record_identification_flight(path, seed=3)
+    simulator = record_identification_flight(path, SHORT_PLAN, seed=3)
     return path, simulator.vehicle
 
 
@@ -39,31 +47,14 @@ def test_identified_dynamic_models_reach_95_percent_on_emulated_flight(slack_fli
     assert time_constant_s == pytest.approx(vehicle.motor_time_constant_s, rel=0.15)
 
 
-def test_cli_writes_a_model_the_estimator_can_run(slack_flight, tmp_path, capsys):
-    path, vehicle = slack_flight
-    out = tmp_path / "thrust.yaml"
-    code = main(
-        ["sysid", str(path), "--structure", "arx", "--structure", "static", "--out", str(out)]
-    )
-    assert code == 0
-    printed = capsys.readouterr().out
-    assert "arx" in printed and "static" in printed and "wrote arx" in printed
-    thrust = load_thrust_model(out)
-    assert isinstance(thrust, LinearThrust)
-    hover_pwm = float(vehicle.thrust_curve.pwm_for_thrust(vehicle.mass_kg * GRAVITY_MPS2 / 4))
-    value = 0.0
-    for k in range(100):
-        value = thrust.total_thrust_n(np.full(4, hover_pwm), 0.005 * k)
-    assert value == pytest.approx(vehicle.mass_kg * GRAVITY_MPS2, rel=0.05)
-
-
 def test_tethered_flight_thrust_corrected_with_known_tension(tmp_path, slack_flight):
     """The same flight on a 3 N constant-tension tether from the anchor below. The motors
     work ~3 N harder, but the accelerometer reads (T - c_z)/m, the same as in the slack
     flight; with the tension given the thrust signal shows the extra ~3 N."""
     path = tmp_path / "tethered.bin"
     tension_n = 3.0
-    simulator = record_identification_flight(path, FlightPlan(cable_tension_n=tension_n), seed=4)
+    plan = dataclasses.replace(SHORT_PLAN, cable_tension_n=tension_n)
+    simulator = record_identification_flight(path, plan, seed=4)
     vehicle = simulator.vehicle
     curve = vehicle.thrust_curve
     pwm_range = (curve.pwm_min_us, curve.pwm_max_us)
@@ -82,12 +73,24 @@ def test_tethered_flight_thrust_corrected_with_known_tension(tmp_path, slack_fli
     assert 2.6 < mean_thrust(corrected) - mean_thrust(slack) < 3.1
 
 
-def test_fly_emulated_option_records_csv(tmp_path, capsys):
-    out = tmp_path / "flight.csv"
-    assert main(["sysid", "--fly-emulated", str(out), "--structure", "static"]) == 0
-    assert "recorded" in capsys.readouterr().out
-    header = out.read_text().splitlines()[0]
-    assert header.startswith("time_s,pwm1_us")
+def test_cli_flies_identifies_and_writes_a_model_the_estimator_loads(tmp_path, capsys):
+    """fly (--fly-emulated, CSV) -> identify -> --out -> EstimatorConfig.thrust_model."""
+    flight, out = tmp_path / "flight.csv", tmp_path / "thrust.yaml"
+    args = ["sysid", "--fly-emulated", str(flight), "--out", str(out)]
+    assert main([*args, "--structure", "arx", "--structure", "static"]) == 0
+    printed = capsys.readouterr().out
+    assert "recorded" in printed and "static" in printed and "wrote arx" in printed
+    assert flight.read_text().splitlines()[0].startswith("time_s,pwm1_us")
+    vehicle = load_vehicle("default-quad")
+    thrust = load_thrust_model(out)
+    assert isinstance(thrust, LinearThrust)
+    hover_pwm = float(vehicle.thrust_curve.pwm_for_thrust(vehicle.mass_kg * GRAVITY_MPS2 / 4))
+    value = 0.0
+    for k in range(100):
+        value = thrust.total_thrust_n(np.full(4, hover_pwm), 0.005 * k)
+    assert value == pytest.approx(vehicle.mass_kg * GRAVITY_MPS2, rel=0.05)
+    config = EstimatorConfig(thrust_model=str(out))
+    assert isinstance(TetherEstimator(config, vehicle).thrust_input, LinearThrust)
 
 
 def test_thrust_signal_recovers_thrust_under_a_tilted_cable():

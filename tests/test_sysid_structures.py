@@ -19,13 +19,14 @@ RANGE = (1000.0, 2000.0)
 @pytest.fixture(scope="module")
 def flight():
     vehicle = load_vehicle("default-quad")
-    return vehicle, split(motor_flight(vehicle, np.random.default_rng(11)))
+    return vehicle, split(motor_flight(vehicle, np.random.default_rng(11), duration_s=40.0))
 
 
 @pytest.fixture(scope="module")
 def results(flight):
+    """PWM inputs (the paper's choice): steps of +-90 us stay close to linear."""
     _, (estimation, validation) = flight
-    return identify([estimation], [validation], RANGE)
+    return identify([estimation], [validation], RANGE, input_kind="pwm")
 
 
 def test_dynamic_structures_reach_95_percent_five_step_fit(results):
@@ -86,7 +87,7 @@ def test_a_failing_structure_is_reported_while_the_others_print(flight, monkeypa
         raise np.linalg.LinAlgError("singular matrix")
 
     monkeypatch.setitem(identify_module.STRUCTURES, "oe", broken)
-    out = identify([estimation], [validation], RANGE, ("arx", "oe", "process"))
+    out = identify([estimation], [validation], RANGE, ("arx", "oe", "process"), input_kind="pwm")
     status = {r.structure: r for r in out}
     assert status["arx"].ok and status["process"].ok
     assert not status["oe"].ok and "singular matrix" in status["oe"].error

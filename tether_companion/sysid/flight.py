@@ -26,9 +26,6 @@ from tether_companion.sim.simulator import Simulator
 from tether_companion.sim.trajectory import TrajectoryConfig
 from tether_companion.sysid.recorders import open_recorder
 
-CYCLE_AMPLITUDES = (1.0, 0.6, 1.3, 0.8)
-"""Relative step amplitude of each excitation cycle."""
-
 
 @dataclass(frozen=True)
 class FlightPlan:
@@ -47,6 +44,12 @@ class FlightPlan:
     dwell_s: float = spec(1.5, minimum=0.3, maximum=10.0, doc="time on each step [s]")
     hover_s: float = spec(5.0, minimum=1.0, doc="hover before the excitation [s]")
     cable_tension_n: float = spec(0.0, minimum=0.0, doc="constant cable tension; 0 = slack [N]")
+    cycle_amplitudes: tuple[float, ...] = spec(
+        (1.0, 0.6, 1.3, 0.8),
+        exclusive_minimum=0.0,
+        maximum=2.0,
+        doc="relative step amplitude of each roll-pitch-yaw-collective cycle",
+    )
 
     def setpoints(self) -> list[tuple[float, Setpoint]]:
         """Timed set-points ``(time_s, Setpoint)`` of the whole flight, the landing last."""
@@ -54,7 +57,7 @@ class FlightPlan:
         plan = [(1.0, Setpoint(position_ned_m=(0.0, 0.0, h), yaw_rad=0.0))]
         t = 1.0 + self.hover_s
         yaw = math.radians(self.yaw_step_deg)
-        for scale in CYCLE_AMPLITUDES:
+        for scale in self.cycle_amplitudes:
             lateral, dz = scale * self.lateral_step_m, scale * self.height_step_m
             steps = [
                 ((0.0, lateral, h), 0.0),

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from tether_companion.errors import InputError
 from tether_companion.mavlink import units
-from tether_companion.mavlink.framing import FrameEncoder, dialect
+from tether_companion.mavlink.framing import FrameEncoder, MAVLinkMessage, dialect
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.sysid.logs import csvlog
 from tether_companion.sysid.logs.dataflash_writer import (
@@ -67,7 +67,7 @@ class TlogRecorder:
         self._range_limits_m = range_limits_m
         self._next_heartbeat_s = 0.0
 
-    def _put(self, time_s: float, msg: units.MAVLinkMessage) -> None:
+    def _put(self, time_s: float, msg: MAVLinkMessage) -> None:
         stamp = TLOG_EPOCH_US + int(round(time_s * 1e6))
         self._file.write(struct.pack(">Q", stamp) + self._encoder.encode(msg))
 

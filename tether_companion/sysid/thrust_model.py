@@ -123,7 +123,7 @@ class LinearThrust:
     step boundary and the next (predicted from the input so far), plus the direct term.
     """
 
-    spec: LinearModelFile
+    model_file: LinearModelFile
     _a: FloatArray = field(init=False, repr=False)
     _b: FloatArray = field(init=False, repr=False)
     _c: FloatArray = field(init=False, repr=False)
@@ -136,23 +136,23 @@ class LinearThrust:
     _boundary_s: float = field(default=math.nan, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        self._a = np.array(self.spec.a, dtype=float).reshape(len(self.spec.a), -1)
-        self._b = np.array(self.spec.b, dtype=float).reshape(self._a.shape[0], -1)
-        self._c = np.array(self.spec.c, dtype=float).reshape(1, -1)
-        self._d = np.array(self.spec.d, dtype=float).reshape(1, -1)
-        self._v0 = np.array(self.spec.input_operating_point, dtype=float)
+        self._a = np.array(self.model_file.a, dtype=float).reshape(len(self.model_file.a), -1)
+        self._b = np.array(self.model_file.b, dtype=float).reshape(self._a.shape[0], -1)
+        self._c = np.array(self.model_file.c, dtype=float).reshape(1, -1)
+        self._d = np.array(self.model_file.d, dtype=float).reshape(1, -1)
+        self._v0 = np.array(self.model_file.input_operating_point, dtype=float)
 
     @property
     def n_motors(self) -> int:
         """Number of PWM inputs."""
-        return int(self._v0.shape[0]) // self.spec.input_map.inputs_per_motor()
+        return int(self._v0.shape[0]) // self.model_file.input_map.inputs_per_motor()
 
     def _restart(self, v: FloatArray, time_s: float) -> None:
         n = self._a.shape[0]
         self._x = np.linalg.solve(np.eye(n) - self._a, self._b @ (v - self._v0))
         self._sum = np.zeros_like(v)
         self._last_s = time_s
-        self._boundary_s = time_s + self.spec.sample_time_s
+        self._boundary_s = time_s + self.model_file.sample_time_s
 
     def total_thrust_n(self, pwm_us: FloatArray, time_s: float) -> float:
         """Total thrust [N] for pulse widths ``pwm_us`` (shape (n_motors,)) at ``time_s`` [s].
@@ -167,15 +167,15 @@ class LinearThrust:
             np.all(np.isfinite(pwm)) and math.isfinite(time_s)
         ):
             raise ValueError(f"expected {self.n_motors} finite pulse widths and a finite time")
-        v = self.spec.input_map.map_pwm(pwm)
-        dt = self.spec.sample_time_s
+        v = self.model_file.input_map.map_pwm(pwm)
+        dt = self.model_file.sample_time_s
         if self._x is None or time_s < self._last_s or time_s - self._last_s > MAX_GAP_STEPS * dt:
             self._restart(v, time_s)
         else:
             self._advance(time_s)
         self._held = v
         thrust = (
-            self.spec.thrust_operating_point_n
+            self.model_file.thrust_operating_point_n
             + self._c @ self._state_now()
             + self._d @ (v - self._v0)
         )
@@ -184,7 +184,7 @@ class LinearThrust:
     def _state_now(self) -> FloatArray:
         """State interpolated between the last boundary and the next, which is predicted from
         the input average so far (removes most of the half-sample latency of a sampled model)."""
-        dt = self.spec.sample_time_s
+        dt = self.model_file.sample_time_s
         elapsed = dt - (self._boundary_s - self._last_s)
         if elapsed <= 0.0:
             return self._x
@@ -193,7 +193,7 @@ class LinearThrust:
 
     def _advance(self, time_s: float) -> None:
         """Integrate the held input up to ``time_s``, stepping at every boundary passed."""
-        dt = self.spec.sample_time_s
+        dt = self.model_file.sample_time_s
         while self._last_s < time_s:
             end = min(time_s, self._boundary_s)
             self._sum = self._sum + self._held * (end - self._last_s)

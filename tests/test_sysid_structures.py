@@ -114,3 +114,17 @@ def test_prediction_error_jacobian_matches_finite_differences():
         [(residual(theta + step * e) - residual(theta - step * e)) / (2 * step) for e in np.eye(8)]
     )
     np.testing.assert_allclose(analytic, numeric, atol=1e-6)
+
+
+def test_no_stable_arx_fails_only_the_arx_row(flight, monkeypatch):
+    _, (estimation, validation) = flight
+
+    def unstable(*args, **kwargs):
+        raise ArithmeticError("no stable ARX model among the candidate orders")
+
+    monkeypatch.setattr(identify_module, "fit_arx", unstable)
+    monkeypatch.setitem(identify_module.STRUCTURES, "arx", lambda e, c, o: unstable())
+    out = identify([estimation], [validation], RANGE, ("arx", "process"), input_kind="pwm")
+    status = {r.structure: r for r in out}
+    assert not status["arx"].ok and "no stable ARX" in status["arx"].error
+    assert status["process"].ok

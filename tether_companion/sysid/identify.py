@@ -35,6 +35,8 @@ STRUCTURES: dict[str, Fitter] = {
 """Structure name -> fitter given the data, context and the ARX-selected orders."""
 
 DYNAMIC_STRUCTURES = ("tf", "process", "arx", "oe", "bj", "ss")
+FALLBACK_ORDERS = ArxOrders(na=2, nb=2, nk=1)
+"""Orders for output error and Box-Jenkins when no stable ARX model is found (Appendix A's)."""
 
 
 @dataclass(frozen=True)
@@ -69,7 +71,11 @@ def identify(
     """
     input_map = InputMap(input_kind, *pwm_range_us)
     context = FitContext.from_data(estimation, pwm_range_us, input_map)
-    orders = selected_orders(estimation, context)
+    try:
+        with np.errstate(all="ignore"):
+            orders = selected_orders(estimation, context)
+    except (ArithmeticError, np.linalg.LinAlgError, ValueError):
+        orders = FALLBACK_ORDERS  # the ARX row itself reports the failure
     results = []
     for name in structures:
         try:

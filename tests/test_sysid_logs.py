@@ -374,3 +374,22 @@ def test_euler_from_quaternion_matches_frames():
     np.testing.assert_allclose(
         euler_from_rotation_body_to_ned(rotation_body_to_ned(roll, pitch, yaw)), [roll, pitch, yaw]
     )
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--cutoff-hz", "60"], "cutoff_hz"),
+        (["--estimation-fraction", "1.5"], "estimation_fraction"),
+        (["--vehicle", "no-such-quad"], "no-such-quad"),
+        (["--k-steps", "0"], "--k-steps"),
+        (["--structure", "arx", "--write", "oe"], "--write oe"),
+        (["--structure", "static", "--out", "/nonexistent-dir/x.yaml"], "cannot write"),
+    ],
+)
+def test_cli_bad_options_exit_2(tmp_path, signals, capsys, extra, message):
+    path = tmp_path / "flight.csv"
+    write_csv(path, signals)
+    assert main(["sysid", str(path), *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err

@@ -204,3 +204,17 @@ def test_motors_idle_withholds_the_position() -> None:
     assert not _of(_feed(publisher, [_estimate(1.0)], motors_idle=True), "VISION_POSITION_ESTIMATE")
     assert publisher.health == "motors_idle"
     assert _of(_feed(publisher, [_estimate(2.0)]), "VISION_POSITION_ESTIMATE")
+
+
+def test_flapping_health_is_announced_at_most_once_a_second() -> None:
+    publisher = Publisher(PublishConfig(settle_s=0.0), has_tension_state=True)
+    sent = []
+    for k in range(200):  # 1 s at 200 Hz, stale every other tick
+        messages, _ = publisher.on_estimate(
+            _estimate(10.0 + k * 0.005), ATTITUDE, inputs_stale=k % 2 == 1
+        )
+        sent += messages
+    texts = [m.text for m in _of(sent, "STATUSTEXT")]
+    assert texts == ["TETHER: position OK"] and publisher.counters.health_changes == 200
+    messages, _ = publisher.on_estimate(_estimate(11.01), ATTITUDE, inputs_stale=True)
+    assert [m.text for m in _of(messages, "STATUSTEXT")] == ["TETHER: inputs stale, no estimate"]

@@ -70,6 +70,8 @@ _HEALTH_TEXT = {
     MOTORS_IDLE: "motors idle (landed?), position withheld",
 }
 _STATUSTEXT_PREFIX = "TETHER: "
+STATUSTEXT_MIN_INTERVAL_S = 1.0
+"""Shortest gap between two health STATUSTEXTs [s of flight-controller time]."""
 _RESUME_GAP_S = 0.5
 """A pause in publication longer than this counts as a reset when publication resumes [s]."""
 
@@ -168,6 +170,8 @@ class Publisher:
         self.counters = PublisherCounters()
         self.reset_counter = 0
         self.health = CONVERGING
+        self._announced: str | None = None
+        self._next_text_s = -math.inf
         self.last: Publication | None = None
         self._period_s = 1.0 / config.rate_hz
         self._tension_period_s = (
@@ -242,7 +246,7 @@ class Publisher:
                 self._ever_ok = True
         elif not self._ever_ok:
             self._ok_since_s = math.inf
-        out += self._health_transition(health)
+        out += self._health_transition(health, t)
         self.counters.by_health[health] += 1
         if (
             t >= self._next_tension_s
@@ -316,13 +320,19 @@ class Publisher:
         self.reset_counter = (self.reset_counter + 1) & 0xFF
         self.counters.resets += 1
 
-    def _health_transition(self, health: str) -> list[MAVLinkMessage]:
-        if health == self.health:
+    def _health_transition(self, health: str, time_s: float | None = None) -> list[MAVLinkMessage]:
+        """Record the health; a STATUSTEXT when the announced one changes, at most one per
+        ``STATUSTEXT_MIN_INTERVAL_S`` of FC time (``time_s`` None: at once) so a flapping
+        health cannot flood the ground station; the latest state is announced when allowed."""
+        if health != self.health:
+            self.health = health
+            self.counters.health_changes += 1
+        if not self.config.statustext or health == self._announced:
             return []
-        self.health = health
-        self.counters.health_changes += 1
-        if not self.config.statustext:
+        if time_s is not None and time_s < self._next_text_s:
             return []
+        self._announced = health
+        self._next_text_s = -math.inf if time_s is None else time_s + STATUSTEXT_MIN_INTERVAL_S
         severity = dialect.MAV_SEVERITY_INFO if health == OK else dialect.MAV_SEVERITY_WARNING
         text = (_STATUSTEXT_PREFIX + _HEALTH_TEXT[health])[:50].encode("ascii")
         return [dialect.MAVLink_statustext_message(severity, text, 0, 0)]

@@ -25,7 +25,7 @@ RANGE = (1000.0, 2000.0)
 MASS_KG = 1.5
 
 
-def write_tlog(path, signals, skip=(), other_system=True):
+def write_tlog(path, signals, skip=(), other_system=True, imu="RAW_IMU"):
     """A .tlog as a ground station records it, packed by pymavlink's MAVLink 2 encoder.
 
     ArduPilot units: RAW_IMU milli-g, ATTITUDE rad, SERVO_OUTPUT_RAW us, DISTANCE_SENSOR cm.
@@ -44,10 +44,16 @@ def write_tlog(path, signals, skip=(), other_system=True):
             acc = signals["accel_mps2"][k] / GRAVITY_MPS2 * 1000.0
             roll, pitch, yaw = signals["euler_rad"][k]
             pwm = [int(p) for p in signals["pwm_us"][k]] + [0] * 12
-            messages = {
-                "RAW_IMU": mavlink2.MAVLink_raw_imu_message(
+            if imu == "HIGHRES_IMU":  # PX4: m/s^2
+                imu_msg = mavlink2.MAVLink_highres_imu_message(
+                    usec, *signals["accel_mps2"][k], *([0.0] * 10), 0b111, 0
+                )
+            else:
+                imu_msg = mavlink2.MAVLink_raw_imu_message(
                     usec, *(int(round(a)) for a in acc), 0, 0, 0, 0, 0, 0, 0, 0
-                ),
+                )
+            messages = {
+                imu: imu_msg,
                 "ATTITUDE": mavlink2.MAVLink_attitude_message(ms, roll, pitch, yaw, 0.0, 0.0, 0.0),
                 "SERVO_OUTPUT_RAW": mavlink2.MAVLink_servo_output_raw_message(usec, 0, *pwm),
                 "DISTANCE_SENSOR": mavlink2.MAVLink_distance_sensor_message(
@@ -163,6 +169,12 @@ def _check_log(log, signals, accel_tol):
     np.testing.assert_allclose(log.specific_force_body_mps2.values, s["accel_mps2"], atol=accel_tol)
     np.testing.assert_allclose(log.euler_rad.values, s["euler_rad"], atol=1e-5)
     assert log.height_m is not None
+
+
+def test_px4_highres_imu_tlog(tmp_path, signals):
+    path = tmp_path / "px4.tlog"
+    write_tlog(path, signals, imu="HIGHRES_IMU")
+    _check_log(load_flight_log(path), signals, accel_tol=1e-5)
 
 
 def test_tlog_written_with_pymavlink(tmp_path, signals):

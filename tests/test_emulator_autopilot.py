@@ -335,7 +335,7 @@ def test_noise_and_wind_parameters_reach_the_simulation() -> None:
     accs = np.array([[m.xacc, m.yacc, m.zacc] for m in imu])
     assert np.ptp(accs, axis=0).max() <= 2  # only quantisation and slow motion left
     param_set(gcs, "SIM_WIND_E", 5.0)
-    assert fc.sim.body.wind_ned_m_s[1] == 5.0
+    assert fc.sim.wind_ned_m_s == (0.0, 5.0, 0.0)
 
 
 # --------------------------------------------------------------------------- streams

@@ -10,9 +10,11 @@ import pytest
 
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.frames import rotation_ned_to_body
+from tether_companion.physics.vehicle import load_vehicle
 from tether_companion.sim.controller import Setpoint
 from tether_companion.sim.events import Event
 from tether_companion.sim.scenario import Scenario, load_scenario
+from tether_companion.sim.sensors import SensorConfig
 from tether_companion.sim.simulator import Simulator
 
 G = GRAVITY_MPS2
@@ -246,3 +248,92 @@ def test_emulator_style_start_landed_without_trajectory_then_fly_setpoints() -> 
     sim.set_setpoint(Setpoint(position_ned_m=(1.0, 0.0, 0.0)))  # land
     sim.advance_to(16.0)
     assert sim.landed
+
+
+# --------------------------------------------------------------------------- run-time changes
+
+
+def test_state_accessors_agree_with_truth() -> None:
+    sim = Simulator(load_scenario("paper-circle"))
+    sim.advance_to(2.0)
+    truth = sim.truth
+    assert sim.position_ned_m == tuple(truth.position_ned_m)
+    assert sim.velocity_ned_m_s == tuple(truth.velocity_ned_m_s)
+    assert sim.euler_rad == tuple(truth.euler_rad)
+    assert sim.body_rates_rad_s == tuple(truth.body_rates_rad_s)
+    assert sim.specific_force_body_mps2 == tuple(truth.specific_force_body_mps2)
+
+
+def test_resume_trajectory_flies_the_scenario_again() -> None:
+    sim = Simulator(load_scenario("hover"))
+    assert sim.follow_trajectory
+    sim.set_setpoint(Setpoint(position_ned_m=(0.0, 1.0, -2.0)))
+    sim.advance_to(6.0)
+    assert sim.position_ned_m == pytest.approx((0.0, 1.0, -2.0), abs=0.05)
+    sim.resume_trajectory()
+    assert sim.follow_trajectory
+    sim.advance_to(14.0)
+    assert sim.position_ned_m == pytest.approx((2.0, 0.0, -3.0), abs=0.05)
+
+
+def test_wind_set_at_run_time_is_flown_against() -> None:
+    scenario = load_scenario("hover")
+    draggy = replace(load_vehicle(scenario.vehicle), drag_coefficient_n_s_per_m=0.3)
+    sim = Simulator(scenario, vehicle=draggy)
+    sim.advance_to(3.0)
+    calm_roll_rad = sim.euler_rad[0]
+    sim.set_wind_ned_m_s([0.0, 5.0, 0.0])
+    assert sim.wind_ned_m_s == (0.0, 5.0, 0.0)
+    sim.advance_to(15.0)
+    # drag pushes east; the controller holds position by banking west (roll left, negative)
+    assert sim.position_ned_m == pytest.approx((2.0, 0.0, -3.0), abs=0.05)
+    assert sim.euler_rad[0] < calm_roll_rad - 0.01
+    with pytest.raises(ValueError):
+        sim.set_wind_ned_m_s([1.0, 2.0])
+
+
+def test_sensor_config_set_at_run_time_is_read_with_its_vibration_frequency() -> None:
+    base = load_scenario("hover")
+    scenario = replace(
+        base,
+        trajectory=replace(base.trajectory, kind="none"),
+        initial=replace(base.initial, airborne=False, armed=False),
+    )
+    sim = Simulator(scenario)  # resting on the ground: the true specific force is constant
+    quiet = SensorConfig(
+        accel_noise_std_mps2=0.0,
+        gyro_noise_std_rad_s=0.0,
+        accel_vibration_amplitude_mps2=1.0,
+        accel_vibration_frequency_hz=50.0,
+    )
+    sim.set_sensor_config(quiet)
+    assert sim.sensor_config is quiet
+    sim.advance_to(1.0)
+
+    def vibration() -> np.ndarray:
+        return sim.read_imu().specific_force_body_mps2 - sim.truth.specific_force_body_mps2
+
+    start = vibration()
+    assert np.abs(start).max() > 0.1
+    sim.advance_to(1.01)  # half a period of 50 Hz
+    assert vibration() == pytest.approx(-start, abs=1e-9)
+    sim.advance_to(1.02)
+    assert vibration() == pytest.approx(start, abs=1e-9)
+
+
+def test_replace_cable_pulls_with_the_new_cable_at_once() -> None:
+    sim = Simulator(load_scenario("hover"))
+    sim.advance_to(2.0)
+    before = np.array(sim.specific_force_body_mps2)
+    old_force = sim.truth.cable_force_ned_n
+    sim.replace_cable(replace(sim.scenario.cable, tension_n=10.0))
+    new_force = sim.truth.cable_force_ned_n
+    assert np.linalg.norm(new_force) == pytest.approx(10.0)
+    roll, pitch, yaw = sim.euler_rad
+    expected = (
+        rotation_ned_to_body(roll, pitch, yaw) @ (new_force - old_force) / sim.vehicle.mass_kg
+    )
+    assert np.array(sim.specific_force_body_mps2) - before == pytest.approx(expected, abs=1e-9)
+    sim.replace_cable(replace(sim.scenario.cable, model="elastic", length_m=4.0))
+    sim.set_paid_out_m(4.5)
+    assert sim.cable.paid_out_m == 4.5 and not sim.cable.released

@@ -227,12 +227,12 @@ async def _serve(controller: FlightController, endpoints: list, args: argparse.N
 async def _status(controller: FlightController, server: EmulatorServer) -> None:
     while True:
         await asyncio.sleep(STATUS_PERIOD_S)
-        x = controller.sim.body.x
+        north_m, east_m, down_m = controller.sim.position_ned_m
         armed = "ARMED" if controller.armed else "disarmed"
         tension_n = controller.sim.cable.tension_n
         print(
             f"t {controller.time_s:7.1f} s  {controller.mode.name:9s} {armed:8s} "
-            f"NED ({x[0]:6.2f}, {x[1]:6.2f}, {x[2]:6.2f}) m  tension {tension_n:5.2f} N  "
+            f"NED ({north_m:6.2f}, {east_m:6.2f}, {down_m:6.2f}) m  tension {tension_n:5.2f} N  "
             f"in {controller.counters.messages_in}  slips {server.counters.slips}",
             flush=True,
         )

@@ -49,7 +49,7 @@ from tether_companion.emulator.streams import (
 from tether_companion.frames import wrap_pi
 from tether_companion.mavlink import geo, units
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
-from tether_companion.physics.cable import CABLE_MODELS, make_cable
+from tether_companion.physics.cable import CABLE_MODELS
 from tether_companion.sim.controller import Setpoint
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.simulator import Simulator
@@ -301,9 +301,8 @@ class FlightController:
             self._before_step()
             sim.step()
             steps_done += 1
-            x = sim.body.x
             now = sim.time_s
-            self.truth_history.record(now, (x[0], x[1], x[2]))
+            self.truth_history.record(now, sim.position_ned_m)
             if now >= self._next_mode_tick_s - tolerance:
                 self._mode_tick(now)
                 self._next_mode_tick_s = now + MODE_TICK_S
@@ -338,7 +337,7 @@ class FlightController:
         ):
             self.sim.navigation_position_override = None
             return
-        velocity = self.sim.body.velocity_ned_m_s()
+        velocity = self.sim.velocity_ned_m_s
         position = self.nav.position_ned_m(self.boot_time_s, np.asarray(velocity))
         if position is not None:
             self._dead_reckoning = [float(v) for v in position]
@@ -356,8 +355,7 @@ class FlightController:
         override = self.sim.navigation_position_override
         if override is not None:
             return override
-        x = self.sim.body.x
-        return (x[0], x[1], x[2])
+        return self.sim.position_ned_m
 
     def navigation_position_ned_m(self) -> tuple[float, float, float] | None:
         """Where the flight controller believes it is, in its EKF frame [m], or None."""
@@ -367,15 +365,14 @@ class FlightController:
             override = self.sim.navigation_position_override
             if override is not None:
                 return override
-            velocity = np.asarray(self.sim.body.velocity_ned_m_s())
+            velocity = np.asarray(self.sim.velocity_ned_m_s)
             position = self.nav.position_ned_m(self.boot_time_s, velocity)
             return (
                 None
                 if position is None
                 else (float(position[0]), float(position[1]), float(position[2]))
             )
-        x = self.sim.body.x
-        return (x[0], x[1], x[2])
+        return self.sim.position_ned_m
 
     # ------------------------------------------------------------------ mode logic (50 Hz)
     def _mode_tick(self, now: float) -> None:
@@ -475,7 +472,7 @@ class FlightController:
         self._velocity_deadline_s = math.inf
         self._rtl_landing = False
         if mode == CopterMode.AUTO:
-            self.sim.follow_trajectory = True
+            self.sim.resume_trajectory()
         elif mode == CopterMode.LAND:
             self._start_descent()
         elif mode == CopterMode.RTL:
@@ -497,9 +494,8 @@ class FlightController:
                 return "PreArm: VisOdom: not healthy"
             euler = self.nav.last_euler_rad
             if euler is not None:
-                x = self.sim.body.x
                 worst = max(
-                    abs(wrap_pi(a - b)) for a, b in zip(euler, (x[6], x[7], x[8]), strict=True)
+                    abs(wrap_pi(a - b)) for a, b in zip(euler, self.sim.euler_rad, strict=True)
                 )
                 if worst > MAX_ATTITUDE_MISMATCH_RAD:
                     return f"PreArm: VisOdom: attitude differs by {math.degrees(worst):.0f} deg"
@@ -855,7 +851,7 @@ class FlightController:
         if not self._guided_target_allowed():
             return
         current = self._control_position()
-        heading = self.sim.body.x[8]
+        heading = self.sim.euler_rad[2]
         if frame in (dialect.MAV_FRAME_BODY_NED, dialect.MAV_FRAME_BODY_OFFSET_NED):
             c, s = math.cos(heading), math.sin(heading)
             if position is not None:
@@ -1068,7 +1064,7 @@ class FlightController:
                 raise ValueError("TETH_MODEL is not constant_tension")
             sim.set_tension_n(value)
         elif name == "TETH_LENGTH":
-            sim.cable.paid_out_m = value
+            sim.set_paid_out_m(value)
         elif name == "TETH_WINCH_RATE":
             sim.set_winch_rate_mps(value)
         elif name in ("TETH_STIFFNESS", "TETH_DAMPING", "TETH_DENSITY"):
@@ -1079,11 +1075,11 @@ class FlightController:
             elif sim.cable.released:
                 raise ValueError("set TETH_MODEL to re-attach the tether")
         elif name in _SENSOR_FIELDS:
-            sim.sensors.config = replace(sim.sensors.config, **{_SENSOR_FIELDS[name]: value})
+            sim.set_sensor_config(replace(sim.sensor_config, **{_SENSOR_FIELDS[name]: value}))
         elif name in ("SIM_WIND_N", "SIM_WIND_E", "SIM_WIND_D"):
-            wind = list(sim.body.wind_ned_m_s)
+            wind = list(sim.wind_ned_m_s)
             wind["NED".index(name[-1])] = value
-            sim.body.wind_ned_m_s = tuple(wind)
+            sim.set_wind_ned_m_s(wind)
         elif name == "EMU_DROP_PCT":
             self.link_faults.drop_probability = value / 100.0
         elif name == "EMU_DUP_PCT":
@@ -1115,9 +1111,7 @@ class FlightController:
         values["length_m"] = min(
             max(float(values["length_m"]), cable_config.min_length_m), cable_config.spool_length_m
         )
-        cable = make_cable(replace(cable_config, **values), self.sim.gravity_mps2)
-        self.sim.cable = cable
-        self.sim.body.external_force = cable.force_components
+        self.sim.replace_cable(replace(cable_config, **values))
         self.params.force("TETH_RELEASE", 0.0)
 
     def _switch_navigation(self, vision: bool) -> None:

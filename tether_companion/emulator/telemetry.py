@@ -143,9 +143,8 @@ def highres_imu(fc: FlightController) -> MAVLinkMessage:
 def attitude(fc: FlightController) -> MAVLinkMessage:
     """ATTITUDE: the attitude estimate (truth plus the scenario's attitude noise) and rates."""
     sample = fc.sim.read_attitude()
-    x = fc.sim.body.x
     return units.attitude_message(
-        dataclasses.replace(sample, time_s=fc.boot_time_s), (x[9], x[10], x[11])
+        dataclasses.replace(sample, time_s=fc.boot_time_s), fc.sim.body_rates_rad_s
     )
 
 
@@ -157,10 +156,10 @@ def servo_output_raw(fc: FlightController) -> MAVLinkMessage:
 
 def distance_sensor(fc: FlightController) -> MAVLinkMessage:
     """DISTANCE_SENSOR, downward; out of range (or forced so) reads just beyond a limit."""
-    sensors = fc.sim.sensors.config
+    sensors = fc.sim.sensor_config
     reading = None if fc.rangefinder_forced_out_of_range else fc.sim.read_rangefinder()
     if reading is None:
-        high = -fc.sim.body.x[2] > 0.5 * (sensors.range_min_m + sensors.range_max_m)
+        high = -fc.sim.position_ned_m[2] > 0.5 * (sensors.range_min_m + sensors.range_max_m)
         distance = sensors.range_max_m + 0.01 if high or fc.rangefinder_forced_out_of_range else 0.0
         fc.rangefinder_in_range = False
     else:
@@ -180,9 +179,7 @@ def local_position_ned(fc: FlightController) -> MAVLinkMessage | None:
     position = fc.navigation_position_ned_m()
     if position is None:
         return None
-    return units.local_position_ned_message(
-        fc.boot_time_s, position, fc.sim.body.velocity_ned_m_s()
-    )
+    return units.local_position_ned_message(fc.boot_time_s, position, fc.sim.velocity_ned_m_s)
 
 
 def global_position_int(fc: FlightController) -> MAVLinkMessage | None:
@@ -191,14 +188,14 @@ def global_position_int(fc: FlightController) -> MAVLinkMessage | None:
     if position is None or fc.origin is None:
         return None
     return geo.global_position_int_message(
-        fc.boot_time_s, fc.origin, position, fc.sim.body.velocity_ned_m_s(), fc.sim.body.x[8]
+        fc.boot_time_s, fc.origin, position, fc.sim.velocity_ned_m_s, fc.sim.euler_rad[2]
     )
 
 
 def vfr_hud(fc: FlightController) -> MAVLinkMessage:
     """VFR_HUD: speeds, heading, throttle and altitude (truth; there is no air data)."""
-    x = fc.sim.body.x
-    vn, ve, vd = fc.sim.body.velocity_ned_m_s()
+    _, _, down_m = fc.sim.position_ned_m
+    vn, ve, vd = fc.sim.velocity_ned_m_s
     curve = fc.sim.vehicle.thrust_curve
     pwm = fc.sim.read_pwm().pwm_us
     throttle = (
@@ -208,23 +205,23 @@ def vfr_hud(fc: FlightController) -> MAVLinkMessage:
     return dialect.MAVLink_vfr_hud_message(
         ground_speed,
         ground_speed,
-        units.saturate_int(math.degrees(x[8]) % 360.0, 0, 359),
+        units.saturate_int(math.degrees(fc.sim.euler_rad[2]) % 360.0, 0, 359),
         units.saturate_int(throttle, 0, 100),
-        float(fc.home.alt_m - x[2]),
+        float(fc.home.alt_m - down_m),
         float(-vd),
     )
 
 
 def sim_state(fc: FlightController) -> MAVLinkMessage:
     """SIM_STATE: the ground truth (position at the anchor's location), as ArduPilot SITL."""
-    x = fc.sim.body.x
+    sim = fc.sim
     return geo.sim_state_message(
         fc.home,
-        (x[0], x[1], x[2]),
-        fc.sim.body.velocity_ned_m_s(),
-        (x[6], x[7], x[8]),
-        fc.sim.body.specific_force_body_mps2(),
-        (x[9], x[10], x[11]),
+        sim.position_ned_m,
+        sim.velocity_ned_m_s,
+        sim.euler_rad,
+        sim.specific_force_body_mps2,
+        sim.body_rates_rad_s,
     )
 
 

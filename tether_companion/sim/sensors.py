@@ -122,6 +122,15 @@ class SensorSuite:
         self.config = config
         self._noise = NormalStream(rng)
         self._vibration_phase_rad = tuple(float(v) for v in rng.uniform(0.0, 2.0 * math.pi, 3))
+
+    @property
+    def config(self) -> SensorConfig:
+        """Noise levels, biases, vibration and rangefinder limits (may be replaced at run time)."""
+        return self._config
+
+    @config.setter
+    def config(self, config: SensorConfig) -> None:
+        self._config = config
         self._vibration_omega_rad_s = 2.0 * math.pi * config.accel_vibration_frequency_hz
 
     def imu(
@@ -131,7 +140,7 @@ class SensorSuite:
         body_rates_rad_s: tuple[float, float, float],
     ) -> ImuSample:
         """Accelerometer (truth + bias + vibration + noise) and gyro (truth + bias + noise)."""
-        c = self.config
+        c = self._config
         take = self._noise.take
         sa, sg = c.accel_noise_std_mps2, c.gyro_noise_std_rad_s
         amp = c.accel_vibration_amplitude_mps2
@@ -154,7 +163,7 @@ class SensorSuite:
         self, time_s: float, roll_rad: float, pitch_rad: float, yaw_rad: float
     ) -> AttitudeSample:
         """Euler angles with white noise; yaw wrapped to [-pi, pi)."""
-        s = self.config.attitude_noise_std_rad
+        s = self._config.attitude_noise_std_rad
         take = self._noise.take
         yaw = yaw_rad + s * take()
         yaw = (yaw + math.pi) % (2.0 * math.pi) - math.pi
@@ -174,7 +183,7 @@ class SensorSuite:
         [range_min_m, range_max_m] or the beam points nearly horizontal (or up). The reported
         value is the true distance plus noise, clipped to the sensor's range.
         """
-        c = self.config
+        c = self._config
         tilt = math.cos(roll_rad) * math.cos(pitch_rad)
         if tilt < _MIN_TILT_COSINE:
             return None

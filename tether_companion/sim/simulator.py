@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.frames import rotation_ned_to_body
-from tether_companion.physics.cable import CableModel, make_cable
+from tether_companion.physics.cable import CableConfig, CableModel, make_cable
 from tether_companion.physics.rigid_body import (
     BODY_RATES,
     EULER,
@@ -36,7 +36,7 @@ from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, Range
 from tether_companion.sim.controller import CascadedController, Setpoint
 from tether_companion.sim.events import Event
 from tether_companion.sim.scenario import Scenario
-from tether_companion.sim.sensors import SensorSuite
+from tether_companion.sim.sensors import SensorConfig, SensorSuite
 from tether_companion.sim.trajectory import Trajectory
 
 FloatArray = NDArray[np.float64]
@@ -80,6 +80,14 @@ class Simulator:
         Overrides the scenario's vehicle profile when given.
     rng
         The one Generator every noise draw comes from; default ``default_rng(scenario.seed)``.
+
+    Notes
+    -----
+    ``cable`` (a :class:`~tether_companion.physics.cable.CableModel`) may be read
+    (``paid_out_m``, ``released``, ``tension_n``); the cable, the wind and the sensor settings
+    are changed only through the methods here (``replace_cable``, ``set_wind_ned_m_s``,
+    ``set_sensor_config``, the ground-station events), so the rigid body always pulls on the
+    cable it is given.
     """
 
     def __init__(
@@ -99,7 +107,7 @@ class Simulator:
         self.controller = CascadedController(scenario.controller, self.vehicle, self.gravity_mps2)
         self.trajectory = Trajectory(scenario.trajectory)
         self.sensors = SensorSuite(scenario.sensors, self.rng)
-        self.follow_trajectory = scenario.trajectory.kind != "none"
+        self._follow_trajectory = scenario.trajectory.kind != "none"
         self.navigation_position_override: tuple[float, float, float] | None = None
         self.armed = False
         self._controller_steps = scenario.controller_steps
@@ -193,7 +201,7 @@ class Simulator:
         if not self.armed:
             pwm = self.controller.idle()
         else:
-            if self.follow_trajectory:
+            if self._follow_trajectory:
                 self.controller.set_setpoint(self.trajectory.setpoint_at(t))
             x = self.body.x
             position = self.navigation_position_override or (x[0], x[1], x[2])
@@ -214,6 +222,34 @@ class Simulator:
     def landed(self) -> bool:
         """True while the drone rests on the ground plane."""
         return self.body.landed
+
+    @property
+    def position_ned_m(self) -> tuple[float, float, float]:
+        """True position relative to the anchor, NED [m] (a tuple: cheap at every step)."""
+        x = self.body.x
+        return (x[0], x[1], x[2])
+
+    @property
+    def velocity_ned_m_s(self) -> tuple[float, float, float]:
+        """True velocity, NED [m/s]."""
+        return self.body.velocity_ned_m_s()
+
+    @property
+    def euler_rad(self) -> tuple[float, float, float]:
+        """True (roll, pitch, yaw) [rad]."""
+        x = self.body.x
+        return (x[6], x[7], x[8])
+
+    @property
+    def body_rates_rad_s(self) -> tuple[float, float, float]:
+        """True body rates (p, q, r), FRD [rad/s]."""
+        x = self.body.x
+        return (x[9], x[10], x[11])
+
+    @property
+    def specific_force_body_mps2(self) -> tuple[float, float, float]:
+        """Noise-free accelerometer specific force, FRD [m/s^2], evaluated on the forces now."""
+        return self.body.specific_force_body_mps2()
 
     def _specific_force_now(self) -> tuple[float, float, float]:
         if self._cache_step != self._steps:
@@ -271,10 +307,44 @@ class Simulator:
         """Disarm: motors to pwm_min at the next controller update (the drone falls if airborne)."""
         self.armed = False
 
+    @property
+    def follow_trajectory(self) -> bool:
+        """True while the controller flies the scenario's trajectory (from the start when it
+        has one, again after :meth:`resume_trajectory`); False after :meth:`set_setpoint`."""
+        return self._follow_trajectory
+
+    def resume_trajectory(self) -> None:
+        """Fly the scenario's trajectory from the next controller update (at the current time)."""
+        self._follow_trajectory = True
+
     def set_setpoint(self, setpoint: Setpoint) -> None:
         """Fly this set-point from now on (stops following the scenario's trajectory)."""
-        self.follow_trajectory = False
+        self._follow_trajectory = False
         self.controller.set_setpoint(setpoint)
+
+    # ------------------------------------------------------------------ environment
+    @property
+    def wind_ned_m_s(self) -> tuple[float, float, float]:
+        """Steady wind, NED [m/s]."""
+        return self.body.wind_ned_m_s
+
+    def set_wind_ned_m_s(self, wind_ned_m_s: ArrayLike) -> None:
+        """Blow this steady wind, NED [m/s], shape (3,), from the next step on."""
+        self.body.wind_ned_m_s = np.asarray(wind_ned_m_s, dtype=float).reshape(3).tolist()
+
+    @property
+    def sensor_config(self) -> SensorConfig:
+        """The sensors' rates, noise, biases and rangefinder limits now."""
+        return self.sensors.config
+
+    def set_sensor_config(self, config: SensorConfig) -> None:
+        """Read the sensors with these settings from now on (the noise stream carries on)."""
+        self.sensors.config = config
+
+    def replace_cable(self, config: CableConfig) -> None:
+        """Swap the tether for a fresh one built from ``config`` (attached, its own winch state)."""
+        self.cable = make_cable(config, self.gravity_mps2)
+        self.body.external_force = self.cable.force_components
 
     # ------------------------------------------------------------------ ground-station events
     def set_tension_n(self, tension_n: float) -> None:
@@ -284,6 +354,10 @@ class Simulator:
     def set_winch_rate_mps(self, rate_mps: float) -> None:
         """Set the winch rate [m/s], positive paying out."""
         self.cable.set_winch_rate_mps(rate_mps)
+
+    def set_paid_out_m(self, length_m: float) -> None:
+        """Set the paid-out cable length [m] (the winch jumps to it)."""
+        self.cable.paid_out_m = length_m
 
     def apply_tug(self, force_ned_n: ArrayLike, duration_s: float) -> None:
         """Pull on the drone with an extra NED force [N] for ``duration_s`` seconds from now."""

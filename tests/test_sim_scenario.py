@@ -9,7 +9,12 @@ import pytest
 
 from tether_companion.config import ConfigError
 from tether_companion.resources import SCENARIOS_DIR
-from tether_companion.sim.scenario import Scenario, load_scenario
+from tether_companion.sim.scenario import (
+    Scenario,
+    load_scenario,
+    resolve_scenario_path,
+    scenario_from_mapping,
+)
 
 BUILT_INS = sorted(p.stem for p in SCENARIOS_DIR.glob("*.yaml"))
 
@@ -46,6 +51,26 @@ def test_a_relative_vehicle_path_resolves_against_the_scenario_file(tmp_path: Pa
     (tmp_path / "s.yaml").write_text("vehicle: quad.yaml\n")
     scenario = load_scenario(tmp_path / "s.yaml")
     assert Path(scenario.vehicle) == (tmp_path / "quad.yaml").resolve()
+
+
+def test_a_mapping_is_read_as_if_from_its_file(tmp_path: Path) -> None:
+    (tmp_path / "quad.yaml").write_text("name: mine\nmass_kg: 1.2\n")
+    path = tmp_path / "both.yaml"
+    scenario = scenario_from_mapping({"vehicle": "quad.yaml", "duration_s": 5.0}, path)
+    assert Path(scenario.vehicle) == (tmp_path / "quad.yaml").resolve()
+    assert scenario.duration_s == 5.0
+    absent = scenario_from_mapping({"vehicle": "other.yaml"}, path)
+    assert absent.vehicle == "other.yaml"  # left as written: the vehicle loader reports it
+    with pytest.raises(ConfigError) as info:
+        scenario_from_mapping({"seed": -1}, path)
+    assert info.value.source == str(path) and info.value.key == "seed"
+
+
+def test_built_in_names_resolve_to_their_files(tmp_path: Path) -> None:
+    assert resolve_scenario_path("hover") == SCENARIOS_DIR / "hover.yaml"
+    assert resolve_scenario_path(tmp_path / "any.yaml") == tmp_path / "any.yaml"
+    with pytest.raises(ConfigError, match="no such built-in"):
+        resolve_scenario_path("no-such-scenario")
 
 
 BAD = [

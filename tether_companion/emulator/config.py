@@ -20,8 +20,7 @@ from pathlib import Path
 
 from tether_companion.config import ConfigError, from_mapping, read_yaml, spec
 from tether_companion.emulator.streams import STREAMS
-from tether_companion.resources import SCENARIOS_DIR, builtin_path
-from tether_companion.sim.scenario import Scenario, load_scenario
+from tether_companion.sim.scenario import Scenario, resolve_scenario_path, scenario_from_mapping
 
 NAVIGATION_SOURCES: tuple[str, ...] = ("truth", "vision")
 MAX_STREAM_RATE_HZ = 1000.0
@@ -123,37 +122,21 @@ class EmulatorConfig:
 def load_emulator_scenario(path_or_name: str | Path) -> tuple[Scenario, EmulatorConfig]:
     """Load a scenario file and its optional ``emulator:`` section.
 
-    Without an ``emulator`` key this is :func:`~tether_companion.sim.scenario.load_scenario`
-    plus default emulator settings. With one, the section is validated here and the rest of
-    the file by the simulator's loader (which sees a copy of the file without the section).
+    The section (default settings without one) is validated here, the rest of the file as
+    :func:`~tether_companion.sim.scenario.load_scenario` would read it.
 
     Raises
     ------
     ConfigError
         Naming the file, key, value and what is allowed.
     """
-    path = Path(path_or_name)
-    if not path.suffix and not path.is_file():
-        try:
-            path = builtin_path(SCENARIOS_DIR, str(path_or_name))
-        except FileNotFoundError as exc:
-            raise ConfigError(str(path_or_name), "", str(path_or_name), str(exc)) from None
+    path = resolve_scenario_path(path_or_name)
     data = read_yaml(path)
     section = data.get("emulator")
-    if section is None:
-        return load_scenario(path), EmulatorConfig()
-    emulator = from_mapping(EmulatorConfig, section, source=str(path), prefix="emulator")
+    emulator = (
+        EmulatorConfig()
+        if section is None
+        else from_mapping(EmulatorConfig, section, source=str(path), prefix="emulator")
+    )
     rest = {k: v for k, v in data.items() if k != "emulator"}
-    return _scenario_from_mapping(rest, path), emulator
-
-
-def _scenario_from_mapping(data: dict, path: Path) -> Scenario:
-    """``data`` validated as the simulator's Scenario, as if read from ``path``.
-
-    Mirrors :func:`~tether_companion.sim.scenario.load_scenario` after its file read: a
-    relative ``vehicle`` path is resolved against the file's folder.
-    """
-    vehicle = data.get("vehicle")
-    if isinstance(vehicle, str) and Path(vehicle).suffix and (path.parent / vehicle).is_file():
-        data = {**data, "vehicle": str((path.parent / vehicle).resolve())}
-    return from_mapping(Scenario, data, source=str(path))
+    return scenario_from_mapping(rest, path), emulator

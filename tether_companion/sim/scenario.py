@@ -13,8 +13,10 @@ allowed. Every key is listed in docs/simulator.md.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from tether_companion.config import ConfigError, from_mapping, read_yaml, spec
 from tether_companion.physics.cable import CableConfig
@@ -127,6 +129,40 @@ class Scenario:
         return round(self.physics_rate_hz / self.controller.rate_hz)
 
 
+def resolve_scenario_path(path_or_name: str | Path) -> Path:
+    """The file of a scenario: ``path_or_name`` itself, or a built-in name's YAML file.
+
+    Raises
+    ------
+    ConfigError
+        When it has no suffix, is no file and names no built-in scenario.
+    """
+    path = Path(path_or_name)
+    if not path.suffix and not path.is_file():
+        try:
+            path = builtin_path(SCENARIOS_DIR, str(path_or_name))
+        except FileNotFoundError as exc:
+            raise ConfigError(str(path_or_name), "", str(path_or_name), str(exc)) from None
+    return path
+
+
+def scenario_from_mapping(data: Mapping[str, Any], path: Path) -> Scenario:
+    """``data`` validated as a :class:`Scenario`, as if read from the file ``path``.
+
+    A relative ``vehicle`` path is resolved against the file's folder. For loaders of files
+    that hold more than a scenario (the emulator's section): they pass the rest of the file.
+
+    Raises
+    ------
+    ConfigError
+        When any key is unknown, mistyped or out of range (naming ``path``).
+    """
+    vehicle = data.get("vehicle")
+    if isinstance(vehicle, str) and Path(vehicle).suffix and (path.parent / vehicle).is_file():
+        data = {**data, "vehicle": str((path.parent / vehicle).resolve())}
+    return from_mapping(Scenario, data, source=str(path))
+
+
 def load_scenario(path_or_name: str | Path) -> Scenario:
     """Load a scenario by built-in name (``sitl/scenarios/NAME.yaml``) or file path.
 
@@ -137,16 +173,5 @@ def load_scenario(path_or_name: str | Path) -> Scenario:
     ConfigError
         When the file is missing or not YAML, or any key is unknown, mistyped or out of range.
     """
-    path = Path(path_or_name)
-    if not path.suffix and not path.is_file():
-        try:
-            path = builtin_path(SCENARIOS_DIR, str(path_or_name))
-        except FileNotFoundError as exc:
-            raise ConfigError(str(path_or_name), "", str(path_or_name), str(exc)) from None
-    data = dict(read_yaml(path))
-    vehicle = data.get("vehicle")
-    if isinstance(vehicle, str) and Path(vehicle).suffix:
-        candidate = path.parent / vehicle
-        if candidate.is_file():
-            data["vehicle"] = str(candidate.resolve())
-    return from_mapping(Scenario, data, source=str(path))
+    path = resolve_scenario_path(path_or_name)
+    return scenario_from_mapping(read_yaml(path), path)

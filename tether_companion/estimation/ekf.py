@@ -32,7 +32,7 @@ from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg.lapack import dpotrf
+from scipy.linalg.lapack import dpotrf, dpotrs
 from scipy.stats import chi2
 
 FloatArray = NDArray[np.float64]
@@ -242,7 +242,8 @@ class ExtendedKalmanFilter:
             s_value = float(s[0, 0])
             positive_definite = s_value > 0.0
         else:
-            positive_definite = dpotrf(s, lower=1, clean=0)[1] == 0  # Cholesky succeeded
+            s_chol, info = dpotrf(s, lower=1, clean=0)  # Cholesky: is S positive definite?
+            positive_definite = info == 0
         if not positive_definite:
             if not math.isfinite(float(s.sum())):
                 status.nonfinite += 1
@@ -250,11 +251,9 @@ class ExtendedKalmanFilter:
             status.singular += 1
             return UpdateResult(SINGULAR, math.nan)
         if m == 1:
-            s_inv = np.array(((1.0 / s_value,),))
             nis = float(innovation[0]) ** 2 / s_value
-        else:
-            s_inv = np.linalg.inv(s)
-            nis = float(innovation @ s_inv @ innovation)
+        else:  # NIS = y^T S^-1 y with S^-1 y solved from the Cholesky factor
+            nis = float(innovation @ dpotrs(s_chol, innovation, lower=1)[0])
         status.last_nis = nis
         status.last_innovation = innovation
         threshold = self._thresholds.get(m)
@@ -267,7 +266,8 @@ class ExtendedKalmanFilter:
                 status.gated += 1
                 return UpdateResult(GATED, nis)
             status.forced += 1
-        gain = pht @ s_inv
+        # K = P H^T S^-1, i.e. K^T = S^-1 (P H^T)^T (S symmetric)
+        gain = pht / s_value if m == 1 else dpotrs(s_chol, pht.T, lower=1)[0].T
         x = self.x + gain @ innovation
         # Joseph form: symmetric PSD by construction, unlike (I - K H) P under rounding
         a = self._eye - gain @ h_jac

@@ -166,7 +166,8 @@ def test_range_is_tilt_corrected_and_validated() -> None:
     estimator.on_range(RangeSample(0.0, 0.01))
     assert estimator.health.range_out_of_range == 2
     estimator.on_range(RangeSample(-1.0, 4.0))
-    assert estimator.health.range_stale == 1
+    estimator.on_range(RangeSample(1.0, 4.0))  # far ahead of the filter (IMU stalled)
+    assert estimator.health.range_stale == 2
     estimator.on_attitude(AttitudeSample(0.0, 1.2, 0.0, 0.0))  # beyond max_tilt_rad
     estimator.on_range(RangeSample(0.0, 4.0))
     assert estimator.health.range_out_of_range == 3
@@ -193,3 +194,13 @@ def test_identified_thrust_model_file_is_used_and_bad_file_refused(tmp_path) -> 
     missing = dataclasses.replace(EstimatorConfig(), thrust_model=str(tmp_path / "none.yaml"))
     with pytest.raises(ConfigError, match="file not found"):
         TetherEstimator(missing, VEHICLE)
+
+
+def test_range_stamped_ahead_of_the_imu_does_not_move_the_filter_clock() -> None:
+    estimator = _primed(0.0)
+    estimator.on_imu(_imu(0.0))
+    estimator.on_range(RangeSample(0.004, 3.0))  # stamped after the next IMU sample below
+    assert estimator.health.range_fused == 1 and estimator.time_s == 0.0
+    estimator.on_attitude(AttitudeSample(0.003, 0.0, 0.0, 0.0))
+    assert estimator.on_imu(_imu(0.003)) is not None
+    assert estimator.health.out_of_order == 0

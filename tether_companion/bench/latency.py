@@ -27,12 +27,15 @@ from rich.table import Table
 
 from tether_companion.config import ConfigError
 from tether_companion.mavlink.endpoints import open_link, parse_endpoint
+from tether_companion.mavlink.framing import dialect
 from tether_companion.resources import CONFIGS_DIR, PROJECT_ROOT
 from tether_companion.service.config import load_service_config, load_vehicle_for
 from tether_companion.service.synthetic import FakeFlightController, HoverStreams
 
 HELP = "latency from IMU arrival to VISION_POSITION_ESTIMATE, and service CPU at 200 Hz input"
 WARMUP_S = 3.0
+FLOOR_S = 10.0
+"""Seconds of the floor measurement (a bare UDP echo process instead of the service)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -72,56 +75,88 @@ async def _measure(args: argparse.Namespace) -> dict:
         data.setdefault("publish", {})["rate_hz"] = args.publish_hz
     config = load_service_config(args.config)  # validates the file as given
     vehicle = load_vehicle_for(config)
+    with tempfile.TemporaryDirectory(prefix="tether-bench-") as scratch:
+        config_path = Path(scratch) / "companion.yaml"
+        config_path.write_text(yaml.safe_dump(data))
+        service = [
+            sys.executable,
+            "-m",
+            "tether_companion.cli",
+            "run",
+            "--config",
+            str(config_path),
+        ]
+        service += ["--no-record", "--connect"]
+        result = await _round_trip(service, vehicle, args.duration, args.seed)
+    floor = await _round_trip(
+        [sys.executable, "-m", "tether_companion.bench.latency"], vehicle, FLOOR_S, args.seed
+    )
+    result["floor_ms"] = floor["latency_ms"]
+    return result
+
+
+async def _round_trip(command: list[str], vehicle, duration_s: float, seed: int) -> dict:
+    """Play the flight controller for ``command`` + ``udp:127.0.0.1:PORT`` and time the replies."""
     fc_link = await open_link(
         parse_endpoint("udpin:127.0.0.1:0", "listen"), system_id=1, component_id=1
     )
     port = fc_link.local_address[1]
-    with tempfile.TemporaryDirectory(prefix="tether-bench-") as scratch:
-        config_path = Path(scratch) / "companion.yaml"
-        config_path.write_text(yaml.safe_dump(data))
-        env = dict(
-            os.environ,
-            PYTHONPATH=os.pathsep.join(
-                filter(None, (str(PROJECT_ROOT), os.environ.get("PYTHONPATH")))
-            ),
+    pythonpath = os.pathsep.join(filter(None, (str(PROJECT_ROOT), os.environ.get("PYTHONPATH"))))
+    peer = await asyncio.create_subprocess_exec(
+        *command, f"udp:127.0.0.1:{port}",
+        env=dict(os.environ, PYTHONPATH=pythonpath),
+        stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.PIPE,
+    )  # fmt: skip
+    try:
+        streams = HoverStreams(
+            vehicle, np.array([2.0, 1.0, -3.0]), 4.0, rng=np.random.default_rng(seed)
         )
-        service = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "tether_companion.cli", "run", "--config", str(config_path),
-            "--connect", f"udp:127.0.0.1:{port}", "--no-record",
-            env=env, stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.PIPE,
-        )  # fmt: skip
-        try:
-            streams = HoverStreams(
-                vehicle, np.array([2.0, 1.0, -3.0]), 4.0, rng=np.random.default_rng(args.seed)
-            )
-            fc = FakeFlightController(fc_link, streams, speed=1.0)
-            await fc.run(WARMUP_S)
-            cpu0, wall0, first_usec = (
-                _cpu_seconds(service.pid),
-                time.monotonic(),
-                int(fc.time_s * 1e6),
-            )
-            await fc.run(args.duration)
-            cpu1, wall1 = _cpu_seconds(service.pid), time.monotonic()
-        finally:
-            service.terminate()
-            _, err = await service.communicate()
-            await fc_link.close()
+        fc = FakeFlightController(fc_link, streams, speed=1.0)
+        await fc.run(WARMUP_S)
+        cpu0, wall0, first_usec = _cpu_seconds(peer.pid), time.monotonic(), int(fc.time_s * 1e6)
+        await fc.run(duration_s)
+        cpu1, wall1 = _cpu_seconds(peer.pid), time.monotonic()
+    finally:
+        peer.terminate()
+        _, err = await peer.communicate()
+        await fc_link.close()
     latencies = [
         arrival - fc.imu_sent_s[usec]
         for usec, arrival in fc.log.vision_arrival_s.items()
         if usec >= first_usec and usec in fc.imu_sent_s
     ]
-    imu_sent = sum(1 for usec in fc.imu_sent_s if usec >= first_usec)
     return {
         "latency_ms": np.array(latencies) * 1e3,
-        "imu_sent": imu_sent,
+        "imu_sent": sum(1 for usec in fc.imu_sent_s if usec >= first_usec),
         "cpu_share": (cpu1 - cpu0) / (wall1 - wall0),
         "wall_s": wall1 - wall0,
         "rate_hz": len(latencies) / (wall1 - wall0),
-        "service_exit": service.returncode,
         "service_err": err.decode(errors="replace")[-500:],
     }
+
+
+async def _echo(endpoint: str) -> None:
+    """The measurement's floor: answer every 6th RAW_IMU at once with a VISION_POSITION_ESTIMATE
+    (no decoding to SI, no EKF), as a process of its own like the service."""
+    link = await open_link(parse_endpoint(endpoint, "connect"), system_id=1, component_id=191)
+    link.send(dialect.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3))
+    link.send(
+        dialect.MAVLink_command_long_message(
+            1, 1, dialect.MAV_CMD_SET_MESSAGE_INTERVAL, 0, 27.0, 5000.0, 0, 0, 0, 0, 0
+        )
+    )
+    count = 0
+    zeros = [0.0] * 21
+    while True:
+        msg = await link.recv()
+        if msg.get_type() == "RAW_IMU":
+            count += 1
+            if count % 6 == 0:
+                link.send(
+                    dialect.MAVLink_vision_position_estimate_message(
+                        msg.time_usec, 0, 0, 0, 0, 0, 0, zeros, 0
+                    )
+                )
 
 
 def _print(result: dict, args: argparse.Namespace) -> None:
@@ -140,6 +175,10 @@ def _print(result: dict, args: argparse.Namespace) -> None:
         table.add_row("latency p90", f"{p90:.3f} ms", "")
         table.add_row("latency p99", f"{p99:.3f} ms", "< 2 ms")
         table.add_row("latency max", f"{lat.max():.3f} ms", "")
+    floor = result["floor_ms"]
+    if floor.size:
+        f50, f99 = np.percentile(floor, [50, 99])
+        table.add_row("floor: bare UDP echo process p50 / p99", f"{f50:.3f} / {f99:.3f} ms", "")
     table.add_row(
         "service CPU (user + system)", f"{100 * result['cpu_share']:.1f} % of one core", "< 10 %"
     )
@@ -149,3 +188,9 @@ def _print(result: dict, args: argparse.Namespace) -> None:
     console.print(table)
     if not lat.size:
         console.print(f"[red]no estimates came back[/red]; service stderr: {result['service_err']}")
+
+
+if __name__ == "__main__":
+    asyncio.run(
+        _echo(sys.argv[1])
+    )  # the floor's peer: python -m tether_companion.bench.latency ENDPOINT

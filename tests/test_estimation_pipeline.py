@@ -204,3 +204,10 @@ def test_range_stamped_ahead_of_the_imu_does_not_move_the_filter_clock() -> None
     estimator.on_attitude(AttitudeSample(0.003, 0.0, 0.0, 0.0))
     assert estimator.on_imu(_imu(0.003)) is not None
     assert estimator.health.out_of_order == 0
+
+
+def test_pwm_with_wrong_motor_count_is_refused_and_counted() -> None:
+    estimator = _primed(0.0)
+    estimator.on_pwm(PwmSample(0.001, np.full(8, 1500.0)))
+    assert estimator.health.pwm_invalid == 1
+    assert estimator.on_imu(_imu(0.002)).accel_fused  # the earlier valid PWM still serves

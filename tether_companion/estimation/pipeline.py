@@ -68,6 +68,8 @@ class EstimatorHealth:
         fresh attitude / older than the filter.
     nonfinite_rejected
         Samples (any kind) or derived inputs containing NaN/inf, rejected before the filter.
+    pwm_invalid
+        PWM samples the thrust input refused (not one pulse width per motor).
     out_of_order
         Samples older than the filter time, dropped.
     resets
@@ -91,6 +93,7 @@ class EstimatorHealth:
     range_out_of_range: int = 0
     range_stale: int = 0
     nonfinite_rejected: int = 0
+    pwm_invalid: int = 0
     out_of_order: int = 0
     resets: int = 0
     pd_repairs: int = 0
@@ -246,7 +249,11 @@ class TetherEstimator:
         if not _finite(sample.time_s) or not np.isfinite(sample.pwm_us).all():
             self.health.nonfinite_rejected += 1
             return
-        thrust_n = self.thrust_input.total_thrust_n(sample.pwm_us, sample.time_s)
+        try:
+            thrust_n = self.thrust_input.total_thrust_n(sample.pwm_us, sample.time_s)
+        except ValueError:  # wrong number of outputs for this vehicle
+            self.health.pwm_invalid += 1
+            return
         if not _finite(thrust_n):
             self.health.nonfinite_rejected += 1
             return

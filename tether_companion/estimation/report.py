@@ -113,9 +113,9 @@ def write_plots(result: RunResult, directory: Path, label: str) -> list[Path]:
 
     fig, axes = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
     for i, (ax, name) in enumerate(zip(axes, ("north", "east", "down"), strict=True)):
-        ax.plot(t, truth[:, i], "k-", lw=1.0, label="Truth")
-        ax.plot(t, p3[:, i], "b-", lw=0.7, label="EKF3S")
-        ax.plot(t, p4[:, i], "r-", lw=0.7, label="EKF4S")
+        ax.plot(t, p3[:, i], "b-", lw=0.6, label="EKF3S")
+        ax.plot(t, p4[:, i], "r-", lw=0.6, label="EKF4S")
+        ax.plot(t, truth[:, i], "k-", lw=1.5, label="Truth")
         ax.set_ylabel(f"{name} [m]")
         ax.grid(True)
     axes[0].legend(loc="upper right")
@@ -138,8 +138,8 @@ def write_plots(result: RunResult, directory: Path, label: str) -> list[Path]:
     paths.append(_save(fig, directory / "fig10_errors.png"))
 
     fig, ax = plt.subplots(figsize=(10, 4))
-    ax.plot(t, result.truth_tension_n, "b-", lw=1.0, label="Truth")
-    ax.plot(t, result.tension_4s_n, "r-", lw=0.7, label="EKF4S")
+    ax.plot(t, result.tension_4s_n, "r-", lw=0.6, label="EKF4S")
+    ax.plot(t, result.truth_tension_n, "b-", lw=1.5, label="Truth")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("cable tension [N]")
     ax.grid(True)

@@ -15,7 +15,7 @@ from tether_companion.emulator.autopilot import FlightController
 from tether_companion.emulator.config import load_emulator_scenario
 from tether_companion.emulator.lockstep import LockstepPeer
 from tether_companion.estimation.runner import run_scenario
-from tether_companion.mavlink.framing import FrameEncoder, FrameParser
+from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
 from tether_companion.resources import CONFIGS_DIR
 from tether_companion.service.app import CompanionService
 from tether_companion.service.config import load_service_config, load_vehicle_for
@@ -195,3 +195,51 @@ def test_demo_command_flies_and_prints_the_emulator_score(capsys) -> None:
     out = capsys.readouterr().out
     assert "accuracy scored by the emulator" in out
     assert "VISION_POSITION_ESTIMATE" in out and "RMSE north" in out
+
+
+def test_service_hosts_tension_following_a_tug_moves_the_drone() -> None:
+    """With ``modes.enabled`` the service runs the tension modes on its own inputs: in GUIDED,
+    a 3 N tug east for 3 s moves the hovering drone east, by targets the service sends."""
+    scenario, emulator_config = load_emulator_scenario("hover")
+    scenario = dataclasses.replace(scenario, duration_s=20.0)
+    controller = FlightController(scenario, emulator_config)
+    config = load_service_config(
+        CONFIGS_DIR / "companion.yaml",
+        {
+            "link": {"connect": "udp:127.0.0.1:14550"},
+            "recording": {"enabled": False},
+            "modes": {"enabled": True, "land_on_first_tug": False},
+        },
+    )
+    peer = LockstepPeer(controller, config.link.system_id, config.link.component_id)
+    ground_station = LockstepPeer(controller)
+    link = _LockstepLink(peer, config.link.system_id, config.link.component_id)
+    service = CompanionService(
+        config,
+        controller.sim.vehicle,
+        notifier=SystemdNotifier({}),
+        monotonic_s=lambda: controller.time_s,
+    )
+    positions = {}
+    read = 0
+    next_housekeeping_s = 0.0
+    while controller.time_s < scenario.duration_s:
+        peer.advance(0.005)
+        t = controller.time_s
+        if abs(t - 1.0) < 0.0025:
+            guided = dialect.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+            assert ground_station.command(dialect.MAV_CMD_DO_SET_MODE, guided, 4) == 0
+        if abs(t - 6.0) < 0.0025:
+            ground_station.command(dialect.MAV_CMD_USER_1, 0.0, 3.0, 0.0, 3.0)
+        while read < len(peer.received):
+            service.handle_message(link, peer.received[read], t)  # type: ignore[arg-type]
+            read += 1
+        if t >= next_housekeeping_s:
+            service.housekeep(link, t)  # type: ignore[arg-type]
+            next_housekeeping_s += 0.05
+        positions[round(t, 3)] = np.array(controller.sim.body.x[:3])
+    before = np.mean([p for t, p in positions.items() if 5.0 <= t <= 6.0], axis=0)
+    after = np.mean([p for t, p in positions.items() if 17.0 <= t <= 20.0], axis=0)
+    assert service.state.sent_by_type.get("SET_POSITION_TARGET_LOCAL_NED", 0) > 0
+    assert after[1] - before[1] > 1.0, after - before  # moved along the pull (east)
+    assert controller.armed

@@ -37,6 +37,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--status", action="store_true", help="show a live status view in the terminal"
     )
+    parser.add_argument(
+        "--tension-mode",
+        action="store_true",
+        help="enable tension-following and landing by the tether (overrides modes.enabled; "
+        "docs/landing.md)",
+    )
 
 
 def config_from_args(args: argparse.Namespace) -> ServiceConfig:
@@ -51,7 +57,10 @@ def config_from_args(args: argparse.Namespace) -> ServiceConfig:
         recording["directory"] = args.record_dir
     if args.no_record:
         recording["enabled"] = False
-    return load_service_config(args.config, {"link": link, "recording": recording})
+    overrides: dict = {"link": link, "recording": recording}
+    if args.tension_mode:
+        overrides["modes"] = {"enabled": True}
+    return load_service_config(args.config, overrides)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -34,7 +34,7 @@ from tether_companion.mavlink.units import seconds_to_usec
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.service.clock import FcClock
 from tether_companion.service.config import ServiceConfig
-from tether_companion.service.ingest import ATTITUDE, IMU, INPUT_KINDS, PWM, RANGE
+from tether_companion.service.ingest import ATTITUDE, FC_POSITION, IMU, INPUT_KINDS, PWM, RANGE
 from tether_companion.service.publish import STALE, Publication
 from tether_companion.service.recording import RecordingLimits, TlogWriter
 from tether_companion.service.session import EstimationSession
@@ -44,6 +44,8 @@ HOUSEKEEPING_PERIOD_S = 0.05
 RATE_WINDOW_S = 1.0
 INPUT_SILENT_S = 0.5
 """An input not heard for this long [s] (local time) while the link is up is re-requested."""
+FC_POSITION_RATE_HZ = 20.0
+"""LOCAL_POSITION_NED rate asked for when the tension modes run [Hz]."""
 ORIGIN_RETRY_S = 1.0
 ORIGIN_ATTEMPTS = 5
 INTERVAL_ATTEMPTS_BEFORE_FALLBACK = 2
@@ -308,6 +310,7 @@ class CompanionService:
 
     def _handle_control(self, link: Link, msg: MAVLinkMessage, kind: str, now_s: float) -> None:
         if kind == "HEARTBEAT":
+            self.session.on_fc_heartbeat(msg.base_mode, msg.custom_mode)
             self.state.fc_autopilot = msg.autopilot
             self.state.fc_armed = bool(msg.base_mode & dialect.MAV_MODE_FLAG_SAFETY_ARMED)
         elif kind == "TIMESYNC":
@@ -416,6 +419,10 @@ class CompanionService:
         if streams.rangefinder_hz > 0:
             table[RANGE] = StreamRequest(
                 dialect.MAVLINK_MSG_ID_DISTANCE_SENSOR, streams.rangefinder_hz
+            )
+        if self.config.modes.enabled:  # the modes' targets are in the FC's own frame
+            table[FC_POSITION] = StreamRequest(
+                dialect.MAVLINK_MSG_ID_LOCAL_POSITION_NED, FC_POSITION_RATE_HZ
             )
         return table
 

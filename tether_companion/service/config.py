@@ -13,7 +13,9 @@ from pathlib import Path
 
 from tether_companion.config import ConfigError, describe, from_mapping, read_yaml, spec
 from tether_companion.estimation.config import EstimatorConfig
+from tether_companion.estimation.tension_kf import TensionFilterConfig
 from tether_companion.mavlink.endpoints import parse_endpoint
+from tether_companion.modes.config import TensionModeConfig
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 
 MAV_COMP_ID_ONBOARD_COMPUTER = 191
@@ -295,6 +297,12 @@ class ServiceConfig:
     )
     tension: TensionConfig = spec(default_factory=TensionConfig)
     publish: PublishConfig = spec(default_factory=PublishConfig)
+    modes: TensionModeConfig = spec(
+        default_factory=TensionModeConfig, doc="tension-following and landing by the tether"
+    )
+    tension_filter: TensionFilterConfig = spec(
+        default_factory=TensionFilterConfig, doc="tension Kalman filter the modes act on"
+    )
     recording: RecordingConfig = spec(default_factory=RecordingConfig)
     watchdog_interval_s: float = spec(
         0.0,

@@ -42,7 +42,8 @@ ATTITUDE = "attitude"
 PWM = "pwm"
 RANGE = "range"
 TENSION = "tension"
-INPUT_KINDS = (IMU, ATTITUDE, PWM, RANGE, TENSION)
+FC_POSITION = "fc_position"
+INPUT_KINDS = (IMU, ATTITUDE, PWM, RANGE, TENSION, FC_POSITION)
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,7 +54,18 @@ class TensionReading:
     tension_n: float
 
 
-Sample = ImuSample | AttitudeSample | PwmSample | RangeSample | TensionReading
+@dataclass(frozen=True, slots=True)
+class FcPosition:
+    """The flight controller's own position belief (LOCAL_POSITION_NED), NED [m], at FC time [s].
+
+    Not an estimator input: the tension modes send GUIDED targets in this frame.
+    """
+
+    time_s: float
+    position_ned_m: tuple[float, float, float]
+
+
+Sample = ImuSample | AttitudeSample | PwmSample | RangeSample | TensionReading | FcPosition
 
 
 @dataclass
@@ -136,6 +148,8 @@ class Ingest:
             return self._checked(PWM, self._pwm(msg))
         if kind_name == "DISTANCE_SENSOR":
             return self._checked(RANGE, self._range(msg))
+        if kind_name == "LOCAL_POSITION_NED":
+            return self._checked(FC_POSITION, self._fc_position(msg))
         counters.not_input += 1
         return None
 
@@ -201,6 +215,13 @@ class Ingest:
             self.counters.out_of_range += 1
             return None
         return RangeSample(time_s=msg.time_boot_ms * 1e-3, distance_m=distance_m)
+
+    def _fc_position(self, msg: MAVLinkMessage) -> FcPosition | None:
+        position = (float(msg.x), float(msg.y), float(msg.z))
+        if not all(math.isfinite(v) for v in position):
+            self.counters.nonfinite += 1
+            return None
+        return FcPosition(time_s=msg.time_boot_ms * 1e-3, position_ned_m=position)
 
     def _tension(self, msg: MAVLinkMessage) -> TensionReading | None:
         name = msg.name if isinstance(msg.name, bytes) else str(msg.name).encode("ascii", "replace")

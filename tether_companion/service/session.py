@@ -10,16 +10,24 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.pipeline import Estimate, TetherEstimator
 from tether_companion.estimation.thrust_input import StaticThrustInput
 from tether_companion.mavlink.framing import MAVLinkMessage
+from tether_companion.modes.session import TensionModeSession
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.config import ServiceConfig
-from tether_companion.service.ingest import Ingest, Sample, TensionReading
+from tether_companion.service.ingest import FcPosition, Ingest, Sample, TensionReading
 from tether_companion.service.publish import Publication, Publisher
 from tether_companion.service.thrust import MotorLagThrustInput
+
+MODE_TICK_S = 0.02
+"""Period of the tension modes' logic [s of flight-controller time] (50 Hz)."""
+HEIGHT_STALE_S = 0.5
+"""A rangefinder height or FC position older than this [s] is not handed to the modes."""
 
 
 @dataclass
@@ -56,6 +64,12 @@ class EstimationSession:
         self._static_thrust = StaticThrustInput(vehicle)
         self._static_thrust_n = math.nan
         self._idle_thrust_n = config.publish.idle_thrust_fraction * vehicle.mass_kg * GRAVITY_MPS2
+        self.modes = self._new_modes()
+        """Tension-following and landing (``modes.enabled``), fed the same samples."""
+        self._height_m = math.nan
+        self._height_time_s = -math.inf
+        self._fc_position: FcPosition | None = None
+        self._next_mode_tick_s = -math.inf
         self.boots = 0
         """Flight-controller reboots seen (each restarts the estimator)."""
 
@@ -67,6 +81,28 @@ class EstimationSession:
         self.attitude = None
         self.last_estimate = None
         self._held_range = None
+        self.modes = self._new_modes()
+        self._next_mode_tick_s = -math.inf
+
+    def _new_modes(self) -> TensionModeSession | None:
+        config = self.config
+        if not config.modes.enabled:
+            return None
+        identified = config.estimator.thrust_model is not None
+        lag = config.thrust_dynamics == "motor_lag" and not identified
+        return TensionModeSession(
+            config.modes,
+            config.tension_filter,
+            self.vehicle,
+            config.link.fc_system_id,
+            config.link.fc_component_id,
+            thrust_input=MotorLagThrustInput(self.vehicle) if lag else None,
+        )
+
+    def on_fc_heartbeat(self, base_mode: int, custom_mode: int) -> None:
+        """The flight controller's HEARTBEAT (armed flag and flight mode, for the modes)."""
+        if self.modes is not None:
+            self.modes.on_heartbeat(base_mode, custom_mode)
 
     def _new_estimator(self) -> TetherEstimator:
         identified = self.config.estimator.thrust_model is not None  # the estimator loads it
@@ -92,6 +128,12 @@ class EstimationSession:
         a range sample is handed over after the IMU sample of the same instant; fusing it at
         once would move the filter ahead of the next IMU sample and make the pipeline drop it.
         """
+        step = self._estimate(sample)
+        if self.modes is not None:
+            step.messages += self._run_modes(self.modes, sample)
+        return step
+
+    def _estimate(self, sample: Sample) -> Step:
         estimator = self.estimator
         if isinstance(sample, ImuSample):
             return self._tick(sample)
@@ -109,6 +151,34 @@ class EstimationSession:
         elif isinstance(sample, TensionReading):
             estimator.set_known_tension_n(sample.tension_n, sample.time_s)
         return Step()
+
+    def _run_modes(self, modes: TensionModeSession, sample: Sample) -> list[MAVLinkMessage]:
+        """Feed the tension modes; run their logic at ``MODE_TICK_S`` on IMU and ATTITUDE
+        stamps (either keeps it running when the other stream stops)."""
+        if isinstance(sample, ImuSample):
+            modes.on_imu(sample)
+        elif isinstance(sample, AttitudeSample):
+            modes.on_attitude(sample)
+        elif isinstance(sample, PwmSample):
+            modes.on_pwm(sample)
+        elif isinstance(sample, RangeSample) and self.attitude is not None:
+            tilt = math.cos(self.attitude.roll_rad) * math.cos(self.attitude.pitch_rad)
+            self._height_m, self._height_time_s = sample.distance_m * tilt, sample.time_s
+        elif isinstance(sample, FcPosition):
+            self._fc_position = sample
+        if not isinstance(sample, (ImuSample, AttitudeSample)):
+            return []
+        t = sample.time_s
+        if t < self._next_mode_tick_s:
+            return []
+        self._next_mode_tick_s = t + MODE_TICK_S
+        # targets are in the flight controller's frame: its own belief, which navigates on our
+        # estimate when it has no other source (the raw estimate would carry a tug's bias)
+        fc = self._fc_position
+        fc_fresh = fc is not None and abs(t - fc.time_s) <= HEIGHT_STALE_S
+        position = np.array(fc.position_ned_m) if fc_fresh else np.full(3, math.nan)
+        fresh = t - self._height_time_s <= HEIGHT_STALE_S
+        return modes.tick(t, position, self._height_m if fresh else math.nan)
 
     def _tick(self, sample: ImuSample) -> Step:
         estimator = self.estimator

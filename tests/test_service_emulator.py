@@ -198,8 +198,8 @@ def test_demo_command_flies_and_prints_the_emulator_score(capsys) -> None:
 
 
 def test_service_hosts_tension_following_a_tug_moves_the_drone() -> None:
-    """With ``modes.enabled`` the service runs the tension modes on its own inputs: in GUIDED,
-    a 3 N tug east for 3 s moves the hovering drone east, by targets the service sends."""
+    """With ``tension_mode.enabled`` the service runs the tension modes on its own inputs: in
+    GUIDED, a 3 N tug east for 3 s moves the hovering drone east, by targets the service sends."""
     scenario, emulator_config = load_emulator_scenario("hover")
     scenario = dataclasses.replace(scenario, duration_s=20.0)
     controller = FlightController(scenario, emulator_config)
@@ -208,7 +208,7 @@ def test_service_hosts_tension_following_a_tug_moves_the_drone() -> None:
         {
             "link": {"connect": "udp:127.0.0.1:14550"},
             "recording": {"enabled": False},
-            "modes": {"enabled": True, "land_on_first_tug": False},
+            "tension_mode": {"enabled": True, "land_on_first_tug": False},
         },
     )
     peer = LockstepPeer(controller, config.link.system_id, config.link.component_id)

@@ -237,3 +237,30 @@ def test_three_state_with_tension_from_a_load_cell_message() -> None:
     assert publications[-1].tension_n == 4.0
     silent = _session(config)
     assert _run(silent, frames) == [] and silent.estimator.health.stale_tension > 0
+
+
+def test_ground_station_command_controls_the_tension_modes(config) -> None:
+    session = _session(config)
+    gcs = FrameEncoder(255, 190)
+    parser = FrameParser()
+
+    def command(cmd: int, *params: float, target: tuple[int, int] = (1, 191)):
+        values = [*params, *([0.0] * (7 - len(params)))]
+        frame = gcs.encode(dialect.MAVLink_command_long_message(*target, cmd, 0, *values))
+        (msg,) = parser.feed(frame)
+        return session.on_message(msg).messages
+
+    assert not session.modes.modes.enabled  # tension_mode.enabled is false by default
+    (ack,) = command(dialect.MAV_CMD_USER_2, 1.0, 0.0)
+    assert ack.result == dialect.MAV_RESULT_ACCEPTED and session.modes.modes.enabled
+    (ack,) = command(dialect.MAV_CMD_USER_2, -1.0, 1.0)  # request a landing, keep enabled
+    assert ack.result == dialect.MAV_RESULT_ACCEPTED and session.modes.modes.enabled
+    (ack,) = command(dialect.MAV_CMD_USER_2, 7.0, 0.0)
+    assert ack.result == dialect.MAV_RESULT_DENIED
+    (ack,) = command(dialect.MAV_CMD_USER_2, float("nan"), 0.0)
+    assert ack.result == dialect.MAV_RESULT_DENIED
+    (ack,) = command(dialect.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+    assert ack.result == dialect.MAV_RESULT_UNSUPPORTED
+    assert command(dialect.MAV_CMD_USER_2, 0.0, 0.0, target=(1, 1)) == []  # for the autopilot
+    (ack,) = command(dialect.MAV_CMD_USER_2, 0.0, 0.0)
+    assert ack.result == dialect.MAV_RESULT_ACCEPTED and not session.modes.modes.enabled

@@ -40,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--tension-mode",
         action="store_true",
-        help="enable tension-following and landing by the tether (overrides modes.enabled; "
+        help="enable tension-following and landing by the tether (overrides tension_mode.enabled; "
         "docs/landing.md)",
     )
 
@@ -59,7 +59,7 @@ def config_from_args(args: argparse.Namespace) -> ServiceConfig:
         recording["enabled"] = False
     overrides: dict = {"link": link, "recording": recording}
     if args.tension_mode:
-        overrides["modes"] = {"enabled": True}
+        overrides["tension_mode"] = {"enabled": True}
     return load_service_config(args.config, overrides)
 
 

@@ -45,7 +45,7 @@ RATE_WINDOW_S = 1.0
 INPUT_SILENT_S = 0.5
 """An input not heard for this long [s] (local time) while the link is up is re-requested."""
 FC_POSITION_RATE_HZ = 20.0
-"""LOCAL_POSITION_NED rate asked for when the tension modes run [Hz]."""
+"""LOCAL_POSITION_NED rate asked for (the tension modes' frame) [Hz]."""
 ORIGIN_RETRY_S = 1.0
 ORIGIN_ATTEMPTS = 5
 INTERVAL_ATTEMPTS_BEFORE_FALLBACK = 2
@@ -56,8 +56,9 @@ _STREAM_GROUPS = {
     ATTITUDE: dialect.MAV_DATA_STREAM_EXTRA1,
     PWM: dialect.MAV_DATA_STREAM_RC_CHANNELS,
     RANGE: dialect.MAV_DATA_STREAM_EXTRA3,
+    FC_POSITION: dialect.MAV_DATA_STREAM_POSITION,
 }
-"""ArduPilot's REQUEST_DATA_STREAM groups (SRx_RAW_SENS, SRx_EXTRA1, SRx_RC_CHAN, SRx_EXTRA3)."""
+"""ArduPilot's REQUEST_DATA_STREAM groups (SRx_RAW_SENS, _EXTRA1, _RC_CHAN, _EXTRA3, _POSITION)."""
 
 
 @dataclass
@@ -420,10 +421,11 @@ class CompanionService:
             table[RANGE] = StreamRequest(
                 dialect.MAVLINK_MSG_ID_DISTANCE_SENSOR, streams.rangefinder_hz
             )
-        if self.config.modes.enabled:  # the modes' targets are in the FC's own frame
-            table[FC_POSITION] = StreamRequest(
-                dialect.MAVLINK_MSG_ID_LOCAL_POSITION_NED, FC_POSITION_RATE_HZ
-            )
+        # the tension modes' targets are in the FC's frame (asked for always: they may be
+        # enabled at run time)
+        table[FC_POSITION] = StreamRequest(
+            dialect.MAVLINK_MSG_ID_LOCAL_POSITION_NED, FC_POSITION_RATE_HZ
+        )
         return table
 
     def _request_streams(self, link: Link, now_s: float) -> None:

@@ -297,7 +297,7 @@ class ServiceConfig:
     )
     tension: TensionConfig = spec(default_factory=TensionConfig)
     publish: PublishConfig = spec(default_factory=PublishConfig)
-    modes: TensionModeConfig = spec(
+    tension_mode: TensionModeConfig = spec(
         default_factory=TensionModeConfig, doc="tension-following and landing by the tether"
     )
     tension_filter: TensionFilterConfig = spec(

@@ -15,7 +15,7 @@ import numpy as np
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.pipeline import Estimate, TetherEstimator
 from tether_companion.estimation.thrust_input import StaticThrustInput
-from tether_companion.mavlink.framing import MAVLinkMessage
+from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.modes.session import TensionModeSession
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
@@ -24,6 +24,11 @@ from tether_companion.service.ingest import FcPosition, Ingest, Sample, TensionR
 from tether_companion.service.publish import Publication, Publisher
 from tether_companion.service.thrust import MotorLagThrustInput
 
+TENSION_MODE_COMMAND = dialect.MAV_CMD_USER_2
+"""COMMAND_LONG a ground station sends to this component (our system and component id) to
+control the tension modes at run time: param1 1 enable, 0 disable, -1 unchanged; param2 1
+request a landing, 2 cancel it, 0 nothing. Answered with COMMAND_ACK (DENIED for other
+values, UNSUPPORTED for other commands)."""
 MODE_TICK_S = 0.02
 """Period of the tension modes' logic [s of flight-controller time] (50 Hz)."""
 HEIGHT_STALE_S = 0.5
@@ -65,7 +70,8 @@ class EstimationSession:
         self._static_thrust_n = math.nan
         self._idle_thrust_n = config.publish.idle_thrust_fraction * vehicle.mass_kg * GRAVITY_MPS2
         self.modes = self._new_modes()
-        """Tension-following and landing (``modes.enabled``), fed the same samples."""
+        """Tension-following and landing, fed the same samples; acts only when enabled
+        (``tension_mode.enabled``, ``run --tension-mode`` or a ground-station command)."""
         self._height_m = math.nan
         self._height_time_s = -math.inf
         self._fc_position: FcPosition | None = None
@@ -81,17 +87,17 @@ class EstimationSession:
         self.attitude = None
         self.last_estimate = None
         self._held_range = None
+        enabled = self.modes.modes.enabled
         self.modes = self._new_modes()
+        self.modes.modes.set_enabled(enabled)
         self._next_mode_tick_s = -math.inf
 
-    def _new_modes(self) -> TensionModeSession | None:
+    def _new_modes(self) -> TensionModeSession:
         config = self.config
-        if not config.modes.enabled:
-            return None
         identified = config.estimator.thrust_model is not None
         lag = config.thrust_dynamics == "motor_lag" and not identified
         return TensionModeSession(
-            config.modes,
+            config.tension_mode,
             config.tension_filter,
             self.vehicle,
             config.link.fc_system_id,
@@ -99,10 +105,31 @@ class EstimationSession:
             thrust_input=MotorLagThrustInput(self.vehicle) if lag else None,
         )
 
+    def _for_us(self, msg: MAVLinkMessage) -> bool:
+        link = self.config.link
+        return msg.target_system == link.system_id and msg.target_component == link.component_id
+
+    def _mode_command(self, msg: MAVLinkMessage) -> MAVLinkMessage:
+        """A ground station's command to this component (see ``TENSION_MODE_COMMAND``)."""
+        result = dialect.MAV_RESULT_UNSUPPORTED
+        if msg.command == TENSION_MODE_COMMAND:
+            enable, landing = msg.param1, msg.param2
+            modes = self.modes.modes
+            if enable not in (-1.0, 0.0, 1.0) or landing not in (0.0, 1.0, 2.0):
+                result = dialect.MAV_RESULT_DENIED
+            else:
+                if enable >= 0.0:
+                    modes.set_enabled(enable == 1.0)
+                if landing == 1.0:
+                    modes.request_landing()
+                elif landing == 2.0:
+                    modes.cancel_landing()
+                result = dialect.MAV_RESULT_ACCEPTED
+        return dialect.MAVLink_command_ack_message(msg.command, result)
+
     def on_fc_heartbeat(self, base_mode: int, custom_mode: int) -> None:
         """The flight controller's HEARTBEAT (armed flag and flight mode, for the modes)."""
-        if self.modes is not None:
-            self.modes.on_heartbeat(base_mode, custom_mode)
+        self.modes.on_heartbeat(base_mode, custom_mode)
 
     def _new_estimator(self) -> TetherEstimator:
         identified = self.config.estimator.thrust_model is not None  # the estimator loads it
@@ -112,6 +139,8 @@ class EstimationSession:
 
     def on_message(self, msg: MAVLinkMessage) -> Step:
         """Process one received message (any sender, any type)."""
+        if msg.get_type() == "COMMAND_LONG" and self._for_us(msg):
+            return Step(messages=[self._mode_command(msg)])
         sample = self.ingest.decode(msg)
         if self.ingest.rebooted:
             self.restart()
@@ -129,8 +158,7 @@ class EstimationSession:
         once would move the filter ahead of the next IMU sample and make the pipeline drop it.
         """
         step = self._estimate(sample)
-        if self.modes is not None:
-            step.messages += self._run_modes(self.modes, sample)
+        step.messages += self._run_modes(self.modes, sample)
         return step
 
     def _estimate(self, sample: Sample) -> Step:

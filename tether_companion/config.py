@@ -106,6 +106,7 @@ def _describe_range(meta: Mapping[str, Any]) -> str:
 
 
 def _check_number(value: float, meta: Mapping[str, Any], source: str, key: str, kind: str) -> None:
+    """Refuse a non-finite ``value`` or one outside the field's bounds (``value`` as given)."""
     if not math.isfinite(value):
         raise ConfigError(source, key, value, f"must be a finite {kind}")
     lo, hi = meta.get("minimum"), meta.get("maximum")
@@ -117,7 +118,8 @@ def _check_number(value: float, meta: Mapping[str, Any], source: str, key: str, 
         or (xhi is not None and value >= xhi)
     )
     if out:
-        raise ConfigError(source, key, value, f"must be a {kind} {_describe_range(meta)}")
+        article = "an" if kind[0] in "aeiou" else "a"
+        raise ConfigError(source, key, value, f"must be {article} {kind} {_describe_range(meta)}")
 
 
 def _convert(tp: Any, value: Any, meta: Mapping[str, Any], source: str, key: str) -> Any:
@@ -176,12 +178,16 @@ def _convert(tp: Any, value: Any, meta: Mapping[str, Any], source: str, key: str
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(source, key, value, f"must be an integer {_describe_range(meta)}".strip())
-        _check_number(float(value), meta, source, key, "integer")
+            raise ConfigError(
+                source, key, value, f"must be an integer {_describe_range(meta)}".strip()
+            )
+        _check_number(value, meta, source, key, "integer")
         return value
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(source, key, value, f"must be a number {_describe_range(meta)}".strip())
+            raise ConfigError(
+                source, key, value, f"must be a number {_describe_range(meta)}".strip()
+            )
         _check_number(float(value), meta, source, key, "number")
         return float(value)
     if tp is str:
@@ -220,7 +226,12 @@ def from_mapping(cls: type[T], data: Mapping[str, Any], *, source: str = "", pre
     for name in data:
         if name not in fields:
             allowed = ", ".join(sorted(fields))
-            raise ConfigError(source, _join(prefix, str(name)), data[name], f"unknown key; allowed keys: {allowed}")
+            raise ConfigError(
+                source,
+                _join(prefix, str(name)),
+                data[name],
+                f"unknown key; allowed keys: {allowed}",
+            )
     kwargs = {}
     for name, field in fields.items():
         key = _join(prefix, name)

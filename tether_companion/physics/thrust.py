@@ -27,8 +27,12 @@ FloatArray = NDArray[np.float64]
 class ThrustCurve:
     """Quadratic thrust map of one motor (see module docstring)."""
 
-    pwm_min_us: float = spec(1000.0, minimum=500.0, maximum=2500.0, doc="pulse width at zero command [us]")
-    pwm_max_us: float = spec(2000.0, minimum=500.0, maximum=2500.0, doc="pulse width at full command [us]")
+    pwm_min_us: float = spec(
+        1000.0, minimum=500.0, maximum=2500.0, doc="pulse width at zero command [us]"
+    )
+    pwm_max_us: float = spec(
+        2000.0, minimum=500.0, maximum=2500.0, doc="pulse width at full command [us]"
+    )
     command_full_scale: float = spec(1.0, exclusive_minimum=0.0, doc="command value at pwm_max_us")
     coefficients_n: tuple[float, float, float] = spec(
         (0.0, 0.5, 7.5), doc="(c0, c1, c2) of f = c0 + c1*cmd + c2*cmd^2 [N]"
@@ -37,19 +41,31 @@ class ThrustCurve:
     def validate(self) -> None:
         """Refuse curves that are not usable (empty PWM span, thrust falling with command)."""
         if self.pwm_max_us <= self.pwm_min_us:
-            raise ConfigError("", "pwm_max_us", self.pwm_max_us, f"must be > pwm_min_us ({self.pwm_min_us})")
+            raise ConfigError(
+                "", "pwm_max_us", self.pwm_max_us, f"must be > pwm_min_us ({self.pwm_min_us})"
+            )
         c0, c1, c2 = self.coefficients_n
         full = self.command_full_scale
         if c1 < 0.0 or c1 + 2.0 * c2 * full < 0.0:
             raise ConfigError(
-                "", "coefficients_n", self.coefficients_n, "thrust must not decrease with command over [0, full scale]"
+                "",
+                "coefficients_n",
+                self.coefficients_n,
+                "thrust must not decrease with command over [0, full scale]",
             )
         if c0 < 0.0:
-            raise ConfigError("", "coefficients_n", self.coefficients_n, "c0 (thrust at zero command) must be >= 0")
+            raise ConfigError(
+                "",
+                "coefficients_n",
+                self.coefficients_n,
+                "c0 (thrust at zero command) must be >= 0",
+            )
 
     def command(self, pwm_us: ArrayLike) -> FloatArray:
         """Motor command ``u * command_full_scale`` for pulse widths [us] (clipped to range)."""
-        u = (np.asarray(pwm_us, dtype=float) - self.pwm_min_us) / (self.pwm_max_us - self.pwm_min_us)
+        u = (np.asarray(pwm_us, dtype=float) - self.pwm_min_us) / (
+            self.pwm_max_us - self.pwm_min_us
+        )
         return np.clip(u, 0.0, 1.0) * self.command_full_scale
 
     def thrust_n(self, pwm_us: ArrayLike) -> FloatArray:

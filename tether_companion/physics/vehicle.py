@@ -72,7 +72,10 @@ class VehicleProfile:
         weight = self.mass_kg * 9.80665
         if capacity <= weight:
             raise ConfigError(
-                "", "thrust_curve", capacity, f"total maximum thrust must exceed the weight ({weight:.2f} N)"
+                "",
+                "thrust_curve",
+                capacity,
+                f"total maximum thrust must exceed the weight ({weight:.2f} N)",
             )
 
     @property

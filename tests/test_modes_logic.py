@@ -219,6 +219,7 @@ def test_lost_estimate_stops_then_lands(bad, reason):
     assert reason in actions[0].reason
     assert all(a.kind == NOTHING for a in actions[1 : int(FOLLOW.lost_timeout_s / DT) - 1])
     assert actions[-1].kind == LAND and modes.state == FALLBACK_LAND
+    assert modes.fallback_lands == 1
 
 
 def test_unknown_height_while_landing_lands():

@@ -184,6 +184,9 @@ class TensionModeSession:
         self._last_sent_s = -math.inf
         self._last_kind = NOTHING
         self.sent = 0
+        """Messages returned by :meth:`tick` so far."""
+        self.land_commands = 0
+        """LAND commands among them."""
 
     # ------------------------------------------------------------------ inputs
     def on_attitude(self, sample: AttitudeSample) -> None:
@@ -240,4 +243,6 @@ class TensionModeSession:
             action, self.target_system, self.target_component, int(round(time_s * 1000.0))
         )
         self.sent += len(messages)
+        if action.kind == LAND:
+            self.land_commands += 1
         return messages

@@ -139,6 +139,8 @@ class TensionModes:
         self._release_since_s = math.nan
         self._lost_since_s = math.nan
         self._stopped = False
+        self.fallback_lands = 0
+        """Times a lost input made the logic hand over to the autopilot's LAND."""
 
     # ------------------------------------------------------------------ commands
     def set_enabled(self, enabled: bool) -> None:
@@ -249,6 +251,7 @@ class TensionModes:
     def _landing(self, inputs: ModeInputs, excess: FloatArray, position: FloatArray) -> ModeAction:
         cfg = self.config
         if not math.isfinite(inputs.height_m):
+            self.fallback_lands += 1
             self.state = FALLBACK_LAND
             return ModeAction(LAND, reason="landing by the tether: height unknown")
         if inputs.height_m <= cfg.land_height_m:
@@ -277,6 +280,8 @@ class TensionModes:
         self._pull_since_s = math.nan
         active = self.state in (FOLLOWING, LANDING, LAND_COMMANDED, FALLBACK_LAND)
         if t - self._lost_since_s >= cfg.lost_timeout_s:
+            if self.state != FALLBACK_LAND:
+                self.fallback_lands += 1
             self.state = FALLBACK_LAND
             return ModeAction(LAND, reason=f"{problem}: autopilot LAND")
         if active and not self._stopped:

@@ -17,7 +17,11 @@ from tether_companion.config import ConfigError
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.pipeline import TetherEstimator
-from tether_companion.estimation.thrust_input import StaticThrustInput
+from tether_companion.estimation.thrust_input import (
+    HOLD_FRACTION,
+    MotorLagThrustInput,
+    StaticThrustInput,
+)
 from tether_companion.frames import rotation_ned_to_body
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
@@ -182,6 +186,25 @@ def test_static_thrust_input_is_the_profile_curve(rng) -> None:
         assert thrust_input.total_thrust_n(pwm, 0.0) == pytest.approx(expected, rel=1e-12)
     with pytest.raises(ValueError, match="expected 4"):
         thrust_input.total_thrust_n(np.ones(3) * 1500.0, 0.0)
+
+
+def test_motor_lag_thrust_input_is_the_exact_first_order_step_response() -> None:
+    """A PWM step at 200 Hz: each value is the static thrust lagged by exp(-t / tau), read
+    ``HOLD_FRACTION`` of a sample into the hold; a long gap restarts at the commanded thrust."""
+    lag = MotorLagThrustInput(VEHICLE)
+    static = StaticThrustInput(VEHICLE)
+    tau = VEHICLE.motor_time_constant_s
+    low, high = np.full(4, 1400.0), np.full(4, 1600.0)
+    f_low, f_high = static.total_thrust_n(low, 0.0), static.total_thrust_n(high, 0.0)
+    assert lag.total_thrust_n(low, 0.0) == pytest.approx(f_low)  # first sample: steady
+    assert lag.total_thrust_n(low, DT_S) == pytest.approx(f_low)
+    for k in range(2, 40):  # step to `high` at 2 DT_S
+        t_read = (k - 2 + HOLD_FRACTION) * DT_S  # time since the step when the value is used
+        expected = f_high + (f_low - f_high) * math.exp(-t_read / tau)
+        assert lag.total_thrust_n(high, k * DT_S) == pytest.approx(expected, rel=1e-12)
+    assert lag.total_thrust_n(low, 5.0) == pytest.approx(f_low)  # 5 s gap: restart
+    with pytest.raises(ValueError, match="expected 4"):
+        lag.total_thrust_n(np.ones(3) * 1500.0, 5.005)
 
 
 def test_identified_thrust_model_file_is_used_and_bad_file_refused(tmp_path) -> None:

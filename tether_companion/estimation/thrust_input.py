@@ -1,18 +1,22 @@
 """Total rotor thrust from motor outputs: the ``u`` the tether EKF's accelerometer model needs.
 
 A :class:`ThrustInput` maps the latest PWM sample to the total thrust [N] along body -z. The
-static one uses the vehicle profile's thrust curve (the paper's eq. 19 generalised);
-system identification (``tether_companion.sysid``) provides dynamic ones (ARX, state space)
+static one uses the vehicle profile's thrust curve (the paper's eq. 19 generalised); the
+motor-lag one runs that curve through the profile's first-order motor lag; system
+identification (``tether_companion.sysid``) provides identified ones (ARX, state space)
 implementing the same protocol.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tether_companion.physics.motors import MotorLag
+from tether_companion.physics.thrust import ThrustCurve
 from tether_companion.physics.vehicle import VehicleProfile
 
 FloatArray = NDArray[np.float64]
@@ -27,15 +31,36 @@ class ThrustInput(Protocol):
         ...
 
 
+class MotorCurve(Protocol):
+    """One motor's static thrust curve and the motor count: a :class:`VehicleProfile`, or a
+    ``kind: static`` thrust-model file written by ``tether-companion sysid``."""
+
+    @property
+    def thrust_curve(self) -> ThrustCurve:
+        """Static PWM-to-thrust map of one motor."""
+        ...
+
+    @property
+    def n_motors(self) -> int:
+        """Number of motors."""
+        ...
+
+
 class StaticThrustInput:
-    """Sum of the vehicle profile's static thrust curve over the motors (no motor dynamics).
+    """Sum of a static thrust curve over the motors (no motor dynamics).
 
     Evaluates :meth:`ThrustCurve.thrust_n` with scalar arithmetic: it runs on every PWM
     sample of every estimator, where numpy's per-call overhead dominates for 4 motors
     (a test checks that both agree).
+
+    Parameters
+    ----------
+    vehicle
+        The vehicle profile, or anything else with ``thrust_curve`` and ``n_motors``
+        (:class:`MotorCurve`, e.g. an identified static model).
     """
 
-    def __init__(self, vehicle: VehicleProfile) -> None:
+    def __init__(self, vehicle: MotorCurve) -> None:
         curve = vehicle.thrust_curve
         self.curve = curve
         self.n_motors = vehicle.n_motors
@@ -61,3 +86,74 @@ class StaticThrustInput:
             cmd = (0.0 if u < 0.0 else 1.0 if u > 1.0 else u) * self._full_scale
             total += cmd * (c1 + c2 * cmd)
         return total
+
+
+HOLD_FRACTION = 0.5
+""":class:`MotorLagThrustInput` returns the lagged thrust half-way through the new command's
+hold: the average over the hold to first order, which is what the IMU ticks until the next PWM
+sample see."""
+RESTART_GAP_S = 1.0
+"""A gap between PWM samples longer than this [s] (or time going back) restarts the motor lag
+at the commanded thrust."""
+
+
+class MotorLagThrustInput:
+    """Total thrust [N] of the profile's static curve through its first-order motor lag.
+
+    The paper's static map (PWM -> thrust) ignores that a rotor needs tens of milliseconds to
+    reach a new speed. In the open-loop evaluation the commands change slowly and that hardly
+    matters; when the autopilot flies on our estimate, every correction it makes is a fast PWM
+    change whose thrust arrives late, the accelerometer model then explains the missing thrust
+    with the cable, the estimate moves, the autopilot corrects again: a feedback loop that can
+    diverge. Modelling the lag that the vehicle profile states (``motor_time_constant_s``)
+    breaks it.
+
+    Each motor's thrust follows ``tau f' = f_cmd(pwm) - f``, with the command held between PWM
+    samples (zero-order hold, as the flight controller's output is). The lag is linear and the
+    same for every motor, so the total thrust is the lagged sum of the static per-motor
+    thrusts::
+
+        f(t_k) = f_cmd(t_{k-1}) + (f(t_{k-1}) - f_cmd(t_{k-1})) exp(-(t_k - t_{k-1}) / tau)
+
+    Parameters
+    ----------
+    vehicle
+        Profile giving the thrust curve and ``motor_time_constant_s``.
+    """
+
+    def __init__(self, vehicle: VehicleProfile) -> None:
+        self._static = StaticThrustInput(vehicle)
+        self._lag = MotorLag(vehicle.motor_time_constant_s)
+        self._thrust_n = math.nan
+        self._command_n = math.nan
+        self._time_s = math.nan
+        self._interval_s = 0.0
+
+    @property
+    def time_constant_s(self) -> float:
+        """Motor time constant ``tau`` [s]."""
+        return self._lag.time_constant_s
+
+    def total_thrust_n(self, pwm_us: FloatArray, time_s: float) -> float:
+        """Thrust [N] expected over the hold of the new command ``pwm_us`` [us] given at ``time_s``.
+
+        The estimator uses the value until the next PWM sample, so it is the lagged thrust
+        ``HOLD_FRACTION`` of one sample interval (the last one seen) into the new command's hold.
+
+        Raises
+        ------
+        ValueError
+            When the number of pulse widths is not the vehicle's motor count.
+        """
+        command_n = self._static.total_thrust_n(pwm_us, time_s)
+        dt = time_s - self._time_s
+        if not (0.0 < dt <= RESTART_GAP_S):  # first sample (nan), time went back, long gap
+            self._thrust_n = command_n
+        else:  # exact zero-order-hold response up to now, under the previous command
+            decay = self._lag.decay(dt)
+            self._thrust_n = self._command_n + (self._thrust_n - self._command_n) * decay
+            self._interval_s = dt
+        self._command_n = command_n
+        self._time_s = time_s
+        ahead = self._lag.decay(HOLD_FRACTION * self._interval_s)
+        return command_n + (self._thrust_n - command_n) * ahead

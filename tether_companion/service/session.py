@@ -14,7 +14,11 @@ import numpy as np
 
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.pipeline import Estimate, TetherEstimator
-from tether_companion.estimation.thrust_input import StaticThrustInput
+from tether_companion.estimation.thrust_input import (
+    MotorLagThrustInput,
+    StaticThrustInput,
+    ThrustInput,
+)
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.modes.session import TensionModeSession
 from tether_companion.physics.vehicle import VehicleProfile
@@ -22,7 +26,6 @@ from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, Range
 from tether_companion.service.config import ServiceConfig
 from tether_companion.service.ingest import FcPosition, Ingest, Sample, TensionReading
 from tether_companion.service.publish import Publication, Publisher
-from tether_companion.service.thrust import MotorLagThrustInput
 
 TENSION_MODE_COMMAND = dialect.MAV_CMD_USER_2
 """COMMAND_LONG a ground station sends to this component (our system and component id) to
@@ -92,17 +95,23 @@ class EstimationSession:
         self.modes.modes.set_enabled(enabled)
         self._next_mode_tick_s = -math.inf
 
+    def _thrust_input(self) -> ThrustInput | None:
+        """A motor-lag thrust input when ``thrust_dynamics`` asks for it, else None (the
+        estimator's default: the identified model of ``estimator.thrust_model`` if set, else
+        the static curve)."""
+        identified = self.config.estimator.thrust_model is not None  # the estimator loads it
+        lag = self.config.thrust_dynamics == "motor_lag" and not identified
+        return MotorLagThrustInput(self.vehicle) if lag else None
+
     def _new_modes(self) -> TensionModeSession:
         config = self.config
-        identified = config.estimator.thrust_model is not None
-        lag = config.thrust_dynamics == "motor_lag" and not identified
         return TensionModeSession(
             config.tension_mode,
             config.tension_filter,
             self.vehicle,
             config.link.fc_system_id,
             config.link.fc_component_id,
-            thrust_input=MotorLagThrustInput(self.vehicle) if lag else None,
+            thrust_input=self._thrust_input(),
         )
 
     def _for_us(self, msg: MAVLinkMessage) -> bool:
@@ -132,10 +141,7 @@ class EstimationSession:
         self.modes.on_heartbeat(base_mode, custom_mode)
 
     def _new_estimator(self) -> TetherEstimator:
-        identified = self.config.estimator.thrust_model is not None  # the estimator loads it
-        lag = self.config.thrust_dynamics == "motor_lag" and not identified
-        thrust = MotorLagThrustInput(self.vehicle) if lag else None
-        return TetherEstimator(self.config.estimator, self.vehicle, thrust)
+        return TetherEstimator(self.config.estimator, self.vehicle, self._thrust_input())
 
     def on_message(self, msg: MAVLinkMessage) -> Step:
         """Process one received message (any sender, any type)."""

@@ -13,7 +13,7 @@ from tether_companion.cli import main
 from tether_companion.estimation.thrust_input import StaticThrustInput
 from tether_companion.physics.vehicle import load_vehicle
 from tether_companion.sim.scenario import load_scenario
-from tether_companion.sysid.thrust_model import StaticCurveThrust
+from tether_companion.sysid.thrust_model import StaticModelFile
 
 
 def test_naive_linear_curve_is_least_squares_through_zero():
@@ -36,7 +36,9 @@ def test_four_state_run_reports_finite_errors_and_exact_thrust_for_the_true_curv
         vehicle.thrust_curve,
         coefficients_n=tuple(0.5 * c for c in vehicle.thrust_curve.coefficients_n),
     )
-    wrong = run_four_state(scenario, StaticCurveThrust(halved, 4), seed=1)
+    wrong = run_four_state(
+        scenario, StaticThrustInput(StaticModelFile(n_motors=4, thrust_curve=halved)), seed=1
+    )
     assert wrong["thrust_n"] > 5.0
 
 

@@ -8,14 +8,13 @@ import yaml
 from sysid_synthetic import arx_data
 
 from tether_companion.config import ConfigError
-from tether_companion.estimation.thrust_input import ThrustInput
+from tether_companion.estimation.thrust_input import StaticThrustInput, ThrustInput
 from tether_companion.physics.thrust import ThrustCurve
 from tether_companion.sysid.structures.arx import ArxOrders, fit_arx
 from tether_companion.sysid.structures.base import FitContext
 from tether_companion.sysid.structures.static import StaticFit
 from tether_companion.sysid.thrust_model import (
     LinearThrust,
-    StaticCurveThrust,
     load_thrust_model,
     model_file_mapping,
     save_thrust_model,
@@ -90,7 +89,7 @@ def test_static_model_file_is_a_vehicle_curve(tmp_path):
     path = tmp_path / "static.yaml"
     save_thrust_model(path, StaticFit(curve=curve, n_motors=4).to_mapping(), "static")
     thrust = load_thrust_model(path)
-    assert isinstance(thrust, StaticCurveThrust)
+    assert isinstance(thrust, StaticThrustInput)
     pwm = np.array([1400.0, 1500.0, 1600.0, 1700.0])
     assert thrust.total_thrust_n(pwm, 0.0) == pytest.approx(float(np.sum(curve.thrust_n(pwm))))
 

@@ -37,7 +37,7 @@ from tether_companion.sysid.identify import best_result, identify
 from tether_companion.sysid.logs import load_flight_log
 from tether_companion.sysid.processing import IdData, prepare
 from tether_companion.sysid.report import results_table
-from tether_companion.sysid.thrust_model import StaticCurveThrust, thrust_input_from_mapping
+from tether_companion.sysid.thrust_model import StaticModelFile, thrust_input_from_mapping
 
 HELP = "Identify a thrust model from an emulated flight; EKF RMSE with it vs a naive linear map."
 
@@ -142,8 +142,11 @@ def run(args: argparse.Namespace) -> int:
         console.print("[red]no structure could be identified[/red]")
         return 1
     inputs = {
-        "naive linear (eq. 19)": lambda: StaticCurveThrust(
-            naive_linear_curve([data.estimation], pwm_range), vehicle.n_motors
+        "naive linear (eq. 19)": lambda: StaticThrustInput(
+            StaticModelFile(
+                n_motors=vehicle.n_motors,
+                thrust_curve=naive_linear_curve([data.estimation], pwm_range),
+            )
         ),
         f"identified ({chosen.structure})": lambda: thrust_input_from_mapping(
             chosen.model.to_mapping()

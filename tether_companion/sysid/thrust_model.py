@@ -13,7 +13,9 @@
   have).
 
 :func:`load_thrust_model` reads either into an object with
-``total_thrust_n(pwm_us, time_s) -> float``.
+``total_thrust_n(pwm_us, time_s) -> float``: a static file into the estimator's
+:class:`~tether_companion.estimation.thrust_input.StaticThrustInput`, a linear one into
+:class:`LinearThrust`.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import yaml
 from numpy.typing import NDArray
 
 from tether_companion.config import ConfigError, from_mapping, read_yaml, spec
+from tether_companion.estimation.thrust_input import StaticThrustInput
 from tether_companion.physics.thrust import ThrustCurve
 from tether_companion.sysid.input_map import InputMap
 
@@ -88,27 +91,6 @@ class LinearModelFile:
                 raise ConfigError("", key, rows, f"must be a {r} x {cols} matrix")
         if n and np.max(np.abs(np.linalg.eigvals(np.array(self.a)))) >= 1.0:
             raise ConfigError("", "a", self.a, "the model must be stable (all |eig(A)| < 1)")
-
-
-class StaticCurveThrust:
-    """Sum of one static curve over the motors (no dynamics)."""
-
-    def __init__(self, curve: ThrustCurve, n_motors: int) -> None:
-        self.curve = curve
-        self.n_motors = n_motors
-
-    def total_thrust_n(self, pwm_us: FloatArray, time_s: float) -> float:
-        """Total thrust [N] for pulse widths ``pwm_us`` (shape (n_motors,)) [us].
-
-        Raises
-        ------
-        ValueError
-            When the number of pulse widths is not the motor count.
-        """
-        pwm = np.asarray(pwm_us, dtype=float)
-        if pwm.shape != (self.n_motors,):
-            raise ValueError(f"expected {self.n_motors} pulse widths, got shape {pwm.shape}")
-        return float(np.sum(self.curve.thrust_n(pwm)))
 
 
 @dataclass
@@ -217,7 +199,7 @@ def save_thrust_model(path: str | Path, mapping: dict[str, Any], header: str) ->
 
 def thrust_input_from_mapping(
     data: dict[str, Any], source: str = ""
-) -> StaticCurveThrust | LinearThrust:
+) -> StaticThrustInput | LinearThrust:
     """Build the :class:`ThrustInput` a thrust-model mapping describes.
 
     Raises
@@ -227,14 +209,13 @@ def thrust_input_from_mapping(
     """
     kind = data.get("kind")
     if kind == "static":
-        static = from_mapping(StaticModelFile, data, source=source)
-        return StaticCurveThrust(static.thrust_curve, static.n_motors)
+        return StaticThrustInput(from_mapping(StaticModelFile, data, source=source))
     if kind == "linear":
         return LinearThrust(from_mapping(LinearModelFile, data, source=source))
     raise ConfigError(source, "kind", kind, "must be 'static' or 'linear'")
 
 
-def load_thrust_model(path: str | Path) -> StaticCurveThrust | LinearThrust:
+def load_thrust_model(path: str | Path) -> StaticThrustInput | LinearThrust:
     """Read a thrust-model YAML file (written by ``tether-companion sysid --out``).
 
     Raises

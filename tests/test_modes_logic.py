@@ -227,7 +227,9 @@ def test_unknown_height_while_landing_lands():
     base = _cable_pull(HOVER)
     _run(modes, 0, 1, HOVER, lambda t: base)
     modes.request_landing()
-    assert modes.step(_inputs(1.0, HOVER, base, height=math.nan)).kind == LAND
+    for t in (1.0, 1.05, 1.1):
+        assert modes.step(_inputs(t, HOVER, base, height=math.nan)).kind == LAND
+    assert modes.fallback_lands == 1 and modes.state == FALLBACK_LAND
 
 
 _finite = st.floats(min_value=-100.0, max_value=100.0)

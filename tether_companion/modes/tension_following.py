@@ -141,6 +141,7 @@ class TensionModes:
         self._stopped = False
         self.fallback_lands = 0
         """Times a lost input made the logic hand over to the autopilot's LAND."""
+        self._fallback_active = False
 
     # ------------------------------------------------------------------ commands
     def set_enabled(self, enabled: bool) -> None:
@@ -198,10 +199,14 @@ class TensionModes:
         tension = inputs.tension.tension_ned_n
         excess = self._excess(position, tension)
         if self.state == IDLE:
-            return self._idle(t, dt, excess, position, tension)
-        if self.state == FOLLOWING:
-            return self._following(t, excess, position, tension)
-        return self._landing(inputs, excess, position)
+            action = self._idle(t, dt, excess, position, tension)
+        elif self.state == FOLLOWING:
+            action = self._following(t, excess, position, tension)
+        else:
+            action = self._landing(inputs, excess, position)
+        if self.state != FALLBACK_LAND:
+            self._fallback_active = False
+        return action
 
     # ------------------------------------------------------------------ states
     def _idle(
@@ -251,9 +256,7 @@ class TensionModes:
     def _landing(self, inputs: ModeInputs, excess: FloatArray, position: FloatArray) -> ModeAction:
         cfg = self.config
         if not math.isfinite(inputs.height_m):
-            self.fallback_lands += 1
-            self.state = FALLBACK_LAND
-            return ModeAction(LAND, reason="landing by the tether: height unknown")
+            return self._fallback("landing by the tether: height unknown, autopilot LAND")
         if inputs.height_m <= cfg.land_height_m:
             self.state = LAND_COMMANDED
             return ModeAction(LAND, reason="landing by the tether: below the landing height")
@@ -280,16 +283,21 @@ class TensionModes:
         self._pull_since_s = math.nan
         active = self.state in (FOLLOWING, LANDING, LAND_COMMANDED, FALLBACK_LAND)
         if t - self._lost_since_s >= cfg.lost_timeout_s:
-            if self.state != FALLBACK_LAND:
-                self.fallback_lands += 1
-            self.state = FALLBACK_LAND
-            return ModeAction(LAND, reason=f"{problem}: autopilot LAND")
+            return self._fallback(f"{problem}: autopilot LAND")
         if active and not self._stopped:
             self._stopped = True
             return ModeAction(
                 VELOCITY_TARGET, velocity_ned_m_s=np.zeros(3), reason=f"{problem}: stop"
             )
         return _NOTHING
+
+    def _fallback(self, reason: str) -> ModeAction:
+        """Hand over to the autopilot's LAND (counted once per episode)."""
+        if not self._fallback_active:
+            self.fallback_lands += 1
+            self._fallback_active = True
+        self.state = FALLBACK_LAND
+        return ModeAction(LAND, reason=reason)
 
     def _frame(self, position: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Unit vectors toward the anchor and 90 deg to its right (horizontal, NED)."""

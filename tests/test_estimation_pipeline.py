@@ -229,6 +229,21 @@ def test_range_stamped_ahead_of_the_imu_does_not_move_the_filter_clock() -> None
     assert estimator.health.out_of_order == 0
 
 
+def test_range_before_the_first_imu_waits_for_it() -> None:
+    """Streams interleave: a DISTANCE_SENSOR can arrive before the first RAW_IMU. It is fused
+    right after the first IMU tick (not dropped, and it does not start the clock: that IMU
+    sample, stamped a hair earlier, still ticks); of two early readings only the latest."""
+    estimator = TetherEstimator(EstimatorConfig(), VEHICLE)
+    estimator.on_attitude(AttitudeSample(0.0, 0.0, 0.0, 0.0))
+    estimator.on_range(RangeSample(0.0, 9.0))
+    estimator.on_range(RangeSample(0.001, 3.0))
+    assert estimator.health.range_fused == 0 and math.isnan(estimator.time_s)
+    assert estimator.on_imu(_imu(0.0005)) is not None
+    assert estimator.health.range_fused == 1 and estimator.health.range_stale == 1
+    assert estimator.health.out_of_order == 0 and estimator.time_s == 0.0005
+    assert -estimator.filter.x[2] < 4.0  # pulled toward 3 m from x0, not toward 9 m
+
+
 def test_pwm_with_wrong_motor_count_is_refused_and_counted() -> None:
     estimator = _primed(0.0)
     estimator.on_pwm(PwmSample(0.001, np.full(8, 1500.0)))

@@ -212,6 +212,7 @@ class TetherEstimator:
         self._r_alt = np.array([[config.altimeter_noise_variance_m2]])
         self._stale = config.staleness
         self._time_s = math.nan
+        self._early_range: RangeSample | None = None
         self._attitude: AttitudeSample | None = None
         self._rotation: FloatArray = np.eye(3)
         self._cos_tilt = 1.0
@@ -282,11 +283,22 @@ class TetherEstimator:
         if not self._advance_to(t):
             return None
         self.health.imu_ticks += 1
-        fused = self._fuse_accel(t, accel)
-        return self._estimate(fused)
+        estimate = self._estimate(self._fuse_accel(t, accel))
+        early = self._early_range
+        if early is not None:  # arrived before the first tick: fused right after it
+            self._early_range = None
+            self.on_range(early)
+        return estimate
 
     def on_range(self, sample: RangeSample) -> None:
-        """Fuse a downward rangefinder reading as the height above the anchor [m]."""
+        """Fuse a downward rangefinder reading as the height above the anchor [m].
+
+        Fused at the filter time (the last IMU tick): the filter's clock moves only with the
+        IMU, so a reading stamped a little after the last IMU sample (DISTANCE_SENSOR carries
+        milliseconds, RAW_IMU microseconds) cannot make the pipeline drop the next one. A
+        reading that arrives before the first IMU tick (no clock yet) waits for that tick (the
+        latest one only; a replaced one counts as stale).
+        """
         health = self.health
         if not (_finite(sample.time_s) and _finite(sample.distance_m)):
             health.nonfinite_rejected += 1
@@ -295,11 +307,15 @@ class TetherEstimator:
         if not (cfg.min_m <= sample.distance_m <= cfg.max_m):
             health.range_out_of_range += 1
             return
+        if math.isnan(self._time_s):
+            if self._early_range is not None:
+                health.range_stale += 1
+            self._early_range = sample
+            return
         att = self._attitude
         if (
             att is None
             or abs(sample.time_s - att.time_s) > self._stale.attitude_s
-            or math.isnan(self._time_s)
             or abs(sample.time_s - self._time_s) > self._stale.range_s
         ):
             health.range_stale += 1

@@ -68,7 +68,6 @@ class EstimationSession:
         self.estimator = self._new_estimator()
         self.attitude: AttitudeSample | None = None
         self.last_estimate: Estimate | None = None
-        self._held_range: RangeSample | None = None
         self._static_thrust = StaticThrustInput(vehicle)
         self._static_thrust_n = math.nan
         self._idle_thrust_n = config.publish.idle_thrust_fraction * vehicle.mass_kg * GRAVITY_MPS2
@@ -89,7 +88,6 @@ class EstimationSession:
         self.publisher.restart()
         self.attitude = None
         self.last_estimate = None
-        self._held_range = None
         enabled = self.modes.modes.enabled
         self.modes = self._new_modes()
         self.modes.modes.set_enabled(enabled)
@@ -157,11 +155,8 @@ class EstimationSession:
     def on_sample(self, sample: Sample) -> Step:
         """Process one checked sample (from :meth:`on_message` or a dataflash log).
 
-        The IMU drives the filter's time. A rangefinder sample stamped after the latest IMU tick
-        (DISTANCE_SENSOR carries milliseconds, RAW_IMU microseconds, and streams interleave) is
-        held and fused right after the first IMU tick that reaches its time, as offline, where
-        a range sample is handed over after the IMU sample of the same instant; fusing it at
-        once would move the filter ahead of the next IMU sample and make the pipeline drop it.
+        Every sample goes to the estimator as it arrives: the pipeline aligns the streams (its
+        clock moves only with the IMU; a rangefinder sample is fused at the filter's time).
         """
         step = self._estimate(sample)
         step.messages += self._run_modes(self.modes, sample)
@@ -178,10 +173,7 @@ class EstimationSession:
             estimator.on_pwm(sample)
             self._static_thrust_n = self._static_thrust.total_thrust_n(sample.pwm_us, sample.time_s)
         elif isinstance(sample, RangeSample):
-            if estimator.time_s >= sample.time_s:  # nan (no IMU yet) compares False: held
-                estimator.on_range(sample)
-            else:
-                self._held_range = sample
+            estimator.on_range(sample)
         elif isinstance(sample, TensionReading):
             estimator.set_known_tension_n(sample.tension_n, sample.time_s)
         return Step()
@@ -221,10 +213,6 @@ class EstimationSession:
         health = estimator.health
         stale_before = health.stale_attitude + health.stale_pwm + health.stale_tension
         estimate = estimator.on_imu(sample)
-        held = self._held_range
-        if held is not None and estimator.time_s >= held.time_s:
-            self._held_range = None
-            estimator.on_range(held)
         if estimate is None:
             return Step()
         health = estimator.health

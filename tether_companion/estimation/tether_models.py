@@ -75,8 +75,8 @@ def _accel_and_jacobian(
     return accel, np.array(rows)
 
 
-class FourStateModel:
-    """The paper's 4-state model: position and unknown cable tension.
+class _StraightTetherModel:
+    """Accelerometer model shared by both state layouts (the tension is a state or given).
 
     Parameters
     ----------
@@ -87,8 +87,10 @@ class FourStateModel:
         accelerometer update is skipped.
     """
 
-    n = 4
-    has_tension_state = True
+    n: int
+    """State dimension."""
+    has_tension_state: bool
+    """Whether the tension is the state's component ``F_C``."""
 
     def __init__(self, mass_kg: float, min_cable_length_m: float = 0.1) -> None:
         self.mass_kg = float(mass_kg)
@@ -101,42 +103,40 @@ class FourStateModel:
         thrust_n: float,
         tension_n: float = math.nan,
     ) -> tuple[FloatArray, FloatArray]:
-        """Specific force ``h_acc(x)`` [m/s^2] shape (3,) and its Jacobian shape (3, 4).
+        """Specific force ``h_acc(x)`` [m/s^2] shape (3,) and its Jacobian shape (3, n).
 
-        ``tension_n`` is ignored: the tension is the state's fourth component.
+        ``tension_n`` [N] is the known tension of the 3-state model; the 4-state model ignores
+        it (the tension is the state's fourth component).
         """
-        pn, pe, pd, fc = x.tolist()
+        values = x.tolist()
+        if self.has_tension_state:
+            tension_n = values[F_C]
         return _accel_and_jacobian(
-            (pn, pe, pd), fc, rotation_ned_to_body, thrust_n, self.mass_kg, True
+            values[P_N : P_D + 1],
+            tension_n,
+            rotation_ned_to_body,
+            thrust_n,
+            self.mass_kg,
+            self.has_tension_state,
         )
+
+
+class FourStateModel(_StraightTetherModel):
+    """The paper's 4-state model: position and unknown cable tension."""
+
+    n = 4
+    has_tension_state = True
 
     def tension_n(self, x: FloatArray, known_tension_n: float = math.nan) -> float:
         """Tension of the state [N]."""
         return float(x[F_C])
 
 
-class ThreeStateModel:
+class ThreeStateModel(_StraightTetherModel):
     """The 3-state model of the authors' earlier work: position only, tension known."""
 
     n = 3
     has_tension_state = False
-
-    def __init__(self, mass_kg: float, min_cable_length_m: float = 0.1) -> None:
-        self.mass_kg = float(mass_kg)
-        self.min_cable_length_m = float(min_cable_length_m)
-
-    def accel(
-        self,
-        x: FloatArray,
-        rotation_ned_to_body: FloatArray,
-        thrust_n: float,
-        tension_n: float = math.nan,
-    ) -> tuple[FloatArray, FloatArray]:
-        """Specific force ``h_acc(x)`` [m/s^2] shape (3,) and its Jacobian shape (3, 3), given
-        the known tension ``tension_n`` [N]."""
-        return _accel_and_jacobian(
-            x.tolist(), tension_n, rotation_ned_to_body, thrust_n, self.mass_kg, False
-        )
 
     def tension_n(self, x: FloatArray, known_tension_n: float = math.nan) -> float:
         """The known tension [N] (the state has none)."""

@@ -58,7 +58,17 @@ class Recorder(Protocol):
         ...
 
 
-class TlogRecorder:
+class _FileRecorder:
+    """A recorder writing one open file ``_file``; :meth:`close` closes it."""
+
+    _file: BinaryIO | TextIO
+
+    def close(self) -> None:
+        """Close the file."""
+        self._file.close()
+
+
+class TlogRecorder(_FileRecorder):
     """MAVLink 2 telemetry log as a ground station records it (see module docstring)."""
 
     def __init__(self, path: Path, range_limits_m: tuple[float, float], system_id: int = 1) -> None:
@@ -96,12 +106,8 @@ class TlogRecorder:
             )
             self._put(rangefinder.time_s, msg)
 
-    def close(self) -> None:
-        """Close the file."""
-        self._file.close()
 
-
-class DataflashRecorder:
+class DataflashRecorder(_FileRecorder):
     """ArduPilot dataflash log with IMU, ATT, RCOU and RFND records."""
 
     def __init__(self, path: Path) -> None:
@@ -126,12 +132,8 @@ class DataflashRecorder:
         if rangefinder is not None:
             self._writer.write("RFND", _us(rangefinder.time_s), 0, rangefinder.distance_m)
 
-    def close(self) -> None:
-        """Close the file."""
-        self._file.close()
 
-
-class CsvRecorder:
+class CsvRecorder(_FileRecorder):
     """CSV with the documented columns; ``height_m`` empty when the rangefinder is out of range."""
 
     def __init__(self, path: Path) -> None:
@@ -158,10 +160,6 @@ class CsvRecorder:
                 height,
             ]
         )
-
-    def close(self) -> None:
-        """Close the file."""
-        self._file.close()
 
 
 def _us(time_s: float) -> int:

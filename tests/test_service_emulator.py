@@ -32,6 +32,23 @@ def _rmse_3d(errors: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(errors[ok] ** 2, axis=1))))
 
 
+async def _fly(emulator: EmulatorProcess, overrides: dict) -> CompanionService:
+    """Start ``emulator``, run the service on a UDP link to it (``overrides`` of the default
+    configuration besides the link) until the emulator exits, stop the service."""
+    async with emulator:
+        overrides = {**overrides, "link": {"connect": f"udpout:127.0.0.1:{emulator.port}"}}
+        config = load_service_config(None, overrides)
+        service = CompanionService(config, load_vehicle_for(config), notifier=SystemdNotifier({}))
+        stop = asyncio.Event()
+        task = asyncio.create_task(service.run(stop), name="service")
+        try:
+            assert await asyncio.wait_for(emulator.wait(), timeout=120.0) == 0
+        finally:
+            stop.set()
+            await asyncio.wait_for(task, timeout=10.0)
+    return service
+
+
 def test_paper_circle_over_udp_matches_offline_ekf_and_replays_identically(tmp_path) -> None:
     """`tether-companion emulate` (its own process, 4x real time) and the service talk over
     UDP on 127.0.0.1 for the paper's 60 s circle (4 N, navigation on truth)."""
@@ -43,29 +60,14 @@ def test_paper_circle_over_udp_matches_offline_ekf_and_replays_identically(tmp_p
         "streams": {"rangefinder_hz": scenario.sensors.range_rate_hz},  # the rates offline uses
     }
 
-    async def fly() -> tuple[dict, CompanionService]:
-        emulator = EmulatorProcess(
-            "paper-circle",
-            duration_s=scenario.duration_s,
-            score_path=tmp_path / "score.json",
-            speed=4.0,
-        )
-        async with emulator:
-            overrides["link"] = {"connect": f"udpout:127.0.0.1:{emulator.port}"}
-            config = load_service_config(None, overrides)
-            service = CompanionService(
-                config, load_vehicle_for(config), notifier=SystemdNotifier({})
-            )
-            stop = asyncio.Event()
-            task = asyncio.create_task(service.run(stop), name="service")
-            try:
-                assert await asyncio.wait_for(emulator.wait(), timeout=120.0) == 0
-            finally:
-                stop.set()
-                await asyncio.wait_for(task, timeout=10.0)
-        return emulator.score(), service
-
-    score, service = asyncio.run(fly())
+    emulator = EmulatorProcess(
+        "paper-circle",
+        duration_s=scenario.duration_s,
+        score_path=tmp_path / "score.json",
+        speed=4.0,
+    )
+    service = asyncio.run(_fly(emulator, overrides))
+    score = emulator.score()
     offline = run_scenario(scenario, service.config.estimator)
     offline_rmse = _rmse_3d(offline.position_4s_ned_m - offline.truth_position_ned_m)
     live_rmse = score["rmse_m"]["3d"]
@@ -100,34 +102,19 @@ def test_link_faults_and_an_in_flight_reboot(tmp_path) -> None:
     set again after it, and nothing wrong is sent while the drone lies on the ground."""
     faults = ("--drop", "0.01", "--duplicate", "0.01", "--corrupt", "0.01", "--jitter-ms", "3")
 
-    async def fly() -> tuple[dict, CompanionService]:
-        emulator = EmulatorProcess(
-            "paper-circle",
-            duration_s=30.0,
-            score_path=tmp_path / "score.json",
-            speed=4.0,
-            extra_args=(*faults, "--reboot-at", "20"),
-        )
-        async with emulator:
-            overrides = {
-                "link": {"connect": f"udpout:127.0.0.1:{emulator.port}"},
-                "recording": {"enabled": False},
-                "streams": {"rangefinder_hz": 200.0},  # as the clean run above (RMSE ~0.16 m)
-            }
-            config = load_service_config(None, overrides)
-            service = CompanionService(
-                config, load_vehicle_for(config), notifier=SystemdNotifier({})
-            )
-            stop = asyncio.Event()
-            task = asyncio.create_task(service.run(stop), name="service")
-            try:
-                assert await asyncio.wait_for(emulator.wait(), timeout=120.0) == 0
-            finally:
-                stop.set()
-                await asyncio.wait_for(task, timeout=10.0)
-        return emulator.score(), service
-
-    score, service = asyncio.run(fly())
+    emulator = EmulatorProcess(
+        "paper-circle",
+        duration_s=30.0,
+        score_path=tmp_path / "score.json",
+        speed=4.0,
+        extra_args=(*faults, "--reboot-at", "20"),
+    )
+    overrides = {
+        "recording": {"enabled": False},
+        "streams": {"rangefinder_hz": 200.0},  # as the clean run above (RMSE ~0.16 m)
+    }
+    service = asyncio.run(_fly(emulator, overrides))
+    score = emulator.score()
     counters = service.session.ingest.counters
     assert counters.reboots == 1 and service.state.origin_sent == 2
     assert counters.duplicate > 0 and counters.out_of_order > 0

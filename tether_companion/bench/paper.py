@@ -25,6 +25,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from tether_companion.commands import int_at_least
 from tether_companion.estimation.config import EstimatorConfig, load_estimator_config
 from tether_companion.estimation.metrics import AXES, rmse
 from tether_companion.estimation.runner import run_scenario
@@ -73,23 +74,16 @@ def _non_negative_float(text: str) -> float:
     return value
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Seeds, output format, quick mode, estimator config, parallel jobs."""
     parser.add_argument(
-        "--seeds", type=_positive_int, default=10, help="Monte Carlo seeds for Table 2 (default 10)"
+        "--seeds",
+        type=int_at_least(1),
+        default=10,
+        help="Monte Carlo seeds for Table 2 (default 10)",
     )
     parser.add_argument(
-        "--sweep-seeds", type=_positive_int, default=3, help="seeds per sweep point (default 3)"
+        "--sweep-seeds", type=int_at_least(1), default=3, help="seeds per sweep point (default 3)"
     )
     parser.add_argument("--json", action="store_true", help="print the results as JSON only")
     parser.add_argument(
@@ -102,7 +96,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--scenario", default="paper-circle", help="base scenario (default paper-circle)"
     )
     parser.add_argument(
-        "--jobs", type=_positive_int, default=min(2, os.cpu_count() or 1), help="worker processes"
+        "--jobs", type=int_at_least(1), default=min(2, os.cpu_count() or 1), help="worker processes"
     )
     parser.add_argument(
         "--settle", type=_non_negative_float, default=5.0, help="settled RMSE starts here [s]"

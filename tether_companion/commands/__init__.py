@@ -1,1 +1,24 @@
-"""One module per CLI command: ``HELP``, ``add_arguments(parser)``, ``run(args) -> int``."""
+"""One module per CLI command: ``HELP``, ``add_arguments(parser)``, ``run(args) -> int``.
+
+Argument types shared by commands and benchmarks live here.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+
+
+def int_at_least(minimum: int) -> Callable[[str], int]:
+    """An argparse ``type``: an integer >= ``minimum`` (argparse reports a bad one, exit 2)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {value}")
+        return value
+
+    return parse

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from rich.console import Console
 
+from tether_companion.commands import int_at_least
 from tether_companion.estimation.config import load_estimator_config
 from tether_companion.estimation.metrics import rmse
 from tether_companion.estimation.report import rmse_table, write_csv, write_plots
@@ -18,23 +19,13 @@ from tether_companion.sim.scenario import load_scenario
 HELP = "Simulate a scenario and estimate position and tension with the 3-state and 4-state EKFs."
 
 
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments: scenario, seed, CSV output, plot directory, estimator config."""
     parser.add_argument(
         "scenario", help="scenario YAML file, or a built-in name (e.g. paper-circle)"
     )
     parser.add_argument(
-        "--seed", type=_seed, default=None, help="override the scenario's seed (>= 0)"
+        "--seed", type=int_at_least(0), default=None, help="override the scenario's seed (>= 0)"
     )
     parser.add_argument("--out", type=Path, default=None, help="write the time series to this CSV")
     parser.add_argument(

@@ -134,6 +134,46 @@ class _LockstepLink:
         self.peer.send_bytes(frame)
 
 
+class _LockstepService:
+    """The service (shipped configuration plus ``overrides``) beside an emulated flight
+    controller, on the controller's clock: :meth:`advance` runs the emulator 5 ms, :meth:`serve`
+    hands the service what arrived and runs its housekeeping every 50 ms."""
+
+    def __init__(self, controller: FlightController, overrides: dict) -> None:
+        config = load_service_config(
+            CONFIGS_DIR / "companion.yaml",
+            {"link": {"connect": "udp:127.0.0.1:14550"}, "recording": {"enabled": False}}
+            | overrides,
+        )
+        self.controller = controller
+        self.peer = LockstepPeer(controller, config.link.system_id, config.link.component_id)
+        self.link = _LockstepLink(self.peer, config.link.system_id, config.link.component_id)
+        self.service = CompanionService(
+            config,
+            controller.sim.vehicle,
+            notifier=SystemdNotifier({}),
+            monotonic_s=lambda: controller.time_s,
+        )
+        self._read = 0
+        self._next_housekeeping_s = 0.0
+
+    def advance(self) -> float:
+        """Run the emulator 5 ms; returns its time [s]."""
+        self.peer.advance(0.005)
+        return self.controller.time_s
+
+    def serve(self) -> None:
+        """The service handles every message received so far; housekeeping when due."""
+        t = self.controller.time_s
+        received = self.peer.received
+        while self._read < len(received):
+            self.service.handle_message(self.link, received[self._read], t)  # type: ignore[arg-type]
+            self._read += 1
+        if t >= self._next_housekeeping_s:
+            self.service.housekeep(self.link, t)  # type: ignore[arg-type]
+            self._next_housekeeping_s += 0.05
+
+
 def test_closed_loop_hover_on_received_estimates_holds_within_half_a_metre() -> None:
     """The emulator flies on nothing but our VISION_POSITION_ESTIMATEs (after our origin) for
     60 s of simulated time, driven in lock-step so the result does not depend on the machine.
@@ -143,30 +183,13 @@ def test_closed_loop_hover_on_received_estimates_holds_within_half_a_metre() -> 
     controller = FlightController(
         scenario, dataclasses.replace(emulator_config, navigation="vision")
     )
-    config = load_service_config(
-        CONFIGS_DIR / "companion.yaml",
-        {"link": {"connect": "udp:127.0.0.1:14550"}, "recording": {"enabled": False}},
-    )
-    peer = LockstepPeer(controller, config.link.system_id, config.link.component_id)
-    link = _LockstepLink(peer, config.link.system_id, config.link.component_id)
-    service = CompanionService(
-        config,
-        controller.sim.vehicle,
-        notifier=SystemdNotifier({}),
-        monotonic_s=lambda: controller.time_s,
-    )
+    lockstep = _LockstepService(controller, {})
+    service = lockstep.service
     target = np.array(scenario.trajectory.position_ned_m)
     deviations = []
-    read = 0
-    next_housekeeping_s = 0.0
     while controller.time_s < scenario.duration_s:
-        peer.advance(0.005)
-        while read < len(peer.received):
-            service.handle_message(link, peer.received[read], controller.time_s)  # type: ignore[arg-type]
-            read += 1
-        if controller.time_s >= next_housekeeping_s:
-            service.housekeep(link, controller.time_s)  # type: ignore[arg-type]
-            next_housekeeping_s += 0.05
+        lockstep.advance()
+        lockstep.serve()
         deviations.append(float(np.linalg.norm(controller.sim.body.x[:3] - target)))
     nav = controller.nav.counters
     assert controller.nav.origin_set and service.state.origin_confirmed
@@ -190,40 +213,20 @@ def test_service_hosts_tension_following_a_tug_moves_the_drone() -> None:
     scenario, emulator_config = load_emulator_scenario("hover")
     scenario = dataclasses.replace(scenario, duration_s=20.0)
     controller = FlightController(scenario, emulator_config)
-    config = load_service_config(
-        CONFIGS_DIR / "companion.yaml",
-        {
-            "link": {"connect": "udp:127.0.0.1:14550"},
-            "recording": {"enabled": False},
-            "tension_mode": {"enabled": True, "land_on_first_tug": False},
-        },
+    lockstep = _LockstepService(
+        controller, {"tension_mode": {"enabled": True, "land_on_first_tug": False}}
     )
-    peer = LockstepPeer(controller, config.link.system_id, config.link.component_id)
+    service = lockstep.service
     ground_station = LockstepPeer(controller)
-    link = _LockstepLink(peer, config.link.system_id, config.link.component_id)
-    service = CompanionService(
-        config,
-        controller.sim.vehicle,
-        notifier=SystemdNotifier({}),
-        monotonic_s=lambda: controller.time_s,
-    )
     positions = {}
-    read = 0
-    next_housekeeping_s = 0.0
     while controller.time_s < scenario.duration_s:
-        peer.advance(0.005)
-        t = controller.time_s
+        t = lockstep.advance()
         if abs(t - 1.0) < 0.0025:
             guided = dialect.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
             assert ground_station.command(dialect.MAV_CMD_DO_SET_MODE, guided, 4) == 0
         if abs(t - 6.0) < 0.0025:
             ground_station.command(dialect.MAV_CMD_USER_1, 0.0, 3.0, 0.0, 3.0)
-        while read < len(peer.received):
-            service.handle_message(link, peer.received[read], t)  # type: ignore[arg-type]
-            read += 1
-        if t >= next_housekeeping_s:
-            service.housekeep(link, t)  # type: ignore[arg-type]
-            next_housekeeping_s += 0.05
+        lockstep.serve()
         positions[round(t, 3)] = np.array(controller.sim.body.x[:3])
     before = np.mean([p for t, p in positions.items() if 5.0 <= t <= 6.0], axis=0)
     after = np.mean([p for t, p in positions.items() if 17.0 <= t <= 20.0], axis=0)

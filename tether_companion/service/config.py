@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from tether_companion.config import ConfigError, describe, from_mapping, read_yaml, spec
+from tether_companion.estimation.catenary_position import CatenaryPositionConfig
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.tension_kf import TensionFilterConfig
 from tether_companion.mavlink.endpoints import parse_endpoint
@@ -199,7 +200,23 @@ class PublishConfig:
     tension_rate_hz: float = spec(
         10.0, minimum=0.0, maximum=50.0, doc="NAMED_VALUE_FLOAT tension rate [Hz] (0 = off)"
     )
-    tension_name: str = spec("TETH_TENS", doc="NAMED_VALUE_FLOAT name of the published tension")
+    tension_name: str = spec(
+        "TETH_TENS", doc="NAMED_VALUE_FLOAT name of the tension of the published estimate"
+    )
+    filtered_rate_hz: float = spec(
+        10.0,
+        minimum=0.0,
+        maximum=50.0,
+        doc="NAMED_VALUE_FLOAT rate of the tension filter's force on the drone TETH_TN, "
+        "TETH_TE, TETH_TD (NED) and magnitude TETH_TMAG [N], and of the catenary position "
+        "TETH_CN, TETH_CE, TETH_CD [m] when it runs [Hz] (0 = off)",
+    )
+    filtered_max_age_s: float = spec(
+        0.3,
+        exclusive_minimum=0.0,
+        maximum=5.0,
+        doc="a filtered tension not updated for this long is not published [s]",
+    )
     statustext: bool = spec(True, doc="send STATUSTEXT when the health changes")
     on_unhealthy: str = spec(
         "stop",
@@ -246,6 +263,32 @@ class PublishConfig:
                 self.tension_name,
                 "must be 1 to 10 characters (NAMED_VALUE_FLOAT name)",
             )
+
+
+EKF = "ekf"
+CATENARY = "catenary"
+
+
+@dataclass(frozen=True)
+class PositionSourceConfig:
+    """Which estimator's position goes to the flight controller, and what runs beside it."""
+
+    source: str = spec(
+        EKF,
+        choices=(EKF, CATENARY),
+        doc="ekf: the tether EKF (estimator section); catenary: the tension filter "
+        "(tension_filter) through the catenary (catenary section), Martins 2019 section 6",
+    )
+    catenary_beside: bool = spec(
+        False,
+        doc="with source ekf: also run the catenary estimator, shown in --status and sent as "
+        "NAMED_VALUE_FLOAT TETH_CN/CE/CD (publish.filtered_rate_hz)",
+    )
+
+    @property
+    def runs_catenary(self) -> bool:
+        """Whether the catenary estimator runs (published or beside)."""
+        return self.source == CATENARY or self.catenary_beside
 
 
 @dataclass(frozen=True)
@@ -301,7 +344,15 @@ class ServiceConfig:
         default_factory=TensionModeConfig, doc="tension-following and landing by the tether"
     )
     tension_filter: TensionFilterConfig = spec(
-        default_factory=TensionFilterConfig, doc="tension Kalman filter the modes act on"
+        default_factory=TensionFilterConfig,
+        doc="tension Kalman filter the modes act on (and the catenary estimator's input)",
+    )
+    position: PositionSourceConfig = spec(
+        default_factory=PositionSourceConfig, doc="which position is published"
+    )
+    catenary: CatenaryPositionConfig = spec(
+        default_factory=CatenaryPositionConfig,
+        doc="position from the filtered tension and the catenary (position.source catenary)",
     )
     recording: RecordingConfig = spec(default_factory=RecordingConfig)
     watchdog_interval_s: float = spec(

@@ -26,17 +26,27 @@ Choices, with the reasons:
 * ``reset_counter`` (uint8, wraps) goes up on every estimator restart, on a jump larger than
   ``jump_m`` between two publications, on resuming after a pause and after a flight-controller
   reboot, so the autopilot resets its position state instead of fighting a step.
+* The position may come from the tether EKF or from the catenary estimator
+  (``position.source``): anything with the :class:`PositionEstimate` attributes.
+* For the ground station, NAMED_VALUE_FLOAT at ``filtered_rate_hz`` (FC time):
+  the tension filter's force of the cable on the drone (``TETH_TN``, ``TETH_TE``, ``TETH_TD``,
+  NED [N]) and its magnitude (``TETH_TMAG`` [N]), and the catenary position when it runs
+  (``TETH_CN``, ``TETH_CE``, ``TETH_CD`` [m]). One scalar per name, so any plotter can pick one
+  (pymavlink's ``NAMED_VALUE_FLOAT.value{NAMED_VALUE_FLOAT.name=="TETH_TN"}`` in MAVProxy's
+  ``graph``). Nothing is sent for an invalid or stale (``filtered_max_age_s``) value: never NaN.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tether_companion.estimation.pipeline import Estimate
+from tether_companion.estimation.catenary_position import CatenaryPosition
+from tether_companion.estimation.tension_kf import TensionEstimate
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.mavlink.units import (
     POSE_DIM,
@@ -74,10 +84,45 @@ STATUSTEXT_MIN_INTERVAL_S = 1.0
 """Shortest gap between two health STATUSTEXTs [s of flight-controller time]."""
 _RESUME_GAP_S = 0.5
 """A pause in publication longer than this counts as a reset when publication resumes [s]."""
+TENSION_VECTOR_NAMES = (b"TETH_TN", b"TETH_TE", b"TETH_TD")
+"""NAMED_VALUE_FLOAT names of the filtered force of the cable on the drone, NED [N]."""
+TENSION_MAGNITUDE_NAME = b"TETH_TMAG"
+"""NAMED_VALUE_FLOAT name of the filtered tension magnitude [N]."""
+CATENARY_POSITION_NAMES = (b"TETH_CN", b"TETH_CE", b"TETH_CD")
+"""NAMED_VALUE_FLOAT names of the catenary estimator's position, NED from the anchor [m]."""
+
+
+class PositionEstimate(Protocol):
+    """What the publisher reads from an estimate (the EKF's
+    :class:`~tether_companion.estimation.pipeline.Estimate` or a catenary one)."""
+
+    @property
+    def time_s(self) -> float:
+        """Flight-controller time [s]."""
+
+    @property
+    def position_ned_m(self) -> FloatArray:
+        """Position from the anchor, NED, shape (3,) [m]."""
+
+    @property
+    def tension_n(self) -> float:
+        """Tension magnitude [N]."""
+
+    @property
+    def covariance(self) -> FloatArray:
+        """Covariance, shape (n, n): position block [m^2] first, then tension [N^2] if n > 3."""
+
+    @property
+    def position_covariance_m2(self) -> FloatArray:
+        """Position block of the covariance, shape (3, 3) [m^2]."""
+
+    @property
+    def reset_counter(self) -> int:
+        """Restarts of the estimator run so far."""
 
 
 def assess_health(
-    estimate: Estimate, config: PublishConfig, has_tension_state: bool, ever_ok: bool
+    estimate: PositionEstimate, config: PublishConfig, has_tension_state: bool, ever_ok: bool
 ) -> str:
     """Health of one estimate (one of :data:`HEALTH_STATES`, never STALE/NO_ATTITUDE here).
 
@@ -177,8 +222,12 @@ class Publisher:
         self._tension_period_s = (
             1.0 / config.tension_rate_hz if config.tension_rate_hz > 0 else math.inf
         )
+        self._filtered_period_s = (
+            1.0 / config.filtered_rate_hz if config.filtered_rate_hz > 0 else math.inf
+        )
         self._next_due_s = -math.inf
         self._next_tension_s = -math.inf
+        self._next_filtered_s = -math.inf
         self._last_sent_s = -math.inf
         self._last_sent_position: FloatArray | None = None
         self._estimator_resets: int | None = None
@@ -190,6 +239,7 @@ class Publisher:
         self._bump_reset()
         self._next_due_s = -math.inf
         self._next_tension_s = -math.inf
+        self._next_filtered_s = -math.inf
         self._last_sent_s = -math.inf
         self._last_sent_position = None
         self._estimator_resets = None
@@ -200,13 +250,52 @@ class Publisher:
         """Record a health state decided outside the estimate (stale inputs); STATUSTEXT if new."""
         return self._health_transition(health)
 
+    def on_filtered(
+        self, tension: TensionEstimate, catenary: CatenaryPosition | None = None
+    ) -> list[MAVLinkMessage]:
+        """NAMED_VALUE_FLOATs of the tension filter (and catenary position), when due.
+
+        Parameters
+        ----------
+        tension
+            The tension filter's estimate at one IMU tick (FC time ``time_s``).
+        catenary
+            The catenary estimator's position at the same tick (None: not running).
+
+        Nothing is sent for a value that is not finite, a tension not updated within
+        ``filtered_max_age_s`` or an invalid catenary position.
+        """
+        t = tension.time_s
+        if self._filtered_period_s == math.inf or not t >= self._next_filtered_s:
+            return []
+        fresh = tension.valid and tension.age_s(t) <= self.config.filtered_max_age_s
+        position_ok = catenary is not None and catenary.valid
+        if not (fresh or position_ok):
+            return []
+        self._next_filtered_s = _next_due(self._next_filtered_s, t, self._filtered_period_s)
+        values: list[tuple[bytes, float]] = []
+        if fresh:
+            force = tension.tension_ned_n
+            values += zip(TENSION_VECTOR_NAMES, (float(v) for v in force), strict=True)
+            values.append((TENSION_MAGNITUDE_NAME, tension.magnitude_n))
+        if position_ok:
+            position = catenary.position_ned_m  # type: ignore[union-attr]
+            values += zip(CATENARY_POSITION_NAMES, (float(v) for v in position), strict=True)
+        stamp_ms = seconds_to_boot_ms(t)
+        return [
+            dialect.MAVLink_named_value_float_message(stamp_ms, name, value)
+            for name, value in values
+            if math.isfinite(value)
+        ]
+
     def on_estimate(
         self,
-        estimate: Estimate,
+        estimate: PositionEstimate,
         attitude: AttitudeSample | None,
         *,
         inputs_stale: bool = False,
         motors_idle: bool = False,
+        unavailable: str | None = None,
     ) -> tuple[list[MAVLinkMessage], Publication | None]:
         """Messages to send for this estimate (often none: decimation) and the CSV record.
 
@@ -222,6 +311,9 @@ class Publisher:
         motors_idle
             The motors' thrust is far below the weight: the vehicle stands on something (the
             ground after landing or a reboot) and the model (thrust + cable only) does not hold.
+        unavailable
+            Why the estimator has no position this tick, when it says so (``stale`` or
+            ``slack``; the catenary estimator): the health shown instead of ``diverged``.
         """
         self.counters.estimates += 1
         out: list[MAVLinkMessage] = []
@@ -232,6 +324,8 @@ class Publisher:
             self._ok_since_s = math.inf
         self._estimator_resets = estimate.reset_counter
         health = assess_health(estimate, self.config, self.has_tension_state, self._ever_ok)
+        if unavailable is not None:
+            health = unavailable
         if inputs_stale and health in (OK, CONVERGING):
             health = STALE
         if motors_idle and health != DIVERGED:
@@ -304,7 +398,7 @@ class Publisher:
         self.last = publication
         return out, publication
 
-    def _pose_covariance(self, estimate: Estimate, *, inflated: bool) -> FloatArray | None:
+    def _pose_covariance(self, estimate: PositionEstimate, *, inflated: bool) -> FloatArray | None:
         if self.config.covariance == "unknown":
             return None
         pose = np.zeros((POSE_DIM, POSE_DIM))

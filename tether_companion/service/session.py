@@ -1,8 +1,19 @@
-"""One estimation session: ingest -> tether EKF -> publisher, pure and synchronous.
+"""One estimation session: ingest -> estimators -> publisher, pure and synchronous.
 
 The live service feeds it the messages it receives, replay feeds it the messages of a .tlog
 (or the samples of a dataflash log); both get the same estimates and the same messages to send
 for the same input, because nothing here reads a wall clock.
+
+Estimators, all fed the same samples:
+
+* the tether EKF (:class:`~tether_companion.estimation.pipeline.TetherEstimator`), always;
+* the tension Kalman filter, owned by the tension modes (:class:`TensionModeSession`), always:
+  its force on the drone is published as NAMED_VALUE_FLOAT (``publish.filtered_rate_hz``);
+* the catenary position estimator
+  (:class:`~tether_companion.estimation.catenary_position.CatenaryPositionEstimator`) on the
+  filtered tension, when ``position.source`` is ``catenary`` (then its position is what
+  VISION_POSITION_ESTIMATE carries) or ``position.catenary_beside`` is set. The paid-out length
+  is ``catenary.default_length_m`` (case 2, ``known_length``), or none is needed (case 1).
 """
 
 from __future__ import annotations
@@ -13,7 +24,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tether_companion.constants import GRAVITY_MPS2
+from tether_companion.estimation.catenary_position import (
+    NO_TENSION,
+    STALE_TENSION,
+    UNOBSERVABLE,
+    CatenaryPosition,
+    CatenaryPositionEstimator,
+)
 from tether_companion.estimation.pipeline import Estimate, TetherEstimator
+from tether_companion.estimation.tension_kf import TensionEstimate
 from tether_companion.estimation.thrust_input import (
     MotorLagThrustInput,
     StaticThrustInput,
@@ -23,9 +42,9 @@ from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.modes.session import TensionModeSession
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
-from tether_companion.service.config import ServiceConfig
+from tether_companion.service.config import CATENARY, ServiceConfig
 from tether_companion.service.ingest import FcPosition, Ingest, Sample, TensionReading
-from tether_companion.service.publish import Publication, Publisher
+from tether_companion.service.publish import SLACK, STALE, Publication, Publisher
 
 TENSION_MODE_COMMAND = dialect.MAV_CMD_USER_2
 """COMMAND_LONG a ground station sends to this component (our system and component id) to
@@ -36,6 +55,54 @@ MODE_TICK_S = 0.02
 """Period of the tension modes' logic [s of flight-controller time] (50 Hz)."""
 HEIGHT_STALE_S = 0.5
 """A rangefinder height or FC position older than this [s] is not handed to the modes."""
+_CATENARY_UNAVAILABLE = {NO_TENSION: STALE, STALE_TENSION: STALE, UNOBSERVABLE: SLACK}
+"""Publisher health for the catenary estimator's reasons to have no position (the others,
+``inconsistent`` and ``no_length``, show as ``diverged``)."""
+
+
+@dataclass(frozen=True, slots=True)
+class CatenaryEstimate:
+    """A catenary position with the tension it came from, as the publisher reads it.
+
+    Attributes
+    ----------
+    time_s
+        Flight-controller time [s].
+    position_ned_m
+        Position from the anchor, NED, shape (3,) [m] (``nan`` when invalid).
+    tension_n
+        Filtered tension magnitude [N].
+    covariance
+        Shape (4, 4): the catenary position covariance [m^2], then the filtered tension's
+        per-axis variance [N^2].
+    reset_counter
+        Restarts of the tension filter (each one can step the position).
+    """
+
+    time_s: float
+    position_ned_m: np.ndarray
+    tension_n: float
+    covariance: np.ndarray
+    reset_counter: int
+
+    @property
+    def position_covariance_m2(self) -> np.ndarray:
+        """Position block of the covariance, shape (3, 3) [m^2]."""
+        return self.covariance[:3, :3]
+
+    @classmethod
+    def of(cls, position: CatenaryPosition, tension: TensionEstimate) -> CatenaryEstimate:
+        """The estimate for ``position``, computed from ``tension``."""
+        covariance = np.zeros((4, 4))
+        covariance[:3, :3] = position.covariance_m2
+        covariance[3, 3] = tension.variance_n2
+        return cls(
+            position.time_s,
+            position.position_ned_m,
+            tension.magnitude_n,
+            covariance,
+            tension.health.restarts,
+        )
 
 
 @dataclass
@@ -62,10 +129,16 @@ class EstimationSession:
         self.config = config
         self.vehicle = vehicle
         self.ingest = Ingest(config.link, config.inputs, config.tension, vehicle.n_motors)
+        self.catenary_source = config.position.source == CATENARY
+        """The published position is the catenary estimator's (else the EKF's)."""
         self.publisher = Publisher(
-            config.publish, has_tension_state=config.estimator.kind == "four_state"
+            config.publish,
+            has_tension_state=self.catenary_source or config.estimator.kind == "four_state",
         )
         self.estimator = self._new_estimator()
+        self.catenary = self._new_catenary()
+        self.last_catenary: CatenaryPosition | None = None
+        """The catenary estimator's latest output (None: not running, or nothing yet)."""
         self.attitude: AttitudeSample | None = None
         self.last_estimate: Estimate | None = None
         self._static_thrust = StaticThrustInput(vehicle)
@@ -86,6 +159,8 @@ class EstimationSession:
         self.boots += 1
         self.estimator = self._new_estimator()
         self.publisher.restart()
+        self.catenary = self._new_catenary()
+        self.last_catenary = None
         self.attitude = None
         self.last_estimate = None
         enabled = self.modes.modes.enabled
@@ -141,6 +216,11 @@ class EstimationSession:
     def _new_estimator(self) -> TetherEstimator:
         return TetherEstimator(self.config.estimator, self.vehicle, self._thrust_input())
 
+    def _new_catenary(self) -> CatenaryPositionEstimator | None:
+        if not self.config.position.runs_catenary:
+            return None
+        return CatenaryPositionEstimator(self.config.catenary)
+
     def on_message(self, msg: MAVLinkMessage) -> Step:
         """Process one received message (any sender, any type)."""
         if msg.get_type() == "COMMAND_LONG" and self._for_us(msg):
@@ -155,17 +235,35 @@ class EstimationSession:
     def on_sample(self, sample: Sample) -> Step:
         """Process one checked sample (from :meth:`on_message` or a dataflash log).
 
-        Every sample goes to the estimator as it arrives: the pipeline aligns the streams (its
+        Every sample goes to the estimators as it arrives: the pipeline aligns the streams (its
         clock moves only with the IMU; a rangefinder sample is fused at the filter's time).
         """
-        step = self._estimate(sample)
+        tension = self._feed_tension_filter(sample)
+        step = self._estimate(sample, tension)
+        if tension is not None:
+            step.messages += self.publisher.on_filtered(tension, self.last_catenary)
         step.messages += self._run_modes(self.modes, sample)
         return step
 
-    def _estimate(self, sample: Sample) -> Step:
+    def _feed_tension_filter(self, sample: Sample) -> TensionEstimate | None:
+        """Feed the tension filter (the modes'); its estimate at an IMU tick, else None.
+        The catenary estimator, when it runs, follows every tension estimate."""
+        modes = self.modes
+        if isinstance(sample, AttitudeSample):
+            modes.on_attitude(sample)
+        elif isinstance(sample, PwmSample):
+            modes.on_pwm(sample)
+        elif isinstance(sample, ImuSample):
+            tension = modes.on_imu(sample)
+            if tension is not None and self.catenary is not None:
+                self.last_catenary = self.catenary.on_tension(tension)
+            return tension
+        return None
+
+    def _estimate(self, sample: Sample, tension: TensionEstimate | None) -> Step:
         estimator = self.estimator
         if isinstance(sample, ImuSample):
-            return self._tick(sample)
+            return self._tick(sample, tension)
         if isinstance(sample, AttitudeSample):
             self.attitude = sample
             estimator.on_attitude(sample)
@@ -179,15 +277,14 @@ class EstimationSession:
         return Step()
 
     def _run_modes(self, modes: TensionModeSession, sample: Sample) -> list[MAVLinkMessage]:
-        """Feed the tension modes; run their logic at ``MODE_TICK_S`` on IMU and ATTITUDE
-        stamps (either keeps it running when the other stream stops)."""
-        if isinstance(sample, ImuSample):
-            modes.on_imu(sample)
-        elif isinstance(sample, AttitudeSample):
-            modes.on_attitude(sample)
-        elif isinstance(sample, PwmSample):
-            modes.on_pwm(sample)
-        elif isinstance(sample, RangeSample) and self.attitude is not None:
+        """Run the tension modes' logic at ``MODE_TICK_S`` on IMU and ATTITUDE stamps (either
+        keeps it running when the other stream stops); their filter is fed already.
+
+        The height above ground is the tilt-corrected rangefinder when it is fresh, else the
+        flight controller's own height above its EKF origin (``-z`` of LOCAL_POSITION_NED; the
+        service puts the origin at the anchor, so this is the height above the anchor's
+        ground), else unknown (a landing then hands over to the autopilot's LAND)."""
+        if isinstance(sample, RangeSample) and self.attitude is not None:
             tilt = math.cos(self.attitude.roll_rad) * math.cos(self.attitude.pitch_rad)
             self._height_m, self._height_time_s = sample.distance_m * tilt, sample.time_s
         elif isinstance(sample, FcPosition):
@@ -203,25 +300,38 @@ class EstimationSession:
         fc = self._fc_position
         fc_fresh = fc is not None and abs(t - fc.time_s) <= HEIGHT_STALE_S
         position = np.array(fc.position_ned_m) if fc_fresh else np.full(3, math.nan)
-        fresh = t - self._height_time_s <= HEIGHT_STALE_S
-        return modes.tick(t, position, self._height_m if fresh else math.nan)
+        if t - self._height_time_s <= HEIGHT_STALE_S:
+            height_m = self._height_m
+        else:
+            height_m = -position[2]  # nan when the FC position is missing or stale too
+        return modes.tick(t, position, height_m)
 
-    def _tick(self, sample: ImuSample) -> Step:
+    def _tick(self, sample: ImuSample, tension: TensionEstimate | None) -> Step:
+        """One IMU tick: the EKF's estimate, and the publisher fed the chosen source's."""
         estimator = self.estimator
         if self.config.tension.source == "config":
             estimator.set_known_tension_n(self.config.tension.known_tension_n, sample.time_s)
         health = estimator.health
         stale_before = health.stale_attitude + health.stale_pwm + health.stale_tension
         estimate = estimator.on_imu(sample)
-        if estimate is None:
-            return Step()
-        health = estimator.health
-        stale = health.stale_attitude + health.stale_pwm + health.stale_tension > stale_before
-        self.last_estimate = estimate
-        messages, publication = self.publisher.on_estimate(
-            estimate,
-            self.attitude,
-            inputs_stale=stale,
-            motors_idle=self._static_thrust_n < self._idle_thrust_n,
-        )
+        if estimate is not None:
+            self.last_estimate = estimate
+        motors_idle = self._static_thrust_n < self._idle_thrust_n
+        messages: list[MAVLinkMessage] = []
+        publication = None
+        if not self.catenary_source and estimate is not None:
+            health = estimator.health
+            stale = health.stale_attitude + health.stale_pwm + health.stale_tension > stale_before
+            messages, publication = self.publisher.on_estimate(
+                estimate, self.attitude, inputs_stale=stale, motors_idle=motors_idle
+            )
+        elif self.catenary_source and tension is not None and self.last_catenary is not None:
+            catenary = self.last_catenary
+            messages, publication = self.publisher.on_estimate(
+                CatenaryEstimate.of(catenary, tension),
+                self.attitude,
+                inputs_stale=not tension.updated,
+                motors_idle=motors_idle,
+                unavailable=_CATENARY_UNAVAILABLE.get(catenary.status),
+            )
         return Step(messages=messages, publication=publication, estimate=estimate)

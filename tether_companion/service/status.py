@@ -9,6 +9,7 @@ import math
 import numpy as np
 from rich.console import Console, Group
 from rich.live import Live
+from rich.markup import escape
 from rich.table import Table
 from rich.text import Text
 
@@ -87,13 +88,30 @@ def render(service: CompanionService) -> Group:
         variance = np.diag(last.covariance)
         sigma = np.sqrt(np.clip(variance, 0.0, None))
         estimate.add_row(
-            "value [m, N]", *(f"{v:+.2f}" for v in last.position_ned_m), f"{last.tension_n:.2f}"
+            escape("EKF [m, N]"),
+            *(f"{v:+.2f}" for v in last.position_ned_m),
+            f"{last.tension_n:.2f}",
         )
         tension_sigma = f"{sigma[3]:.3f}" if sigma.shape[0] > 3 else "known"
-        estimate.add_row("1-sigma", *(f"{s:.3f}" for s in sigma[:3]), tension_sigma)
-        estimate.add_row("FC time [s]", f"{last.time_s:.3f}", "", "", "")
+        estimate.add_row("EKF 1-sigma", *(f"{s:.3f}" for s in sigma[:3]), tension_sigma)
+        estimate.add_row(escape("FC time [s]"), f"{last.time_s:.3f}", "", "", "")
     else:
         estimate.add_row("no estimate yet", "", "", "", "")
+    tension = session.modes.tension
+    if tension is not None and tension.valid:
+        estimate.add_row(
+            escape("tension filter [N]"),
+            *(f"{v:+.2f}" for v in tension.tension_ned_n),
+            f"{tension.magnitude_n:.2f}",
+        )
+    catenary = session.last_catenary
+    if catenary is not None:
+        source = " (published)" if session.catenary_source else ""
+        if catenary.valid:
+            values = [f"{v:+.2f}" for v in catenary.position_ned_m]
+        else:
+            values = [catenary.status, "", ""]
+        estimate.add_row(escape(f"catenary [m]{source}"), *values, "")
     sent = ", ".join(f"{k} {v}" for k, v in sorted(state.sent_by_type.items()))
     return Group(head, inputs, estimate, drops, Text(f"sent: {sent}"))
 

@@ -7,13 +7,16 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import io
+import math
 
 import numpy as np
 import pytest
+from rich.console import Console
 
+from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.emulator.autopilot import FlightController
 from tether_companion.emulator.config import load_emulator_scenario
-from tether_companion.emulator.lockstep import LockstepPeer
+from tether_companion.emulator.lockstep import LockstepPeer, build_controller
 from tether_companion.estimation.runner import run_scenario
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
 from tether_companion.resources import CONFIGS_DIR
@@ -22,6 +25,7 @@ from tether_companion.service.config import load_service_config, load_vehicle_fo
 from tether_companion.service.emulator_process import EmulatorProcess
 from tether_companion.service.recording import read_tlog
 from tether_companion.service.replay import replay_log
+from tether_companion.service.status import render
 from tether_companion.service.systemd import SystemdNotifier
 
 pytestmark = pytest.mark.integration
@@ -139,14 +143,21 @@ def test_link_faults_and_an_in_flight_reboot(tmp_path, monkeypatch) -> None:
 
 
 class _LockstepLink:
-    """The service's side of a lock-step link: frames go straight into the emulator."""
+    """The service's side of a lock-step link: frames go straight into the emulator (and,
+    decoded, into ``sent`` when ``record`` is set)."""
 
-    def __init__(self, peer: LockstepPeer, system_id: int, component_id: int) -> None:
+    def __init__(
+        self, peer: LockstepPeer, system_id: int, component_id: int, record: bool = False
+    ) -> None:
         self.peer = peer
         self.encoder = FrameEncoder(system_id, component_id)
+        self.sent: list = []
+        self._parser = FrameParser() if record else None
 
     def send_bytes(self, frame: bytes) -> None:
         self.peer.send_bytes(frame)
+        if self._parser is not None:
+            self.sent.extend(self._parser.feed(frame))
 
 
 class _LockstepService:
@@ -154,7 +165,7 @@ class _LockstepService:
     controller, on the controller's clock: :meth:`advance` runs the emulator 5 ms, :meth:`serve`
     hands the service what arrived and runs its housekeeping every 50 ms."""
 
-    def __init__(self, controller: FlightController, overrides: dict) -> None:
+    def __init__(self, controller: FlightController, overrides: dict, record: bool = False) -> None:
         config = load_service_config(
             CONFIGS_DIR / "companion.yaml",
             {"link": {"connect": "udp:127.0.0.1:14550"}, "recording": {"enabled": False}}
@@ -162,7 +173,9 @@ class _LockstepService:
         )
         self.controller = controller
         self.peer = LockstepPeer(controller, config.link.system_id, config.link.component_id)
-        self.link = _LockstepLink(self.peer, config.link.system_id, config.link.component_id)
+        self.link = _LockstepLink(
+            self.peer, config.link.system_id, config.link.component_id, record
+        )
         self.service = CompanionService(
             config,
             controller.sim.vehicle,
@@ -248,3 +261,117 @@ def test_service_hosts_tension_following_a_tug_moves_the_drone() -> None:
     assert service.state.sent_by_type.get("SET_POSITION_TARGET_LOCAL_NED", 0) > 0
     assert after[1] - before[1] > 1.0, after - before  # moved along the pull (east)
     assert controller.armed
+
+
+def test_catenary_position_source_on_a_heavy_cable_in_lock_step() -> None:
+    """``position.source: catenary`` on the emulator's catenary cable (catenary-hover without
+    its winch events: 5.2 m of 0.05 kg/m cable, hovering at (4, 0, -3) m), the paid-out length
+    and weight from config. What the flight controller receives is close to the truth
+    (``bench catenary --flight hover --seed 5``: RMSE 0.047 / 0.064 / 0.048 m; the 4-state
+    EKF's straight-cable model is 2.2 m off in north there), and the tension filter's force on
+    the drone, published as NAMED_VALUE_FLOAT, matches the simulator's cable force."""
+    scenario, emulator_config = load_emulator_scenario("catenary-hover")
+    scenario = dataclasses.replace(scenario, duration_s=12.0, events=())
+    controller = FlightController(scenario, emulator_config)
+    cable = scenario.cable
+    overrides = {
+        "position": {"source": "catenary"},
+        "catenary": {
+            "case": "known_length",
+            "weight_per_length_n_per_m": cable.linear_density_kg_per_m * GRAVITY_MPS2,
+            "default_length_m": cable.length_m,
+        },
+    }
+    lockstep = _LockstepService(controller, overrides, record=True)
+    forces = []
+    while controller.time_s < scenario.duration_s:
+        t = lockstep.advance()
+        lockstep.serve()
+        if t >= 4.0:
+            forces.append(np.array(controller.sim.truth.cable_force_ned_n))
+    score = controller.score()
+    assert score.invalid == 0 and score.unmatched == 0
+    assert score.scored >= 25.0 * (scenario.duration_s - 2.0)  # 30 Hz after settling
+    rmse = score.rmse_m
+    assert max(rmse["north"], rmse["east"], rmse["down"]) < 0.15, rmse
+    assert score.max_error_m < 0.5, score.max_error_m
+
+    sent = lockstep.link.sent
+    named: dict[str, list[float]] = {}
+    for msg in sent:
+        if msg.get_type() == "NAMED_VALUE_FLOAT" and msg.time_boot_ms >= 4000:
+            named.setdefault(msg.name.rstrip("\0"), []).append(msg.value)
+    true_force = np.mean(forces, axis=0)
+    for axis, name in enumerate(("TETH_TN", "TETH_TE", "TETH_TD")):
+        values = np.array(named[name])
+        assert len(values) >= 9.0 * (scenario.duration_s - 4.0)  # 10 Hz
+        assert abs(values.mean() - true_force[axis]) < 0.15, (name, values.mean(), true_force)
+    assert abs(np.mean(named["TETH_TMAG"]) - np.linalg.norm(true_force)) < 0.15
+    vision = [m for m in sent if m.get_type() == "VISION_POSITION_ESTIMATE"]
+    assert all(np.all(np.isfinite(m.covariance)) for m in vision)
+    status = io.StringIO()
+    Console(file=status, width=120).print(render(lockstep.service))
+    assert "catenary [m] (published)" in status.getvalue()
+
+
+def test_tether_landing_without_a_rangefinder_uses_the_fc_height(tmp_path) -> None:
+    """No DISTANCE_SENSOR at all (an outage for the whole flight): the landing by the tether
+    takes its height from the flight controller's LOCAL_POSITION_NED, so a winch reel-in
+    (0.3 m/s from 5 m up, as test_modes_e2e (b)) brings the drone down under the service's
+    targets to the landing height and LAND, where without a height it handed over to the
+    autopilot's LAND at once."""
+    length = math.hypot(1.0, 5.0) - 0.03
+    path = tmp_path / "reel-in.yaml"
+    path.write_text(
+        f"""
+duration_s: 40.0
+seed: 21
+physics_rate_hz: 1000
+vehicle: default-quad
+cable: {{model: elastic, length_m: {length:.4f}, stiffness_n_per_m: 100.0,
+        damping_n_s_per_m: 5.0, linear_density_kg_per_m: 0.0167, min_length_m: 0.2}}
+trajectory: {{kind: hover, position_ned_m: [1.0, 0.0, -5.0]}}
+initial: {{airborne: true}}
+""",
+        encoding="utf-8",
+    )
+    outage = {"stream": "DISTANCE_SENSOR", "start_s": 0.0, "duration_s": 1000.0}
+    controller = build_controller(str(path), emulator={"faults": {"outages": [outage]}})
+    lockstep = _LockstepService(
+        controller, {"tension_mode": {"enabled": True, "land_on_first_tug": True}}
+    )
+    ground_station = LockstepPeer(controller)
+    ground_station.collecting = False
+    while controller.time_s < 40.0 and not controller.sim.landed:
+        t = lockstep.advance()
+        if abs(t - 1.0) < 0.0025:
+            guided = dialect.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+            ground_station.send(
+                dialect.MAVLink_command_long_message(
+                    1, 1, dialect.MAV_CMD_DO_SET_MODE, 0, guided, 4, 0, 0, 0, 0, 0
+                )
+            )
+        if abs(t - 5.0) < 0.0025:
+            ground_station.send(
+                dialect.MAVLink_command_long_message(
+                    1,
+                    1,
+                    dialect.MAV_CMD_DO_WINCH,
+                    0,
+                    1,
+                    dialect.WINCH_RATE_CONTROL,
+                    0.0,
+                    -0.3,
+                    0,
+                    0,
+                    0,
+                )
+            )
+        lockstep.serve()
+    session = lockstep.service.session
+    assert session.ingest.counters.accepted["range"] == 0  # really no rangefinder
+    modes = session.modes
+    assert modes.land_commands > 0 and modes.modes.fallback_lands == 0  # by the tether
+    assert controller.mode.name == "LAND" and controller.sim.landed
+    final = controller.sim.body.x[:3]
+    assert math.hypot(final[0], final[1]) < 1.0, final

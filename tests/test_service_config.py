@@ -50,6 +50,18 @@ def test_shipped_config_loads_with_paper_estimator() -> None:
             r"recording.max_total_mb = 150(\.0)?: must be >= 2 \* max_file_mb",
         ),
         ("vehicle: no-such-drone\n", "no such built-in file"),
+        (
+            "position:\n  source: gps\n",
+            "position.source = 'gps': must be one of 'ekf', 'catenary'",
+        ),
+        (
+            "catenary:\n  case: straight\n",
+            "catenary.case = 'straight': must be one of 'lowest_point_at_anchor', 'known_length'",
+        ),
+        (
+            "publish:\n  filtered_rate_hz: 100\n",
+            r"publish.filtered_rate_hz = 100(\.0)?: must be a number >= 0.0 and <= 50.0",
+        ),
         ("streams: [1, 2]\n", r"streams = \[1, 2\]: must be a mapping"),
     ],
 )

@@ -4,11 +4,13 @@
 service and by replay. It is pure and synchronous: the caller hands it samples in time order
 and it returns an :class:`Estimate` per IMU tick.
 
-* ``on_attitude``, ``on_pwm``, ``set_known_tension_n`` store the latest value (non-finite
-  samples are rejected and counted).
+* ``on_attitude``, ``on_pwm`` hand the sample to an
+  :class:`~tether_companion.estimation.alignment.InputAligner` (the latest attitude's rotation,
+  the latest PWM's thrust through a :class:`ThrustInput`), ``set_known_tension_n`` stores the
+  latest value; non-finite samples are rejected and counted.
 * ``on_imu`` ticks the filter: predict to the IMU time, then fuse the accelerometer with the
-  latest attitude (rotation) and PWM (thrust through a :class:`ThrustInput`) if each is within
-  its staleness bound of the IMU time; otherwise the update is skipped and counted.
+  aligner's inputs if attitude and PWM are each within their staleness bound of the IMU time;
+  otherwise the update is skipped and counted.
 * ``on_range`` tilt-corrects the rangefinder with the latest attitude (``d cos(phi) cos(theta)``,
   flat ground) and fuses it as the height above the anchor at the filter's time (the last IMU
   tick; the random walk makes a few milliseconds' offset immaterial, and the filter's clock
@@ -26,6 +28,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from tether_companion.estimation import alignment
+from tether_companion.estimation.alignment import AlignedInputs, InputAligner, aligner_for
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.ekf import FUSED, GATED, NONFINITE, ExtendedKalmanFilter
 from tether_companion.estimation.tether_models import (
@@ -36,7 +40,6 @@ from tether_companion.estimation.tether_models import (
     altimeter,
 )
 from tether_companion.estimation.thrust_input import StaticThrustInput, ThrustInput
-from tether_companion.frames import rotation_ned_to_body
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 
@@ -185,6 +188,15 @@ class TetherEstimator:
     thrust_input
         PWM-to-thrust map; default: the model file of ``config.thrust_model`` (written by
         ``tether-companion sysid``), else :class:`StaticThrustInput` of ``vehicle``.
+    aligner
+        An :class:`InputAligner` shared with another estimator fed the same samples (its
+        bounds must equal ``config.staleness``'s; its thrust input is used); default: a
+        private one.
+
+    Raises
+    ------
+    ValueError
+        When ``aligner`` does not match ``config`` or comes with another ``thrust_input``.
     """
 
     def __init__(
@@ -192,12 +204,20 @@ class TetherEstimator:
         config: EstimatorConfig,
         vehicle: VehicleProfile,
         thrust_input: ThrustInput | None = None,
+        *,
+        aligner: InputAligner | None = None,
     ) -> None:
         self.config = config
         self.vehicle = vehicle
-        self.thrust_input: ThrustInput = (
-            thrust_input if thrust_input is not None else _default_thrust_input(config, vehicle)
+        stale = config.staleness
+        self.aligner = aligner_for(
+            aligner,
+            stale.attitude_s,
+            stale.pwm_s,
+            thrust_input,
+            lambda: _default_thrust_input(config, vehicle),
         )
+        self.thrust_input: ThrustInput = self.aligner.thrust_input
         model_cls = FourStateModel if config.kind == "four_state" else ThreeStateModel
         self.model = model_cls(vehicle.mass_kg, config.min_cable_length_m)
         self.filter = ExtendedKalmanFilter(
@@ -213,11 +233,6 @@ class TetherEstimator:
         self._stale = config.staleness
         self._time_s = math.nan
         self._early_range: RangeSample | None = None
-        self._attitude: AttitudeSample | None = None
-        self._rotation: FloatArray = np.eye(3)
-        self._cos_tilt = 1.0
-        self._pwm_time_s = math.nan
-        self._thrust_n = math.nan
         self._tension_time_s = math.nan
         self._known_tension_n = math.nan
         self._tension_from_measurement = (
@@ -238,28 +253,18 @@ class TetherEstimator:
 
     def on_attitude(self, sample: AttitudeSample) -> None:
         """Store the latest attitude (rejected and counted when not finite)."""
-        if not _finite(sample.time_s + sample.roll_rad + sample.pitch_rad + sample.yaw_rad):
+        if self.aligner.on_attitude(sample) is not None:
             self.health.nonfinite_rejected += 1
-            return
-        self._attitude = sample
-        self._rotation = rotation_ned_to_body(sample.roll_rad, sample.pitch_rad, sample.yaw_rad)
-        self._cos_tilt = math.cos(sample.roll_rad) * math.cos(sample.pitch_rad)
 
     def on_pwm(self, sample: PwmSample) -> None:
         """Store the total thrust [N] of the latest motor outputs (rejected when not finite)."""
-        if not _finite(sample.time_s) or not np.isfinite(sample.pwm_us).all():
-            self.health.nonfinite_rejected += 1
-            return
         try:
-            thrust_n = self.thrust_input.total_thrust_n(sample.pwm_us, sample.time_s)
+            rejected = self.aligner.on_pwm(sample) is not None
         except ValueError:  # wrong number of outputs for this vehicle
             self.health.pwm_invalid += 1
             return
-        if not _finite(thrust_n):
+        if rejected:
             self.health.nonfinite_rejected += 1
-            return
-        self._pwm_time_s = sample.time_s
-        self._thrust_n = thrust_n
 
     def set_known_tension_n(self, tension_n: float, time_s: float) -> None:
         """Known cable tension [N] at ``time_s`` [s] (load cell; used by the 3-state model)."""
@@ -275,15 +280,14 @@ class TetherEstimator:
 
         Returns ``None`` when the sample is rejected (non-finite, or older than the filter).
         """
-        t = sample.time_s
-        accel = sample.specific_force_body_mps2
-        if not (_finite(t) and np.isfinite(accel).all()):
+        aligned = self.aligner.align(sample)
+        if aligned == alignment.NONFINITE:
             self.health.nonfinite_rejected += 1
             return None
-        if not self._advance_to(t):
+        if not self._advance_to(sample.time_s):
             return None
         self.health.imu_ticks += 1
-        estimate = self._estimate(self._fuse_accel(t, accel))
+        estimate = self._estimate(self._fuse_accel(aligned))
         early = self._early_range
         if early is not None:  # arrived before the first tick: fused right after it
             self._early_range = None
@@ -312,7 +316,8 @@ class TetherEstimator:
                 health.range_stale += 1
             self._early_range = sample
             return
-        att = self._attitude
+        aligner = self.aligner
+        att = aligner.attitude
         if (
             att is None
             or abs(sample.time_s - att.time_s) > self._stale.attitude_s
@@ -320,10 +325,11 @@ class TetherEstimator:
         ):
             health.range_stale += 1
             return
-        if self._cos_tilt < math.cos(cfg.max_tilt_rad):
+        cos_tilt = aligner.cos_tilt
+        if cos_tilt < math.cos(cfg.max_tilt_rad):
             health.range_out_of_range += 1
             return
-        height_m = np.array((sample.distance_m * self._cos_tilt,))
+        height_m = np.array((sample.distance_m * cos_tilt,))
         result = self.filter.update(ALTIMETER, height_m, altimeter, self._r_alt)
         health.last_range_nis = result.nis
         if result.status == FUSED:
@@ -352,30 +358,29 @@ class TetherEstimator:
         self._time_s = t
         return True
 
-    def _fuse_accel(self, t: float, accel: FloatArray) -> bool:
+    def _fuse_accel(self, aligned: AlignedInputs | str) -> bool:
         health = self.health
-        stale = self._stale
-        att = self._attitude
-        if att is None or abs(t - att.time_s) > stale.attitude_s:
+        if aligned == alignment.STALE_ATTITUDE:
             health.stale_attitude += 1
             return False
-        if math.isnan(self._pwm_time_s) or abs(t - self._pwm_time_s) > stale.pwm_s:
+        if aligned == alignment.STALE_PWM:
             health.stale_pwm += 1
             return False
+        t, accel, rotation, thrust_n = aligned
         model = self.model
         tension_n = self._known_tension_n
         if not model.has_tension_state and (
-            math.isnan(self._tension_time_s) or abs(t - self._tension_time_s) > stale.tension_s
+            math.isnan(self._tension_time_s)
+            or abs(t - self._tension_time_s) > self._stale.tension_s
         ):
             health.stale_tension += 1
             return False
         if self._needs_tension_init:
-            self._initialise_tension(accel)
+            self._initialise_tension(accel, thrust_n)
         x = self.filter.x
         if x[0] * x[0] + x[1] * x[1] + x[2] * x[2] < model.min_cable_length_m**2:
             health.near_anchor += 1
             return False
-        rotation, thrust_n = self._rotation, self._thrust_n
 
         def measure(state: FloatArray) -> tuple[FloatArray, FloatArray]:
             return model.accel(state, rotation, thrust_n, tension_n)
@@ -394,14 +399,14 @@ class TetherEstimator:
             health.nonfinite_rejected += 1
         return False
 
-    def _initialise_tension(self, accel: FloatArray) -> None:
+    def _initialise_tension(self, accel: FloatArray, thrust_n: float) -> None:
         """Set the 4-state tension to the magnitude of the unexplained specific force [N].
 
         The body-frame specific force minus the thrust's is the cable's force per unit mass;
         its magnitude times the mass is the tension, whatever the direction.
         """
         cable_body = accel.copy()
-        cable_body[2] += self._thrust_n / self.model.mass_kg
+        cable_body[2] += thrust_n / self.model.mass_kg
         x = self.filter.x.copy()
         x[F_C] = self.model.mass_kg * float(np.linalg.norm(cable_body))
         self.filter.x = x

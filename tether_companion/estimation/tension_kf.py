@@ -23,9 +23,11 @@ run as one filter over an ``(n, 3)`` state: the constant model is the ``n = 1`` 
 ``A = [[1]]``, exactly eqs. 48-49 for the 3-vector. The update uses the Joseph form, which
 keeps P symmetric positive semi-definite in floating point.
 
-:class:`TensionEstimator` aligns samples (latest attitude and PWM within staleness bounds at
-each IMU tick, like :class:`~tether_companion.estimation.pipeline.TetherEstimator`) and emits
-a :class:`TensionEstimate` per tick. Pure and synchronous.
+:class:`TensionEstimator` aligns samples through an
+:class:`~tether_companion.estimation.alignment.InputAligner` (latest attitude and PWM within
+staleness bounds at each IMU tick, as :class:`~tether_companion.estimation.pipeline.TetherEstimator`
+does; the two can share one) and emits a :class:`TensionEstimate` per tick. Pure and
+synchronous.
 """
 
 from __future__ import annotations
@@ -38,8 +40,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.config import ConfigError, load_yaml, spec
+from tether_companion.estimation import alignment
+from tether_companion.estimation.alignment import AlignedInputs, InputAligner, aligner_for
 from tether_companion.estimation.thrust_input import StaticThrustInput, ThrustInput
-from tether_companion.frames import rotation_body_to_ned
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample
 
@@ -364,6 +367,15 @@ class TensionEstimator:
         Vehicle profile (mass; thrust curve for the default thrust input).
     thrust_input
         PWM-to-thrust map; default :class:`StaticThrustInput` of ``vehicle``.
+    aligner
+        An :class:`InputAligner` shared with another estimator fed the same samples (its
+        bounds must equal ``config.attitude_staleness_s`` and ``config.pwm_staleness_s``; its
+        thrust input is used); default: a private one.
+
+    Raises
+    ------
+    ValueError
+        When ``aligner`` does not match ``config`` or comes with another ``thrust_input``.
     """
 
     def __init__(
@@ -371,12 +383,19 @@ class TensionEstimator:
         config: TensionFilterConfig,
         vehicle: VehicleProfile,
         thrust_input: ThrustInput | None = None,
+        *,
+        aligner: InputAligner | None = None,
     ) -> None:
         self.config = config
         self.mass_kg = vehicle.mass_kg
-        self.thrust_input: ThrustInput = (
-            thrust_input if thrust_input is not None else StaticThrustInput(vehicle)
+        self.aligner = aligner_for(
+            aligner,
+            config.attitude_staleness_s,
+            config.pwm_staleness_s,
+            thrust_input,
+            lambda: StaticThrustInput(vehicle),
         )
+        self.thrust_input: ThrustInput = self.aligner.thrust_input
         self.filter = TensionKalmanFilter(
             config.transition(),
             config.process_noise(),
@@ -386,48 +405,39 @@ class TensionEstimator:
         self.health = TensionHealth()
         self._time_s = math.nan
         self._last_update_s = math.nan
-        self._attitude_time_s = math.nan
-        self._rotation: FloatArray = np.eye(3)
-        self._pwm_time_s = math.nan
-        self._thrust_n = math.nan
 
     def on_attitude(self, sample: AttitudeSample) -> None:
         """Store the latest attitude (rejected and counted when not finite)."""
-        values = (sample.time_s, sample.roll_rad, sample.pitch_rad, sample.yaw_rad)
-        if not all(math.isfinite(v) for v in values):
+        if self.aligner.on_attitude(sample) is not None:
             self.health.nonfinite_rejected += 1
-            return
-        self._attitude_time_s = sample.time_s
-        self._rotation = rotation_body_to_ned(sample.roll_rad, sample.pitch_rad, sample.yaw_rad)
 
     def on_pwm(self, sample: PwmSample) -> None:
-        """Store the total thrust of the latest motor outputs (rejected when not finite)."""
-        if not math.isfinite(sample.time_s) or not np.isfinite(sample.pwm_us).all():
+        """Store the total thrust of the latest motor outputs (rejected when not finite).
+
+        Raises
+        ------
+        ValueError
+            From the thrust input, when the number of pulse widths is wrong.
+        """
+        if self.aligner.on_pwm(sample) is not None:
             self.health.nonfinite_rejected += 1
-            return
-        thrust_n = self.thrust_input.total_thrust_n(sample.pwm_us, sample.time_s)
-        if not math.isfinite(thrust_n):
-            self.health.nonfinite_rejected += 1
-            return
-        self._pwm_time_s = sample.time_s
-        self._thrust_n = thrust_n
 
     def on_imu(self, sample: ImuSample) -> TensionEstimate | None:
         """Step the filter at the IMU time and fuse an observation when inputs are fresh.
 
         Returns ``None`` when the sample is rejected (non-finite or out of order).
         """
-        t = sample.time_s
-        f = sample.specific_force_body_mps2
+        aligned = self.aligner.align(sample)
         health = self.health
-        if not (math.isfinite(t) and np.isfinite(f).all()):
+        if aligned == alignment.NONFINITE:
             health.nonfinite_rejected += 1
             return None
+        t = sample.time_s
         if math.isfinite(self._time_s) and t < self._time_s:
             health.out_of_order += 1
             return None
         self._time_s = t
-        observation = self._observe(t, f)
+        observation = self._observe(aligned)
         kf = self.filter
         updated = False
         if observation is not None:
@@ -451,15 +461,20 @@ class TensionEstimator:
             health=health.copy(),
         )
 
-    def _observe(self, t: float, f: FloatArray) -> FloatArray | None:
+    def _observe(self, aligned: AlignedInputs | str) -> FloatArray | None:
         cfg, health = self.config, self.health
-        if not abs(t - self._attitude_time_s) <= cfg.attitude_staleness_s:
+        if aligned == alignment.STALE_ATTITUDE:
             health.stale_attitude += 1
             return None
-        if not abs(t - self._pwm_time_s) <= cfg.pwm_staleness_s:
+        if aligned == alignment.STALE_PWM:
             health.stale_pwm += 1
             return None
-        observation = observe_tension_ned_n(f, self._rotation, self._thrust_n, self.mass_kg)
+        observation = observe_tension_ned_n(
+            aligned.specific_force_body_mps2,
+            aligned.rotation_body_to_ned,
+            aligned.thrust_n,
+            self.mass_kg,
+        )
         if not np.isfinite(observation).all():
             health.nonfinite_rejected += 1
             return None

@@ -119,7 +119,11 @@ def test_service_talks_to_a_flight_controller_over_udp(tmp_path) -> None:
     assert np.linalg.norm(np.array([last.x, last.y, last.z]) - POSITION) < 0.4
     assert all(np.isfinite([v.x, v.y, v.z]).all() for v in log.vision)
     assert after[0].reset_counter > before[-1].reset_counter  # reboot -> reset
-    assert log.named_values and log.named_values[-1].name == "TETH_TENS"
+    names = {v.name for v in log.named_values}
+    assert names == {"TETH_TENS", "TETH_TN", "TETH_TE", "TETH_TD", "TETH_TMAG"}, names
+    assert all(np.isfinite(v.value) for v in log.named_values)
+    magnitude = [v.value for v in log.named_values if v.name == "TETH_TMAG"]
+    assert abs(magnitude[-1] - 4.0) < 0.3  # the filtered tension of the 4 N hover
     assert any("position OK" in t.text for t in log.statustexts)
     # bad bytes and other systems: dropped and counted
     assert service.session.ingest.counters.reboots == 1

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tether_companion.estimation.alignment import (
-    NONFINITE,
+    NONFINITE_INPUT,
     STALE_ATTITUDE,
     STALE_PWM,
     AlignedInputs,
@@ -75,7 +75,10 @@ def test_staleness_reasons_in_order_and_both_directions() -> None:
     assert aligner.align(_imu(1.045)) == STALE_PWM
     assert aligner.align(_imu(0.955)) == STALE_PWM
     assert aligner.align(_imu(1.06)) == STALE_ATTITUDE
-    assert InputAligner(0.05, 0.04, StaticThrustInput(VEHICLE)).align(_imu(math.nan)) == NONFINITE
+    assert (
+        InputAligner(0.05, 0.04, StaticThrustInput(VEHICLE)).align(_imu(math.nan))
+        == NONFINITE_INPUT
+    )
 
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf])
@@ -84,13 +87,15 @@ def test_nonfinite_samples_are_reported_and_not_stored(bad: float) -> None:
     aligner = InputAligner(0.05, 0.05, thrust)
     aligner.on_attitude(AttitudeSample(1.0, 0.0, 0.0, 0.0))
     aligner.on_pwm(PwmSample(1.0, HOVER_PWM))
-    assert aligner.on_attitude(AttitudeSample(1.01, 0.0, bad, 0.0)) == NONFINITE
-    assert aligner.on_attitude(AttitudeSample(bad, 0.0, 0.0, 0.0)) == NONFINITE
-    assert aligner.on_pwm(PwmSample(1.01, np.array([1500.0, bad, 1500.0, 1500.0]))) == NONFINITE
-    assert aligner.on_pwm(PwmSample(bad, HOVER_PWM)) == NONFINITE
+    assert aligner.on_attitude(AttitudeSample(1.01, 0.0, bad, 0.0)) == NONFINITE_INPUT
+    assert aligner.on_attitude(AttitudeSample(bad, 0.0, 0.0, 0.0)) == NONFINITE_INPUT
+    assert (
+        aligner.on_pwm(PwmSample(1.01, np.array([1500.0, bad, 1500.0, 1500.0]))) == NONFINITE_INPUT
+    )
+    assert aligner.on_pwm(PwmSample(bad, HOVER_PWM)) == NONFINITE_INPUT
     assert thrust.times_s == [1.0]  # non-finite PWM never reaches the thrust input
     assert aligner.attitude.time_s == 1.0 and aligner.pwm_time_s == 1.0
-    assert aligner.align(_imu(1.0, (0.0, bad, -9.8))) == NONFINITE
+    assert aligner.align(_imu(1.0, (0.0, bad, -9.8))) == NONFINITE_INPUT
 
 
 def test_nonfinite_thrust_is_reported() -> None:
@@ -99,7 +104,7 @@ def test_nonfinite_thrust_is_reported() -> None:
             return math.nan
 
     aligner = InputAligner(0.05, 0.05, NanThrust())
-    assert aligner.on_pwm(PwmSample(1.0, HOVER_PWM)) == NONFINITE
+    assert aligner.on_pwm(PwmSample(1.0, HOVER_PWM)) == NONFINITE_INPUT
     assert math.isnan(aligner.pwm_time_s)
 
 
@@ -121,7 +126,7 @@ def test_the_same_sample_object_is_converted_once() -> None:
     for _ in range(2):
         assert aligner.on_pwm(pwm) is None
         assert aligner.on_attitude(att) is None
-        assert aligner.on_attitude(bad) == NONFINITE
+        assert aligner.on_attitude(bad) == NONFINITE_INPUT
     assert thrust.times_s == [1.0]
     aligner.on_pwm(dataclasses.replace(pwm))  # equal but a new sample: converted
     assert thrust.times_s == [1.0, 1.0]

@@ -32,7 +32,7 @@ from tether_companion.samples import AttitudeSample, ImuSample, PwmSample
 
 FloatArray = NDArray[np.float64]
 
-NONFINITE = "nonfinite"
+NONFINITE_INPUT = "nonfinite"
 """A sample, or the thrust derived from it, contains NaN/inf."""
 STALE_ATTITUDE = "stale_attitude"
 """No attitude yet, or the latest one is further from the IMU time than its bound."""
@@ -107,10 +107,10 @@ class InputAligner:
         self._pwm_in: PwmSample | None = None
         self._pwm_outcome: str | None = None
         self._imu_in: ImuSample | None = None
-        self._imu_outcome: AlignedInputs | str = NONFINITE
+        self._imu_outcome: AlignedInputs | str = NONFINITE_INPUT
 
     def on_attitude(self, sample: AttitudeSample) -> str | None:
-        """Store the latest attitude; ``None`` when stored, else :data:`NONFINITE`."""
+        """Store the latest attitude; ``None`` when stored, else :data:`NONFINITE_INPUT`."""
         if sample is self._attitude_in:  # the same sample from another estimator
             return self._attitude_outcome
         self._attitude_in = sample
@@ -118,8 +118,8 @@ class InputAligner:
         if not (
             math.isfinite(t) and math.isfinite(roll) and math.isfinite(pitch) and math.isfinite(yaw)
         ):
-            self._attitude_outcome = NONFINITE
-            return NONFINITE
+            self._attitude_outcome = NONFINITE_INPUT
+            return NONFINITE_INPUT
         self.attitude = sample
         self.rotation_ned_to_body = rotation_ned_to_body(roll, pitch, yaw)
         self.cos_tilt = math.cos(roll) * math.cos(pitch)
@@ -129,7 +129,7 @@ class InputAligner:
 
     def on_pwm(self, sample: PwmSample) -> str | None:
         """Store the total thrust of the latest motor outputs; ``None`` when stored, else
-        :data:`NONFINITE` (pulse widths, time or the resulting thrust).
+        :data:`NONFINITE_INPUT` (pulse widths, time or the resulting thrust).
 
         Raises
         ------
@@ -141,7 +141,7 @@ class InputAligner:
         if sample is self._pwm_in:  # the same sample from another estimator
             return self._pwm_outcome
         if not math.isfinite(sample.time_s) or not np.isfinite(sample.pwm_us).all():
-            outcome: str | None = NONFINITE
+            outcome: str | None = NONFINITE_INPUT
         else:
             thrust_n = self.thrust_input.total_thrust_n(sample.pwm_us, sample.time_s)
             if math.isfinite(thrust_n):
@@ -150,7 +150,7 @@ class InputAligner:
                 self._imu_in = None
                 outcome = None
             else:
-                outcome = NONFINITE
+                outcome = NONFINITE_INPUT
         self._pwm_in, self._pwm_outcome = sample, outcome
         return outcome
 
@@ -160,9 +160,10 @@ class InputAligner:
         Returns
         -------
         AlignedInputs or str
-            The aligned inputs, else :data:`NONFINITE` (IMU time or specific force),
-            :data:`STALE_ATTITUDE` or :data:`STALE_PWM` (checked in that order). Changes no
-            state apart from a cache of this outcome: the caller may still drop the tick.
+            The aligned inputs, else :data:`NONFINITE_INPUT` (IMU time or specific force),
+            :data:`STALE_ATTITUDE` or :data:`STALE_PWM` (checked in that order; these module
+            constants themselves, so ``is`` compares). Changes no state apart from a cache of
+            this outcome: the caller may still drop the tick.
         """
         if sample is self._imu_in:  # the same tick from another estimator, inputs unchanged
             return self._imu_outcome
@@ -170,7 +171,7 @@ class InputAligner:
         force = sample.specific_force_body_mps2
         outcome: AlignedInputs | str
         if not (math.isfinite(t) and np.isfinite(force).all()):
-            outcome = NONFINITE
+            outcome = NONFINITE_INPUT
         elif self.attitude is None or not (
             abs(t - self.attitude.time_s) <= self.attitude_staleness_s
         ):

@@ -28,8 +28,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from tether_companion.estimation import alignment
-from tether_companion.estimation.alignment import AlignedInputs, InputAligner, aligner_for
+from tether_companion.estimation.alignment import (
+    NONFINITE_INPUT,
+    STALE_ATTITUDE,
+    STALE_PWM,
+    AlignedInputs,
+    InputAligner,
+    aligner_for,
+)
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.ekf import FUSED, GATED, NONFINITE, ExtendedKalmanFilter
 from tether_companion.estimation.tether_models import (
@@ -281,7 +287,7 @@ class TetherEstimator:
         Returns ``None`` when the sample is rejected (non-finite, or older than the filter).
         """
         aligned = self.aligner.align(sample)
-        if aligned == alignment.NONFINITE:
+        if aligned is NONFINITE_INPUT:
             self.health.nonfinite_rejected += 1
             return None
         if not self._advance_to(sample.time_s):
@@ -360,10 +366,10 @@ class TetherEstimator:
 
     def _fuse_accel(self, aligned: AlignedInputs | str) -> bool:
         health = self.health
-        if aligned == alignment.STALE_ATTITUDE:
+        if aligned is STALE_ATTITUDE:
             health.stale_attitude += 1
             return False
-        if aligned == alignment.STALE_PWM:
+        if aligned is STALE_PWM:
             health.stale_pwm += 1
             return False
         t, accel, rotation, thrust_n = aligned

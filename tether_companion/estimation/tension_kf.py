@@ -40,8 +40,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.config import ConfigError, load_yaml, spec
-from tether_companion.estimation import alignment
-from tether_companion.estimation.alignment import AlignedInputs, InputAligner, aligner_for
+from tether_companion.estimation.alignment import (
+    NONFINITE_INPUT,
+    STALE_ATTITUDE,
+    STALE_PWM,
+    AlignedInputs,
+    InputAligner,
+    aligner_for,
+)
 from tether_companion.estimation.thrust_input import StaticThrustInput, ThrustInput
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample
@@ -429,7 +435,7 @@ class TensionEstimator:
         """
         aligned = self.aligner.align(sample)
         health = self.health
-        if aligned == alignment.NONFINITE:
+        if aligned is NONFINITE_INPUT:
             health.nonfinite_rejected += 1
             return None
         t = sample.time_s
@@ -463,10 +469,10 @@ class TensionEstimator:
 
     def _observe(self, aligned: AlignedInputs | str) -> FloatArray | None:
         cfg, health = self.config, self.health
-        if aligned == alignment.STALE_ATTITUDE:
+        if aligned is STALE_ATTITUDE:
             health.stale_attitude += 1
             return None
-        if aligned == alignment.STALE_PWM:
+        if aligned is STALE_PWM:
             health.stale_pwm += 1
             return None
         observation = observe_tension_ned_n(

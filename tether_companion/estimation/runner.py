@@ -95,7 +95,9 @@ def run_scenario(
     sim = Simulator(scenario, rng=rng)
     vehicle = sim.vehicle
     est4 = TetherEstimator(dataclasses.replace(config, kind="four_state"), vehicle)
-    est3 = TetherEstimator(dataclasses.replace(config, kind="three_state"), vehicle)
+    est3 = TetherEstimator(  # same inputs, aligned once for both
+        dataclasses.replace(config, kind="three_state"), vehicle, aligner=est4.aligner
+    )
     schedule = _schedule(scenario)
     n_ticks = sum(1 for _, kind in schedule if kind == _IMU)
     time_s = np.empty(n_ticks)

@@ -40,14 +40,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.config import ConfigError, load_yaml, spec
-from tether_companion.estimation.alignment import (
-    NONFINITE_INPUT,
-    STALE_ATTITUDE,
-    STALE_PWM,
-    AlignedInputs,
-    InputAligner,
-    aligner_for,
-)
+from tether_companion.estimation import alignment
+from tether_companion.estimation.alignment import AlignedInputs, InputAligner
 from tether_companion.estimation.thrust_input import StaticThrustInput, ThrustInput
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample
@@ -374,14 +368,9 @@ class TensionEstimator:
     thrust_input
         PWM-to-thrust map; default :class:`StaticThrustInput` of ``vehicle``.
     aligner
-        An :class:`InputAligner` shared with another estimator fed the same samples (its
-        bounds must equal ``config.attitude_staleness_s`` and ``config.pwm_staleness_s``; its
-        thrust input is used); default: a private one.
-
-    Raises
-    ------
-    ValueError
-        When ``aligner`` does not match ``config`` or comes with another ``thrust_input``.
+        Time alignment shared with the tether EKF (same samples, same staleness bounds as
+        ``config``; its thrust input replaces the default); ``ValueError`` if it does not
+        match. Default: a private :class:`InputAligner`.
     """
 
     def __init__(
@@ -394,7 +383,7 @@ class TensionEstimator:
     ) -> None:
         self.config = config
         self.mass_kg = vehicle.mass_kg
-        self.aligner = aligner_for(
+        self.aligner = alignment.aligner_for(
             aligner,
             config.attitude_staleness_s,
             config.pwm_staleness_s,
@@ -435,7 +424,7 @@ class TensionEstimator:
         """
         aligned = self.aligner.align(sample)
         health = self.health
-        if aligned is NONFINITE_INPUT:
+        if aligned is alignment.NONFINITE_INPUT:
             health.nonfinite_rejected += 1
             return None
         t = sample.time_s
@@ -469,10 +458,10 @@ class TensionEstimator:
 
     def _observe(self, aligned: AlignedInputs | str) -> FloatArray | None:
         cfg, health = self.config, self.health
-        if aligned is STALE_ATTITUDE:
+        if aligned is alignment.STALE_ATTITUDE:
             health.stale_attitude += 1
             return None
-        if aligned is STALE_PWM:
+        if aligned is alignment.STALE_PWM:
             health.stale_pwm += 1
             return None
         observation = observe_tension_ned_n(

@@ -20,6 +20,7 @@ from tether_companion.estimation.catenary_position import (
     CatenaryPosition,
 )
 from tether_companion.estimation.tension_kf import TensionEstimate, TensionHealth
+from tether_companion.estimation.thrust_input import MotorLagThrustInput
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
 from tether_companion.mavlink.units import local_position_ned_message
 from tether_companion.service.config import PublishConfig, load_service_config, load_vehicle_for
@@ -290,3 +291,26 @@ def test_a_fresh_rangefinder_wins_then_the_fc_position_takes_over_when_it_goes_s
     session, lands = _landing(range_until_s=1.5, fc_down_m=-0.3)
     assert lands and 10.0 + 1.5 < lands[0] <= 10.0 + 1.5 + 0.6
     assert session.modes.modes.fallback_lands == 0
+
+
+def test_the_ekf_and_the_tension_filter_share_one_alignment_stage() -> None:
+    """Each attitude and PWM sample is converted once: both estimators use the session's
+    aligner (with the configured thrust dynamics), and a restart gives both a new one."""
+    session = _session({"thrust_dynamics": "motor_lag"})
+    first = session.aligner
+    assert isinstance(first.thrust_input, MotorLagThrustInput)
+    assert session.estimator.aligner is first
+    assert session.modes.estimator.aligner is first
+    published: list = []
+    _fly(session, 2.0, published=published)
+    assert published, "the EKF published through the shared aligner"
+    assert session.modes.tension is not None and session.modes.tension.updated
+    session.restart()
+    assert session.aligner is not first
+    assert session.estimator.aligner is session.aligner
+    assert session.modes.estimator.aligner is session.aligner
+
+
+def test_tension_filter_staleness_must_match_the_estimators() -> None:
+    with pytest.raises(ConfigError, match=r"tension_filter\.pwm_staleness_s = 0\.2: must equal"):
+        load_service_config(None, {"tension_filter": {"pwm_staleness_s": 0.2}})

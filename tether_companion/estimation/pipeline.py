@@ -163,7 +163,7 @@ class Estimate:
         return self.covariance[POSITION, POSITION]
 
 
-def _default_thrust_input(config: EstimatorConfig, vehicle: VehicleProfile) -> ThrustInput:
+def default_thrust_input(config: EstimatorConfig, vehicle: VehicleProfile) -> ThrustInput:
     """The identified model of ``config.thrust_model`` if set, else the profile's static curve.
 
     Raises
@@ -221,7 +221,7 @@ class TetherEstimator:
             stale.attitude_s,
             stale.pwm_s,
             thrust_input,
-            lambda: _default_thrust_input(config, vehicle),
+            lambda: default_thrust_input(config, vehicle),
         )
         self.thrust_input: ThrustInput = self.aligner.thrust_input
         model_cls = FourStateModel if config.kind == "four_state" else ThreeStateModel

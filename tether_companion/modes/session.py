@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from pymavlink import mavutil
 
+from tether_companion.estimation.alignment import InputAligner
 from tether_companion.estimation.tension_kf import (
     TensionEstimate,
     TensionEstimator,
@@ -155,6 +156,10 @@ class TensionModeSession:
         The flight controller's MAVLink ids.
     thrust_input
         PWM-to-thrust map (default: the vehicle's static curve).
+    aligner
+        An input-alignment stage shared with another estimator of the same samples (the
+        service's EKF), so attitude and PWM are converted once per sample; it brings its own
+        thrust input.
     target_period_s, land_period_s
         Shortest interval between two motion targets / two LAND commands [s].
     """
@@ -168,10 +173,11 @@ class TensionModeSession:
         target_component: int,
         *,
         thrust_input: ThrustInput | None = None,
+        aligner: InputAligner | None = None,
         target_period_s: float = 0.1,
         land_period_s: float = 1.0,
     ) -> None:
-        self.estimator = TensionEstimator(filter_config, vehicle, thrust_input)
+        self.estimator = TensionEstimator(filter_config, vehicle, thrust_input, aligner=aligner)
         self.modes = TensionModes(mode_config)
         self.target_system = target_system
         self.target_component = target_component

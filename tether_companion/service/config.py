@@ -362,7 +362,22 @@ class ServiceConfig:
     )
 
     def validate(self) -> None:
-        """The 3-state estimator needs a tension source; the 4-state one estimates it."""
+        """The 3-state estimator needs a tension source; the 4-state one estimates it. The EKF
+        and the tension filter share one input-alignment stage, so one pair of staleness
+        bounds."""
+        stale = self.estimator.staleness
+        for key, value, bound in (
+            ("attitude_staleness_s", self.tension_filter.attitude_staleness_s, stale.attitude_s),
+            ("pwm_staleness_s", self.tension_filter.pwm_staleness_s, stale.pwm_s),
+        ):
+            if value != bound:
+                raise ConfigError(
+                    "",
+                    f"tension_filter.{key}",
+                    value,
+                    f"must equal estimator.staleness ({bound} s): the service aligns the inputs "
+                    "once for the EKF and the tension filter",
+                )
         kind = self.estimator.kind
         if kind == "three_state" and self.tension.source == "estimate":
             raise ConfigError(

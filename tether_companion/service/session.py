@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tether_companion.constants import GRAVITY_MPS2
+from tether_companion.estimation.alignment import InputAligner
 from tether_companion.estimation.catenary_position import (
     NO_TENSION,
     STALE_TENSION,
@@ -31,7 +32,7 @@ from tether_companion.estimation.catenary_position import (
     CatenaryPosition,
     CatenaryPositionEstimator,
 )
-from tether_companion.estimation.pipeline import Estimate, TetherEstimator
+from tether_companion.estimation.pipeline import Estimate, TetherEstimator, default_thrust_input
 from tether_companion.estimation.tension_kf import TensionEstimate
 from tether_companion.estimation.thrust_input import (
     MotorLagThrustInput,
@@ -135,6 +136,9 @@ class EstimationSession:
             config.publish,
             has_tension_state=self.catenary_source or config.estimator.kind == "four_state",
         )
+        self.aligner = self._new_aligner()
+        """Time alignment shared by the EKF and the tension filter: each attitude and PWM
+        sample is converted (rotation, thrust) once."""
         self.estimator = self._new_estimator()
         self.catenary = self._new_catenary()
         self.last_catenary: CatenaryPosition | None = None
@@ -157,6 +161,7 @@ class EstimationSession:
     def restart(self) -> None:
         """Start a fresh estimator run (after a flight-controller reboot)."""
         self.boots += 1
+        self.aligner = self._new_aligner()
         self.estimator = self._new_estimator()
         self.publisher.restart()
         self.catenary = self._new_catenary()
@@ -168,13 +173,18 @@ class EstimationSession:
         self.modes.modes.set_enabled(enabled)
         self._next_mode_tick_s = -math.inf
 
-    def _thrust_input(self) -> ThrustInput | None:
-        """A motor-lag thrust input when ``thrust_dynamics`` asks for it, else None (the
-        estimator's default: the identified model of ``estimator.thrust_model`` if set, else
-        the static curve)."""
-        identified = self.config.estimator.thrust_model is not None  # the estimator loads it
-        lag = self.config.thrust_dynamics == "motor_lag" and not identified
-        return MotorLagThrustInput(self.vehicle) if lag else None
+    def _new_aligner(self) -> InputAligner:
+        """One alignment stage for both estimators, with one thrust input: the identified model
+        of ``estimator.thrust_model`` if set, else motor lag when ``thrust_dynamics`` asks for
+        it, else the static curve."""
+        config = self.config
+        estimator = config.estimator
+        if estimator.thrust_model is None and config.thrust_dynamics == "motor_lag":
+            thrust: ThrustInput = MotorLagThrustInput(self.vehicle)
+        else:
+            thrust = default_thrust_input(estimator, self.vehicle)
+        stale = estimator.staleness
+        return InputAligner(stale.attitude_s, stale.pwm_s, thrust)
 
     def _new_modes(self) -> TensionModeSession:
         config = self.config
@@ -184,7 +194,7 @@ class EstimationSession:
             self.vehicle,
             config.link.fc_system_id,
             config.link.fc_component_id,
-            thrust_input=self._thrust_input(),
+            aligner=self.aligner,
         )
 
     def _for_us(self, msg: MAVLinkMessage) -> bool:
@@ -214,7 +224,7 @@ class EstimationSession:
         self.modes.on_heartbeat(base_mode, custom_mode)
 
     def _new_estimator(self) -> TetherEstimator:
-        return TetherEstimator(self.config.estimator, self.vehicle, self._thrust_input())
+        return TetherEstimator(self.config.estimator, self.vehicle, aligner=self.aligner)
 
     def _new_catenary(self) -> CatenaryPositionEstimator | None:
         if not self.config.position.runs_catenary:

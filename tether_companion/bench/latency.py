@@ -32,7 +32,7 @@ from tether_companion.resources import CONFIGS_DIR, PROJECT_ROOT
 from tether_companion.service.config import load_service_config, load_vehicle_for
 from tether_companion.service.synthetic import FakeFlightController, HoverStreams
 
-HELP = "latency from IMU arrival to VISION_POSITION_ESTIMATE, and service CPU at 200 Hz input"
+HELP = "Latency from IMU arrival to VISION_POSITION_ESTIMATE, and service CPU at 200 Hz input."
 WARMUP_S = 3.0
 FLOOR_S = 10.0
 """Seconds of the floor measurement (a bare UDP echo process instead of the service)."""

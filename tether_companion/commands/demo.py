@@ -19,7 +19,8 @@ from tether_companion.service.systemd import SystemdNotifier
 from tether_companion.sim.scenario import load_scenario
 
 HELP = (
-    "fly the paper's circle on the built-in emulator with the service on loopback (no flags needed)"
+    "Fly the paper's circle on the built-in emulator with the service on loopback "
+    "(no flags needed)."
 )
 DEFAULT_SCENARIO = "paper-circle"
 

@@ -17,7 +17,7 @@ from tether_companion.emulator.config import EmulatorConfig, load_emulator_scena
 from tether_companion.emulator.server import EmulatorServer
 from tether_companion.mavlink.endpoints import parse_endpoint
 
-HELP = "emulate an ArduPilot-like flight controller flying a tethered quadcopter scenario"
+HELP = "Emulate an ArduPilot-like flight controller flying a tethered quadcopter scenario."
 DEFAULT_SCENARIO = "paper-circle"
 DEFAULT_LISTEN = "udp:127.0.0.1:14550"
 STATUS_PERIOD_S = 5.0

@@ -11,7 +11,7 @@ from tether_companion.config import ConfigError
 from tether_companion.service.config import load_service_config, load_vehicle_for
 from tether_companion.service.replay import replay_log
 
-HELP = "replay a .tlog or ArduPilot .bin log through the estimation pipeline into a CSV"
+HELP = "Replay a .tlog or ArduPilot .bin log through the estimation pipeline into a CSV."
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

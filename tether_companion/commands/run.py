@@ -10,7 +10,7 @@ from tether_companion.resources import CONFIGS_DIR
 from tether_companion.service.app import CompanionService
 from tether_companion.service.config import ServiceConfig, load_service_config, load_vehicle_for
 
-HELP = "run the companion service against a flight controller (systemd-ready)"
+HELP = "Run the companion service against a flight controller (systemd-ready)."
 DEFAULT_CONFIG = CONFIGS_DIR / "companion.yaml"
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scenario_files import reel_in_scenario
 
 from tether_companion.emulator.lockstep import build_controller
 from tether_companion.emulator.server import EmulatorServer
@@ -163,26 +164,6 @@ def test_a_tug_moves_the_hovering_drone_along_the_pull_then_it_holds() -> None:
     assert controller.armed
 
 
-def _reel_in_scenario(tmp_path: Path) -> Path:
-    """Hover 5 m up, 1 m from the anchor, on an elastic line just past taut."""
-    length = math.hypot(1.0, 5.0) - 0.03
-    path = tmp_path / "reel-in.yaml"
-    path.write_text(
-        f"""
-duration_s: 60.0
-seed: 21
-physics_rate_hz: 1000
-vehicle: default-quad
-cable: {{model: elastic, length_m: {length:.4f}, stiffness_n_per_m: 100.0,
-        damping_n_s_per_m: 5.0, linear_density_kg_per_m: 0.0167, min_length_m: 0.2}}
-trajectory: {{kind: hover, position_ned_m: [1.0, 0.0, -5.0]}}
-initial: {{airborne: true}}
-""",
-        encoding="utf-8",
-    )
-    return path
-
-
 TENSION_LIMIT_N = 12.0
 """No tension spike above this while the drone comes down (about 3x the 3.8 N of the hover).
 Once it is on the ground the winch, still reeling in, pulls on a landed drone until the
@@ -198,7 +179,7 @@ def test_b_winch_reel_in_lands_the_drone_near_the_anchor(tmp_path: Path) -> None
 
     mode = {"enabled": True, "land_on_first_tug": True}
     controller, service, truth = asyncio.run(
-        _fly(_reel_in_scenario(tmp_path), mode, script, duration_s=40.0)
+        _fly(reel_in_scenario(tmp_path, 60.0), mode, script, duration_s=40.0)
     )
     final = controller.sim.body.x[:3]
     assert not controller.armed and controller.sim.landed
@@ -227,7 +208,7 @@ def test_c_estimate_lost_mid_landing_still_lands(tmp_path: Path) -> None:
     emulator = {"faults": {"outages": [{"stream": "RAW_IMU", "start_s": 12.0, "duration_s": 60.0}]}}
     mode = {"enabled": True, "land_on_first_tug": True}
     controller, service, truth = asyncio.run(
-        _fly(_reel_in_scenario(tmp_path), mode, script, duration_s=40.0, emulator=emulator)
+        _fly(reel_in_scenario(tmp_path, 60.0), mode, script, duration_s=40.0, emulator=emulator)
     )
     heights = {round(t): -p[2] for t, p in zip(truth.time_s, truth.position, strict=True)}
     assert heights[12] > 1.0  # it really was mid-landing when the estimate went

@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 from rich.console import Console
+from scenario_files import reel_in_scenario
 
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.emulator.autopilot import FlightController
@@ -320,21 +321,7 @@ def test_tether_landing_without_a_rangefinder_uses_the_fc_height(tmp_path) -> No
     (0.3 m/s from 5 m up, as test_modes_e2e (b)) brings the drone down under the service's
     targets to the landing height and LAND, where without a height it handed over to the
     autopilot's LAND at once."""
-    length = math.hypot(1.0, 5.0) - 0.03
-    path = tmp_path / "reel-in.yaml"
-    path.write_text(
-        f"""
-duration_s: 40.0
-seed: 21
-physics_rate_hz: 1000
-vehicle: default-quad
-cable: {{model: elastic, length_m: {length:.4f}, stiffness_n_per_m: 100.0,
-        damping_n_s_per_m: 5.0, linear_density_kg_per_m: 0.0167, min_length_m: 0.2}}
-trajectory: {{kind: hover, position_ned_m: [1.0, 0.0, -5.0]}}
-initial: {{airborne: true}}
-""",
-        encoding="utf-8",
-    )
+    path = reel_in_scenario(tmp_path, 40.0)
     outage = {"stream": "DISTANCE_SENSOR", "start_s": 0.0, "duration_s": 1000.0}
     controller = build_controller(str(path), emulator={"faults": {"outages": [outage]}})
     lockstep = _LockstepService(

@@ -1,0 +1,139 @@
+"""What the dynamic tether filter hands to the service: :class:`NavigationEstimate`.
+
+One estimate per IMU tick: position and velocity of the drone relative to the tether anchor
+(NED), their joint 6x6 covariance, the cable tension at the drone, and an observability status
+with a human-readable reason, so the publisher can withhold or inflate with the reason shown.
+
+Compatibility with :class:`~tether_companion.estimation.pipeline.Estimate` (the paper's
+filters) and the service's ``PositionEstimate`` protocol: ``time_s``, ``position_ned_m``,
+``tension_n``, ``covariance`` (position block first, then the tension variance: shape (4, 4),
+the 4-state layout the publisher and its CSV read), ``position_covariance_m2``,
+``reset_counter``, ``accel_fused`` and ``health`` have the same meaning and units. New:
+``velocity_ned_mps``, ``position_velocity_covariance`` (6, 6), ``velocity_covariance_m2ps2``,
+``status``, ``reason``, ``observable``, ``thrust_scale``, ``accel_bias_body_mps2``,
+``wind_ne_mps``.
+
+Pure data; no behaviour beyond views of the stored arrays.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+OK = "ok"
+"""Position observable and the filter converged: publish."""
+INITIALISING = "initialising"
+"""No state yet: the first second of data has not given a cable direction and a height."""
+WEAK_PULL = "weak_pull"
+"""The horizontal pull is too weak for the horizontal position (covariance beyond the bound)."""
+SLACK = "slack"
+"""The cable tension at the drone is below the slack threshold: the direction says nothing."""
+ON_GROUND = "on_ground"
+"""The motors carry much less than the weight: standing on the ground, the model does not hold."""
+STALE_INPUTS = "stale_inputs"
+"""This tick had no fresh attitude or PWM: prediction only, the force balance not fused."""
+RESET = "reset"
+"""The filter diverged (non-finite or inconsistent state) or had an IMU gap and restarted."""
+
+STATUSES = (OK, INITIALISING, WEAK_PULL, SLACK, ON_GROUND, STALE_INPUTS, RESET)
+"""Every status, best first."""
+
+POSITION_BLOCK = slice(0, 3)
+"""Rows/columns of the position in :attr:`NavigationEstimate.position_velocity_covariance`."""
+VELOCITY_BLOCK = slice(3, 6)
+"""Rows/columns of the velocity in :attr:`NavigationEstimate.position_velocity_covariance`."""
+
+
+@dataclass(frozen=True, slots=True)
+class NavigationEstimate:
+    """The dynamic filter's output at one IMU tick (SI units, NED from the tether anchor).
+
+    Attributes
+    ----------
+    time_s
+        Flight-controller time of the IMU tick [s].
+    position_ned_m
+        Drone position relative to the anchor, NED, shape (3,) [m].
+    velocity_ned_mps
+        Drone velocity, NED, shape (3,) [m/s].
+    position_velocity_covariance
+        Joint covariance of (position, velocity), shape (6, 6): position block [m^2] first
+        (:data:`POSITION_BLOCK`), then velocity [m^2/s^2] (:data:`VELOCITY_BLOCK`),
+        cross terms [m^2/s]. Symmetric positive definite, finite.
+    tension_n
+        Magnitude of the cable's force on the drone [N].
+    tension_variance_n2
+        Its variance [N^2].
+    reset_counter
+        Filter restarts so far (for ``VISION_POSITION_ESTIMATE.reset_counter``).
+    status
+        One of :data:`STATUSES`: ``ok`` when the position may be published.
+    reason
+        Why the status is not ``ok``, in words fit for a STATUSTEXT (empty when ``ok``).
+    accel_fused
+        Whether this tick fused the accelerometer force balance.
+    thrust_scale
+        Estimated ratio of the true thrust to the thrust map's (1 = map exact).
+    accel_bias_body_mps2
+        Estimated accelerometer bias, FRD body, shape (3,) [m/s^2].
+    wind_ne_mps
+        Estimated wind, north and east, shape (2,) [m/s].
+    health_values
+        The filter's counters at this tick in field order of its health record; read them
+        through ``health`` (a tuple, cheap at the IMU rate).
+    health_type
+        The class that names ``health_values`` (set by the filter).
+    """
+
+    time_s: float
+    position_ned_m: FloatArray
+    velocity_ned_mps: FloatArray
+    position_velocity_covariance: FloatArray
+    tension_n: float
+    tension_variance_n2: float
+    reset_counter: int
+    status: str
+    reason: str
+    accel_fused: bool
+    thrust_scale: float
+    accel_bias_body_mps2: FloatArray
+    wind_ne_mps: FloatArray
+    health_values: tuple = field(repr=False)
+    health_type: type | None = field(default=None, repr=False)
+
+    @property
+    def observable(self) -> bool:
+        """Whether the status is ``ok`` (the position may be published as is)."""
+        return self.status == OK
+
+    @property
+    def position_covariance_m2(self) -> FloatArray:
+        """Position block of the covariance, shape (3, 3) [m^2]."""
+        return self.position_velocity_covariance[POSITION_BLOCK, POSITION_BLOCK]
+
+    @property
+    def velocity_covariance_m2ps2(self) -> FloatArray:
+        """Velocity block of the covariance, shape (3, 3) [m^2/s^2]."""
+        return self.position_velocity_covariance[VELOCITY_BLOCK, VELOCITY_BLOCK]
+
+    @property
+    def covariance(self) -> FloatArray:
+        """Position block then tension variance, shape (4, 4) [m^2, N^2]: the layout of the
+        paper's 4-state :class:`~tether_companion.estimation.pipeline.Estimate` that the
+        publisher and its CSV read (position-tension cross terms left at zero)."""
+        out = np.zeros((4, 4))
+        out[:3, :3] = self.position_covariance_m2
+        out[3, 3] = self.tension_variance_n2
+        return out
+
+    @property
+    def health(self):  # noqa: ANN201 - the filter's health record type
+        """The filter's counters at this tick (its health record type), or the raw tuple."""
+        if self.health_type is None:
+            return self.health_values
+        return self.health_type(*self.health_values)

@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 from rich.console import Console
+from lockstep_service import LockstepService as _LockstepService
 from scenario_files import reel_in_scenario
 
 from tether_companion.constants import GRAVITY_MPS2
@@ -141,66 +142,6 @@ def test_link_faults_and_an_in_flight_reboot(tmp_path, monkeypatch) -> None:
     assert service.session.publisher.counters.by_health["motors_idle"] > 0
     assert score["invalid"] == 0 and score["scored"] > 25.0 * 15.0
     assert score["max_error_m"] < 1.0 and score["rmse_m"]["3d"] < 0.3
-
-
-class _LockstepLink:
-    """The service's side of a lock-step link: frames go straight into the emulator (and,
-    decoded, into ``sent`` when ``record`` is set)."""
-
-    def __init__(
-        self, peer: LockstepPeer, system_id: int, component_id: int, record: bool = False
-    ) -> None:
-        self.peer = peer
-        self.encoder = FrameEncoder(system_id, component_id)
-        self.sent: list = []
-        self._parser = FrameParser() if record else None
-
-    def send_bytes(self, frame: bytes) -> None:
-        self.peer.send_bytes(frame)
-        if self._parser is not None:
-            self.sent.extend(self._parser.feed(frame))
-
-
-class _LockstepService:
-    """The service (shipped configuration plus ``overrides``) beside an emulated flight
-    controller, on the controller's clock: :meth:`advance` runs the emulator 5 ms, :meth:`serve`
-    hands the service what arrived and runs its housekeeping every 50 ms."""
-
-    def __init__(self, controller: FlightController, overrides: dict, record: bool = False) -> None:
-        config = load_service_config(
-            CONFIGS_DIR / "companion.yaml",
-            {"link": {"connect": "udp:127.0.0.1:14550"}, "recording": {"enabled": False}}
-            | overrides,
-        )
-        self.controller = controller
-        self.peer = LockstepPeer(controller, config.link.system_id, config.link.component_id)
-        self.link = _LockstepLink(
-            self.peer, config.link.system_id, config.link.component_id, record
-        )
-        self.service = CompanionService(
-            config,
-            controller.sim.vehicle,
-            notifier=SystemdNotifier({}),
-            monotonic_s=lambda: controller.time_s,
-        )
-        self._read = 0
-        self._next_housekeeping_s = 0.0
-
-    def advance(self) -> float:
-        """Run the emulator 5 ms; returns its time [s]."""
-        self.peer.advance(0.005)
-        return self.controller.time_s
-
-    def serve(self) -> None:
-        """The service handles every message received so far; housekeeping when due."""
-        t = self.controller.time_s
-        received = self.peer.received
-        while self._read < len(received):
-            self.service.handle_message(self.link, received[self._read], t)  # type: ignore[arg-type]
-            self._read += 1
-        if t >= self._next_housekeeping_s:
-            self.service.housekeep(self.link, t)  # type: ignore[arg-type]
-            self._next_housekeeping_s += 0.05
 
 
 def test_closed_loop_hover_on_received_estimates_holds_within_half_a_metre() -> None:

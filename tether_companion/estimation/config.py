@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from tether_companion.config import ConfigError, load_yaml, spec
 from tether_companion.constants import GRAVITY_MPS2
+from tether_companion.estimation.observability import ObservabilityConfig
 from tether_companion.resources import CONFIGS_DIR
 
 FloatArray = NDArray[np.float64]
@@ -148,6 +149,10 @@ class EstimatorConfig:
     )
     thrust_model: str | None = spec(
         None, doc="YAML of an identified thrust model (None: static curve)"
+    )
+    observability: ObservabilityConfig = spec(
+        default_factory=ObservabilityConfig,
+        doc="covariance growth along the cable while no height is measured",
     )
 
     def validate(self) -> None:

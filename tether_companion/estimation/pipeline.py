@@ -38,6 +38,7 @@ from tether_companion.estimation.alignment import (
 )
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.ekf import FUSED, GATED, NONFINITE, ExtendedKalmanFilter
+from tether_companion.estimation.observability import RANGEFINDER, RangeWatch, grow_for_imu_gap
 from tether_companion.estimation.tether_models import (
     F_C,
     POSITION,
@@ -142,6 +143,10 @@ class Estimate:
     health_values
         The pipeline's counters at this tick, in :class:`EstimatorHealth` field order; read
         them as ``estimate.health`` (kept as a tuple: an estimate is made at every IMU tick).
+    missing_input
+        The input whose absence leaves part of the position unobserved (``"rangefinder"``:
+        no height fused for ``observability.range_lost_after_s``; the covariance along the
+        cable grows meanwhile), or None.
     """
 
     time_s: float
@@ -151,6 +156,7 @@ class Estimate:
     reset_counter: int
     accel_fused: bool
     health_values: tuple = field(repr=False)
+    missing_input: str | None = None
 
     @property
     def health(self) -> EstimatorHealth:
@@ -245,6 +251,7 @@ class TetherEstimator:
             model_cls is FourStateModel and config.initial_tension_n is None
         )
         self._needs_tension_init = self._tension_from_measurement
+        self._range_watch = RangeWatch(config.observability)
 
     # ------------------------------------------------------------------ inputs
     @property
@@ -340,6 +347,7 @@ class TetherEstimator:
         health.last_range_nis = result.nis
         if result.status == FUSED:
             health.range_fused += 1
+            self._range_watch.on_fused(self._time_s)
         elif result.status == GATED:
             health.range_gated += 1
         elif result.status == NONFINITE:
@@ -361,6 +369,8 @@ class TetherEstimator:
             self._sync_filter_counters()
         else:
             self.filter.predict(dt)
+            grow_for_imu_gap(self.filter.P, dt, self.config.observability)
+            self._range_watch.grow(self.filter.P, self.filter.x[POSITION], t, dt)
         self._time_s = t
         return True
 
@@ -421,6 +431,7 @@ class TetherEstimator:
     def _sync_filter_counters(self) -> None:
         if self.filter.resets != self.health.resets:  # the filter restarted: measure again
             self._needs_tension_init = self._tension_from_measurement
+            self._range_watch.reset()
         self.health.resets = self.filter.resets
         self.health.pd_repairs = self.filter.pd_repairs
 
@@ -434,4 +445,5 @@ class TetherEstimator:
             reset_counter=self.filter.resets,
             accel_fused=accel_fused,
             health_values=self.health.values(),
+            missing_input=RANGEFINDER if self._range_watch.lost(self._time_s) else None,
         )

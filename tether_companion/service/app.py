@@ -35,7 +35,7 @@ from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.service.clock import FcClock
 from tether_companion.service.config import ServiceConfig
 from tether_companion.service.ingest import ATTITUDE, FC_POSITION, IMU, INPUT_KINDS, PWM, RANGE
-from tether_companion.service.publish import STALE, Publication
+from tether_companion.service.publish import NO_IMU, STALE, Publication
 from tether_companion.service.recording import RecordingLimits, TlogWriter
 from tether_companion.service.session import EstimationSession
 from tether_companion.service.systemd import SystemdNotifier
@@ -402,7 +402,7 @@ class CompanionService:
         self._send_origin(link, now_s)
         imu = self._streams[IMU]
         if now_s - imu.last_heard_s > INPUT_SILENT_S:
-            for msg in self.session.publisher.set_health(STALE):
+            for msg in self.session.publisher.set_health(NO_IMU):
                 self._send(link, msg)
 
     def _stream_table(self) -> dict[str, StreamRequest]:

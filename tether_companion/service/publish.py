@@ -46,6 +46,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.catenary_position import CatenaryPosition
+from tether_companion.estimation.observability import RANGEFINDER
 from tether_companion.estimation.tension_kf import TensionEstimate
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.mavlink.units import (
@@ -67,7 +68,25 @@ SLACK = "slack"
 STALE = "stale"
 NO_ATTITUDE = "no_attitude"
 MOTORS_IDLE = "motors_idle"
-HEALTH_STATES = (OK, CONVERGING, DIVERGED, SLACK, STALE, NO_ATTITUDE, MOTORS_IDLE)
+NO_RANGE = "no_range"
+NO_IMU = "no_imu"
+STALE_ATTITUDE = "stale_attitude"
+STALE_PWM = "stale_pwm"
+STALE_TENSION = "stale_tension"
+HEALTH_STATES = (
+    OK,
+    CONVERGING,
+    DIVERGED,
+    SLACK,
+    STALE,
+    NO_ATTITUDE,
+    MOTORS_IDLE,
+    NO_RANGE,
+    NO_IMU,
+    STALE_ATTITUDE,
+    STALE_PWM,
+    STALE_TENSION,
+)
 """Health of the published position, worst cases last in the status text."""
 
 _HEALTH_TEXT = {
@@ -78,6 +97,11 @@ _HEALTH_TEXT = {
     STALE: "inputs stale, no estimate",
     NO_ATTITUDE: "no attitude from FC",
     MOTORS_IDLE: "motors idle (landed?), position withheld",
+    NO_RANGE: "no rangefinder height, position unknown",
+    NO_IMU: "no IMU data, no estimate",
+    STALE_ATTITUDE: "attitude stale, position withheld",
+    STALE_PWM: "motor outputs stale, position withheld",
+    STALE_TENSION: "tension reading stale, position withheld",
 }
 _STATUSTEXT_PREFIX = "TETHER: "
 STATUSTEXT_MIN_INTERVAL_S = 1.0
@@ -148,6 +172,8 @@ def assess_health(
         return DIVERGED
     variances = np.diag(estimate.position_covariance_m2)
     if np.any(variances <= 0.0) or float(variances.max()) >= config.max_position_variance_m2:
+        if getattr(estimate, "missing_input", None) == RANGEFINDER:
+            return NO_RANGE  # the variance grew because the height is not measured
         return DIVERGED if ever_ok else CONVERGING
     if has_tension_state and estimate.tension_n < config.slack_tension_n:
         return SLACK
@@ -293,7 +319,7 @@ class Publisher:
         estimate: PositionEstimate,
         attitude: AttitudeSample | None,
         *,
-        inputs_stale: bool = False,
+        inputs_stale: bool | str = False,
         motors_idle: bool = False,
         unavailable: str | None = None,
     ) -> tuple[list[MAVLinkMessage], Publication | None]:
@@ -307,7 +333,9 @@ class Publisher:
             The flight controller's latest ATTITUDE (roll/pitch/yaw to echo back).
         inputs_stale
             The tick could not fuse the accelerometer because the attitude, PWM or known
-            tension was missing or too old: the estimate is a prediction only.
+            tension was missing or too old: the estimate is a prediction only. A health name
+            (``stale_attitude``, ``stale_pwm``, ``stale_tension``) says which input; True
+            says ``stale``.
         motors_idle
             The motors' thrust is far below the weight: the vehicle stands on something (the
             ground after landing or a reboot) and the model (thrust + cable only) does not hold.
@@ -327,7 +355,7 @@ class Publisher:
         if unavailable is not None:
             health = unavailable
         if inputs_stale and health in (OK, CONVERGING):
-            health = STALE
+            health = inputs_stale if isinstance(inputs_stale, str) else STALE
         if motors_idle and health != DIVERGED:
             health = MOTORS_IDLE
         if attitude is None and health == OK:

@@ -32,7 +32,12 @@ from tether_companion.estimation.catenary_position import (
     CatenaryPosition,
     CatenaryPositionEstimator,
 )
-from tether_companion.estimation.pipeline import Estimate, TetherEstimator, default_thrust_input
+from tether_companion.estimation.pipeline import (
+    Estimate,
+    EstimatorHealth,
+    TetherEstimator,
+    default_thrust_input,
+)
 from tether_companion.estimation.tension_kf import TensionEstimate
 from tether_companion.estimation.thrust_input import (
     MotorLagThrustInput,
@@ -45,7 +50,15 @@ from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.config import CATENARY, ServiceConfig
 from tether_companion.service.ingest import FcPosition, Ingest, Sample, TensionReading
-from tether_companion.service.publish import SLACK, STALE, Publication, Publisher
+from tether_companion.service.publish import (
+    SLACK,
+    STALE,
+    STALE_ATTITUDE,
+    STALE_PWM,
+    STALE_TENSION,
+    Publication,
+    Publisher,
+)
 
 TENSION_MODE_COMMAND = dialect.MAV_CMD_USER_2
 """COMMAND_LONG a ground station sends to this component (our system and component id) to
@@ -321,8 +334,7 @@ class EstimationSession:
         estimator = self.estimator
         if self.config.tension.source == "config":
             estimator.set_known_tension_n(self.config.tension.known_tension_n, sample.time_s)
-        health = estimator.health
-        stale_before = health.stale_attitude + health.stale_pwm + health.stale_tension
+        stale_before = _stale_counts(estimator.health)
         estimate = estimator.on_imu(sample)
         if estimate is not None:
             self.last_estimate = estimate
@@ -330,8 +342,7 @@ class EstimationSession:
         messages: list[MAVLinkMessage] = []
         publication = None
         if not self.catenary_source and estimate is not None:
-            health = estimator.health
-            stale = health.stale_attitude + health.stale_pwm + health.stale_tension > stale_before
+            stale = _stale_input(stale_before, _stale_counts(estimator.health))
             messages, publication = self.publisher.on_estimate(
                 estimate, self.attitude, inputs_stale=stale, motors_idle=motors_idle
             )
@@ -345,3 +356,19 @@ class EstimationSession:
                 unavailable=_CATENARY_UNAVAILABLE.get(catenary.status),
             )
         return Step(messages=messages, publication=publication, estimate=estimate)
+
+
+_STALE_HEALTH = (STALE_ATTITUDE, STALE_PWM, STALE_TENSION)
+
+
+def _stale_counts(health: EstimatorHealth) -> tuple[int, int, int]:
+    """The estimator's stale-input counters (attitude, PWM, known tension)."""
+    return health.stale_attitude, health.stale_pwm, health.stale_tension
+
+
+def _stale_input(before: tuple[int, int, int], after: tuple[int, int, int]) -> str | bool:
+    """The publisher health naming the input that kept this tick from fusing (False: none)."""
+    for name, old, new in zip(_STALE_HEALTH, before, after, strict=True):
+        if new > old:
+            return name
+    return False

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tether_companion.constants import GRAVITY_MPS2
-from tether_companion.frames import rotation_body_to_ned, wrap_pi
+from tether_companion.frames import rotation_body_to_ned, rotation_ned_to_body, wrap_pi
 from tether_companion.mavlink import geo, units
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample
@@ -183,7 +183,8 @@ def test_vision_position_estimate_round_trip() -> None:
 
 def test_odometry_round_trip_and_frame_check() -> None:
     est = units.PoseEstimate(2.0, np.array([1.0, 2.0, -3.0]), (0.2, -0.1, 2.5), None, 4)
-    msg = over_the_wire(units.odometry_message(est, [0.5, 0.0, -0.1]))
+    velocity = units.VelocityEstimate(2.0, np.array([0.5, 0.0, -0.1]), None, 4)
+    msg = over_the_wire(units.odometry_message(est, velocity))
     back = units.pose_from_odometry(msg)
     np.testing.assert_allclose(back.position_ned_m, [1, 2, -3], rtol=1e-6)
     np.testing.assert_allclose(back.euler_rad, est.euler_rad, atol=1e-6)
@@ -193,6 +194,49 @@ def test_odometry_round_trip_and_frame_check() -> None:
         units.pose_from_odometry(msg)
     with pytest.raises(ValueError):
         units.euler_from_quaternion([0, 0, 0, 0])
+
+
+def test_odometry_velocity_in_the_body_frame_as_ardupilot_and_px4_read_it() -> None:
+    """ArduPilot drops ODOMETRY unless frame_id is LOCAL_FRD and child_frame_id BODY_FRD, then
+    rotates the body velocity to NED with the message's quaternion; PX4 reads the velocity frame
+    from child_frame_id. The NED velocity and its covariance survive the round trip."""
+    euler = (0.1, -0.2, 2.0)
+    est = units.PoseEstimate(3.0, np.array([1.0, 2.0, -3.0]), euler, None, 7)
+    a = np.array([[0.02, 0.005, 0.0], [0.005, 0.03, 0.001], [0.0, 0.001, 0.01]])
+    velocity = units.VelocityEstimate(3.0, np.array([0.8, -0.3, 0.2]), a, 7)
+    msg = over_the_wire(
+        units.odometry_message(est, velocity, frame_id=units.MAV_FRAME_LOCAL_FRD)
+    )
+    assert msg.frame_id == units.MAV_FRAME_LOCAL_FRD
+    assert msg.child_frame_id == units.MAV_FRAME_BODY_FRD
+    body = rotation_ned_to_body(*euler) @ velocity.velocity_ned_m_s
+    np.testing.assert_allclose([msg.vx, msg.vy, msg.vz], body, rtol=1e-6, atol=1e-7)
+    back = units.velocity_from_odometry(msg)
+    assert back is not None and back.reset_counter == 7
+    np.testing.assert_allclose(back.velocity_ned_m_s, velocity.velocity_ned_m_s, atol=1e-6)
+    np.testing.assert_allclose(back.covariance, a, atol=1e-6)
+    assert all(math.isfinite(v) for v in msg.velocity_covariance)  # never NaN beside a value
+    without = over_the_wire(units.odometry_message(est))
+    assert units.velocity_from_odometry(without) is None
+    assert math.isnan(without.velocity_covariance[0])
+
+
+def test_vision_speed_estimate_round_trip_and_unknown_covariance() -> None:
+    cov = np.diag([0.01, 0.02, 0.04])
+    velocity = units.VelocityEstimate(4.5, np.array([1.0, -0.5, 0.25]), cov, 258)
+    msg = over_the_wire(units.vision_speed_estimate_message(velocity))
+    assert msg.usec == 4_500_000 and msg.reset_counter == 2
+    back = units.velocity_from_vision_speed_estimate(msg)
+    np.testing.assert_allclose(back.velocity_ned_m_s, velocity.velocity_ned_m_s, rtol=1e-6)
+    np.testing.assert_allclose(back.covariance, cov, rtol=1e-6)
+    unknown = units.VelocityEstimate(4.5, np.zeros(3), None, 0)
+    msg = over_the_wire(units.vision_speed_estimate_message(unknown))
+    assert math.isnan(msg.covariance[0])
+    assert units.velocity_from_vision_speed_estimate(msg).covariance is None
+    with pytest.raises(ValueError, match="covariance"):
+        units.vision_speed_estimate_message(
+            units.VelocityEstimate(1.0, np.zeros(3), np.full((3, 3), math.nan), 0)
+        )
 
 
 def test_local_position_ned() -> None:

@@ -9,10 +9,21 @@ import numpy as np
 import pytest
 
 from tether_companion.estimation.pipeline import Estimate, EstimatorHealth
+from tether_companion.estimation.observability import RANGEFINDER
+from tether_companion.mavlink import units
 from tether_companion.mavlink.units import urt_to_covariance
 from tether_companion.samples import AttitudeSample
 from tether_companion.service.config import PublishConfig
-from tether_companion.service.publish import CONVERGING, DIVERGED, OK, SLACK, STALE, Publisher
+from tether_companion.service.publish import (
+    CONVERGING,
+    DIVERGED,
+    NO_RANGE,
+    OK,
+    SLACK,
+    STALE,
+    STALE_PWM,
+    Publisher,
+)
 
 ATTITUDE = AttitudeSample(0.0, 0.05, -0.1, 1.2)
 HEALTH_VALUES = tuple(
@@ -218,3 +229,71 @@ def test_flapping_health_is_announced_at_most_once_a_second() -> None:
     assert texts == ["TETHER: position OK"] and publisher.counters.health_changes == 200
     messages, _ = publisher.on_estimate(_estimate(11.01), ATTITUDE, inputs_stale=True)
     assert [m.text for m in _of(messages, "STATUSTEXT")] == ["TETHER: inputs stale, no estimate"]
+
+
+@dataclasses.dataclass(frozen=True)
+class _MovingEstimate:
+    """An estimator output with a velocity state (what the service reads of it)."""
+
+    time_s: float
+    position_ned_m: np.ndarray
+    tension_n: float
+    covariance: np.ndarray
+    reset_counter: int
+    velocity_ned_mps: np.ndarray
+    velocity_covariance_m2ps2: np.ndarray
+
+    @property
+    def position_covariance_m2(self) -> np.ndarray:
+        return self.covariance[:3, :3]
+
+
+def test_velocity_goes_out_in_odometry_and_vision_speed_estimate_never_nan() -> None:
+    config = PublishConfig(
+        settle_s=0.0, odometry=True, odometry_frame="local_frd", speed_estimate=True
+    )
+    publisher = Publisher(config, has_tension_state=True)
+    velocity_cov = np.diag([0.01, 0.02, 0.005])
+    moving = _MovingEstimate(
+        2.0, np.array([2.0, 1.0, -3.0]), 4.0, P_GOOD, 0, np.array([0.6, -0.8, 0.1]), velocity_cov
+    )
+    sent = _feed(publisher, [moving])
+    (odometry,) = _of(sent, "ODOMETRY")
+    (speed,) = _of(sent, "VISION_SPEED_ESTIMATE")
+    assert odometry.frame_id == 20 and odometry.child_frame_id == 12  # LOCAL_FRD, BODY_FRD
+    back = units.velocity_from_odometry(odometry)
+    assert back is not None
+    np.testing.assert_allclose(back.velocity_ned_m_s, [0.6, -0.8, 0.1], atol=1e-6)
+    np.testing.assert_allclose(back.covariance, velocity_cov, atol=1e-7)
+    assert speed.usec == odometry.time_usec and (speed.x, speed.y, speed.z) == pytest.approx(
+        (0.6, -0.8, 0.1)
+    )
+    assert speed.covariance[0] == pytest.approx(0.01) and speed.covariance[4] == pytest.approx(0.02)
+    # a non-finite velocity is never sent: ODOMETRY marks it unknown, no VISION_SPEED_ESTIMATE
+    bad = dataclasses.replace(moving, time_s=3.0, velocity_ned_mps=np.array([math.nan, 0, 0]))
+    sent = _feed(publisher, [bad])
+    (odometry,) = _of(sent, "ODOMETRY")
+    assert not _of(sent, "VISION_SPEED_ESTIMATE")
+    assert math.isnan(odometry.vx) and math.isnan(odometry.velocity_covariance[0])
+    # the paper's filters have no velocity: nothing to send
+    assert not _of(_feed(publisher, [_estimate(4.0)]), "VISION_SPEED_ESTIMATE")
+
+
+def test_stale_input_health_names_the_input() -> None:
+    publisher = Publisher(PublishConfig(settle_s=0.0), has_tension_state=True)
+    sent = _feed(publisher, [_estimate(1.0)], inputs_stale=STALE_PWM)
+    assert not _of(sent, "VISION_POSITION_ESTIMATE")
+    assert publisher.health == STALE_PWM
+    assert any("motor outputs stale" in m.text for m in _of(sent, "STATUSTEXT"))
+
+
+def test_variance_grown_for_a_missing_rangefinder_is_no_range_health() -> None:
+    publisher = Publisher(PublishConfig(settle_s=0.0), has_tension_state=True)
+    grown = np.diag([0.3, 0.2, 0.9, 0.01])
+    lost = dataclasses.replace(_estimate(1.0, covariance=grown), missing_input=RANGEFINDER)
+    sent = _feed(publisher, [lost])
+    assert not _of(sent, "VISION_POSITION_ESTIMATE") and publisher.health == NO_RANGE
+    assert any("rangefinder" in m.text for m in _of(sent, "STATUSTEXT"))
+    publisher = Publisher(PublishConfig(settle_s=0.0), has_tension_state=True)
+    _feed(publisher, [_estimate(1.0, covariance=grown)])  # same variance, no reason known
+    assert publisher.health == CONVERGING

@@ -14,7 +14,9 @@ ATTITUDE             rad, rad/s, time_boot_ms       unchanged
 SERVO_OUTPUT_RAW     us (uint16), time_usec uint32  us (float array); time wraps at 2^32 us
 DISTANCE_SENSOR      cm (uint16), covariance cm^2   m; readings outside [min, max] dropped
 VISION_POSITION_EST. m, rad, 21-float URT cov.      NED m, rad, (6, 6) covariance
-ODOMETRY             m, quaternion (w,x,y,z), cov.  NED m, rad, (6, 6) covariance
+ODOMETRY             m, quaternion (w,x,y,z), cov.  NED m, rad, (6, 6) covariance; velocity
+                     body FRD m/s, cov.             NED m/s, (3, 3) covariance
+VISION_SPEED_EST.    m/s NED, 9-float row-major     NED m/s, (3, 3) covariance
 LOCAL_POSITION_NED   m, m/s, time_boot_ms           unchanged
 GLOBAL_POSITION_INT  degE7, mm, cm/s, cdeg          see :mod:`tether_companion.mavlink.geo`
 ==================== ============================== ==========================================
@@ -38,6 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tether_companion.constants import GRAVITY_MPS2
+from tether_companion.frames import rotation_ned_to_body
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 
@@ -403,39 +406,139 @@ def pose_from_vision_position_estimate(msg: MAVLinkMessage) -> PoseEstimate:
     )
 
 
+@dataclass(frozen=True)
+class VelocityEstimate:
+    """A velocity estimate as sent to or received from a flight controller.
+
+    Attributes
+    ----------
+    time_s
+        The sender's timestamp [s] (flight-controller time, as :class:`PoseEstimate`).
+    velocity_ned_m_s
+        Velocity, shape (3,), local NED frame [m/s].
+    covariance
+        (3, 3) velocity covariance, NED [m^2/s^2], or None when unknown.
+    reset_counter
+        The estimate's reset counter (0-255).
+    """
+
+    time_s: float
+    velocity_ned_m_s: FloatArray
+    covariance: FloatArray | None
+    reset_counter: int
+
+
+UNKNOWN_RATE_VARIANCE = 1.0e4
+"""ODOMETRY velocity-covariance diagonal for the angular rates we do not estimate [rad^2/s^2]
+(finite: one NaN in entry 0 would void the linear-velocity block too)."""
+
+
 def odometry_message(
     estimate: PoseEstimate,
-    velocity_ned_m_s: ArrayLike | None = None,
+    velocity: VelocityEstimate | None = None,
     *,
     frame_id: int = MAV_FRAME_LOCAL_NED,
 ) -> MAVLinkMessage:
     """ODOMETRY with pose in ``frame_id`` (LOCAL_NED or LOCAL_FRD) and, if given, velocity.
 
-    Velocity is sent in the same local frame (``child_frame_id`` = ``frame_id``); without it
-    the velocity fields are NaN and their covariance is marked unknown.
+    The velocity is sent in the body frame (``child_frame_id`` BODY_FRD), rotated from NED
+    with the pose's roll, pitch and yaw, its covariance as ``R Sigma R^T``: ArduPilot takes
+    ODOMETRY only with ``frame_id`` LOCAL_FRD and ``child_frame_id`` BODY_FRD and rotates the
+    velocity back with the quaternion; PX4 reads the velocity frame from ``child_frame_id``.
+    Without a velocity the fields are NaN and the velocity covariance is marked unknown.
     """
     p = estimate.position_ned_m
-    if velocity_ned_m_s is None:
-        velocity = [math.nan] * 3
+    if velocity is None:
+        body_velocity = [math.nan] * 3
+        velocity_covariance = covariance_to_urt(None)
     else:
-        velocity = [float(v) for v in np.asarray(velocity_ned_m_s, dtype=float)]
+        rotation = rotation_ned_to_body(*estimate.euler_rad)
+        body_velocity = [float(v) for v in rotation @ np.asarray(velocity.velocity_ned_m_s)]
+        if velocity.covariance is None:
+            velocity_covariance = covariance_to_urt(None)
+        else:
+            twist = np.eye(POSE_DIM) * UNKNOWN_RATE_VARIANCE
+            twist[:3, :3] = rotation @ np.asarray(velocity.covariance) @ rotation.T
+            velocity_covariance = covariance_to_urt(0.5 * (twist + twist.T))
     return dialect.MAVLink_odometry_message(
         seconds_to_usec(estimate.time_s),
         frame_id,
-        frame_id,
+        MAV_FRAME_BODY_FRD,
         float(p[0]),
         float(p[1]),
         float(p[2]),
         quaternion_from_euler(*estimate.euler_rad),
-        *velocity,
+        *body_velocity,
         math.nan,
         math.nan,
         math.nan,
         covariance_to_urt(estimate.covariance),
-        covariance_to_urt(None),
+        velocity_covariance,
         estimate.reset_counter & 0xFF,
         dialect.MAV_ESTIMATOR_TYPE_VIO,
         0,
+    )
+
+
+def velocity_from_odometry(msg: MAVLinkMessage) -> VelocityEstimate | None:
+    """The NED velocity of an ODOMETRY (None when its velocity is NaN, i.e. not sent).
+
+    A BODY_FRD ``child_frame_id`` is rotated to NED with the
+    message's quaternion; LOCAL_NED / LOCAL_FRD is taken as NED.
+
+    Raises
+    ------
+    ValueError
+        When ``child_frame_id`` is none of those, or the quaternion has no norm.
+    """
+    body = np.array([msg.vx, msg.vy, msg.vz], dtype=float)
+    if not np.all(np.isfinite(body)):
+        return None
+    covariance_6 = urt_to_covariance(msg.velocity_covariance)
+    covariance = None if covariance_6 is None else covariance_6[:3, :3]
+    if msg.child_frame_id == MAV_FRAME_BODY_FRD:
+        rotation = rotation_ned_to_body(*euler_from_quaternion(msg.q)).T
+        velocity = rotation @ body
+        if covariance is not None:
+            covariance = rotation @ covariance @ rotation.T
+    elif msg.child_frame_id in (MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_FRD):
+        velocity = body
+    else:
+        raise ValueError(f"ODOMETRY child_frame_id {msg.child_frame_id} is not BODY_FRD or local")
+    return VelocityEstimate(msg.time_usec * 1e-6, velocity, covariance, int(msg.reset_counter))
+
+
+def vision_speed_estimate_message(velocity: VelocityEstimate) -> MAVLinkMessage:
+    """VISION_SPEED_ESTIMATE: NED velocity [m/s] and its row-major 3x3 covariance (NaN in
+    entry 0 when unknown). ArduPilot (VISO_TYPE MAVLink) fuses it as NED velocity with its own
+    VISO_VEL_M_NSE, ignoring the covariance; it is sent for consumers that read it."""
+    v = np.asarray(velocity.velocity_ned_m_s, dtype=float)
+    if velocity.covariance is None:
+        covariance = [math.nan] + [0.0] * 8
+    else:
+        matrix = np.asarray(velocity.covariance, dtype=float)
+        if matrix.shape != (3, 3) or not np.all(np.isfinite(matrix)):
+            raise ValueError("velocity covariance must be a finite (3, 3) matrix")
+        covariance = [float(x) for x in (0.5 * (matrix + matrix.T)).ravel()]
+    return dialect.MAVLink_vision_speed_estimate_message(
+        seconds_to_usec(velocity.time_s),
+        float(v[0]),
+        float(v[1]),
+        float(v[2]),
+        covariance,
+        velocity.reset_counter & 0xFF,
+    )
+
+
+def velocity_from_vision_speed_estimate(msg: MAVLinkMessage) -> VelocityEstimate:
+    """VISION_SPEED_ESTIMATE to a :class:`VelocityEstimate` (values not checked for NaN)."""
+    values = np.asarray(msg.covariance, dtype=float)
+    covariance = None if math.isnan(values[0]) else values.reshape(3, 3)
+    return VelocityEstimate(
+        msg.usec * 1e-6,
+        np.array([msg.x, msg.y, msg.z], dtype=float),
+        covariance,
+        int(msg.reset_counter),
     )
 
 

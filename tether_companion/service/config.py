@@ -196,7 +196,22 @@ class PublishConfig:
         maximum=10.0,
         doc="roll/pitch/yaw variance sent [rad^2] (large: the attitude is the FC's own)",
     )
-    odometry: bool = spec(False, doc="also send ODOMETRY (PX4; velocity marked unknown)")
+    odometry: bool = spec(
+        False,
+        doc="also send ODOMETRY (pose, and the velocity in the body frame with its covariance "
+        "when the estimator has one; velocity marked unknown otherwise)",
+    )
+    odometry_frame: str = spec(
+        "local_ned",
+        choices=("local_ned", "local_frd"),
+        doc="ODOMETRY frame_id: local_ned for PX4; local_frd for ArduPilot, which ignores "
+        "ODOMETRY in any other frame",
+    )
+    speed_estimate: bool = spec(
+        False,
+        doc="also send VISION_SPEED_ESTIMATE (NED velocity and covariance; ArduPilot fuses it "
+        "with EK3_SRC1_VELXY 6) when the estimator has a velocity",
+    )
     tension_rate_hz: float = spec(
         10.0, minimum=0.0, maximum=50.0, doc="NAMED_VALUE_FLOAT tension rate [Hz] (0 = off)"
     )

@@ -50,11 +50,15 @@ from tether_companion.estimation.observability import RANGEFINDER
 from tether_companion.estimation.tension_kf import TensionEstimate
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.mavlink.units import (
+    MAV_FRAME_LOCAL_FRD,
+    MAV_FRAME_LOCAL_NED,
     POSE_DIM,
     PoseEstimate,
+    VelocityEstimate,
     odometry_message,
     seconds_to_boot_ms,
     vision_position_estimate_message,
+    vision_speed_estimate_message,
 )
 from tether_companion.samples import AttitudeSample
 from tether_companion.service.config import PublishConfig
@@ -143,6 +147,29 @@ class PositionEstimate(Protocol):
     @property
     def reset_counter(self) -> int:
         """Restarts of the estimator run so far."""
+
+
+_ODOMETRY_FRAMES = {"local_ned": MAV_FRAME_LOCAL_NED, "local_frd": MAV_FRAME_LOCAL_FRD}
+
+
+def velocity_of(
+    estimate: PositionEstimate, time_s: float, reset_counter: int
+) -> VelocityEstimate | None:
+    """The estimate's velocity to send, or None when it has none (the paper's random-walk
+    filters) or when it or its covariance is not finite (never NaN to a flight controller).
+
+    An estimator with a velocity state exposes ``velocity_ned_mps`` (shape (3,), NED [m/s])
+    and ``velocity_covariance_m2ps2`` (shape (3, 3) [m^2/s^2]).
+    """
+    velocity = getattr(estimate, "velocity_ned_mps", None)
+    covariance = getattr(estimate, "velocity_covariance_m2ps2", None)
+    if velocity is None or covariance is None:
+        return None
+    velocity = np.asarray(velocity, dtype=float)
+    covariance = np.asarray(covariance, dtype=float)
+    if not (np.all(np.isfinite(velocity)) and np.all(np.isfinite(covariance))):
+        return None
+    return VelocityEstimate(time_s, velocity, 0.5 * (covariance + covariance.T), reset_counter)
 
 
 def assess_health(
@@ -409,8 +436,12 @@ class Publisher:
             reset_counter=self.reset_counter,
         )
         out.append(vision_position_estimate_message(pose))
+        velocity = None if send_inflated else velocity_of(estimate, t, self.reset_counter)
         if self.config.odometry:
-            out.append(odometry_message(pose))
+            frame = _ODOMETRY_FRAMES[self.config.odometry_frame]
+            out.append(odometry_message(pose, velocity, frame_id=frame))
+        if self.config.speed_estimate and velocity is not None:
+            out.append(vision_speed_estimate_message(velocity))
         self.counters.published += 1
         self.counters.inflated += int(send_inflated)
         variances = np.diag(estimate.covariance)

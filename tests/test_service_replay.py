@@ -16,7 +16,7 @@ from tether_companion.errors import InputError
 from tether_companion.mavlink.framing import FrameEncoder
 from tether_companion.service.config import load_service_config, load_vehicle_for
 from tether_companion.service.recording import RecordingLimits, TlogWriter
-from tether_companion.service.replay import replay_log
+from tether_companion.service.replay import ReplaySummary, replay_log
 from tether_companion.service.synthetic import HoverStreams, hover_state
 
 POSITION = np.array([2.0, 1.0, -3.0])
@@ -183,3 +183,22 @@ def test_dataflash_errors(tmp_path: Path, config) -> None:
     junk.write_bytes(bytes(range(256)) * 4)
     with pytest.raises(InputError, match="not an ArduPilot dataflash log"):
         replay_log(junk, config, vehicle, io.StringIO())
+
+
+def test_replay_says_why_nothing_was_published(tmp_path: Path, config, capsys) -> None:
+    """A hover log without DISTANCE_SENSOR: the height along the cable is never measured, the
+    covariance there grows until the position cannot be published, and the summary says so
+    instead of a bare "0 estimates"."""
+    path = _write_tlog(tmp_path, config, 4.0, skip=("DISTANCE_SENSOR",))
+    summary = replay_log(path, config, load_vehicle_for(config), io.StringIO())
+    assert summary.estimates == 800 and summary.not_ok.get("no_range", 0) > 0
+    out = tmp_path / "estimates.csv"
+    assert main(["replay", str(path), "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "no_range" in err and "no rangefinder height" in err, err
+
+
+def test_summary_without_any_imu_tick_says_so() -> None:
+    summary = ReplaySummary("x.tlog", {"imu": 0, "attitude": 10}, 0, 0.0, 3)
+    assert "no IMU sample reached the estimator" in summary.reasons_text()
+    assert ReplaySummary("x.tlog", {"imu": 5}, 5, 1.0, 0, 5, {}).reasons_text() == ""

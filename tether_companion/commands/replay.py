@@ -67,4 +67,7 @@ def run(args: argparse.Namespace) -> int:
         f"({speed:.0f}x real time) -> {args.out}",
         file=sys.stderr,
     )
+    reasons = summary.reasons_text()
+    if reasons:
+        print(f"replay: {reasons}", file=sys.stderr)
     return 0

@@ -4,7 +4,11 @@ Each VISION_POSITION_ESTIMATE or ODOMETRY is matched to the true position at the
 stamped with (flight-controller time, linearly interpolated between physics steps), which is
 the error that matters to the autopilot's EKF: it fuses the measurement at its timestamp.
 The report gives RMSE per axis (NED), horizontal and 3-D, the count, the rate and the age
-(arrival time minus timestamp) of the estimates.
+(arrival time minus timestamp) of the estimates. When an estimate carries its covariance, its
+honesty is scored too: how many were off by more than 3 standard deviations on some axis, and
+the mean NEES (``e^T P^-1 e``, 3 on average for an honest 3-D Gaussian). Velocities (ODOMETRY,
+VISION_SPEED_ESTIMATE) are scored against the true velocity at their stamp (central difference
+of the recorded truth over one physics step) as RMSE per axis and 3-D.
 """
 
 from __future__ import annotations
@@ -72,6 +76,28 @@ class TruthHistory:
         w = 0.0 if t1 == t0 else (time_s - t0) / (t1 - t0)
         return (1.0 - w) * self._p[order[k - 1]] + w * self._p[order[k]]
 
+    def velocity_at(self, time_s: float) -> FloatArray | None:
+        """True velocity at ``time_s`` [m/s], NED: the central difference of the interpolated
+        positions one record spacing either side (one side at the ends), or None outside."""
+        if self._count < 2:
+            return None
+        newest = (self._count - 1) % self._n
+        spacing = self._t[newest] - self._t[(self._count - 2) % self._n]
+        if not spacing > 0.0:
+            return None
+        after = self.at(time_s + spacing)
+        before = self.at(time_s - spacing)
+        if after is not None and before is not None:
+            return (after - before) / (2.0 * spacing)
+        here = self.at(time_s)
+        if here is None:
+            return None
+        if after is not None:
+            return (after - here) / spacing
+        if before is not None:
+            return (here - before) / spacing
+        return None
+
 
 @dataclass
 class ScoreReport:
@@ -94,6 +120,16 @@ class ScoreReport:
     """Scored estimates per second of emulator time."""
     age_ms: dict[str, float] = field(default_factory=dict)
     """Arrival minus timestamp: mean, p50, p95, max [ms]."""
+    with_covariance: int = 0
+    """Scored estimates that carried a position covariance."""
+    beyond_3_sigma: int = 0
+    """Of those, estimates with an axis error beyond 3 standard deviations of their own."""
+    nees_mean: float = math.nan
+    """Mean normalised estimation error squared of those (3 for an honest filter)."""
+    velocity_scored: int = 0
+    """Velocities scored (ODOMETRY with a velocity, VISION_SPEED_ESTIMATE)."""
+    velocity_rmse_m_s: dict[str, float] = field(default_factory=dict)
+    """Velocity RMSE per axis (north, east, down) and 3-D [m/s]."""
 
     def to_json(self, path: str | Path) -> None:
         """Write the report as JSON (NaN written as null)."""
@@ -120,6 +156,17 @@ class ScoreReport:
                 f"rate {self.rate_hz:.1f} Hz; age mean {a['mean']:.1f} ms, p50 {a['p50']:.1f} ms, "
                 f"p95 {a['p95']:.1f} ms, max {a['max']:.1f} ms"
             )
+        if self.with_covariance:
+            lines.append(
+                f"covariance: {self.beyond_3_sigma} of {self.with_covariance} beyond 3 sigma, "
+                f"NEES mean {self.nees_mean:.2f} (3 if honest)"
+            )
+        if self.velocity_scored:
+            v = self.velocity_rmse_m_s
+            lines.append(
+                f"velocity RMSE north {v['north']:.3f} m/s, east {v['east']:.3f} m/s, "
+                f"down {v['down']:.3f} m/s, 3-D {v['3d']:.3f} m/s ({self.velocity_scored} scored)"
+            )
         return "\n".join(lines)
 
 
@@ -145,6 +192,8 @@ class Scorer:
         self._errors: list[tuple[float, float, float]] = []
         self._ages: list[float] = []
         self._arrivals: list[float] = []
+        self._nees: list[float] = []
+        self._velocity_errors: list[tuple[float, float, float]] = []
         self._report = ScoreReport()
 
     def add(
@@ -154,8 +203,10 @@ class Scorer:
         stamp_sim_s: float,
         arrival_sim_s: float,
         truth: TruthHistory,
+        covariance_m2: FloatArray | None = None,
     ) -> None:
-        """Score one estimate stamped at ``stamp_sim_s`` that arrived at ``arrival_sim_s``."""
+        """Score one estimate stamped at ``stamp_sim_s`` that arrived at ``arrival_sim_s``
+        (with its (3, 3) position covariance [m^2] when it carried one)."""
         r = self._report
         r.received[kind] = r.received.get(kind, 0) + 1
         if not (np.all(np.isfinite(position_ned_m)) and math.isfinite(stamp_sim_s)):
@@ -175,11 +226,55 @@ class Scorer:
         self._errors.append((float(error[0]), float(error[1]), float(error[2])))
         self._ages.append(arrival_sim_s - stamp_sim_s)
         self._arrivals.append(arrival_sim_s)
+        if covariance_m2 is not None:
+            self._score_covariance(error, np.asarray(covariance_m2, dtype=float))
+
+    def _score_covariance(self, error: FloatArray, covariance: FloatArray) -> None:
+        r = self._report
+        variances = np.diag(covariance)
+        if not (np.all(np.isfinite(covariance)) and np.all(variances > 0.0)):
+            return
+        r.with_covariance += 1
+        if np.any(np.abs(error) > 3.0 * np.sqrt(variances)):
+            r.beyond_3_sigma += 1
+        try:
+            self._nees.append(float(error @ np.linalg.solve(covariance, error)))
+        except np.linalg.LinAlgError:
+            pass
+
+    def add_velocity(
+        self,
+        velocity_ned_m_s: FloatArray,
+        stamp_sim_s: float,
+        arrival_sim_s: float,
+        truth: TruthHistory,
+    ) -> None:
+        """Score one velocity [m/s] stamped at ``stamp_sim_s`` (after the warm-up only)."""
+        v = np.asarray(velocity_ned_m_s, dtype=float)
+        if not (np.all(np.isfinite(v)) and math.isfinite(stamp_sim_s)):
+            return
+        if stamp_sim_s > arrival_sim_s + FUTURE_TOLERANCE_S or stamp_sim_s < self.score_start_s:
+            return
+        true_velocity = truth.velocity_at(stamp_sim_s)
+        if true_velocity is None:
+            return
+        error = v - true_velocity
+        self._velocity_errors.append((float(error[0]), float(error[1]), float(error[2])))
 
     def report(self) -> ScoreReport:
         """The report so far."""
         r = self._report
         r.scored = len(self._errors)
+        r.nees_mean = float(np.mean(self._nees)) if self._nees else math.nan
+        r.velocity_scored = len(self._velocity_errors)
+        if self._velocity_errors:
+            ms = np.mean(np.array(self._velocity_errors) ** 2, axis=0)
+            r.velocity_rmse_m_s = {
+                "north": float(math.sqrt(ms[0])),
+                "east": float(math.sqrt(ms[1])),
+                "down": float(math.sqrt(ms[2])),
+                "3d": float(math.sqrt(ms.sum())),
+            }
         if not self._errors:
             r.rmse_m = {k: math.nan for k in ("north", "east", "down", "horizontal", "3d")}
             r.age_ms = {k: math.nan for k in ("mean", "p50", "p95", "max")}

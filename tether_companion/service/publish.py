@@ -108,6 +108,13 @@ _HEALTH_TEXT = {
     STALE_TENSION: "tension reading stale, position withheld",
 }
 _STATUSTEXT_PREFIX = "TETHER: "
+
+
+def health_text(health: str) -> str:
+    """What a health state means, in words (the STATUSTEXT after ``TETHER: ``)."""
+    return _HEALTH_TEXT[health]
+
+
 STATUSTEXT_MIN_INTERVAL_S = 1.0
 """Shortest gap between two health STATUSTEXTs [s of flight-controller time]."""
 _RESUME_GAP_S = 0.5

@@ -19,7 +19,7 @@ import contextlib
 import io
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
@@ -32,7 +32,7 @@ from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.config import ServiceConfig
 from tether_companion.service.ingest import ATTITUDE, IMU, PWM, Sample
-from tether_companion.service.publish import Publication
+from tether_companion.service.publish import OK, Publication, health_text
 from tether_companion.service.recording import read_tlog
 from tether_companion.service.session import EstimationSession
 
@@ -46,13 +46,40 @@ _DATAFLASH_NAMES = {IMU: "IMU", ATTITUDE: "ATT", PWM: "RCOU"}
 
 @dataclass(frozen=True)
 class ReplaySummary:
-    """What a replay did."""
+    """What a replay did.
+
+    ``estimates`` counts the estimator's outputs (IMU ticks), ``not_ok`` those whose health
+    was not ``ok``, by health state: the reasons positions were withheld (or inflated).
+    """
 
     source: str
     inputs: dict[str, int]
     published: int
     fc_time_span_s: float
     ingest_dropped: int
+    estimates: int = 0
+    not_ok: dict[str, int] = field(default_factory=dict)
+
+    def reasons_text(self) -> str:
+        """Why positions were not published as healthy, most frequent first ("" if always ok).
+
+        With no estimate at all, says so and why (no IMU tick reached the estimator)."""
+        if self.estimates == 0:
+            return (
+                "no estimate: no IMU sample reached the estimator "
+                f"(inputs accepted: {_counts(self.inputs)}; {self.ingest_dropped} dropped)"
+            )
+        if not self.not_ok:
+            return ""
+        parts = [
+            f"{name} {count / self.estimates:.0%} ({health_text(name)})"
+            for name, count in sorted(self.not_ok.items(), key=lambda kv: -kv[1])
+        ]
+        return "not ok for " + ", ".join(parts)
+
+
+def _counts(counts: dict[str, int]) -> str:
+    return ", ".join(f"{k} {v}" for k, v in counts.items()) or "none"
 
 
 def replay_log(
@@ -99,12 +126,15 @@ def replay_log(
         dict(session.ingest.counters.accepted) if suffix == ".tlog" else dict(dataflash.counts)
     )
     _check_inputs(path, config, accepted, suffix)
+    counters = session.publisher.counters
     return ReplaySummary(
         source=str(path),
         inputs=accepted,
         published=published,
         fc_time_span_s=(last_s - first_s) if published else 0.0,
         ingest_dropped=session.ingest.counters.dropped,
+        estimates=counters.estimates,
+        not_ok={k: v for k, v in counters.by_health.items() if k != OK and v > 0},
     )
 
 

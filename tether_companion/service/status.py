@@ -15,7 +15,7 @@ from rich.text import Text
 
 from tether_companion.service.app import CompanionService
 from tether_companion.service.ingest import INPUT_KINDS
-from tether_companion.service.publish import OK
+from tether_companion.service.publish import OK, health_text
 
 _HEALTH_STYLE = {
     OK: "bold green",
@@ -36,6 +36,7 @@ def render(service: CompanionService) -> Group:
         (state.link_text, "green" if state.link_up else "red"),
         "  health: ",
         (publisher.health, health_style),
+        ("" if publisher.health == OK else f" ({health_text(publisher.health)})", health_style),
         f"  reset_counter {publisher.reset_counter}",
         _clock_text(service),
     )

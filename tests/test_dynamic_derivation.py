@@ -1,0 +1,124 @@
+"""The generated models of the dynamic filter: regenerated text, Jacobians against finite
+differences, and the force balance against the paper's independent straight-cable model."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tether_companion.estimation.dynamic import generated, state
+from tether_companion.estimation.tether_models import FourStateModel
+from tether_companion.frames import rotation_ned_to_body
+
+sympy = pytest.importorskip("sympy", reason="sympy (test extra) derives the models")
+from tether_companion.estimation.dynamic.derivation import derive  # noqa: E402
+
+ROTATION_MODELS = {
+    "force_balance_known_length",
+    "force_balance_chord_length",
+    "accel_known_length",
+    "accel_chord_length",
+}
+PROCESS_MODELS = {"force_balance_known_length", "force_balance_chord_length", "inertial"}
+ALL_MODELS = [name for name, *_ in derive.models()]
+
+
+def test_regenerating_gives_the_committed_file() -> None:
+    text = derive.OUTPUT.read_text()
+    if f"sympy {sympy.__version__}." not in text:
+        pytest.skip(
+            f"generated.py was written by another sympy version than {sympy.__version__}; "
+            "printing may differ (the finite-difference tests still check the content)"
+        )
+    assert derive.generate_source() == text, (
+        "generated.py is out of date: run python -m "
+        "tether_companion.estimation.dynamic.derivation.derive"
+    )
+
+
+def _random_case(rng: np.random.Generator, name: str) -> tuple[list, list, list]:
+    x = np.empty(state.N_STATES)
+    direction = rng.normal(size=3)
+    direction[2] = -abs(direction[2]) - 0.3
+    x[state.POSITION] = direction / np.linalg.norm(direction) * rng.uniform(1.0, 20.0)
+    x[state.VELOCITY] = rng.normal(scale=2.0, size=3)
+    x[state.TENSION] = rng.uniform(0.5, 15.0)
+    x[state.SCALE] = rng.uniform(0.8, 1.2)
+    x[state.BIAS] = rng.normal(scale=0.2, size=3)
+    x[state.WIND] = rng.normal(scale=3.0, size=2)
+    rotation = rotation_ned_to_body(*rng.uniform(-0.6, 0.6, size=2), rng.uniform(-3, 3))
+    if name == "inertial":
+        u = [*rotation.ravel(), *rng.normal(scale=3.0, size=3)]
+    elif name in ROTATION_MODELS:
+        u = [*rotation.ravel(), rng.uniform(5.0, 30.0)]
+    elif name == "height_above_ground":
+        u = [rng.uniform(-1.0, 3.0)]
+    else:
+        u = []
+    length = float(np.linalg.norm(x[state.POSITION])) * rng.uniform(1.0, 1.2)
+    c = [rng.uniform(0.5, 3.0), rng.uniform(0.0, 0.6), rng.uniform(0.0, 1.0), length]
+    return list(x), u, c
+
+
+@pytest.mark.parametrize("name", ALL_MODELS)
+def test_jacobian_matches_central_differences(name: str) -> None:
+    rng = np.random.default_rng(sum(map(ord, name)))
+    function = getattr(generated, name)
+    for _ in range(20):
+        x, u, c = _random_case(rng, name)
+        values, jac = function(x, u, c)
+        rows = slice(3, 6) if name in PROCESS_MODELS else slice(0, len(values))
+        jacobian = np.array(jac, dtype=float).reshape(-1, state.N_STATES)
+        numeric = np.empty_like(jacobian)
+        for j in range(state.N_STATES):
+            step = 1e-6 * max(1.0, abs(x[j]))
+            plus, minus = list(x), list(x)
+            plus[j] += step
+            minus[j] -= step
+            numeric[:, j] = (
+                np.array(function(plus, u, c)[0])[rows] - np.array(function(minus, u, c)[0])[rows]
+            ) / (2 * step)
+        np.testing.assert_allclose(jacobian, numeric, rtol=1e-5, atol=1e-6, err_msg=name)
+
+
+def test_straight_cable_accelerometer_is_the_papers_model() -> None:
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        x, u, c = _random_case(rng, "accel_known_length")
+        x[state.SCALE], x[8:11], c[1], c[2] = 1.0, [0.0, 0.0, 0.0], 0.0, 0.0
+        rotation = np.array(u[:9]).reshape(3, 3)
+        ours, _ = generated.accel_known_length(x, u, c)
+        paper = FourStateModel(c[0]).accel(np.array([*x[0:3], x[state.TENSION]]), rotation, u[9])[0]
+        np.testing.assert_allclose(ours, paper, rtol=1e-12, atol=1e-12)
+
+
+def test_force_balance_is_the_rotated_specific_force_plus_gravity() -> None:
+    """Formulation (a)'s acceleration equals R^T (accelerometer model - bias) + g, and (b)'s
+    equals it when fed that specific force: the two formulations share one physics."""
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        x, u, c = _random_case(rng, "force_balance_known_length")
+        rotation = np.array(u[:9]).reshape(3, 3)
+        accel, _ = generated.accel_known_length(x, u, c)
+        specific = np.array(accel) - np.array(x[8:11])
+        expected = rotation.T @ specific + np.array([0.0, 0.0, 9.80665])
+        xdot, _ = generated.force_balance_known_length(x, u, c)
+        np.testing.assert_allclose(xdot[3:6], expected, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(xdot[0:3], x[3:6])
+        ins, _ = generated.inertial(x, [*u[:9], *accel], c)
+        np.testing.assert_allclose(ins[3:6], expected, rtol=1e-10, atol=1e-10)
+
+
+def test_cable_weight_adds_half_the_hanging_weight_at_the_drone() -> None:
+    x = [3.0, 4.0, -12.0, 0, 0, 0, 5.0, 1.0, 0, 0, 0, 0, 0]
+    (tension,), _ = generated.tension_known_length(x, [], [1.5, 0.0, 0.2, 14.0])
+    chord = 5.0 * np.array([3.0, 4.0, -12.0]) / 13.0
+    expected = np.linalg.norm(-chord + np.array([0.0, 0.0, 0.2 * 14.0 / 2]))
+    assert tension == pytest.approx(expected)
+    (length,), _ = generated.winch_length(x, [], [1.5, 0.0, 0.0, 0.0])
+    assert length == pytest.approx(13.0)
+    (elevation, azimuth), _ = generated.cable_angle_known_length(x, [], [1.5, 0.0, 0.0, 14.0])
+    assert elevation == pytest.approx(math.atan2(12.0, 5.0))
+    assert azimuth == pytest.approx(math.atan2(4.0, 3.0))

@@ -1,0 +1,43 @@
+"""Optional winch paid-out length: the cable's arc length, ``|p|`` plus the parabolic sag
+excess (generated ``winch_length``). Skipped while the cable is slack (its length then says
+only that the drone is closer than that)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.estimation.dynamic import generated, state
+from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
+from tether_companion.estimation.dynamic.models import ModelConstants
+from tether_companion.estimation.ekf import ExtendedKalmanFilter
+
+FloatArray = NDArray[np.float64]
+
+NAME = "winch"
+SLACK = "slack"
+
+
+class WinchAid:
+    """Fuses a paid-out length [m] with noise ``noise_std_m`` [m] while the chord tension is
+    above ``slack_tension_n`` [N]."""
+
+    def __init__(self, noise_std_m: float, slack_tension_n: float) -> None:
+        self.status = AidStatus()
+        self._r = np.array([[noise_std_m**2]])
+        self._slack_n = slack_tension_n
+
+    def fuse(
+        self, kf: ExtendedKalmanFilter, constants: ModelConstants, length_m: float, time_s: float
+    ) -> bool:
+        """Fuse one reading [m]."""
+        if kf.x[state.TENSION] < self._slack_n:
+            self.status.skip(SLACK)
+            return False
+        c = constants.values()
+
+        def measure(xs: FloatArray) -> tuple[FloatArray, FloatArray]:
+            h, jac = generated.winch_length(xs.tolist(), (), c)
+            return np.array(h), np.array(jac).reshape(1, state.N_STATES)
+
+        return fuse(kf, NAME, self.status, np.array((length_m,)), measure, self._r, time_s)

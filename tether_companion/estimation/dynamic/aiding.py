@@ -1,0 +1,112 @@
+"""One measurement fusion with its status record (PX4 EKF2's ``aid_sources`` pattern).
+
+Each sensor module (``aid_*.py``) decides when to fuse, forms the measurement and hands it to
+:func:`fuse`, which runs the filter's gated Joseph-form update
+(:meth:`~tether_companion.estimation.ekf.ExtendedKalmanFilter.update`) and records what
+happened in that sensor's :class:`AidStatus`: innovation and its variance, test ratio, fused
+or why not, the time of the last fusion, and counters.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.estimation.ekf import (
+    FUSED,
+    GATED,
+    NONFINITE,
+    ExtendedKalmanFilter,
+    MeasurementFunction,
+    chi2_threshold,
+)
+
+FloatArray = NDArray[np.float64]
+
+_threshold = functools.lru_cache(maxsize=32)(chi2_threshold)
+
+
+@dataclass(slots=True)
+class AidStatus:
+    """What one measurement source did (monotonic counters and the last sample's numbers).
+
+    Attributes
+    ----------
+    fused, gated, nonfinite, singular, skipped
+        Samples fused; rejected by the innovation gate; rejected as NaN/inf; rejected with a
+        non-positive-definite innovation covariance; not offered to the filter (the module's
+        own conditions, counted by reason in ``skipped_by_reason``).
+    last_innovation
+        ``z - h(x)`` of the last sample that reached the gate, shape (m,).
+    last_innovation_variance
+        Diagonal of its innovation covariance ``H P H^T + R``, shape (m,).
+    last_test_ratio
+        NIS over the gate threshold (``> 1``: gated; 0 when the gate is off).
+    last_fused
+        Whether the last sample offered was fused.
+    last_fused_time_s
+        Filter time of the last fusion [s] (``nan`` before the first).
+    """
+
+    fused: int = 0
+    gated: int = 0
+    nonfinite: int = 0
+    singular: int = 0
+    skipped: int = 0
+    skipped_by_reason: dict[str, int] = field(default_factory=dict)
+    last_innovation: FloatArray = field(default_factory=lambda: np.zeros(0))
+    last_innovation_variance: FloatArray = field(default_factory=lambda: np.zeros(0))
+    last_test_ratio: float = math.nan
+    last_fused: bool = False
+    last_fused_time_s: float = math.nan
+
+    def skip(self, reason: str) -> None:
+        """Count a sample the module did not offer to the filter, with why."""
+        self.skipped += 1
+        self.skipped_by_reason[reason] = self.skipped_by_reason.get(reason, 0) + 1
+        self.last_fused = False
+
+
+def fuse(
+    kf: ExtendedKalmanFilter,
+    name: str,
+    status: AidStatus,
+    z: FloatArray,
+    measure: MeasurementFunction,
+    r: FloatArray,
+    time_s: float,
+) -> bool:
+    """Fuse ``z`` (shape (m,)) with noise ``r`` (m, m) into ``kf``; record it in ``status``.
+
+    Returns whether the sample was fused.
+    """
+    p_before = kf.P
+    jacobians: list[FloatArray] = []
+
+    def measure_and_keep(x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        value, h_jac = measure(x)
+        jacobians.append(h_jac)
+        return value, h_jac
+
+    result = kf.update(name, z, measure_and_keep, r)
+    if math.isfinite(result.nis):
+        h_jac = jacobians[0]
+        status.last_innovation = kf.sensors[name].last_innovation
+        status.last_innovation_variance = ((h_jac @ p_before) * h_jac).sum(axis=1) + np.diag(r)
+        threshold = _threshold(kf.gate_probability, z.size)
+        status.last_test_ratio = result.nis / threshold if math.isfinite(threshold) else 0.0
+    status.last_fused = result.status == FUSED
+    if result.status == FUSED:
+        status.fused += 1
+        status.last_fused_time_s = time_s
+    elif result.status == GATED:
+        status.gated += 1
+    elif result.status == NONFINITE:
+        status.nonfinite += 1
+    else:
+        status.singular += 1
+    return status.last_fused

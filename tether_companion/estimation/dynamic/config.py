@@ -1,0 +1,110 @@
+"""Settings of the dynamic tether filter (typed, validated like every config section).
+
+The shared time-alignment, gate and rangefinder-validity settings stay in
+:class:`~tether_companion.estimation.config.EstimatorConfig`; this section holds what only
+the dynamic filter has: its noise densities, the cable's weight, the rotor-drag coefficient,
+the anchor's height above the ground, the initialisation window and the publication bounds
+behind its observability status.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from tether_companion.config import load_yaml, spec
+
+FORCE_BALANCE = "force_balance"
+"""Formulation (a): the force balance drives the prediction, the accelerometer is measured."""
+INERTIAL = "inertial"
+"""Formulation (b): the accelerometer drives the prediction, the force balance is measured."""
+
+
+@dataclass(frozen=True)
+class DynamicNoise:
+    """Process noise spectral densities (random walks and unmodelled forces)."""
+
+    acceleration_m2ps3: float = spec(
+        0.002,
+        exclusive_minimum=0.0,
+        doc="unmodelled forces per unit mass (gusts, motor lag, model error) [m^2/s^3]",
+    )
+    position_m2ps: float = spec(1e-6, exclusive_minimum=0.0, doc="position [m^2/s]")
+    tension_n2ps: float = spec(0.5, exclusive_minimum=0.0, doc="chord tension [N^2/s]")
+    thrust_scale_per_s: float = spec(
+        1e-5, exclusive_minimum=0.0, doc="thrust scale factor (battery sag) [1/s]"
+    )
+    accel_bias_m2ps5: float = spec(
+        1e-6, exclusive_minimum=0.0, doc="accelerometer bias random walk [(m/s^2)^2/s]"
+    )
+    wind_m2ps3: float = spec(0.05, exclusive_minimum=0.0, doc="wind, north and east [m^2/s^3]")
+
+
+@dataclass(frozen=True)
+class DynamicInitial:
+    """Prior uncertainty of the states the first second of data does not measure."""
+
+    velocity_std_mps: float = spec(0.5, exclusive_minimum=0.0, doc="velocity [m/s]")
+    thrust_scale_std: float = spec(0.1, exclusive_minimum=0.0, doc="thrust scale factor [1]")
+    accel_bias_std_mps2: tuple[float, float, float] = spec(
+        (0.2, 0.2, 0.2), exclusive_minimum=0.0, doc="accelerometer bias, body x y z [m/s^2]"
+    )
+    wind_std_mps: float = spec(2.0, exclusive_minimum=0.0, doc="wind, north and east [m/s]")
+    window_s: float = spec(
+        1.0, exclusive_minimum=0.0, doc="data averaged to initialise (tension direction) [s]"
+    )
+
+
+@dataclass(frozen=True)
+class DynamicFilterConfig:
+    """The dynamic tether filter (issue 10)."""
+
+    formulation: str = spec(
+        INERTIAL,
+        choices=(FORCE_BALANCE, INERTIAL),
+        doc="force_balance: dynamics predict, accelerometer measured; inertial: the reverse",
+    )
+    accel_noise_std_mps2: float = spec(
+        0.3, exclusive_minimum=0.0, doc="accelerometer force-balance noise per axis [m/s^2]"
+    )
+    drag_per_s: float | None = spec(
+        None,
+        minimum=0.0,
+        doc="rotor drag a = -mu v_air, body horizontal [1/s]; null: from the vehicle profile",
+    )
+    cable_weight_n_per_m: float = spec(
+        0.0, minimum=0.0, doc="cable weight per length (0: a light, straight cable) [N/m]"
+    )
+    anchor_height_m: float = spec(
+        0.0, doc="height of the tether anchor above the ground under the drone [m]"
+    )
+    load_cell_noise_std_n: float = spec(0.1, exclusive_minimum=0.0, doc="load cell [N]")
+    winch_length_noise_std_m: float = spec(0.05, exclusive_minimum=0.0, doc="winch length [m]")
+    cable_angle_noise_std_rad: float = spec(
+        0.02, exclusive_minimum=0.0, doc="ground-station cable angle [rad]"
+    )
+    slack_tension_n: float = spec(
+        0.2, minimum=0.0, doc="below this tension the cable is reported slack [N]"
+    )
+    min_thrust_fraction: float = spec(
+        0.5,
+        minimum=0.0,
+        maximum=1.0,
+        doc="thrust below this fraction of the weight: on the ground, force balance not fused",
+    )
+    max_horizontal_std_m: float = spec(
+        0.5, exclusive_minimum=0.0, doc="horizontal std beyond which the pull is too weak [m]"
+    )
+    noise: DynamicNoise = spec(default_factory=DynamicNoise, doc="process noise")
+    initial: DynamicInitial = spec(default_factory=DynamicInitial, doc="initialisation")
+
+
+def load_dynamic_config(path: str | Path) -> DynamicFilterConfig:
+    """Load a :class:`DynamicFilterConfig` from YAML.
+
+    Raises
+    ------
+    ConfigError
+        When the file is missing or a key is unknown, mistyped or out of range.
+    """
+    return load_yaml(DynamicFilterConfig, path)

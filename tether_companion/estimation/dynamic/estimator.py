@@ -1,0 +1,496 @@
+"""The dynamic tether filter fed by typed samples: :class:`DynamicTetherEstimator`.
+
+Same call pattern as :class:`~tether_companion.estimation.pipeline.TetherEstimator` (pure,
+synchronous, samples in time order, one :class:`NavigationEstimate` per IMU tick), so the
+service, replay and the offline runner can use either:
+
+* ``on_attitude``, ``on_pwm``: through the shared
+  :class:`~tether_companion.estimation.alignment.InputAligner`;
+* ``on_imu``: until initialised, the tick feeds the
+  :class:`~tether_companion.estimation.dynamic.initialise.Initialiser`; afterwards the filter
+  predicts to the IMU time with the previous tick's inputs (force balance, or the previous
+  specific force in the inertial formulation) and fuses the accelerometer force balance;
+* ``on_range``: the tilt-corrected height above the ground (validity checked and counted);
+* ``set_known_tension_n`` (load cell), ``set_paid_out_length_m`` (winch; also switches the
+  cable model to the known length), ``on_cable_angle`` (ground-station cable angle).
+
+Divergence: a non-finite state (the EKF resets), an accelerometer innovation gated for
+``DIVERGED_AFTER_S`` in a row, or a position beyond ``MAX_DISTANCE_M`` restarts the
+initialisation; ``reset_counter`` counts it and the tick's status is ``reset`` with the reason.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import operator
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.constants import GRAVITY_MPS2
+from tether_companion.estimation.alignment import (
+    NONFINITE_INPUT,
+    STALE_ATTITUDE,
+    STALE_PWM,
+    AlignedInputs,
+    InputAligner,
+    aligner_for,
+)
+from tether_companion.estimation.config import EstimatorConfig
+from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.aid.accel import NEAR_ANCHOR, ON_GROUND, AccelAid
+from tether_companion.estimation.dynamic.aid.cable_angle import CableAngleAid
+from tether_companion.estimation.dynamic.aid.load_cell import LoadCellAid
+from tether_companion.estimation.dynamic.aid.rangefinder import RangefinderAid
+from tether_companion.estimation.dynamic.aid.winch import WinchAid
+from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterConfig
+from tether_companion.estimation.dynamic.initialise import Initialiser
+from tether_companion.estimation.dynamic.models import (
+    ForceBalanceProcess,
+    InertialProcess,
+    ModelConstants,
+)
+from tether_companion.estimation.dynamic.observability import assess
+from tether_companion.estimation.dynamic.output import NavigationEstimate
+from tether_companion.estimation.ekf import ExtendedKalmanFilter
+from tether_companion.estimation.pipeline import default_thrust_input
+from tether_companion.estimation.thrust_input import ThrustInput
+from tether_companion.physics.vehicle import VehicleProfile
+from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
+
+FloatArray = NDArray[np.float64]
+
+DIVERGED_AFTER_S = 1.0
+"""Accelerometer innovations gated this long in a row [s]: the filter has diverged."""
+MAX_DISTANCE_M = 1000.0
+"""A position farther than this from the anchor [m] is a divergence."""
+UNKNOWN_VARIANCE = 1e6
+"""Variance reported for every component while there is no state [SI units^2]."""
+NOMINAL_IMU_STEP_S = 0.005
+"""IMU period the inertial formulation's per-sample noise is converted with [s]."""
+
+
+@dataclass(slots=True)
+class DynamicHealth:
+    """Counters of what the dynamic filter did with its inputs (monotonic except ``last_*``).
+
+    Field names shared with :class:`~tether_companion.estimation.pipeline.EstimatorHealth`
+    mean the same (the service reads ``stale_attitude``, ``stale_pwm``, ``stale_tension``).
+    """
+
+    imu_ticks: int = 0
+    accel_fused: int = 0
+    accel_gated: int = 0
+    stale_attitude: int = 0
+    stale_pwm: int = 0
+    stale_tension: int = 0
+    on_ground: int = 0
+    near_anchor: int = 0
+    range_fused: int = 0
+    range_gated: int = 0
+    range_out_of_range: int = 0
+    range_stale: int = 0
+    load_cell_fused: int = 0
+    winch_fused: int = 0
+    cable_angle_fused: int = 0
+    nonfinite_rejected: int = 0
+    pwm_invalid: int = 0
+    out_of_order: int = 0
+    initialisations: int = 0
+    resets: int = 0
+    pd_repairs: int = 0
+    last_accel_nis: float = math.nan
+    last_range_nis: float = math.nan
+
+    def values(self) -> tuple:
+        """All fields in declaration order (a cheap snapshot)."""
+        return _HEALTH_VALUES(self)
+
+
+_HEALTH_VALUES = operator.attrgetter(*(f.name for f in dataclasses.fields(DynamicHealth)))
+
+
+def drag_per_s(dynamic: DynamicFilterConfig, vehicle: VehicleProfile) -> float:
+    """Rotor drag coefficient ``mu`` [1/s]: the config's, else the profile's linear drag
+    coefficient over the mass (the profile's ``rotor_drag_per_s`` when it has one)."""
+    if dynamic.drag_per_s is not None:
+        return dynamic.drag_per_s
+    rotor = getattr(vehicle, "rotor_drag_per_s", None)
+    if rotor is not None:
+        return float(rotor)
+    return vehicle.drag_coefficient_n_s_per_m / vehicle.mass_kg
+
+
+class DynamicTetherEstimator:
+    """Position, velocity, tension, thrust scale, accelerometer bias and wind from samples.
+
+    Parameters
+    ----------
+    config
+        The shared estimator settings (staleness, gate, rangefinder validity and noise,
+        ``min_cable_length_m``, ``thrust_model``).
+    vehicle
+        Vehicle profile (mass, thrust curve, drag).
+    dynamic
+        This filter's own settings (default: :class:`DynamicFilterConfig` defaults).
+    thrust_input, aligner
+        As for :class:`~tether_companion.estimation.pipeline.TetherEstimator`.
+    """
+
+    has_tension_state = True
+
+    def __init__(
+        self,
+        config: EstimatorConfig,
+        vehicle: VehicleProfile,
+        dynamic: DynamicFilterConfig | None = None,
+        thrust_input: ThrustInput | None = None,
+        *,
+        aligner: InputAligner | None = None,
+    ) -> None:
+        self.config = config
+        self.dynamic = dynamic = dynamic if dynamic is not None else DynamicFilterConfig()
+        self.vehicle = vehicle
+        stale = config.staleness
+        self.aligner = aligner_for(
+            aligner,
+            stale.attitude_s,
+            stale.pwm_s,
+            thrust_input,
+            lambda: default_thrust_input(config, vehicle),
+        )
+        self.thrust_input: ThrustInput = self.aligner.thrust_input
+        self.constants = ModelConstants(
+            vehicle.mass_kg, drag_per_s(dynamic, vehicle), dynamic.cable_weight_n_per_m
+        )
+        self.health = DynamicHealth()
+        self._weight_n = vehicle.mass_kg * GRAVITY_MPS2
+        self._inertial = dynamic.formulation == INERTIAL
+        self._q = self._process_noise()
+        self.accel = AccelAid(self._accel_measurement_std(), config.min_cable_length_m)
+        self.rangefinder = RangefinderAid(
+            config.altimeter_noise_variance_m2, dynamic.anchor_height_m
+        )
+        self.load_cell = LoadCellAid(dynamic.load_cell_noise_std_n)
+        self.winch = WinchAid(dynamic.winch_length_noise_std_m, dynamic.slack_tension_n)
+        self.cable_angle = CableAngleAid(dynamic.cable_angle_noise_std_rad, dynamic.slack_tension_n)
+        self.filter: ExtendedKalmanFilter | None = None
+        self._initialiser = self._new_initialiser()
+        self._time_s = math.nan
+        self._inputs: list[float] | None = None
+        self._resets = 0
+        self._reset_reason: str | None = None
+        self._gated_since_s = math.nan
+        self._last_tick_s = math.nan
+
+    # ------------------------------------------------------------------ setup
+    def _process_noise(self) -> FloatArray:
+        noise = self.dynamic.noise
+        q = np.zeros(state.N_STATES)
+        q[state.POSITION] = noise.position_m2ps
+        if self._inertial:  # the accelerometer's white noise drives the velocity
+            q[state.VELOCITY] = self.dynamic.accel_noise_std_mps2**2 * NOMINAL_IMU_STEP_S
+        else:
+            q[state.VELOCITY] = noise.acceleration_m2ps3
+        q[state.TENSION] = noise.tension_n2ps
+        q[state.SCALE] = noise.thrust_scale_per_s
+        q[state.BIAS] = noise.accel_bias_m2ps5
+        q[state.WIND] = noise.wind_m2ps3
+        return np.diag(q)
+
+    def _accel_measurement_std(self) -> float:
+        sensor = self.dynamic.accel_noise_std_mps2
+        if not self._inertial:
+            return sensor
+        # the force balance as the measurement carries the unmodelled forces as white noise
+        unmodelled_sq = self.dynamic.noise.acceleration_m2ps3 / NOMINAL_IMU_STEP_S
+        return math.sqrt(sensor**2 + unmodelled_sq)
+
+    def _new_initialiser(self) -> Initialiser:
+        return Initialiser(
+            self.dynamic,
+            self.vehicle.mass_kg,
+            self.constants.drag_per_s,
+            self.dynamic.accel_noise_std_mps2,
+            math.sqrt(self.config.altimeter_noise_variance_m2),
+        )
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def time_s(self) -> float:
+        """Filter time [s] (``nan`` before the first IMU tick)."""
+        return self._time_s
+
+    @property
+    def reset_counter(self) -> int:
+        """Restarts after divergence so far."""
+        return self._resets
+
+    @property
+    def initialised(self) -> bool:
+        """Whether the filter has a state."""
+        return self.filter is not None
+
+    # ------------------------------------------------------------------ inputs
+    def on_attitude(self, sample: AttitudeSample) -> None:
+        """Store the latest attitude (rejected and counted when not finite)."""
+        if self.aligner.on_attitude(sample) is not None:
+            self.health.nonfinite_rejected += 1
+
+    def on_pwm(self, sample: PwmSample) -> None:
+        """Store the thrust of the latest motor outputs (rejected when not finite)."""
+        try:
+            rejected = self.aligner.on_pwm(sample) is not None
+        except ValueError:
+            self.health.pwm_invalid += 1
+            return
+        if rejected:
+            self.health.nonfinite_rejected += 1
+
+    def set_known_tension_n(self, tension_n: float, time_s: float) -> None:
+        """Load-cell tension at the drone [N] at ``time_s`` [s]: fused when initialised."""
+        if not (math.isfinite(tension_n) and math.isfinite(time_s)) or tension_n < 0.0:
+            self.health.nonfinite_rejected += 1
+            return
+        if self.filter is not None and self._fresh(time_s, self.config.staleness.tension_s):
+            if self.load_cell.fuse(self.filter, self.constants, tension_n, self._time_s):
+                self.health.load_cell_fused += 1
+
+    def set_paid_out_length_m(self, length_m: float, time_s: float) -> None:
+        """Winch paid-out length [m]: the cable model's length from now on, and fused."""
+        if not (math.isfinite(length_m) and math.isfinite(time_s)) or length_m <= 0.0:
+            self.health.nonfinite_rejected += 1
+            return
+        self.constants.length_m = length_m
+        if self.filter is not None and self._fresh(time_s, self.config.staleness.tension_s):
+            if self.winch.fuse(self.filter, self.constants, length_m, self._time_s):
+                self.health.winch_fused += 1
+
+    def on_cable_angle(self, elevation_rad: float, azimuth_rad: float, time_s: float) -> None:
+        """Ground-station cable angle at the anchor [rad]: elevation up, azimuth from north."""
+        values = (elevation_rad, azimuth_rad, time_s)
+        if not all(math.isfinite(v) for v in values) or abs(elevation_rad) > math.pi / 2:
+            self.health.nonfinite_rejected += 1
+            return
+        if self.filter is not None and self._fresh(time_s, self.config.staleness.tension_s):
+            if self.cable_angle.fuse(
+                self.filter, self.constants, elevation_rad, azimuth_rad, self._time_s
+            ):
+                self.health.cable_angle_fused += 1
+
+    def on_range(self, sample: RangeSample) -> None:
+        """A downward rangefinder reading along the body z axis [m] (tilt-corrected here)."""
+        health = self.health
+        if not (math.isfinite(sample.time_s) and math.isfinite(sample.distance_m)):
+            health.nonfinite_rejected += 1
+            return
+        cfg = self.config.rangefinder
+        if not (cfg.min_m <= sample.distance_m <= cfg.max_m):
+            health.range_out_of_range += 1
+            return
+        att = self.aligner.attitude
+        if att is None or abs(sample.time_s - att.time_s) > self.config.staleness.attitude_s:
+            health.range_stale += 1
+            return
+        cos_tilt = self.aligner.cos_tilt
+        if cos_tilt < math.cos(cfg.max_tilt_rad):
+            health.range_out_of_range += 1
+            return
+        height_m = sample.distance_m * cos_tilt
+        if self.filter is None:
+            self._initialiser.add_height(height_m - self.dynamic.anchor_height_m)
+            return
+        if not self._fresh(sample.time_s, self.config.staleness.range_s):
+            health.range_stale += 1
+            return
+        fused = self.rangefinder.fuse(self.filter, height_m, self._time_s)
+        health.last_range_nis = self.filter.sensors["rangefinder"].last_nis
+        if fused:
+            health.range_fused += 1
+        elif self.rangefinder.status.gated:
+            health.range_gated = self.rangefinder.status.gated
+
+    # ------------------------------------------------------------------ the tick
+    def on_imu(self, sample: ImuSample) -> NavigationEstimate | None:
+        """Predict to the IMU time and fuse the force balance; the estimate (status
+        ``initialising`` with the reason until the first window gives a state), or ``None``
+        when the sample is rejected (non-finite, older than the filter)."""
+        aligned = self.aligner.align(sample)
+        health = self.health
+        if aligned is NONFINITE_INPUT:
+            health.nonfinite_rejected += 1
+            return None
+        t = sample.time_s
+        previous_s = self._time_s
+        if not math.isnan(previous_s):
+            if t < previous_s:
+                health.out_of_order += 1
+                return None
+            gap_s = t - previous_s
+            if gap_s > self.config.staleness.max_gap_s and self.filter is not None:
+                self._restart(f"IMU gap of {gap_s:.2f} s")
+        self._time_s = t
+        health.imu_ticks += 1
+        stale = aligned is STALE_ATTITUDE or aligned is STALE_PWM
+        if aligned is STALE_ATTITUDE:
+            health.stale_attitude += 1
+        elif aligned is STALE_PWM:
+            health.stale_pwm += 1
+        if self.filter is None:
+            return self._initialise_tick(aligned, stale)
+        self._predict(t - self._last_tick_s)
+        self._last_tick_s = t
+        if self.filter is None:  # the prediction diverged and restarted
+            return self._estimate(False, stale, False)
+        on_ground = False
+        accel_fused = False
+        if not stale:
+            assert isinstance(aligned, AlignedInputs)
+            on_ground = aligned.thrust_n < self.dynamic.min_thrust_fraction * self._weight_n
+            inputs = [*aligned.rotation_ned_to_body.ravel().tolist(), aligned.thrust_n]
+            accel_fused = self._fuse_accel(inputs, aligned, on_ground, t)
+            self._inputs = (
+                [*inputs[:9], *aligned.specific_force_body_mps2.tolist()]
+                if self._inertial
+                else inputs
+            )
+        self._check_divergence(t)
+        return self._estimate(accel_fused, stale, on_ground)
+
+    @property
+    def initialising_reason(self) -> str:
+        """Why there is no state yet (empty once initialised)."""
+        return "" if self.filter is not None else self._initialiser.reason
+
+    # ------------------------------------------------------------------ internals
+    def _fresh(self, time_s: float, bound_s: float) -> bool:
+        return not math.isnan(self._time_s) and abs(time_s - self._time_s) <= bound_s
+
+    def _initialise_tick(self, aligned: AlignedInputs | str, stale: bool) -> NavigationEstimate:
+        if stale:
+            return self._estimate(False, True, False)
+        assert isinstance(aligned, AlignedInputs)
+        t, force, rotation, thrust = aligned
+        self._initialiser.add_tick(t, force, rotation, thrust)
+        start = self._initialiser.try_start(t, self.constants.length_m)
+        if start.x is None:
+            return self._estimate(False, False, False)
+        process = (
+            InertialProcess(self.constants)
+            if self._inertial
+            else ForceBalanceProcess(self.constants)
+        )
+        gate = self.config.gate
+        self.filter = ExtendedKalmanFilter(
+            start.x,
+            start.p,
+            self._q,
+            process,
+            gate_probability=gate.probability,
+            max_consecutive_rejections=gate.max_consecutive_rejections,
+        )
+        self.health.initialisations += 1
+        inputs = [*rotation.ravel().tolist(), thrust]
+        self._inputs = [*inputs[:9], *force.tolist()] if self._inertial else inputs
+        self._last_tick_s = t
+        self._gated_since_s = math.nan
+        return self._estimate(False, False, False)
+
+    def _predict(self, dt_s: float) -> None:
+        kf = self.filter
+        assert kf is not None and self._inputs is not None
+        resets_before = kf.resets
+        try:
+            kf.predict(dt_s, np.array(self._inputs))
+        except ZeroDivisionError:  # the state reached the anchor: the cable model is undefined
+            self._restart("position at the anchor")
+            return
+        self.health.pd_repairs = kf.pd_repairs
+        if kf.resets != resets_before:
+            self._restart("state or covariance not finite")
+
+    def _fuse_accel(
+        self, inputs: list[float], aligned: AlignedInputs, on_ground: bool, t: float
+    ) -> bool:
+        health = self.health
+        status = self.accel.status
+        gated_before = status.gated
+        kf = self.filter
+        assert kf is not None
+        fused = self.accel.fuse(
+            kf, self.constants, inputs, aligned.specific_force_body_mps2, t, on_ground
+        )
+        health.on_ground = status.skipped_by_reason.get(ON_GROUND, 0)
+        health.near_anchor = status.skipped_by_reason.get(NEAR_ANCHOR, 0)
+        health.accel_gated = status.gated
+        if "accel" in kf.sensors:
+            health.last_accel_nis = kf.sensors["accel"].last_nis
+        if fused:
+            health.accel_fused += 1
+            self._gated_since_s = math.nan
+        elif status.gated != gated_before and math.isnan(self._gated_since_s):
+            self._gated_since_s = t
+        return fused
+
+    def _check_divergence(self, t: float) -> None:
+        kf = self.filter
+        if kf is None:
+            return
+        if not math.isnan(self._gated_since_s) and t - self._gated_since_s >= DIVERGED_AFTER_S:
+            self._restart(f"accelerometer innovations gated for {DIVERGED_AFTER_S:g} s")
+        elif float(np.dot(kf.x[state.POSITION], kf.x[state.POSITION])) > MAX_DISTANCE_M**2:
+            self._restart(f"position beyond {MAX_DISTANCE_M:g} m")
+
+    def _restart(self, reason: str) -> None:
+        """Drop the state and initialise again from fresh data; counted in reset_counter."""
+        self.filter = None
+        self._initialiser = self._new_initialiser()
+        self._resets += 1
+        self.health.resets = self._resets
+        self._reset_reason = f"filter restarted: {reason}"
+
+    def _estimate(self, accel_fused: bool, stale: bool, on_ground: bool) -> NavigationEstimate:
+        kf = self.filter
+        reset_reason, self._reset_reason = self._reset_reason, None
+        if kf is None:  # no state: zeros with a covariance that says "unknown"
+            x = np.zeros(state.N_STATES)
+            p = np.eye(state.N_STATES) * UNKNOWN_VARIANCE
+            tension, tension_var = 0.0, UNKNOWN_VARIANCE
+        else:
+            x, p = kf.x, kf.P
+            c = self.constants
+            try:
+                (tension,), jac = c.models.tension(x.tolist(), (), c.values())
+                jac_row = np.array(jac)
+                tension_var = float(jac_row @ p @ jac_row)
+            except ZeroDivisionError:  # exactly at the anchor: the chord term alone
+                tension, tension_var = float(x[state.TENSION]), float(p[6, 6])
+        status, reason = assess(
+            initialised_reason=None if kf is not None else self._initialiser.reason,
+            reset_reason=reset_reason,
+            on_ground=on_ground,
+            inputs_stale=stale,
+            tension_n=tension,
+            slack_tension_n=self.dynamic.slack_tension_n,
+            position_covariance_m2=p[state.POSITION, state.POSITION],
+            max_horizontal_std_m=self.dynamic.max_horizontal_std_m,
+        )
+        return NavigationEstimate(
+            time_s=self._time_s,
+            position_ned_m=x[state.POSITION].copy(),
+            velocity_ned_mps=x[state.VELOCITY].copy(),
+            position_velocity_covariance=p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy(),
+            tension_n=float(tension),
+            tension_variance_n2=tension_var,
+            reset_counter=self._resets,
+            status=status,
+            reason=reason,
+            accel_fused=accel_fused,
+            thrust_scale=float(x[state.SCALE]),
+            accel_bias_body_mps2=x[state.BIAS].copy(),
+            wind_ne_mps=x[state.WIND].copy(),
+            health_values=self.health.values(),
+            health_type=DynamicHealth,
+        )

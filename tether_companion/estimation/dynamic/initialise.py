@@ -1,0 +1,283 @@
+"""Start the dynamic filter from its first second of data: no initial guess needed.
+
+Over a window of IMU ticks (``initial.window_s``), with the drone assumed near rest on
+average, the cable's force per unit mass in NED is what the accelerometer reads beyond
+thrust, drag and bias:
+
+    c = mean(R^T f) - mean(R^T) b + s mean(R^T e_z T / m) - mu mean(R^T diag(1,1,0) R) w
+
+(``f`` specific force, FRD body; ``T`` thrust from the map, ``s`` its scale; ``b`` bias;
+``w`` wind). The chord part ``F_ch = m c - (w_c L / 2) e_d`` points from the drone to the
+anchor: ``u = -F_ch/|F_ch|``; the rangefinder's height above the anchor ``h`` places the
+drone at ``p = u h / (-u_d)`` (or a winch length ``L`` at ``p = L u`` without a height), and
+``T_ch = |F_ch|``. The prior of everything the window cannot measure (``s``, ``b``, ``w``
+from the config; the accelerometer's and the rangefinder's noise averaged over the window)
+is mapped through this construction by central differences, so the initial covariance
+carries the correlations (position with thrust scale, bias and wind) that let later data
+correct the position when those become known. In a steady hover they do not: the thrust
+scale trades against the cable's vertical pull and the wind against its horizontal pull, and
+the covariance says so.
+
+Not possible yet (reported, and the window starts again): no height and no winch length,
+thrust far below the weight (on the ground), cable slack, or a cable that does not rise to the
+drone when only a height is known.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.constants import GRAVITY_MPS2
+from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.config import DynamicFilterConfig
+
+FloatArray = NDArray[np.float64]
+
+_THETA = 13
+"""Parameters of the construction: A (3), s, b (3), w (2), h, L, and two spare (zero)."""
+_A, _S, _B, _W, _H, _L = slice(0, 3), 3, slice(4, 7), slice(7, 9), 9, 10
+_MIN_RISE = 0.1
+"""``-u_d`` below this: the cable is too close to horizontal for a height to place the drone."""
+_REL_STEP = 1e-6
+
+
+@dataclass(frozen=True, slots=True)
+class Initialisation:
+    """A starting state and covariance, or why there is none yet (``x`` is None)."""
+
+    x: FloatArray | None
+    p: FloatArray | None
+    reason: str
+
+
+class Initialiser:
+    """Accumulates the first window of aligned ticks and heights; :meth:`try_start` solves.
+
+    Parameters
+    ----------
+    config
+        The dynamic filter's settings (priors, window, slack and thrust thresholds).
+    mass_kg
+        Vehicle mass [kg].
+    drag_per_s
+        Rotor drag coefficient ``mu`` [1/s].
+    accel_std_mps2
+        Accelerometer noise per axis per tick [m/s^2].
+    range_std_m
+        Rangefinder noise per reading [m].
+    """
+
+    def __init__(
+        self,
+        config: DynamicFilterConfig,
+        mass_kg: float,
+        drag_per_s: float,
+        accel_std_mps2: float,
+        range_std_m: float,
+    ) -> None:
+        self.config = config
+        self.mass_kg = mass_kg
+        self.drag_per_s = drag_per_s
+        self.accel_std_mps2 = accel_std_mps2
+        self.range_std_m = range_std_m
+        self.reason = "waiting for the first second of data"
+        self._restart(math.nan)
+
+    def _restart(self, time_s: float) -> None:
+        self._start_s = time_s
+        self._n = 0
+        self._sum_a = np.zeros(3)
+        self._sum_r = np.zeros((3, 3))
+        self._sum_e = np.zeros(3)
+        self._sum_d = np.zeros((3, 3))
+        self._sum_thrust = 0.0
+        self._n_height = 0
+        self._sum_height = 0.0
+        self._latest_height = math.nan
+        self._snap_t: list[float] = []
+        self._snap_p: list[FloatArray] = []
+
+    def add_tick(
+        self,
+        time_s: float,
+        specific_force_body: FloatArray,
+        rotation_ned_to_body: FloatArray,
+        thrust_n: float,
+    ) -> None:
+        """One aligned IMU tick (specific force [m/s^2] FRD, ``R_v^b``, thrust [N])."""
+        if math.isnan(self._start_s):
+            self._start_s = time_s
+        rt = rotation_ned_to_body.T
+        self._n += 1
+        self._sum_a += rt @ specific_force_body
+        self._sum_r += rt
+        self._sum_e += rt[:, 2] * (thrust_n / self.mass_kg)
+        horizontal = rt[:, :2] @ rotation_ned_to_body[:2, :]
+        self._sum_d += horizontal
+        self._sum_thrust += thrust_n
+        if not math.isnan(self._latest_height):
+            force = self.mass_kg * (rt @ specific_force_body + rt[:, 2] * (thrust_n / self.mass_kg))
+            snapshot = self._place(force, self._latest_height, math.nan)
+            if snapshot is not None:
+                self._snap_t.append(time_s)
+                self._snap_p.append(snapshot[:3])
+
+    def add_height(self, height_above_anchor_m: float) -> None:
+        """One rangefinder height above the anchor [m] (tilt-corrected, anchor height off)."""
+        self._n_height += 1
+        self._sum_height += height_above_anchor_m
+        self._latest_height = height_above_anchor_m
+
+    def try_start(self, time_s: float, length_m: float = math.nan) -> Initialisation:
+        """The starting state once the window is full, else why not (``x`` None).
+
+        ``length_m``: the winch's paid-out length [m] when known (``nan`` otherwise).
+        """
+        cfg = self.config
+        if self._n == 0 or time_s - self._start_s < cfg.initial.window_s:
+            return self._not_yet(self.reason)
+        n = self._n
+        weight_n = self.mass_kg * GRAVITY_MPS2
+        mean_thrust = self._sum_thrust / n
+        height = self._sum_height / self._n_height if self._n_height else math.nan
+        if mean_thrust < cfg.min_thrust_fraction * weight_n:
+            return self._again(
+                time_s,
+                f"thrust {mean_thrust:.1f} N below {cfg.min_thrust_fraction:.0%} of the "
+                f"weight: on the ground",
+            )
+        if math.isnan(height) and math.isnan(length_m):
+            return self._again(time_s, "no rangefinder height and no winch length yet")
+        theta = np.zeros(_THETA)
+        theta[_A] = self._sum_a / n
+        theta[_S] = 1.0
+        theta[_H] = height
+        theta[_L] = length_m
+        y = self._solve(theta)
+        if y is None or not np.all(np.isfinite(y)):
+            return self._again(time_s, "the cable does not rise to the drone: no height fix")
+        if y[3] < cfg.slack_tension_n:
+            return self._again(
+                time_s, f"cable slack (chord tension {y[3]:.2f} N < {cfg.slack_tension_n} N)"
+            )
+        x, p = self._state_and_covariance(theta, y, n)
+        if x is None or p is None:
+            return self._again(time_s, "initial covariance not finite (geometry degenerate)")
+        motion = self._fitted_motion(time_s)
+        if motion is not None:  # the window's motion: position now and velocity
+            position, velocity, velocity_se = motion
+            x[state.POSITION] = position
+            x[state.VELOCITY] = velocity
+            p[state.VELOCITY, state.VELOCITY] = np.eye(3) * max(
+                velocity_se**2, cfg.initial.velocity_std_mps**2 * 0.25
+            )
+        self.reason = ""
+        return Initialisation(x, p, "")
+
+    # ------------------------------------------------------------------ internals
+    def _not_yet(self, reason: str) -> Initialisation:
+        self.reason = reason
+        return Initialisation(None, None, reason)
+
+    def _again(self, time_s: float, reason: str) -> Initialisation:
+        self._restart(time_s)
+        return self._not_yet(reason)
+
+    def _solve(self, theta: FloatArray) -> FloatArray | None:
+        """``(p_n, p_e, p_d, T_ch)`` from the parameters, or None (no rising cable)."""
+        n = self._n
+        c = (
+            theta[_A]
+            - (self._sum_r / n) @ theta[_B]
+            + theta[_S] * (self._sum_e / n)
+            - self.drag_per_s * ((self._sum_d / n)[:, :2] @ theta[_W])
+        )
+        return self._place(self.mass_kg * c, theta[_H], theta[_L])
+
+    def _place(self, force: FloatArray, height: float, length: float) -> FloatArray | None:
+        """``(p_n, p_e, p_d, T_ch)`` of a cable force on the drone ``force`` (NED [N]) with
+        the drone ``height`` [m] above the anchor and/or a cable ``length`` [m] (``nan``:
+        unknown); None when the cable does not rise to the drone."""
+        half_weight = 0.5 * self.config.cable_weight_n_per_m
+        known_length = not math.isnan(length)
+        distance = length if known_length else (height if not math.isnan(height) else 0.0)
+        position = np.zeros(3)
+        tension = 0.0
+        for _ in range(8):  # the chord length feeds the weight term: fixed point
+            chord = force - np.array((0.0, 0.0, half_weight * distance))
+            tension = float(np.linalg.norm(chord))
+            if tension <= 0.0:
+                return None
+            u = -chord / tension
+            if not math.isnan(height):
+                if -u[2] < _MIN_RISE:
+                    return None
+                span = height / -u[2]
+            else:
+                span = length
+            distance = length if known_length else span
+            position = u * span
+        return np.array((*position, tension))
+
+    def _fitted_motion(self, time_s: float) -> tuple[FloatArray, FloatArray, float] | None:
+        """Position [m] and velocity [m/s] at ``time_s`` from a quadratic fit of the
+        window's per-tick positions, and the velocity's standard error [m/s]."""
+        if len(self._snap_t) < 10:
+            return None
+        t = np.asarray(self._snap_t) - time_s
+        design = np.stack((np.ones_like(t), t, t * t), axis=1)
+        coef, *_ = np.linalg.lstsq(design, np.asarray(self._snap_p), rcond=None)
+        residual = np.asarray(self._snap_p) - design @ coef
+        sigma = float(np.sqrt(np.mean(residual**2)))
+        # standard error of the slope at t = 0 (the window's end), per axis
+        slope_se = float(sigma * np.sqrt(np.linalg.inv(design.T @ design)[1, 1]))
+        return coef[0], coef[1], slope_se
+
+    def _state_and_covariance(
+        self, theta: FloatArray, y: FloatArray, n: int
+    ) -> tuple[FloatArray | None, FloatArray | None]:
+        cfg = self.config
+        init = cfg.initial
+        sigma = np.zeros(_THETA)
+        sigma[_A] = self.accel_std_mps2 / math.sqrt(n)
+        sigma[_S] = init.thrust_scale_std
+        sigma[_B] = init.accel_bias_std_mps2
+        sigma[_W] = init.wind_std_mps
+        sigma[_H] = self.range_std_m / math.sqrt(max(self._n_height, 1))
+        sigma[_L] = cfg.winch_length_noise_std_m
+        active = [i for i in range(_THETA) if math.isfinite(theta[i]) and sigma[i] > 0.0]
+        jac = np.zeros((4, _THETA))
+        for i in active:
+            step = _REL_STEP * max(1.0, abs(theta[i]))
+            plus, minus = theta.copy(), theta.copy()
+            plus[i] += step
+            minus[i] -= step
+            y_plus, y_minus = self._solve(plus), self._solve(minus)
+            if y_plus is None or y_minus is None:
+                return None, None
+            jac[:, i] = (y_plus - y_minus) / (2.0 * step)
+        # rows: p (3), T_ch, s, b (3), w (2) as functions of theta
+        rows = np.zeros((10, _THETA))
+        rows[0:4] = jac
+        rows[4, _S] = 1.0
+        rows[5:8, _B] = np.eye(3)
+        rows[8:10, _W] = np.eye(2)
+        theta_cov = np.diag(np.where(np.isfinite(sigma), sigma, 0.0) ** 2)
+        joint = rows @ theta_cov @ rows.T
+        order = [0, 1, 2, state.TENSION, state.SCALE, 8, 9, 10, 11, 12]
+        p = np.zeros((state.N_STATES, state.N_STATES))
+        p[np.ix_(order, order)] = joint
+        p[state.VELOCITY, state.VELOCITY] = np.eye(3) * init.velocity_std_mps**2
+        p += np.eye(state.N_STATES) * 1e-9  # keep it positive definite when a prior is exact
+        p = 0.5 * (p + p.T)
+        if not np.all(np.isfinite(p)):
+            return None, None
+        x = np.zeros(state.N_STATES)
+        x[state.POSITION] = y[:3]
+        x[state.TENSION] = y[3]
+        x[state.SCALE] = 1.0
+        return x, p

@@ -1,0 +1,47 @@
+"""State layout of the dynamic tether filter, declared once (the derivation and the filter
+both read it).
+
+==========  =====  ==========================================================  ========
+name        index  meaning                                                     unit
+==========  =====  ==========================================================  ========
+position    0-2    drone relative to the tether anchor, NED                    m
+velocity    3-5    drone velocity, NED                                         m/s
+tension     6      chord tension: cable force on the drone along the chord     N
+                   (anchor to drone), the catenary's weight term aside
+scale       7      thrust scale: true thrust / thrust map's (battery sag,      1
+                   map error)
+bias        8-10   accelerometer bias, FRD body                                m/s^2
+wind        11-12  wind north, east                                            m/s
+==========  =====  ==========================================================  ========
+"""
+
+from __future__ import annotations
+
+NAMES: tuple[str, ...] = (
+    "p_n",
+    "p_e",
+    "p_d",
+    "v_n",
+    "v_e",
+    "v_d",
+    "tension",
+    "scale",
+    "b_x",
+    "b_y",
+    "b_z",
+    "wind_n",
+    "wind_e",
+)
+"""State component names in order (also the sympy symbols' names)."""
+N_STATES = len(NAMES)
+
+POSITION = slice(0, 3)
+VELOCITY = slice(3, 6)
+POSITION_VELOCITY = slice(0, 6)
+TENSION = 6
+SCALE = 7
+BIAS = slice(8, 11)
+WIND = slice(11, 13)
+
+ROTATION_INPUTS = 9
+"""The first nine inputs of every model: ``R_v^b`` (NED to FRD body) row by row."""

@@ -25,7 +25,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from tether_companion.commands import int_at_least
+from tether_companion.commands import float_at_least, int_at_least
 from tether_companion.estimation.config import EstimatorConfig, load_estimator_config
 from tether_companion.estimation.metrics import AXES, rmse
 from tether_companion.estimation.runner import run_scenario
@@ -67,13 +67,6 @@ TARGETS_4S = {"north_m": 0.30, "east_m": 0.30, "down_m": 0.07, "tension_n": 0.12
 TARGET_TENSIONS_N = (2.0, 4.0, 10.0)
 
 
-def _non_negative_float(text: str) -> float:
-    value = float(text)
-    if not (value >= 0.0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
-    return value
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Seeds, output format, quick mode, estimator config, parallel jobs."""
     parser.add_argument(
@@ -99,7 +92,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--jobs", type=int_at_least(1), default=min(2, os.cpu_count() or 1), help="worker processes"
     )
     parser.add_argument(
-        "--settle", type=_non_negative_float, default=5.0, help="settled RMSE starts here [s]"
+        "--settle", type=float_at_least(0.0), default=5.0, help="settled RMSE starts here [s]"
     )
     parser.add_argument("--no-sweeps", action="store_true", help="Table 2 only")
 

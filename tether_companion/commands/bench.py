@@ -19,6 +19,7 @@ BENCHMARKS: tuple[str, ...] = (
     "emulator",
     "latency",
     "sysid",
+    "estimators",
 )
 """Benchmark names, one per line, in the order ``bench --help`` lists them."""
 

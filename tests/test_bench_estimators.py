@@ -1,0 +1,220 @@
+"""``bench estimators``: NEES and band against closed forms, a tiny scorecard on a local Dask
+cluster, the same numbers through a scheduler started here, bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tether_companion.bench.estimators import cluster
+from tether_companion.bench.estimators.registry import kinds
+from tether_companion.bench.estimators.scores import (
+    converge_time_s,
+    nees,
+    nees_band,
+    share_in_band,
+)
+from tether_companion.cli import main
+
+TINY = [
+    "bench",
+    "estimators",
+    "--seeds",
+    "2",
+    "--duration-s",
+    "4",
+    "--settle-s",
+    "1",
+    "--scenario",
+    "hover",
+    "--json",
+]
+
+
+def _random_spd(rng: np.random.Generator, n: int) -> np.ndarray:
+    a = rng.standard_normal((n, 3, 3))
+    return a @ np.transpose(a, (0, 2, 1)) + 0.1 * np.eye(3)
+
+
+def test_nees_is_the_quadratic_form_and_nan_where_undefined():
+    rng = np.random.default_rng(3)
+    cov = _random_spd(rng, 5)
+    err = rng.standard_normal((5, 3))
+    expected = [float(e @ np.linalg.inv(p) @ e) for e, p in zip(err, cov, strict=True)]
+    err[4] = np.nan
+    cov[3] = np.nan
+    got = nees(err, cov)
+    np.testing.assert_allclose(got[:3], expected[:3], rtol=1e-10)
+    assert math.isnan(got[3]) and math.isnan(got[4])
+    singular = np.zeros((1, 3, 3))
+    assert math.isnan(nees(np.ones((1, 3)), singular)[0])
+
+
+def test_nees_band_is_the_chi_square_quantiles():
+    """chi2(3) 2.5 % / 97.5 %: 0.2158 / 9.348; 10 runs: chi2(30) / 10 = 1.679 / 4.698."""
+    low, high = nees_band(1)
+    assert (float(low), float(high)) == pytest.approx((0.2158, 9.3484), abs=1e-4)
+    low, high = nees_band(10)
+    assert (float(low), float(high)) == pytest.approx((1.6791, 4.6979), abs=1e-4)
+
+
+def test_consistent_errors_lie_in_the_band_95_percent_of_the_time():
+    """Errors drawn from the stated covariance: the 10-run average is in its band ~95 % of
+    ticks (binomial sd over 4000 ticks: 0.35 %); errors twice as large almost never."""
+    rng = np.random.default_rng(7)
+    runs, ticks = 10, 4000
+    cov = _random_spd(rng, ticks)
+    chol = np.linalg.cholesky(cov)
+    values = np.empty((runs, ticks))
+    for r in range(runs):
+        err = np.einsum("tij,tj->ti", chol, rng.standard_normal((ticks, 3)))
+        values[r] = nees(err, cov)
+    assert share_in_band(values) == pytest.approx(0.95, abs=0.015)
+    assert share_in_band(4.0 * values) < 0.02
+    values[:5, :100] = np.nan  # fewer runs on some ticks: their band widens, share stays
+    assert share_in_band(values) == pytest.approx(0.95, abs=0.015)
+    assert math.isnan(share_in_band(np.full((2, 3), np.nan)))
+
+
+def test_converge_time():
+    t = np.arange(6) * 1.0
+    assert converge_time_s(t, np.array([2, 1, 0.4, 0.6, 0.1, 0.1]), 0.5) == 4.0
+    assert converge_time_s(t, np.full(6, 0.1), 0.5) == 0.0
+    assert converge_time_s(t, np.array([0.1, 0.1, 0.1, 0.1, 0.1, 0.9]), 0.5) == math.inf
+    assert math.isnan(converge_time_s(t, np.full(6, np.nan), 0.5))
+
+
+def test_builtin_kinds_are_registered():
+    registry = kinds()
+    assert {"ekf-4s", "ekf-3s", "catenary"} <= set(registry)
+
+
+def _run_json(capsys, argv: list[str]) -> dict:
+    assert main(argv) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+@pytest.fixture(scope="module")
+def local_card():
+    """The tiny scorecard on a local cluster of one process (computed once)."""
+    import contextlib
+    import io
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main([*TINY, "--workers", "1"]) == 0
+    return json.loads(out.getvalue())
+
+
+def test_tiny_scorecard_on_a_local_cluster(local_card):
+    card = local_card["scenarios"]["hover"]
+    assert set(card) == set(kinds())
+    assert local_card["seeds"] == [1, 2] and local_card["flights"] == 2
+    for name, cell in card.items():
+        assert cell["seeds"] == 2
+        assert 0.0 <= cell["share_published"] <= 1.0
+        assert cell["crlb_horizontal_m"] > 0.0 and cell["crlb_vertical_m"] > 0.0
+        assert cell["horizontal_rmse_m"] < 1.0, name  # hover at 4 N: every kind is close
+        assert cell["nees_mean"] > 0.0
+        assert cell["velocity_rmse_mps"] is None  # none of these has a velocity
+    assert card["ekf-3s"]["tension_rmse_n"] is None
+    assert card["ekf-4s"]["tension_rmse_n"] < 0.5
+
+
+def test_unknown_estimator_and_empty_window_exit_2(capsys):
+    assert main([*TINY, "--estimator", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert "'nope' is not a registered kind" in err and err.count("\n") == 1
+    assert main([*TINY, "--settle-s", "4"]) == 2
+    assert "leaves nothing to score" in capsys.readouterr().err
+    assert main([*TINY, "--scenario", "no-such-scenario"]) == 2
+    with pytest.raises(SystemExit) as exit_info:
+        main([*TINY, "--seeds", "0"])
+    assert exit_info.value.code == 2
+
+
+def test_without_distributed_exits_2_saying_what_to_install(capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import raises ImportError
+    assert main(TINY) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "pip install 'tether-companion[bench]'" in err
+
+
+def test_unreachable_scheduler_exits_2(capsys, monkeypatch):
+    monkeypatch.setattr(cluster, "CONNECT_TIMEOUT_S", 1.0)
+    assert main([*TINY, "--scheduler", "tcp://127.0.0.1:9"]) == 2
+    err = capsys.readouterr().err
+    assert "cannot reach the dask scheduler at 'tcp://127.0.0.1:9'" in err
+    assert err.count("\n") == 1
+
+
+def _wait_for(path: Path, process: subprocess.Popen, timeout_s: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not path.exists():
+        if process.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(f"{process.args} did not start (exit {process.poll()})")
+        time.sleep(0.1)
+
+
+@pytest.mark.integration
+def test_scheduler_gives_the_local_numbers(local_card, tmp_path, capsys):
+    """A dask scheduler and one worker as real processes on 127.0.0.1; the same seeds give
+    the same scorecard as the local cluster, to the last digit."""
+    scheduler_file = tmp_path / "scheduler.json"
+    common = ["--no-dashboard"]
+    scheduler = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "distributed.cli.dask_scheduler",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            "0",
+            "--scheduler-file",
+            str(scheduler_file),
+            *common,
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    worker = None
+    try:
+        _wait_for(scheduler_file, scheduler)
+        address = json.loads(scheduler_file.read_text())["address"]
+        assert address.startswith("tcp://127.0.0.1:")
+        worker = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "distributed.cli.dask_worker",
+                address,
+                "--nworkers",
+                "1",
+                "--nthreads",
+                "1",
+                "--host",
+                "127.0.0.1",
+                *common,
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        remote = _run_json(capsys, [*TINY, "--scheduler", address])
+    finally:
+        for process in (worker, scheduler):
+            if process is not None:
+                process.terminate()
+                try:
+                    process.wait(timeout=20)
+                except subprocess.TimeoutExpired:
+                    process.kill()
+    assert remote["scheduler"] == address and remote["workers"] == 1
+    assert remote["scenarios"] == local_card["scenarios"]

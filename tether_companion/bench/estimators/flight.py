@@ -1,0 +1,166 @@
+"""One simulated flight with every estimator kind riding along: truth and outputs per IMU tick.
+
+The scenario is flown once by :class:`~tether_companion.sim.simulator.Simulator`; its samples
+are handed to each kind in time order (the schedule of
+:mod:`~tether_companion.estimation.runner`: attitude, PWM, rangefinder, then the ground
+station and the IMU at each instant). Pure and synchronous; runs on a Dask worker.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.bench.estimators.registry import (
+    EstimatorKind,
+    FlightContext,
+    GroundStation,
+)
+from tether_companion.estimation.runner import _ATTITUDE, _IMU, _PWM, _RANGE, _schedule
+from tether_companion.physics.vehicle import load_vehicle
+from tether_companion.sim.scenario import Scenario
+from tether_companion.sim.simulator import Simulator
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class KindTrace:
+    """One kind's outputs at every IMU tick (``nan`` rows where it had none).
+
+    Attributes
+    ----------
+    position_ned_m, position_covariance_m2
+        Shapes (N, 3) [m] and (N, 3, 3) [m^2].
+    velocity_ned_mps
+        Shape (N, 3) [m/s].
+    tension_n, tension_variance_n2
+        Shapes (N,) [N], [N^2].
+    published
+        Shape (N,), bool.
+    """
+
+    position_ned_m: FloatArray
+    position_covariance_m2: FloatArray
+    velocity_ned_mps: FloatArray
+    tension_n: FloatArray
+    tension_variance_n2: FloatArray
+    published: NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class FlightRecord:
+    """Truth and every kind's trace at the IMU ticks of one flight.
+
+    Attributes
+    ----------
+    time_s
+        Tick times, shape (N,) [s].
+    position_ned_m, velocity_ned_mps, euler_rad
+        True position [m], velocity [m/s], (roll, pitch, yaw) [rad], shapes (N, 3).
+    tension_n, thrust_n
+        True cable tension at the drone and total rotor thrust, shapes (N,) [N].
+    range_seen
+        Whether a rangefinder sample was produced since the previous tick, shape (N,).
+    traces
+        Kind name -> :class:`KindTrace`.
+    """
+
+    time_s: FloatArray
+    position_ned_m: FloatArray
+    velocity_ned_mps: FloatArray
+    euler_rad: FloatArray
+    tension_n: FloatArray
+    thrust_n: FloatArray
+    range_seen: NDArray[np.bool_]
+    traces: dict[str, KindTrace]
+
+
+def fly(scenario: Scenario, kinds: list[EstimatorKind]) -> FlightRecord:
+    """Fly ``scenario`` (seeded by ``scenario.seed``) with every kind in ``kinds``."""
+    sim = Simulator(scenario)
+    context = FlightContext(scenario, load_vehicle(scenario.vehicle), sim.gravity_mps2)
+    estimators = [kind.build(context) for kind in kinds]
+    schedule = _schedule(scenario)
+    n = sum(1 for _, what in schedule if what == _IMU)
+    time_s = np.empty(n)
+    truth = {name: np.empty((n, 3)) for name in ("position", "velocity", "euler")}
+    tension, thrust = np.empty(n), np.empty(n)
+    range_seen = np.zeros(n, dtype=bool)
+    outputs = [_empty_trace(n) for _ in kinds]
+    tick = 0
+    seen = False
+    dt_s = sim.physics_dt_s
+    for step, what in schedule:
+        sim.advance_to(step * dt_s)
+        if what == _ATTITUDE:
+            attitude = sim.read_attitude()
+            for estimator in estimators:
+                estimator.on_attitude(attitude)
+        elif what == _PWM:
+            pwm = sim.read_pwm()
+            for estimator in estimators:
+                estimator.on_pwm(pwm)
+        elif what == _RANGE:
+            reading = sim.read_rangefinder()
+            if reading is not None:
+                seen = True
+                for estimator in estimators:
+                    estimator.on_range(reading)
+        else:
+            imu = sim.read_imu()
+            state = sim.truth
+            station = GroundStation(imu.time_s, state.tension_n, sim.cable.paid_out_m)
+            time_s[tick] = imu.time_s
+            truth["position"][tick] = state.position_ned_m
+            truth["velocity"][tick] = state.velocity_ned_m_s
+            truth["euler"][tick] = state.euler_rad
+            tension[tick] = state.tension_n
+            thrust[tick] = float(state.motor_thrust_n.sum())
+            range_seen[tick] = seen
+            seen = False
+            for estimator, out in zip(estimators, outputs, strict=True):
+                estimator.on_ground_station(station)
+                result = estimator.on_imu(imu)
+                if result is not None:
+                    out["position"][tick] = result.position_ned_m
+                    out["covariance"][tick] = result.position_covariance_m2
+                    out["velocity"][tick] = result.velocity_ned_mps
+                    out["tension"][tick] = result.tension_n
+                    out["tension_variance"][tick] = result.tension_variance_n2
+                    out["published"][tick] = result.published
+            tick += 1
+    return FlightRecord(
+        time_s=time_s,
+        position_ned_m=truth["position"],
+        velocity_ned_mps=truth["velocity"],
+        euler_rad=truth["euler"],
+        tension_n=tension,
+        thrust_n=thrust,
+        range_seen=range_seen,
+        traces={
+            kind.name: KindTrace(
+                position_ned_m=out["position"],
+                position_covariance_m2=out["covariance"],
+                velocity_ned_mps=out["velocity"],
+                tension_n=out["tension"],
+                tension_variance_n2=out["tension_variance"],
+                published=out["published"],
+            )
+            for kind, out in zip(kinds, outputs, strict=True)
+        },
+    )
+
+
+def _empty_trace(n: int) -> dict[str, np.ndarray]:
+    return {
+        "position": np.full((n, 3), math.nan),
+        "covariance": np.full((n, 3, 3), math.nan),
+        "velocity": np.full((n, 3), math.nan),
+        "tension": np.full(n, math.nan),
+        "tension_variance": np.full(n, math.nan),
+        "published": np.zeros(n, dtype=bool),
+    }

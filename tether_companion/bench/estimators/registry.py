@@ -1,0 +1,179 @@
+"""What the scorecard needs from an estimator, and the registry of estimator kinds.
+
+An *estimator kind* is anything that can ride along a simulated flight: the scorecard
+(``tether-companion bench estimators``) flies a scenario once and hands every kind the same
+samples, in time order, through the :class:`FlightEstimator` methods. At each IMU tick the
+kind returns a :class:`TickOutput` (or ``None`` when it has nothing this tick) that the
+scorecard compares with the simulator's truth.
+
+A kind registers itself with :func:`register` in a *provider* module listed in
+:data:`PROVIDERS`; :func:`kinds` imports the providers on first use. To add an estimator::
+
+    # tether_companion/estimation/dynamic/scorecard.py (say)
+    from tether_companion.bench.estimators.registry import EstimatorKind, register
+
+    register(EstimatorKind(name="dynamic", label="dynamic EKF", build=_build, ...))
+
+and add the module's dotted path to :data:`PROVIDERS` (one line).
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.physics.vehicle import VehicleProfile
+from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
+from tether_companion.sim.scenario import Scenario
+
+FloatArray = NDArray[np.float64]
+
+KNOWN_TENSION = "known_tension"
+UNKNOWN_TENSION = "unknown_tension"
+CRLB_MODELS = (KNOWN_TENSION, UNKNOWN_TENSION)
+"""Which posterior Cramer-Rao bound an estimator is compared with: the position-only bound
+(tension given by a load cell) or the position + tension bound (see ``estimation/crlb.py``)."""
+
+PROVIDERS: tuple[str, ...] = ("tether_companion.bench.estimators.builtin",)
+"""Modules that call :func:`register` when imported, one per line."""
+
+
+@dataclass(frozen=True, slots=True)
+class GroundStation:
+    """What the ground station knows at ``time_s`` [s]: handed to every kind each IMU tick.
+
+    Attributes
+    ----------
+    time_s
+        Flight-controller time [s].
+    tension_n
+        Load-cell reading of the cable tension at the drone end [N] (the simulator's truth).
+    paid_out_m
+        Cable length paid out by the winch [m].
+    """
+
+    time_s: float
+    tension_n: float
+    paid_out_m: float
+
+
+_NAN3 = np.full(3, math.nan)
+_NAN33 = np.full((3, 3), math.nan)
+
+
+@dataclass(frozen=True, slots=True)
+class TickOutput:
+    """One estimator's output at an IMU tick (SI units, NED from the anchor).
+
+    Attributes
+    ----------
+    position_ned_m
+        Position estimate, shape (3,) [m].
+    position_covariance_m2
+        Its covariance, shape (3, 3) [m^2]; ``nan`` when the kind has none.
+    published
+        Whether the service would send this position to the flight controller now.
+    tension_n, tension_variance_n2
+        Tension estimate [N] and its variance [N^2] (``nan`` when the kind has none).
+    velocity_ned_mps, velocity_covariance_m2ps2
+        Velocity estimate, shape (3,) [m/s] and covariance (3, 3) [m^2/s^2] (``nan`` if none).
+    """
+
+    position_ned_m: FloatArray
+    position_covariance_m2: FloatArray
+    published: bool
+    tension_n: float = math.nan
+    tension_variance_n2: float = math.nan
+    velocity_ned_mps: FloatArray = field(default_factory=lambda: _NAN3)
+    velocity_covariance_m2ps2: FloatArray = field(default_factory=lambda: _NAN33)
+
+
+class FlightEstimator(Protocol):
+    """The samples of a flight, in time order (samples due at one instant: attitude, PWM,
+    range, ground station, then IMU)."""
+
+    def on_attitude(self, sample: AttitudeSample) -> None:
+        """The flight controller's attitude."""
+
+    def on_pwm(self, sample: PwmSample) -> None:
+        """The motor outputs."""
+
+    def on_range(self, sample: RangeSample) -> None:
+        """A downward rangefinder reading."""
+
+    def on_ground_station(self, station: GroundStation) -> None:
+        """The ground station's load cell and winch (every IMU tick, before ``on_imu``)."""
+
+    def on_imu(self, sample: ImuSample) -> TickOutput | None:
+        """Tick at the IMU rate; the estimate now, or ``None`` when there is none."""
+
+
+@dataclass(frozen=True, slots=True)
+class FlightContext:
+    """What a kind may know before the flight: the scenario (for ground-station facts such
+    as the cable's weight) and the *nominal* vehicle profile (not the simulator's truth)."""
+
+    scenario: Scenario
+    vehicle: VehicleProfile
+    gravity_mps2: float
+
+
+@dataclass(frozen=True)
+class EstimatorKind:
+    """An estimator the scorecard can run.
+
+    Attributes
+    ----------
+    name
+        Short key used on the command line and in JSON (``ekf-4s``).
+    label
+        Column header in the tables.
+    build
+        Makes a fresh estimator for one flight.
+    crlb_model
+        One of :data:`CRLB_MODELS`.
+    has_velocity, has_tension
+        Whether its velocity / tension is scored.
+    description
+        One sentence for ``--help`` and the docs.
+    """
+
+    name: str
+    label: str
+    build: Callable[[FlightContext], FlightEstimator]
+    crlb_model: str
+    has_velocity: bool
+    has_tension: bool
+    description: str
+
+    def __post_init__(self) -> None:
+        if self.crlb_model not in CRLB_MODELS:
+            raise ValueError(f"crlb_model must be one of {CRLB_MODELS}, got {self.crlb_model!r}")
+
+
+_KINDS: dict[str, EstimatorKind] = {}
+_loaded = False
+
+
+def register(kind: EstimatorKind) -> EstimatorKind:
+    """Add ``kind`` to the registry (its name must be new); returns it."""
+    if kind.name in _KINDS and _KINDS[kind.name] is not kind:
+        raise ValueError(f"estimator kind {kind.name!r} is already registered")
+    _KINDS[kind.name] = kind
+    return kind
+
+
+def kinds() -> dict[str, EstimatorKind]:
+    """Every registered kind by name, in registration order (providers imported once)."""
+    global _loaded
+    if not _loaded:
+        for module in PROVIDERS:
+            importlib.import_module(module)
+        _loaded = True
+    return dict(_KINDS)

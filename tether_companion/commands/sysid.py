@@ -71,6 +71,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--seed", type=int, default=0, help="noise seed of the emulated flight")
     parser.add_argument(
+        "--from-params",
+        action="append",
+        type=Path,
+        metavar="FILE",
+        help="instead of fitting: write the vehicle profile the autopilot's parameters define "
+        "(.tlog PARAM_VALUE, .bin PARM, .ulg, .parm; repeat to merge) to --out; needs --mass-kg",
+    )
+    parser.add_argument("--mass-kg", type=float, help="take-off mass for --from-params [kg]")
+    parser.add_argument(
         "--fly-tension-n", type=float, default=0.0, help="cable tension in the emulated flight [N]"
     )
 
@@ -78,6 +87,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Fit, print the table, write the model; 0 on success."""
     console = Console()
+    if args.from_params:
+        return write_profile_from_parameters(args, console)
     vehicle = load_vehicle(args.vehicle)
     if args.k_steps < 1:
         raise InputError(f"--k-steps must be >= 1, got {args.k_steps}")
@@ -148,4 +159,35 @@ def run(args: argparse.Namespace) -> int:
     if args.plot is not None:
         plot_validation(args.plot, results, validation[0], args.k_steps)
         console.print(f"plot saved to {args.plot}")
+    return 0
+
+
+def write_profile_from_parameters(args: argparse.Namespace, console: Console) -> int:
+    """``--from-params``: the profile from parameter files and the mass, written to --out."""
+    from tether_companion.vehicle_params.profile import profile_from_parameters
+    from tether_companion.vehicle_params.profile_file import save_profile
+    from tether_companion.vehicle_params.sources import merge, read_parameters
+
+    if args.mass_kg is None:
+        raise InputError("--from-params needs --mass-kg (the take-off mass; no parameter holds it)")
+    if args.out is None:
+        raise InputError("--from-params needs --out PROFILE.yaml")
+    sources = ", ".join(map(str, args.from_params))
+    params = merge(*(read_parameters(path) for path in args.from_params))
+    profile = profile_from_parameters(
+        params, args.mass_kg, load_vehicle(args.vehicle), source=sources
+    )
+    header = (
+        f"Vehicle profile from the autopilot parameters in {sources}\n"
+        f"(tether-companion sysid --from-params; mass {args.mass_kg} kg given by the user)"
+    )
+    try:
+        save_profile(args.out, profile, header)
+    except OSError as exc:
+        raise InputError(f"{args.out}: cannot write ({exc.strerror})") from None
+    curve = profile.thrust_curve
+    console.print(
+        f"wrote {profile.name} to {args.out}: {profile.n_motors} motors, "
+        f"{curve.max_thrust_n:.2f} N each at {curve.pwm_max_us:.0f} us"
+    )
     return 0

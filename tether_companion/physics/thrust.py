@@ -8,6 +8,18 @@ A curve is a quadratic in a motor command ``cmd = u * command_full_scale`` where
 With ``command_full_scale = 65535`` and ``(c0, c1, c2) = (5.485e-4, 1.033e-6, 2.130e-11)``
 this is Martins (2019) eq. 6 for a Crazyflie 2.0 (Foerster 2015); with
 ``command_full_scale = 1`` the coefficients are in normalised throttle.
+
+``command_unit`` says what the flight controller's motor outputs (SERVO_OUTPUT_RAW, log
+outputs) carry; ``pwm_min_us`` / ``pwm_max_us`` are in that unit (the names are kept from when
+only microseconds existed):
+
+* ``pwm_us``: pulse width in microseconds, 500-2500 (ArduPilot and PX4 PWM outputs);
+* ``raw``: an unsigned integer motor command, 0-65535 (Crazyflie firmware);
+* ``normalised``: a 0-1 output (PX4 ``actuator_motors``, logs);
+* ``dshot``: a DShot throttle value, 0-2047 (48-2047 are throttle steps).
+
+ArduPilot's own curve (``MOT_THST_EXPO``, ``MOT_SPIN_MIN/MAX``) is this quadratic exactly:
+see :func:`tether_companion.vehicle_params.ardupilot.thrust_curve`.
 """
 
 from __future__ import annotations
@@ -22,16 +34,30 @@ from tether_companion.config import ConfigError, spec
 
 FloatArray = NDArray[np.float64]
 
+COMMAND_UNITS: dict[str, tuple[float, float]] = {
+    "pwm_us": (500.0, 2500.0),
+    "raw": (0.0, 65535.0),
+    "normalised": (0.0, 1.0),
+    "dshot": (0.0, 2047.0),
+}
+"""Motor output units and the range of values each can carry."""
+
 
 @dataclass(frozen=True)
 class ThrustCurve:
     """Quadratic thrust map of one motor (see module docstring)."""
 
+    command_unit: str = spec(
+        "pwm_us",
+        choices=tuple(COMMAND_UNITS),
+        doc="what the motor outputs carry: pwm_us (500-2500), raw (0-65535), normalised (0-1), "
+        "dshot (0-2047)",
+    )
     pwm_min_us: float = spec(
-        1000.0, minimum=500.0, maximum=2500.0, doc="pulse width at zero command [us]"
+        1000.0, minimum=0.0, doc="output at zero command, in command_unit (us for pwm_us)"
     )
     pwm_max_us: float = spec(
-        2000.0, minimum=500.0, maximum=2500.0, doc="pulse width at full command [us]"
+        2000.0, minimum=0.0, doc="output at full command, in command_unit (us for pwm_us)"
     )
     command_full_scale: float = spec(1.0, exclusive_minimum=0.0, doc="command value at pwm_max_us")
     coefficients_n: tuple[float, float, float] = spec(
@@ -39,7 +65,17 @@ class ThrustCurve:
     )
 
     def validate(self) -> None:
-        """Refuse curves that are not usable (empty PWM span, thrust falling with command)."""
+        """Refuse curves that are not usable (outputs outside the unit's range, empty span,
+        thrust falling with command)."""
+        low, high = COMMAND_UNITS[self.command_unit]
+        for key, value in (("pwm_min_us", self.pwm_min_us), ("pwm_max_us", self.pwm_max_us)):
+            if not low <= value <= high:
+                raise ConfigError(
+                    "",
+                    key,
+                    value,
+                    f"must be a number >= {low} and <= {high} (command_unit {self.command_unit!r})",
+                )
         if self.pwm_max_us <= self.pwm_min_us:
             raise ConfigError(
                 "", "pwm_max_us", self.pwm_max_us, f"must be > pwm_min_us ({self.pwm_min_us})"
@@ -68,9 +104,14 @@ class ThrustCurve:
         )
         return np.clip(u, 0.0, 1.0) * self.command_full_scale
 
-    def thrust_n(self, pwm_us: ArrayLike) -> FloatArray:
-        """Steady-state thrust [N] for pulse widths [us], element-wise."""
-        cmd = self.command(pwm_us)
+    def thrust_n(self, pwm_us: ArrayLike, voltage_ratio: float = 1.0) -> FloatArray:
+        """Steady-state thrust [N] for pulse widths [us], element-wise.
+
+        ``voltage_ratio`` is the battery voltage over the one the curve holds at
+        (:class:`tether_companion.physics.battery.BatteryCompensation`): the motor command
+        is scaled by it, as ArduPilot's thrust linearisation assumes.
+        """
+        cmd = self.command(pwm_us) * voltage_ratio
         c0, c1, c2 = self.coefficients_n
         return c0 + cmd * (c1 + c2 * cmd)
 

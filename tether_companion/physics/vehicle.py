@@ -1,7 +1,8 @@
 """Vehicle profiles: mass, inertia, motor geometry and thrust curve of a multicopter.
 
-Loaded from YAML files in ``configs/vehicles/``. Motor geometry follows ArduPilot's
-numbering for a quad X frame: motor ``i`` is SERVO_OUTPUT_RAW ``servo{i}_raw``.
+Loaded from YAML files in ``configs/vehicles/``. Motor geometry is a named ``frame``
+(:mod:`tether_companion.physics.frames`, the autopilots' numbering: motor ``i`` is
+SERVO_OUTPUT_RAW ``servo{i}_raw``) or an explicit ``motors`` list.
 """
 
 from __future__ import annotations
@@ -14,31 +15,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.config import ConfigError, load_yaml, spec
+from tether_companion.physics.battery import BatteryCompensation
+from tether_companion.physics.frames import FRAME_NAMES, FRAMES
+from tether_companion.physics.motor_layout import Motor
 from tether_companion.physics.thrust import ThrustCurve
 from tether_companion.resources import VEHICLES_DIR, builtin_path
 
 FloatArray = NDArray[np.float64]
 
 
-@dataclass(frozen=True)
-class Motor:
-    """One rotor: where it sits and which way it spins.
-
-    ``angle_deg`` is measured in the body x-y plane from the nose (body x), positive toward
-    the right wing (body y), as ArduPilot's ``add_motor`` angles are. ``spin`` is seen from
-    above: a ``ccw`` propeller pushes the airframe clockwise (positive yaw in FRD).
-    """
-
-    angle_deg: float = spec(doc="arm direction from the nose, positive to the right [deg]")
-    spin: str = spec(choices=("ccw", "cw"), doc="propeller rotation seen from above")
-
-
-QUAD_X_ARDUPILOT: tuple[Motor, ...] = (
-    Motor(45.0, "ccw"),
-    Motor(-135.0, "ccw"),
-    Motor(-45.0, "cw"),
-    Motor(135.0, "cw"),
-)
+QUAD_X_ARDUPILOT: tuple[Motor, ...] = FRAMES["quad-x"]
 """ArduPilot Copter quad X: motor 1 front-right, 2 back-left, 3 front-left, 4 back-right."""
 
 
@@ -62,10 +48,27 @@ class VehicleProfile:
         0.04, exclusive_minimum=0.0, doc="first-order lag of each motor's thrust [s]"
     )
     thrust_curve: ThrustCurve = spec(default_factory=ThrustCurve, doc="static PWM-to-thrust map")
+    battery: BatteryCompensation = spec(
+        default_factory=BatteryCompensation,
+        doc="thrust scaled by the measured battery voltage (as ArduPilot's MOT_BAT_VOLT_*)",
+    )
+    frame: str = spec(
+        "custom",
+        choices=("custom", *FRAME_NAMES),
+        doc="motor layout by name (sets motors); 'custom' takes the motors list",
+    )
     motors: tuple[Motor, ...] = spec(QUAD_X_ARDUPILOT, doc="rotors in output-channel order")
 
+    def __post_init__(self) -> None:
+        if self.frame != "custom" and self.motors == QUAD_X_ARDUPILOT:
+            object.__setattr__(self, "motors", FRAMES[self.frame])
+
     def validate(self) -> None:
-        """A profile must be able to hover and must have at least 4 motors."""
+        """A profile must be able to hover, have at least 4 motors and one motor layout."""
+        if self.frame != "custom" and self.motors != FRAMES[self.frame]:
+            raise ConfigError(
+                "", "motors", len(self.motors), f"give either frame ({self.frame!r}) or motors"
+            )
         if len(self.motors) < 4:
             raise ConfigError("", "motors", len(self.motors), "at least 4 motors are needed")
         capacity = self.thrust_curve.max_thrust_n * len(self.motors)
@@ -93,8 +96,9 @@ class VehicleProfile:
         columns = []
         for motor in self.motors:
             angle = math.radians(motor.angle_deg)
-            x = self.arm_length_m * math.cos(angle)
-            y = self.arm_length_m * math.sin(angle)
+            radius = self.arm_length_m * motor.radius_scale
+            x = radius * math.cos(angle)
+            y = radius * math.sin(angle)
             yaw = self.yaw_moment_per_thrust_m * (1.0 if motor.spin == "ccw" else -1.0)
             columns.append((1.0, -y, x, yaw))
         return np.array(columns, dtype=float).T

@@ -339,7 +339,9 @@ class ServiceConfig:
     """The whole companion configuration (one YAML file)."""
 
     vehicle: str = spec(
-        "default-quad", doc="vehicle profile: a name in configs/vehicles/ or a YAML path"
+        "default-quad",
+        doc="vehicle profile: a name in configs/vehicles/ or a YAML path (relative to this "
+        "file's folder); docs/vehicle-reference.md lists its keys",
     )
     link: LinkConfig = spec(default_factory=LinkConfig)
     streams: StreamsConfig = spec(default_factory=StreamsConfig)
@@ -427,6 +429,8 @@ def load_service_config(path: str | Path | None, overrides: dict | None = None) 
         On a missing file, bad YAML, an unknown key or an out-of-range value.
     """
     data: dict = {} if path is None else _plain(read_yaml(path))
+    if path is not None:
+        data = _vehicle_beside_config(data, Path(path))
     for section, values in (overrides or {}).items():
         if isinstance(values, dict):
             merged = dict(data.get(section) or {})
@@ -453,6 +457,15 @@ def config_reference() -> str:
     for key, type_name, default, text in describe(ServiceConfig):
         lines.append(f"| `{key}` | {type_name} | `{default}` | {text.replace('|', '/')} |")
     return "\n".join(lines) + "\n"
+
+
+def _vehicle_beside_config(data: dict, path: Path) -> dict:
+    """A relative profile path in ``vehicle:`` is taken from the config file's folder (a
+    built-in name has no suffix and stays as it is)."""
+    vehicle = data.get("vehicle")
+    if isinstance(vehicle, str) and Path(vehicle).suffix and not Path(vehicle).is_absolute():
+        return {**data, "vehicle": str(path.parent / vehicle)}
+    return data
 
 
 def _plain(data: object) -> dict:

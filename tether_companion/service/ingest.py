@@ -29,6 +29,7 @@ from tether_companion.mavlink.units import (
     imu_from_raw_imu,
     pwm_from_servo_output_raw,
 )
+from tether_companion.physics.thrust import COMMAND_UNITS
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.config import InputLimitsConfig, LinkConfig, TensionConfig
 
@@ -102,13 +103,27 @@ class Ingest:
         Tension-sensor settings (source ``message`` enables NAMED_VALUE_FLOAT decoding).
     n_motors
         Motors in the vehicle profile (SERVO_OUTPUT_RAW channels 1..n).
+    command_unit
+        What SERVO_OUTPUT_RAW carries (the profile's ``thrust_curve.command_unit``): outputs
+        in ``pwm_us`` are checked against ``limits.pwm_min_us/max_us``, any other unit against
+        the unit's own range (e.g. 0-65535 for ``raw``).
     """
 
     def __init__(
-        self, link: LinkConfig, limits: InputLimitsConfig, tension: TensionConfig, n_motors: int
+        self,
+        link: LinkConfig,
+        limits: InputLimitsConfig,
+        tension: TensionConfig,
+        n_motors: int,
+        command_unit: str = "pwm_us",
     ) -> None:
         self.link = link
         self.limits = limits
+        self._output_range = (
+            (limits.pwm_min_us, limits.pwm_max_us)
+            if command_unit == "pwm_us"
+            else COMMAND_UNITS[command_unit]
+        )
         self.tension = tension
         self.n_motors = n_motors
         self.counters = IngestCounters()
@@ -197,7 +212,8 @@ class Ingest:
             msg, self.n_motors, time_s=self._unwrap_uint32_us(msg.time_usec)
         )
         pwm = sample.pwm_us
-        if pwm.min() < self.limits.pwm_min_us or pwm.max() > self.limits.pwm_max_us:
+        low, high = self._output_range
+        if pwm.min() < low or pwm.max() > high:
             self.counters.absurd += 1
             return None
         return sample

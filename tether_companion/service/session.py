@@ -142,7 +142,13 @@ class EstimationSession:
     def __init__(self, config: ServiceConfig, vehicle: VehicleProfile) -> None:
         self.config = config
         self.vehicle = vehicle
-        self.ingest = Ingest(config.link, config.inputs, config.tension, vehicle.n_motors)
+        self.ingest = Ingest(
+            config.link,
+            config.inputs,
+            config.tension,
+            vehicle.n_motors,
+            vehicle.thrust_curve.command_unit,
+        )
         self.catenary_source = config.position.source == CATENARY
         """The published position is the catenary estimator's (else the EKF's)."""
         self.publisher = Publisher(

@@ -4,7 +4,7 @@ Used to record simulated identification flights in the format ArduPilot writes, 
 tests. Each record is ``0xA3 0x95 <type id>`` and the little-endian packed fields; a message
 type is declared once by an ``FMT`` record (type 128) giving its length, name, field format
 characters and column names (pymavlink ``DFReader`` conventions: ``Q`` uint64, ``f`` float,
-``H`` uint16, ``B`` uint8).
+``H`` uint16, ``B`` uint8, ``N`` char[16]).
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ _CHAR_TO_STRUCT = {
     "b": "b",
     "I": "I",
     "i": "i",
+    "N": "16s",
 }
 
 

@@ -43,6 +43,8 @@ from tether_companion.mavlink.framing import (
     FramingCounters,
     MAVLinkMessage,
 )
+from tether_companion.mavlink.signing import Signer
+from tether_companion.mavlink.trust import LinkTrust
 
 Role = Literal["listen", "connect"]
 Transport = Literal["udp", "tcp", "serial"]
@@ -61,7 +63,9 @@ _FORMS = (
     "tcpin:HOST:PORT, tcpout:HOST:PORT or serial:/dev/DEVICE:BAUD"
 )
 MAX_UDP_PEERS = 16
-"""A listening UDP link replies to at most this many peers (the most recently heard)."""
+"""A listening UDP link replies to at most this many peers: the flight controller's pinned
+address and the ground stations' (:meth:`LinkTrust.protected`) are kept, strangers take the
+other places, the least recently heard evicted first."""
 WRITE_BUFFER_LIMIT_BYTES = 1 << 20
 UDP_BUFFER_BYTES = 1 << 21
 """Receive buffer asked for on UDP sockets (the kernel caps it at net.core.rmem_max)."""
@@ -175,6 +179,8 @@ class LinkCounters:
     """Received messages dropped (oldest first) because nobody read the queue."""
     connections: int = 0
     """Peers heard (UDP listen) or clients accepted (TCP server) so far."""
+    peers_evicted: int = 0
+    """Peers a listening UDP link stopped replying to to make room for a new one."""
 
     def as_dict(self) -> dict[str, int]:
         """The counters as a plain mapping."""
@@ -197,13 +203,22 @@ class Link:
         Output and queue counters.
     framing
         Input counters (garbage, bad CRC, unknown ids, ...), summed over all peers.
+    trust
+        The gate every intact frame passes before it is decoded (None: all believed).
     """
 
-    def __init__(self, endpoint: Endpoint, encoder: FrameEncoder, rx_queue_size: int) -> None:
+    def __init__(
+        self,
+        endpoint: Endpoint,
+        encoder: FrameEncoder,
+        rx_queue_size: int,
+        trust: LinkTrust | None = None,
+    ) -> None:
         self.endpoint = endpoint
         self.encoder = encoder
         self.counters = LinkCounters()
         self.framing = FramingCounters()
+        self.trust = trust
         self._queue: asyncio.Queue[object] = asyncio.Queue(maxsize=rx_queue_size)
         self._closed = False
 
@@ -307,6 +322,8 @@ async def open_link(
     system_id: int,
     component_id: int,
     rx_queue_size: int = DEFAULT_RX_QUEUE,
+    trust: LinkTrust | None = None,
+    signer: Signer | None = None,
 ) -> Link:
     """Open ``endpoint`` and return a running :class:`Link`.
 
@@ -318,6 +335,11 @@ async def open_link(
         The identity this side sends as.
     rx_queue_size
         Received messages held for :meth:`Link.recv`; the oldest is dropped beyond it.
+    trust
+        Decides which received frames are believed (signatures, the flight controller's
+        address; :mod:`tether_companion.mavlink.trust`); None believes every intact frame.
+    signer
+        Signs every sent frame (MAVLink 2 signing) when given.
 
     Raises
     ------
@@ -325,15 +347,15 @@ async def open_link(
         When the socket cannot be bound, the TCP server refuses (ConnectionRefusedError) or
         the serial device cannot be opened; the message names the endpoint.
     """
-    encoder = FrameEncoder(system_id, component_id)
+    encoder = FrameEncoder(system_id, component_id, signer)
     try:
         if endpoint.transport == "udp":
-            return await _UdpLink.open(endpoint, encoder, rx_queue_size)
+            return await _UdpLink.open(endpoint, encoder, rx_queue_size, trust)
         if endpoint.transport == "tcp" and endpoint.role == "listen":
-            return await _TcpServerLink.open(endpoint, encoder, rx_queue_size)
+            return await _TcpServerLink.open(endpoint, encoder, rx_queue_size, trust)
         if endpoint.transport == "tcp":
-            return await _TcpClientLink.open(endpoint, encoder, rx_queue_size)
-        return await _SerialLink.open(endpoint, encoder, rx_queue_size)
+            return await _TcpClientLink.open(endpoint, encoder, rx_queue_size, trust)
+        return await _SerialLink.open(endpoint, encoder, rx_queue_size, trust)
     except OSError as exc:
         raise type(exc)(exc.errno, f"{endpoint}: {exc.strerror or exc}") from exc
 
@@ -351,16 +373,28 @@ class _UdpLink(Link):
     socket, up to :data:`MAX_DATAGRAMS_PER_READ`.
     """
 
-    def __init__(self, endpoint: Endpoint, encoder: FrameEncoder, rx_queue_size: int) -> None:
-        super().__init__(endpoint, encoder, rx_queue_size)
-        self._parser = FrameParser(self.framing)
+    def __init__(
+        self,
+        endpoint: Endpoint,
+        encoder: FrameEncoder,
+        rx_queue_size: int,
+        trust: LinkTrust | None = None,
+    ) -> None:
+        super().__init__(endpoint, encoder, rx_queue_size, trust)
+        self._parser = FrameParser(self.framing, trust)
         self._sock: socket.socket | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._peers: OrderedDict[tuple[str, int], None] = OrderedDict()
 
     @classmethod
-    async def open(cls, endpoint: Endpoint, encoder: FrameEncoder, rx_queue_size: int) -> Link:
-        link = cls(endpoint, encoder, rx_queue_size)
+    async def open(
+        cls,
+        endpoint: Endpoint,
+        encoder: FrameEncoder,
+        rx_queue_size: int,
+        trust: LinkTrust | None = None,
+    ) -> Link:
+        link = cls(endpoint, encoder, rx_queue_size, trust)
         loop = asyncio.get_running_loop()
         infos = await loop.getaddrinfo(endpoint.host, endpoint.port, type=socket.SOCK_DGRAM)
         if not infos:
@@ -398,7 +432,7 @@ class _UdpLink(Link):
             self._datagram(data, addr)
 
     def _datagram(self, data: bytes, addr: tuple[str, int]) -> None:
-        messages = self._parser.feed(data)
+        messages = self._parser.feed(data, addr)
         messages += self._parser.end_datagram()
         if messages and self.endpoint.role == "listen":
             if addr in self._peers:
@@ -407,8 +441,18 @@ class _UdpLink(Link):
                 self.counters.connections += 1
                 self._peers[addr] = None
                 if len(self._peers) > MAX_UDP_PEERS:
-                    self._peers.popitem(last=False)
+                    self._evict_peer()
         self._deliver(messages)
+
+    def _evict_peer(self) -> None:
+        """Forget the least recently heard peer that is not protected by the trust gate."""
+        trust = self.trust
+        victim = next(
+            (a for a in self._peers if trust is None or not trust.protected(a)),
+            next(iter(self._peers)),
+        )
+        del self._peers[victim]
+        self.counters.peers_evicted += 1
 
     def _write(self, frame: bytes) -> int:
         sock = self._sock
@@ -465,7 +509,9 @@ class _StreamPeer:
         self.link = link
         self.reader = reader
         self.writer = writer
-        self.parser = FrameParser(link.framing)
+        self.parser = FrameParser(link.framing, link.trust)
+        peer = writer.get_extra_info("peername")
+        self.source = tuple(peer[:2]) if isinstance(peer, tuple) else peer
 
     async def pump(self) -> None:
         try:
@@ -473,7 +519,7 @@ class _StreamPeer:
                 data = await self.reader.read(READ_CHUNK_BYTES)
                 if not data:
                     return
-                self.link._deliver(self.parser.feed(data))
+                self.link._deliver(self.parser.feed(data, self.source))
         except (ConnectionError, OSError):
             return
         finally:
@@ -493,14 +539,26 @@ class _StreamPeer:
 class _TcpServerLink(Link):
     """TCP server: every connected client receives every message; all clients are heard."""
 
-    def __init__(self, endpoint: Endpoint, encoder: FrameEncoder, rx_queue_size: int) -> None:
-        super().__init__(endpoint, encoder, rx_queue_size)
+    def __init__(
+        self,
+        endpoint: Endpoint,
+        encoder: FrameEncoder,
+        rx_queue_size: int,
+        trust: LinkTrust | None = None,
+    ) -> None:
+        super().__init__(endpoint, encoder, rx_queue_size, trust)
         self._server: asyncio.Server | None = None
         self._peers: dict[_StreamPeer, asyncio.Task[None]] = {}
 
     @classmethod
-    async def open(cls, endpoint: Endpoint, encoder: FrameEncoder, rx_queue_size: int) -> Link:
-        link = cls(endpoint, encoder, rx_queue_size)
+    async def open(
+        cls,
+        endpoint: Endpoint,
+        encoder: FrameEncoder,
+        rx_queue_size: int,
+        trust: LinkTrust | None = None,
+    ) -> Link:
+        link = cls(endpoint, encoder, rx_queue_size, trust)
         link._server = await asyncio.start_server(link._accept, endpoint.host, endpoint.port)
         return link
 
@@ -551,14 +609,26 @@ class _TcpServerLink(Link):
 class _TcpClientLink(Link):
     """TCP client: one connection; the link closes when the server goes away."""
 
-    def __init__(self, endpoint: Endpoint, encoder: FrameEncoder, rx_queue_size: int) -> None:
-        super().__init__(endpoint, encoder, rx_queue_size)
+    def __init__(
+        self,
+        endpoint: Endpoint,
+        encoder: FrameEncoder,
+        rx_queue_size: int,
+        trust: LinkTrust | None = None,
+    ) -> None:
+        super().__init__(endpoint, encoder, rx_queue_size, trust)
         self._peer: _StreamPeer | None = None
         self._task: asyncio.Task[None] | None = None
 
     @classmethod
-    async def open(cls, endpoint: Endpoint, encoder: FrameEncoder, rx_queue_size: int) -> Link:
-        link = cls(endpoint, encoder, rx_queue_size)
+    async def open(
+        cls,
+        endpoint: Endpoint,
+        encoder: FrameEncoder,
+        rx_queue_size: int,
+        trust: LinkTrust | None = None,
+    ) -> Link:
+        link = cls(endpoint, encoder, rx_queue_size, trust)
         reader, writer = await asyncio.open_connection(endpoint.host, endpoint.port)
         link._peer = _StreamPeer(link, reader, writer)
         link.counters.connections = 1
@@ -599,7 +669,7 @@ class _SerialReader(asyncio.Protocol):
         self.link = link
 
     def data_received(self, data: bytes) -> None:
-        self.link._deliver(self.link._parser.feed(data))
+        self.link._deliver(self.link._parser.feed(data, self.link.endpoint.device))
 
     def eof_received(self) -> bool:
         self.link._mark_closed()
@@ -612,15 +682,27 @@ class _SerialReader(asyncio.Protocol):
 class _SerialLink(Link):
     """A serial port in raw 8N1 mode at the endpoint's baud rate (termios, no pyserial)."""
 
-    def __init__(self, endpoint: Endpoint, encoder: FrameEncoder, rx_queue_size: int) -> None:
-        super().__init__(endpoint, encoder, rx_queue_size)
-        self._parser = FrameParser(self.framing)
+    def __init__(
+        self,
+        endpoint: Endpoint,
+        encoder: FrameEncoder,
+        rx_queue_size: int,
+        trust: LinkTrust | None = None,
+    ) -> None:
+        super().__init__(endpoint, encoder, rx_queue_size, trust)
+        self._parser = FrameParser(self.framing, trust)
         self._read_transport: asyncio.ReadTransport | None = None
         self._write_transport: asyncio.WriteTransport | None = None
 
     @classmethod
-    async def open(cls, endpoint: Endpoint, encoder: FrameEncoder, rx_queue_size: int) -> Link:
-        link = cls(endpoint, encoder, rx_queue_size)
+    async def open(
+        cls,
+        endpoint: Endpoint,
+        encoder: FrameEncoder,
+        rx_queue_size: int,
+        trust: LinkTrust | None = None,
+    ) -> Link:
+        link = cls(endpoint, encoder, rx_queue_size, trust)
         fd = os.open(endpoint.device, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
         try:
             _configure_raw(fd, endpoint.baud)

@@ -22,9 +22,15 @@ Example
 from __future__ import annotations
 
 import struct
+from collections.abc import Hashable
 from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import ardupilotmega as dialect
+
+if TYPE_CHECKING:
+    from tether_companion.mavlink.signing import Signer
+    from tether_companion.mavlink.trust import FrameGate
 
 __all__ = [
     "FrameEncoder",
@@ -75,6 +81,9 @@ class FramingCounters:
     """Intact frames pymavlink could not turn into a message."""
     truncated: int = 0
     """Datagrams (UDP) that ended inside a frame: a cut frame or a stray start marker."""
+    untrusted: int = 0
+    """Intact frames the link's gate refused (signature, sender address; see
+    :mod:`tether_companion.mavlink.trust` for the reasons)."""
 
     def as_dict(self) -> dict[str, int]:
         """The counters as a plain mapping (for status views and JSON)."""
@@ -92,21 +101,32 @@ class FrameParser:
     Feed it bytes as they arrive with :meth:`feed`; it returns the complete messages and keeps
     any partial frame for the next call. For datagram transports call :meth:`end_datagram`
     after each datagram: a frame never spans two UDP datagrams, so a leftover is truncated.
-    Signed frames are accepted without checking the signature (the emulator and the service do
-    not use signing).
+
+    With a ``gate`` (:class:`~tether_companion.mavlink.trust.FrameGate`), every intact frame is
+    offered to ``gate.admit(frame, source)`` before it is decoded, and dropped (counted as
+    ``untrusted``) when refused: signatures and sender addresses are checked there. Without
+    one, signed frames are decoded without checking the signature.
     """
 
-    def __init__(self, counters: FramingCounters | None = None) -> None:
+    def __init__(
+        self, counters: FramingCounters | None = None, gate: FrameGate | None = None
+    ) -> None:
         self._buf = bytearray()
         self._decoder = dialect.MAVLink(None)
         self.counters = FramingCounters() if counters is None else counters
         """Counts of what was accepted and dropped; pass one object to several parsers (one
         per TCP client of a server, say) to total them."""
+        self.gate = gate
+        self._source: Hashable | None = None
 
-    def feed(self, data: bytes | bytearray | memoryview) -> list[MAVLinkMessage]:
-        """Add ``data`` and return every message completed by it, in order."""
+    def feed(
+        self, data: bytes | bytearray | memoryview, source: Hashable | None = None
+    ) -> list[MAVLinkMessage]:
+        """Add ``data`` (sent by ``source``: an address, for the gate) and return every message
+        completed by it, in order."""
         self.counters.bytes_in += len(data)
         self._buf += data
+        self._source = source
         return self._parse()
 
     def _parse(self) -> list[MAVLinkMessage]:
@@ -176,8 +196,13 @@ class FrameParser:
                 counters.garbage_bytes += 1
                 pos += 1
                 continue
+            frame = buf[pos : pos + frame_len]
+            if self.gate is not None and not self.gate.admit(frame, self._source):
+                counters.untrusted += 1
+                pos += frame_len
+                continue
             try:
-                msg = self._decoder.decode(bytearray(buf[pos : pos + frame_len]))
+                msg = self._decoder.decode(frame)
             except Exception:  # noqa: BLE001 - pymavlink raises assorted errors on odd payloads
                 counters.bad_payload += 1
                 pos += frame_len
@@ -234,13 +259,16 @@ class FrameEncoder:
     ----------
     system_id, component_id
         Identity written into every frame's header (1..255).
+    signer
+        Signs every frame (MAVLink 2 signing) when given.
     """
 
-    def __init__(self, system_id: int, component_id: int) -> None:
+    def __init__(self, system_id: int, component_id: int, signer: Signer | None = None) -> None:
         if not (1 <= system_id <= 255 and 0 <= component_id <= 255):
             raise ValueError(f"system_id {system_id} / component_id {component_id} out of range")
         self._packer = dialect.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self.frames_out = 0
+        self.signer = signer
 
     @property
     def factory(self) -> dialect.MAVLink:
@@ -269,4 +297,6 @@ class FrameEncoder:
         frame = msg.pack(self._packer)
         self._packer.seq = (self._packer.seq + 1) & 0xFF
         self.frames_out += 1
+        if self.signer is not None:
+            return self.signer.sign(frame)
         return frame

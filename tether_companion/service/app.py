@@ -22,6 +22,7 @@ import asyncio
 import contextlib
 import gc
 import math
+import sys
 import time
 import traceback
 from collections.abc import Awaitable, Callable
@@ -37,6 +38,7 @@ from tether_companion.service.config import ServiceConfig
 from tether_companion.service.ingest import ATTITUDE, FC_POSITION, IMU, INPUT_KINDS, PWM, RANGE
 from tether_companion.service.publish import NO_IMU, STALE, Publication
 from tether_companion.service.recording import RecordingLimits, TlogWriter
+from tether_companion.service.security import LinkSecurity
 from tether_companion.service.session import EstimationSession
 from tether_companion.service.systemd import SystemdNotifier
 
@@ -131,6 +133,8 @@ class CompanionService:
         self.config = config
         self.vehicle = vehicle
         self.session = EstimationSession(config, vehicle)
+        self.security = LinkSecurity(config.security, config.link, monotonic_s=monotonic_s)
+        """Signing key, signer and verifier; a trust gate per opened link (docs/security.md)."""
         self.notifier = notifier if notifier is not None else SystemdNotifier()
         self.clock = FcClock()
         self.state = ServiceState()
@@ -151,6 +155,7 @@ class CompanionService:
         self._rate_counts: dict[str, int] = {}
         self._rate_time_s = -math.inf
         self._last_latest_fc_s = -math.inf
+        self._key_installed = False
 
     def monotonic_s(self) -> float:
         """The service's local clock [s] (injected for lock-step use)."""
@@ -212,7 +217,11 @@ class CompanionService:
     async def _open_default_link(self) -> Link:
         link_cfg = self.config.link
         return await open_link(
-            self._endpoint, system_id=link_cfg.system_id, component_id=link_cfg.component_id
+            self._endpoint,
+            system_id=link_cfg.system_id,
+            component_id=link_cfg.component_id,
+            trust=self.security.new_trust(),
+            signer=self.security.signer,
         )
 
     # ------------------------------------------------------------------ link supervision
@@ -276,6 +285,7 @@ class CompanionService:
         self._awaiting_ack = []
         self._origin_attempts = 0
         self.state.origin_confirmed = False
+        self._key_installed = False
 
     # ------------------------------------------------------------------ receive path
     def handle_message(self, link: Link, msg: MAVLinkMessage, now_s: float) -> None:
@@ -339,6 +349,7 @@ class CompanionService:
         self._origin_attempts = 0
         self.state.origin_confirmed = False
         self._timesync_pending.clear()
+        self._key_installed = False
 
     def _send(self, link: Link, msg: MAVLinkMessage) -> None:
         frame = link.encoder.encode(msg)
@@ -387,6 +398,7 @@ class CompanionService:
             self._timesync_pending[stamp_ns] = now_s
             self._send(link, dialect.MAVLink_timesync_message(0, stamp_ns))
         self._update_rates(now_s)
+        self._report_trust_events(link)
         fc_present = now_s - self._fc_heard_s < cfg.link_timeout_s
         if not fc_present:
             if self.state.link_up:
@@ -398,12 +410,25 @@ class CompanionService:
                 for msg in self.session.publisher.set_health(STALE):
                     self._send(link, msg)
             return
+        if self.config.security.install_key and not self._key_installed:
+            self._key_installed = True
+            self._send(link, self.security.setup_signing_message())
         self._request_streams(link, now_s)
         self._send_origin(link, now_s)
         imu = self._streams[IMU]
         if now_s - imu.last_heard_s > INPUT_SILENT_S:
             for msg in self.session.publisher.set_health(NO_IMU):
                 self._send(link, msg)
+
+    def _report_trust_events(self, link: Link) -> None:
+        """Log the trust gate's address changes once each (stderr: the journal)."""
+        trust = link.trust
+        if trust is None or not trust.events:
+            return
+        for event in trust.events:
+            print(f"tether-companion: {link.endpoint}: {event}", file=sys.stderr, flush=True)
+        self.state.last_error = trust.events[-1]
+        trust.events.clear()
 
     def _stream_table(self) -> dict[str, StreamRequest]:
         streams = self.config.streams

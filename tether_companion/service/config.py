@@ -334,6 +334,50 @@ class RecordingConfig:
             )
 
 
+SIGNING_MODES = ("off", "preferred", "required")
+
+
+@dataclass(frozen=True)
+class SecurityConfig:
+    """Who the service believes on the link (``docs/security.md``)."""
+
+    signing: str = spec(
+        "off",
+        choices=SIGNING_MODES,
+        doc="MAVLink 2 signing: required (drop every frame not correctly signed), preferred "
+        "(check signed frames, accept unsigned), off; we sign what we send unless off",
+    )
+    key_file: str = spec(
+        "",
+        doc="the 32-byte signing key: 32 raw bytes or 64 hex digits, readable by the service "
+        "user only (chmod 600); needed unless signing is off",
+    )
+    link_id: int = spec(
+        0, minimum=0, maximum=255, doc="this link's id in the signature of what we send"
+    )
+    command_sources: tuple[int, ...] = spec(
+        (255,),
+        minimum=1,
+        maximum=255,
+        doc="system ids of the ground stations whose tension-mode and landing commands are "
+        "accepted (others get COMMAND_ACK DENIED)",
+    )
+    install_key: bool = spec(
+        False,
+        doc="send the key to the flight controller with SETUP_SIGNING after each of its boots "
+        "(serial links only: the key would cross the network in clear otherwise)",
+    )
+
+    def validate(self) -> None:
+        """A key is needed to sign; installing it needs signing on."""
+        if self.signing != "off" and not self.key_file:
+            raise ConfigError(
+                "", "key_file", self.key_file, f"a key file is needed with signing {self.signing}"
+            )
+        if self.install_key and self.signing == "off":
+            raise ConfigError("", "install_key", True, "needs signing preferred or required")
+
+
 @dataclass(frozen=True)
 class ServiceConfig:
     """The whole companion configuration (one YAML file)."""
@@ -372,6 +416,7 @@ class ServiceConfig:
         doc="position from the filtered tension and the catenary (position.source catenary)",
     )
     recording: RecordingConfig = spec(default_factory=RecordingConfig)
+    security: SecurityConfig = spec(default_factory=SecurityConfig)
     watchdog_interval_s: float = spec(
         0.0,
         minimum=0.0,
@@ -395,6 +440,14 @@ class ServiceConfig:
                     f"must equal estimator.staleness ({bound} s): the service aligns the inputs "
                     "once for the EKF and the tension filter",
                 )
+        if self.security.install_key and not self.link.connect.startswith("serial:"):
+            raise ConfigError(
+                "",
+                "security.install_key",
+                True,
+                f"only over a serial link (link.connect is {self.link.connect!r}): SETUP_SIGNING "
+                "carries the key in clear",
+            )
         kind = self.estimator.kind
         if kind == "three_state" and self.tension.source == "estimate":
             raise ConfigError(

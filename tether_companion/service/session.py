@@ -59,6 +59,7 @@ from tether_companion.service.publish import (
     Publication,
     Publisher,
 )
+from tether_companion.service.security import command_refusal
 
 TENSION_MODE_COMMAND = dialect.MAV_CMD_USER_2
 """COMMAND_LONG a ground station sends to this component (our system and component id) to
@@ -176,6 +177,8 @@ class EstimationSession:
         self._next_mode_tick_s = -math.inf
         self.boots = 0
         """Flight-controller reboots seen (each restarts the estimator)."""
+        self.commands_refused: dict[str, int] = {}
+        """Commands to this component answered DENIED for their sender, by reason."""
 
     def restart(self) -> None:
         """Start a fresh estimator run (after a flight-controller reboot)."""
@@ -221,9 +224,15 @@ class EstimationSession:
         return msg.target_system == link.system_id and msg.target_component == link.component_id
 
     def _mode_command(self, msg: MAVLinkMessage) -> MAVLinkMessage:
-        """A ground station's command to this component (see ``TENSION_MODE_COMMAND``)."""
+        """A ground station's command to this component (see ``TENSION_MODE_COMMAND``); from
+        a sender outside ``security.command_sources`` (or unsigned, with signing required)
+        it is DENIED and counted in :attr:`commands_refused`."""
         result = dialect.MAV_RESULT_UNSUPPORTED
-        if msg.command == TENSION_MODE_COMMAND:
+        refusal = command_refusal(msg, self.config.security)
+        if refusal is not None:
+            self.commands_refused[refusal] = self.commands_refused.get(refusal, 0) + 1
+            result = dialect.MAV_RESULT_DENIED
+        elif msg.command == TENSION_MODE_COMMAND:
             enable, landing = msg.param1, msg.param2
             modes = self.modes.modes
             if enable not in (-1.0, 0.0, 1.0) or landing not in (0.0, 1.0, 2.0):

@@ -20,7 +20,11 @@ POSITION = np.array([2.0, 1.0, -3.0])
 
 @pytest.fixture
 def config():
-    return load_service_config(None, {"recording": {"enabled": False}})
+    """Ingest's rules message by message: no reorder buffer (tests/test_service_trust.py
+    tests it)."""
+    return load_service_config(
+        None, {"recording": {"enabled": False}, "inputs": {"reorder_window_s": 0.0}}
+    )
 
 
 def _session(config) -> EstimationSession:
@@ -168,7 +172,14 @@ def test_rangefinder_outside_its_range_and_sideways_sensors(config) -> None:
 
 
 def test_px4_flavour_reads_highres_imu(config) -> None:
-    px4 = load_service_config(None, {"recording": {"enabled": False}, "link": {"autopilot": "px4"}})
+    px4 = load_service_config(
+        None,
+        {
+            "recording": {"enabled": False},
+            "link": {"autopilot": "px4"},
+            "inputs": {"reorder_window_s": 0.0},
+        },
+    )
     session = _session(px4)
     fc = FrameEncoder(1, 1)
     parser = FrameParser()

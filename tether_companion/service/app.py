@@ -35,7 +35,15 @@ from tether_companion.mavlink.units import seconds_to_usec
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.service.clock import FcClock
 from tether_companion.service.config import ServiceConfig
-from tether_companion.service.ingest import ATTITUDE, FC_POSITION, IMU, INPUT_KINDS, PWM, RANGE
+from tether_companion.service.ingest import (
+    ATTITUDE,
+    FC_POSITION,
+    IMU,
+    INPUT_KINDS,
+    PWM,
+    RANGE,
+    SYSTEM_TIME,
+)
 from tether_companion.service.publish import NO_IMU, STALE, Publication
 from tether_companion.service.recording import RecordingLimits, TlogWriter
 from tether_companion.service.security import LinkSecurity
@@ -48,6 +56,8 @@ INPUT_SILENT_S = 0.5
 """An input not heard for this long [s] (local time) while the link is up is re-requested."""
 FC_POSITION_RATE_HZ = 20.0
 """LOCAL_POSITION_NED rate asked for (the tension modes' frame) [Hz]."""
+SYSTEM_TIME_RATE_HZ = 5.0
+"""SYSTEM_TIME rate asked for: the evidence of a flight-controller reboot [Hz]."""
 ORIGIN_RETRY_S = 1.0
 ORIGIN_ATTEMPTS = 5
 INTERVAL_ATTEMPTS_BEFORE_FALLBACK = 2
@@ -59,6 +69,7 @@ _STREAM_GROUPS = {
     PWM: dialect.MAV_DATA_STREAM_RC_CHANNELS,
     RANGE: dialect.MAV_DATA_STREAM_EXTRA3,
     FC_POSITION: dialect.MAV_DATA_STREAM_POSITION,
+    SYSTEM_TIME: dialect.MAV_DATA_STREAM_EXTRA3,
 }
 """ArduPilot's REQUEST_DATA_STREAM groups (SRx_RAW_SENS, _EXTRA1, _RC_CHAN, _EXTRA3, _POSITION)."""
 
@@ -307,7 +318,7 @@ class CompanionService:
             if kind in ("HEARTBEAT", "TIMESYNC", "COMMAND_ACK", "GPS_GLOBAL_ORIGIN"):
                 self._handle_control(link, msg, kind, now_s)
                 return
-        step = session.on_message(msg)
+        step = session.on_message(msg, now_s)
         if session.ingest.rebooted:
             self._on_fc_reboot()
         latest = session.ingest.latest_fc_s
@@ -422,7 +433,7 @@ class CompanionService:
 
     def _report_trust_events(self, link: Link) -> None:
         """Log the trust gate's address changes once each (stderr: the journal)."""
-        trust = link.trust
+        trust = getattr(link, "trust", None)  # lock-step harnesses bring their own link
         if trust is None or not trust.events:
             return
         for event in trust.events:
@@ -451,6 +462,8 @@ class CompanionService:
         table[FC_POSITION] = StreamRequest(
             dialect.MAVLINK_MSG_ID_LOCAL_POSITION_NED, FC_POSITION_RATE_HZ
         )
+        # a reboot is believed only on SYSTEM_TIME's word (service/fc_time.py)
+        table[SYSTEM_TIME] = StreamRequest(dialect.MAVLINK_MSG_ID_SYSTEM_TIME, SYSTEM_TIME_RATE_HZ)
         return table
 
     def _request_streams(self, link: Link, now_s: float) -> None:

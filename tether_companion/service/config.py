@@ -129,6 +129,13 @@ class InputLimitsConfig:
     range_max_m: float = spec(
         40.0, exclusive_minimum=0.0, doc="rangefinder readings above this are dropped [m]"
     )
+    reorder_window_s: float = spec(
+        0.02,
+        minimum=0.0,
+        maximum=0.2,
+        doc="late samples within this much flight-controller time are put back in order "
+        "instead of dropped (adds as much latency; 0 = drop every late sample) [s]",
+    )
 
     def validate(self) -> None:
         """Bounds in order."""

@@ -8,10 +8,13 @@ Pure and synchronous (the live service and replay share it). For each message:
    ATTITUDE, SERVO_OUTPUT_RAW, downward DISTANCE_SENSOR; anything else is not an input;
 3. values: NaN/inf is ``nonfinite``; outside the plausibility bounds is ``absurd``; a
    rangefinder reading outside its valid range is ``out_of_range``;
-4. time: per message type the flight-controller stamp must increase; an equal stamp is a
-   ``duplicate``, an older one ``out_of_order``, unless the stamps of ``REBOOT_CONFIRMATIONS``
-   consecutive inputs all went back by more than ``REBOOT_BACKSTEP_S``: then the flight
-   controller rebooted, which :attr:`Ingest.reboots` counts and the caller acts on.
+4. clock (:class:`~tether_companion.service.fc_time.FcTimeGate`): a stamp far ahead of the
+   flight controller's clock model is ``implausible``; one more than a second behind is
+   ``out_of_order``, unless SYSTEM_TIME said the flight controller rebooted and the stamps
+   agree: then :attr:`IngestCounters.reboots` counts it and the caller restarts;
+5. order: samples wait in a small reorder buffer (``inputs.reorder_window_s``) and leave it
+   in stamp order; per message type the stamp must then increase: an equal stamp is a
+   ``duplicate``, an older one (later than the window) ``out_of_order``.
 """
 
 from __future__ import annotations
@@ -32,11 +35,9 @@ from tether_companion.mavlink.units import (
 from tether_companion.physics.thrust import COMMAND_UNITS
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.config import InputLimitsConfig, LinkConfig, TensionConfig
+from tether_companion.service.fc_time import BACKSTEP, IMPLAUSIBLE, REBOOT, FcTimeGate
+from tether_companion.service.reorder import ReorderBuffer
 
-REBOOT_BACKSTEP_S = 1.0
-"""A stamp this far [s] behind the latest one is a reboot candidate (less: out of order)."""
-REBOOT_CONFIRMATIONS = 3
-"""Consecutive backstepped inputs needed to declare a reboot (one corrupt stamp is not)."""
 _UINT32_US = 1 << 32
 IMU = "imu"
 ATTITUDE = "attitude"
@@ -44,7 +45,9 @@ PWM = "pwm"
 RANGE = "range"
 TENSION = "tension"
 FC_POSITION = "fc_position"
-INPUT_KINDS = (IMU, ATTITUDE, PWM, RANGE, TENSION, FC_POSITION)
+SYSTEM_TIME = "system_time"
+"""The flight controller's SYSTEM_TIME: no sample, the evidence of its reboots."""
+INPUT_KINDS = (IMU, ATTITUDE, PWM, RANGE, TENSION, FC_POSITION, SYSTEM_TIME)
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,13 +84,24 @@ class IngestCounters:
     out_of_range: int = 0
     duplicate: int = 0
     out_of_order: int = 0
+    implausible: int = 0
+    """Stamps far ahead of the flight controller's clock model (e.g. a spoofed 2^63 us)."""
+    reordered: int = 0
+    """Late samples put back in stamp order by the reorder buffer (not dropped)."""
     reboots: int = 0
     accepted: dict[str, int] = field(default_factory=lambda: dict.fromkeys(INPUT_KINDS, 0))
 
     @property
     def dropped(self) -> int:
         """Inputs refused for their content or time (not counting other systems' traffic)."""
-        return self.nonfinite + self.absurd + self.out_of_range + self.duplicate + self.out_of_order
+        return (
+            self.nonfinite
+            + self.absurd
+            + self.out_of_range
+            + self.duplicate
+            + self.out_of_order
+            + self.implausible
+        )
 
 
 class Ingest:
@@ -127,9 +141,11 @@ class Ingest:
         self.tension = tension
         self.n_motors = n_motors
         self.counters = IngestCounters()
-        self.latest_fc_s = -math.inf
+        self.clock = FcTimeGate()
+        """Which stamps are believed; ``clock.latest_fc_s`` is the newest."""
+        self.reorder: ReorderBuffer[Sample] = ReorderBuffer(limits.reorder_window_s)
         self._latest_by_kind: dict[str, float] = {}
-        self._backsteps = 0
+        self._local_s: float | None = None
         self._imu_type = "RAW_IMU" if link.autopilot == "ardupilot" else "HIGHRES_IMU"
         self._tension_name = (
             tension.message_name.encode("ascii") if tension.source == "message" else None
@@ -144,27 +160,60 @@ class Ingest:
             and msg.get_srcComponent() == self.link.fc_component_id
         )
 
-    def decode(self, msg: MAVLinkMessage) -> Sample | None:
-        """The checked SI sample carried by ``msg``, or None (not an input, or dropped)."""
+    @property
+    def latest_fc_s(self) -> float:
+        """Newest believed flight-controller stamp [s] (-inf before the first)."""
+        return self.clock.latest_fc_s
+
+    def receive(self, msg: MAVLinkMessage, local_s: float | None = None) -> list[Sample]:
+        """The checked SI samples ``msg`` releases from the reorder buffer, oldest first.
+
+        ``local_s`` is the local time [s] it arrived at (None in replay: no plausibility check
+        against the clock model).
+        """
+        self._local_s = local_s
+        held = self._decode(msg)
+        if held is None:
+            return []
+        kind, sample = held
+        released = self.reorder.push(kind, sample.time_s, sample)
+        return [s for k, s in released if self._in_order(k, s)]
+
+    def decode(self, msg: MAVLinkMessage, local_s: float | None = None) -> Sample | None:
+        """The newest sample :meth:`receive` releases for ``msg``, or None (not an input,
+        dropped, or still held by the reorder buffer)."""
+        released = self.receive(msg, local_s)
+        return released[-1] if released else None
+
+    def flush(self) -> list[Sample]:
+        """Release every held sample (end of a log)."""
+        self.counters.reordered = self.reorder.reordered
+        return [s for k, s in self.reorder.flush() if self._in_order(k, s)]
+
+    def _decode(self, msg: MAVLinkMessage) -> tuple[str, Sample] | None:
+        """(kind, checked sample) carried by ``msg`` before reordering, or None."""
         self.rebooted = False
         counters = self.counters
         counters.messages += 1
         kind_name = msg.get_type()
         if kind_name == "NAMED_VALUE_FLOAT" and self._tension_name is not None:
-            return self._tension(msg)
+            return self._timed(TENSION, self._tension(msg))
         if not self.from_flight_controller(msg):
             counters.wrong_system += 1
             return None
+        if kind_name == "SYSTEM_TIME":
+            self._system_time(msg)
+            return None
         if kind_name == self._imu_type:
-            return self._checked(IMU, self._imu(msg))
+            return self._timed(IMU, self._imu(msg))
         if kind_name == "ATTITUDE":
-            return self._checked(ATTITUDE, self._attitude(msg))
+            return self._timed(ATTITUDE, self._attitude(msg))
         if kind_name == "SERVO_OUTPUT_RAW":
-            return self._checked(PWM, self._pwm(msg))
+            return self._timed(PWM, self._pwm(msg))
         if kind_name == "DISTANCE_SENSOR":
-            return self._checked(RANGE, self._range(msg))
+            return self._timed(RANGE, self._range(msg))
         if kind_name == "LOCAL_POSITION_NED":
-            return self._checked(FC_POSITION, self._fc_position(msg))
+            return self._timed(FC_POSITION, self._fc_position(msg))
         counters.not_input += 1
         return None
 
@@ -257,37 +306,50 @@ class Ingest:
         if value < 0.0 or value > 10.0 * self.tension.known_tension_n + 1000.0:
             self.counters.absurd += 1
             return None
-        return self._checked(
-            TENSION, TensionReading(time_s=msg.time_boot_ms * 1e-3, tension_n=value)
-        )
+        return TensionReading(time_s=msg.time_boot_ms * 1e-3, tension_n=value)
+
+    def _system_time(self, msg: MAVLinkMessage) -> None:
+        verdict = self.clock.on_system_time(msg.time_boot_ms * 1e-3, self._local_s)
+        if verdict == IMPLAUSIBLE:
+            self.counters.implausible += 1
+        else:
+            self.counters.accepted[SYSTEM_TIME] += 1
 
     # ------------------------------------------------------------------ time checks
-    def _checked(self, kind: str, sample: Sample | None) -> Sample | None:
+    def _timed(self, kind: str, sample: Sample | None) -> tuple[str, Sample] | None:
+        """The sample if the clock believes its stamp (a confirmed reboot starts afresh)."""
         if sample is None:
             return None
-        t = sample.time_s
+        verdict = self.clock.check(sample.time_s, self._local_s)
         counters = self.counters
-        if t < self.latest_fc_s - REBOOT_BACKSTEP_S:
-            self._backsteps += 1
-            if self._backsteps < REBOOT_CONFIRMATIONS:
-                counters.out_of_order += 1
-                return None
+        if verdict == IMPLAUSIBLE:
+            counters.implausible += 1
+            return None
+        if verdict == BACKSTEP:
+            counters.out_of_order += 1
+            return None
+        if verdict == REBOOT:
             counters.reboots += 1
             self.rebooted = True
             self._latest_by_kind.clear()
-            self.latest_fc_s = -math.inf
-        self._backsteps = 0
+            self.reorder.clear()
+        return kind, sample
+
+    def _in_order(self, kind: str, sample: Sample) -> bool:
+        """Per message type, stamps must increase after the reorder buffer."""
+        t = sample.time_s
+        counters = self.counters
+        counters.reordered = self.reorder.reordered
         previous = self._latest_by_kind.get(kind, -math.inf)
         if t == previous:
             counters.duplicate += 1
-            return None
+            return False
         if t < previous:
             counters.out_of_order += 1
-            return None
+            return False
         self._latest_by_kind[kind] = t
-        self.latest_fc_s = max(self.latest_fc_s, t)
         counters.accepted[kind] += 1
-        return sample
+        return True
 
     def _unwrap_uint32_us(self, time_usec: int) -> float:
         """SERVO_OUTPUT_RAW's uint32 microseconds to seconds near the latest stamp [s]."""

@@ -259,16 +259,32 @@ class EstimationSession:
             return None
         return CatenaryPositionEstimator(self.config.catenary)
 
-    def on_message(self, msg: MAVLinkMessage) -> Step:
-        """Process one received message (any sender, any type)."""
+    def on_message(self, msg: MAVLinkMessage, local_s: float | None = None) -> Step:
+        """Process one received message (any sender, any type) that arrived at local time
+        ``local_s`` [s] (None in replay: stamps are not checked against the clock model)."""
         if msg.get_type() == "COMMAND_LONG" and self._for_us(msg):
             return Step(messages=[self._mode_command(msg)])
-        sample = self.ingest.decode(msg)
+        samples = self.ingest.receive(msg, local_s)
         if self.ingest.rebooted:
             self.restart()
-        if sample is None:
-            return Step()
-        return self.on_sample(sample)
+        return self._on_samples(samples)
+
+    def flush(self) -> Step:
+        """Process the samples the reorder buffer still holds (end of a log)."""
+        return self._on_samples(self.ingest.flush())
+
+    def _on_samples(self, samples: list[Sample]) -> Step:
+        if len(samples) == 1:
+            return self.on_sample(samples[0])
+        step = Step()
+        for sample in samples:
+            out = self.on_sample(sample)
+            step.messages += out.messages
+            if out.publication is not None:
+                step.publication = out.publication
+            if out.estimate is not None:
+                step.estimate = out.estimate
+        return step
 
     def on_sample(self, sample: Sample) -> Step:
         """Process one checked sample (from :meth:`on_message` or a dataflash log).

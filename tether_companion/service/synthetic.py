@@ -165,9 +165,10 @@ class FakeFlightController:
     """A minimal ArduPilot-like flight controller streaming a hover over a real link.
 
     It streams only after the companion asked (SET_MESSAGE_INTERVAL or REQUEST_DATA_STREAM
-    for RAW_IMU), answers COMMAND_LONG with COMMAND_ACK, SET_GPS_GLOBAL_ORIGIN with
-    GPS_GLOBAL_ORIGIN and TIMESYNC requests in its own time base, and records everything the
-    companion sends. ``speed`` > 1 runs its clock faster than real time (bursts of ticks).
+    for RAW_IMU), with SYSTEM_TIME at 5 Hz beside the hover, answers COMMAND_LONG with
+    COMMAND_ACK, SET_GPS_GLOBAL_ORIGIN with GPS_GLOBAL_ORIGIN and TIMESYNC requests in its own
+    time base, and records everything the companion sends. ``speed`` > 1 runs its clock
+    faster than real time (bursts of ticks).
 
     Parameters
     ----------
@@ -185,6 +186,8 @@ class FakeFlightController:
     """
 
     TICK_S = 0.005
+    SYSTEM_TIME_TICKS = 40
+    """SYSTEM_TIME every this many ticks (5 Hz): what tells the companion of a reboot."""
 
     def __init__(
         self,
@@ -253,6 +256,9 @@ class FakeFlightController:
             for _ in range(ticks_per_wakeup):
                 self.time_s += self.TICK_S
                 if self.streaming:
+                    if self.tick % self.SYSTEM_TIME_TICKS == 0:
+                        boot_ms = round(self.time_s * 1e3)
+                        self.link.send(d.MAVLink_system_time_message(0, boot_ms))
                     for msg in self.streams.messages(self.time_s, self.tick):
                         if msg.get_type() == "RAW_IMU":
                             self.imu_sent_s[msg.time_usec] = time.monotonic()

@@ -148,7 +148,7 @@ def test_reorder_buffer_releases_in_stamp_order_after_the_window() -> None:
     assert buffer.push("imu", 0.990, "late") == []
     assert buffer.push("att", 1.005, "b") == []
     assert [s for _, s in buffer.push("imu", 1.022, "c")] == ["late", "a"]
-    assert [s for _, s in buffer.flush()] == ["b", "c"]
+    assert len(buffer) == 2  # b and c wait for newer stamps
     assert buffer.reordered == 1
     assert ReorderBuffer(0.0).push("imu", 1.0, "x") == [("imu", "x")]
 
@@ -170,7 +170,6 @@ def _jittered_drop_fraction(window_s: float, seed: int) -> float:
     for arrival, _, frame in arrivals:
         for msg in parser.feed(frame):
             session.on_message(msg, arrival - OFFSET_S)
-    session.flush()
     counters = session.ingest.counters
     return (counters.out_of_order + counters.duplicate) / len(arrivals)
 

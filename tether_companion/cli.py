@@ -11,6 +11,7 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from tether_companion import __version__
 from tether_companion.config import ConfigError
@@ -23,9 +24,20 @@ EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse with a one-line error (what is wrong and where the help is), exit code 2.
+
+    argparse's own error prints the whole usage block first, which systemd's journal and
+    ``systemctl status`` show as several lines that hide the error.
+    """
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser with one sub-parser per command."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="tether-companion",
         description="Localise a tethered drone from its tether's pull and feed the position "
         "to ArduPilot or PX4 over MAVLink.",

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import stat
 import types
 import typing
 from collections.abc import Mapping
@@ -31,6 +33,8 @@ import yaml
 T = TypeVar("T")
 
 _MISSING = dataclasses.MISSING
+MAX_YAML_BYTES = 1 << 20
+"""A YAML file larger than this [bytes] is refused before it is read (configs are ~10 kB)."""
 
 
 class ConfigError(ValueError):
@@ -262,14 +266,11 @@ def read_yaml(path: str | Path) -> Mapping[str, Any]:
         When the file is missing, unreadable, not YAML, or not a mapping at the top level.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(str(path), "", _MISSING, "file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(str(path), "", _MISSING, f"cannot read file ({exc})") from None
+    text = _read_small_text(path)
     try:
         data = yaml.safe_load(text)
+    except RecursionError:
+        raise ConfigError(str(path), "", _MISSING, "not valid YAML: nested too deeply") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
@@ -280,6 +281,38 @@ def read_yaml(path: str | Path) -> Mapping[str, Any]:
     if not isinstance(data, Mapping):
         raise ConfigError(str(path), "", data, "the file must hold a mapping of keys to values")
     return data
+
+
+def _read_small_text(path: Path) -> str:
+    """The UTF-8 text of a regular file of at most :data:`MAX_YAML_BYTES` (checked before
+    reading, so a device such as /dev/zero or a huge file is never loaded)."""
+    try:
+        with path.open("rb") as handle:
+            info = os.fstat(handle.fileno())
+            if not stat.S_ISREG(info.st_mode):
+                raise ConfigError(str(path), "", _MISSING, "not a regular file")
+            if info.st_size > MAX_YAML_BYTES:
+                raise ConfigError(
+                    str(path),
+                    "",
+                    _MISSING,
+                    f"file too large ({info.st_size} bytes; at most {MAX_YAML_BYTES})",
+                )
+            data = handle.read(MAX_YAML_BYTES + 1)
+    except FileNotFoundError:
+        raise ConfigError(str(path), "", _MISSING, "file not found") from None
+    except IsADirectoryError:
+        raise ConfigError(str(path), "", _MISSING, "not a regular file (a directory)") from None
+    except OSError as exc:
+        raise ConfigError(str(path), "", _MISSING, f"cannot read file ({exc.strerror})") from None
+    if len(data) > MAX_YAML_BYTES:
+        raise ConfigError(str(path), "", _MISSING, f"file too large (at most {MAX_YAML_BYTES})")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            str(path), "", _MISSING, f"not UTF-8 text (byte {exc.start}: {exc.reason})"
+        ) from None
 
 
 def load_yaml(cls: type[T], path: str | Path) -> T:

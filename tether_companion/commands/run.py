@@ -6,6 +6,7 @@ import argparse
 import asyncio
 import signal
 
+from tether_companion.config import ConfigError
 from tether_companion.resources import CONFIGS_DIR
 from tether_companion.service.app import CompanionService
 from tether_companion.service.config import ServiceConfig, load_service_config, load_vehicle_for
@@ -48,7 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def config_from_args(args: argparse.Namespace) -> ServiceConfig:
     """The service config with the command-line overrides applied (ConfigError when bad)."""
     link: dict = {}
-    if args.connect:
+    if args.connect is not None:  # an empty --connect is an error, not "use the config's"
         link["connect"] = args.connect
     if args.autopilot:
         link["autopilot"] = args.autopilot
@@ -66,8 +67,11 @@ def config_from_args(args: argparse.Namespace) -> ServiceConfig:
 def run(args: argparse.Namespace) -> int:
     """Run until SIGTERM/SIGINT; 0 on a clean stop."""
     config = config_from_args(args)
-    vehicle = load_vehicle_for(config)
-    service = CompanionService(config, vehicle)
+    try:
+        service = CompanionService(config, load_vehicle_for(config))
+    except ConfigError as exc:  # the vehicle profile, the signing key: name the config file
+        inner = f" (in {exc.source})" if exc.source and exc.source != exc.value else ""
+        raise ConfigError(args.config, exc.key, exc.value, exc.allowed + inner) from None
     asyncio.run(serve(service, show_status=args.status))
     return 0
 

@@ -707,6 +707,10 @@ class _SerialLink(Link):
         try:
             _configure_raw(fd, endpoint.baud)
             write_fd = os.dup(fd)
+        except termios.error as exc:  # e.g. /dev/null: not a terminal
+            os.close(fd)
+            errno_, text = (exc.args + (0, ""))[:2]
+            raise OSError(errno_, f"not a serial port ({text})") from None
         except OSError:
             os.close(fd)
             raise

@@ -22,6 +22,7 @@ import asyncio
 import contextlib
 import gc
 import math
+import socket
 import sys
 import time
 import traceback
@@ -51,6 +52,8 @@ from tether_companion.service.session import EstimationSession
 from tether_companion.service.systemd import SystemdNotifier
 
 HOUSEKEEPING_PERIOD_S = 0.05
+LINK_OPEN_TIMEOUT_S = 2.0
+"""An open (name lookup, TCP connect) taking longer than this [s] counts as failed."""
 RATE_WINDOW_S = 1.0
 INPUT_SILENT_S = 0.5
 """An input not heard for this long [s] (local time) while the link is up is re-requested."""
@@ -237,18 +240,32 @@ class CompanionService:
 
     # ------------------------------------------------------------------ link supervision
     async def _supervise_link(self, stop: asyncio.Event) -> None:
+        """Open the link, serve it, reopen it: a failure is said at once (within
+        ``LINK_OPEN_TIMEOUT_S``) on stderr, once per change of reason, then retried with
+        exponential back-off."""
         cfg = self.config.link
         delay = cfg.retry_initial_s
+        reported = ""
         while not stop.is_set():
             try:
-                link = await self._open_link_fn()
-            except OSError as exc:
+                link = await asyncio.wait_for(self._open_link_fn(), LINK_OPEN_TIMEOUT_S)
+            except OSError as exc:  # TimeoutError is one too
+                reason = _open_failure(exc).removeprefix(f"{self._endpoint}: ")
                 self.state.link_open_failures += 1
-                self.state.last_error = str(exc)
+                self.state.last_error = f"cannot open {self._endpoint}: {reason}"
                 self.state.link_text = f"cannot open {self._endpoint} (retry in {delay:.1f} s)"
+                if reason != reported:
+                    reported = reason
+                    _log(
+                        f"cannot open {self._endpoint}: {reason}; retrying with back-off "
+                        f"({cfg.retry_initial_s:g} s doubling up to {cfg.retry_max_s:g} s)"
+                    )
                 await _wait_or_stop(stop, delay)
                 delay = min(2.0 * delay, cfg.retry_max_s)
                 continue
+            if reported:
+                _log(f"opened {self._endpoint}")
+                reported = ""
             delay = cfg.retry_initial_s
             self.state.link_opens += 1
             self.state.link_text = f"opened {self._endpoint}"
@@ -262,6 +279,8 @@ class CompanionService:
                 self.state.link_up = False
                 await link.close()
             self.state.link_text = f"{self._endpoint} closed (reopen in {delay:.1f} s)"
+            if not stop.is_set():
+                _log(f"{self._endpoint} closed; reopening in {delay:g} s")
             await _wait_or_stop(stop, delay)
 
     async def _serve(self, link: Link) -> None:
@@ -437,7 +456,7 @@ class CompanionService:
         if trust is None or not trust.events:
             return
         for event in trust.events:
-            print(f"tether-companion: {link.endpoint}: {event}", file=sys.stderr, flush=True)
+            _log(f"{link.endpoint}: {event}")
         self.state.last_error = trust.events[-1]
         trust.events.clear()
 
@@ -588,6 +607,20 @@ class CompanionService:
             f"{self.state.link_text}; IMU {self.state.rates_hz[IMU]:.0f} Hz; "
             f"published {self.state.rates_hz['published']:.1f} Hz; health {pub.health}"
         )
+
+
+def _open_failure(exc: OSError) -> str:
+    """Why a link did not open, in words (no errno numbers)."""
+    if isinstance(exc, TimeoutError):
+        return f"no answer within {LINK_OPEN_TIMEOUT_S:g} s"
+    if isinstance(exc, socket.gaierror):
+        return f"cannot resolve the host ({exc.strerror})"
+    return exc.strerror or str(exc)
+
+
+def _log(line: str) -> None:
+    """One line for the journal (stderr)."""
+    print(f"tether-companion: {line}", file=sys.stderr, flush=True)
 
 
 async def _wait_or_stop(stop: asyncio.Event, timeout_s: float) -> None:

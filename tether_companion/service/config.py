@@ -491,14 +491,18 @@ def load_service_config(path: str | Path | None, overrides: dict | None = None) 
     data: dict = {} if path is None else _plain(read_yaml(path))
     if path is not None:
         data = _vehicle_beside_config(data, Path(path))
+    source = str(path) if path is not None else "<defaults>"
     for section, values in (overrides or {}).items():
         if isinstance(values, dict):
-            merged = dict(data.get(section) or {})
+            current = data.get(section)
+            if current is not None and not isinstance(current, dict):
+                raise ConfigError(source, section, current, "must be a mapping of keys to values")
+            merged = dict(current or {})
             merged.update(values)
             data[section] = merged
         else:
             data[section] = values
-    return from_mapping(ServiceConfig, data, source=str(path) if path is not None else "<defaults>")
+    return from_mapping(ServiceConfig, data, source=source)
 
 
 def load_vehicle_for(config: ServiceConfig) -> VehicleProfile:

@@ -5,8 +5,12 @@ able to move that clock: a stamp of 2^63 us would make every later genuine sampl
 and one stamped in the past must not restart the estimator. :class:`FcTimeGate` decides, per
 stamp, from the stamps it has believed and the local time they arrived at:
 
-* **implausible**: further ahead of the clock model (the newest believed stamp plus the local
-  time elapsed since it arrived) than ``future_tolerance_s``: dropped, the clock does not move;
+* **implausible**: further ahead of the clock model than ``future_tolerance_s``: dropped, the
+  clock does not move. The model is the newest believed stamp plus ``max_rate`` times the
+  local time elapsed since it arrived (the flight controller's clock runs at the local rate,
+  but an emulator at 4x speed, or a burst after a stalled link, runs faster for a while);
+  when nothing but implausible stamps has arrived for ``fallback_s`` (the old clock is
+  silent), the clock jumps to the new one;
 * **backstep**: more than ``backstep_s`` behind the newest believed stamp: dropped (counted as
   out of order by the caller), unless it confirms a reboot;
 * **reboot**: believed only on the flight controller's own evidence: a SYSTEM_TIME whose
@@ -35,6 +39,8 @@ REBOOT_BACKSTEP_S = 1.0
 """A stamp this far [s] behind the newest is a backstep (less: out of order, by the caller)."""
 FUTURE_TOLERANCE_S = 0.5
 """A stamp this far [s] ahead of the clock model is implausible."""
+MAX_RATE = 10.0
+"""The flight controller's stamps may advance up to this many times faster than local time."""
 REBOOT_CONFIRMATIONS = 3
 CONFIRM_SPAN_S = 0.01
 FALLBACK_S = 2.0
@@ -61,6 +67,7 @@ class FcTimeGate:
         *,
         backstep_s: float = REBOOT_BACKSTEP_S,
         future_tolerance_s: float = FUTURE_TOLERANCE_S,
+        max_rate: float = MAX_RATE,
         confirmations: int = REBOOT_CONFIRMATIONS,
         confirm_span_s: float = CONFIRM_SPAN_S,
         fallback_s: float = FALLBACK_S,
@@ -68,6 +75,7 @@ class FcTimeGate:
     ) -> None:
         self.backstep_s = backstep_s
         self.future_tolerance_s = future_tolerance_s
+        self.max_rate = max_rate
         self.confirmations = confirmations
         self.confirm_span_s = confirm_span_s
         self.fallback_s = fallback_s
@@ -83,12 +91,13 @@ class FcTimeGate:
         self._confirm_local_s: list[float | None] = []
         self._backsteps = 0
         self._first_backstep_local_s: float | None = None
+        self._first_implausible_local_s: float | None = None
 
     def _implausible(self, fc_s: float, local_s: float | None) -> bool:
         if local_s is None or self._latest_local_s is None:
             return False
-        expected = self.latest_fc_s + max(0.0, local_s - self._latest_local_s)
-        return fc_s > expected + self.future_tolerance_s
+        elapsed = max(0.0, local_s - self._latest_local_s)
+        return fc_s > self.latest_fc_s + self.max_rate * elapsed + self.future_tolerance_s
 
     def on_system_time(self, fc_s: float, local_s: float | None) -> str:
         """A SYSTEM_TIME's ``time_boot_ms`` [s]: a reboot claim when it went back."""
@@ -106,7 +115,12 @@ class FcTimeGate:
     def check(self, fc_s: float, local_s: float | None) -> str:
         """Verdict on an input stamp [s] received at local time ``local_s`` [s] (or None)."""
         if self._implausible(fc_s, local_s):
-            return IMPLAUSIBLE
+            if self._first_implausible_local_s is None:
+                self._first_implausible_local_s = local_s
+            assert local_s is not None  # no plausibility check without local times
+            if local_s - self._first_implausible_local_s < self.fallback_s:
+                return IMPLAUSIBLE
+        self._first_implausible_local_s = None
         if fc_s < self.latest_fc_s - self.backstep_s:
             return self._backstep(fc_s, local_s)
         self._claim = None

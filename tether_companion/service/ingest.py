@@ -185,11 +185,6 @@ class Ingest:
         released = self.receive(msg, local_s)
         return released[-1] if released else None
 
-    def flush(self) -> list[Sample]:
-        """Release every held sample (end of a log)."""
-        self.counters.reordered = self.reorder.reordered
-        return [s for k, s in self.reorder.flush() if self._in_order(k, s)]
-
     def _decode(self, msg: MAVLinkMessage) -> tuple[str, Sample] | None:
         """(kind, checked sample) carried by ``msg`` before reordering, or None."""
         self.rebooted = False

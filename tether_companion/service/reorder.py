@@ -69,11 +69,5 @@ class ReorderBuffer(Generic[T]):
         self._heap.clear()
         self._newest_s = float("-inf")
 
-    def flush(self) -> list[tuple[str, T]]:
-        """Release everything held, oldest first (end of a log)."""
-        out = [(k, s) for _, _, k, s in sorted(self._heap)]
-        self._heap.clear()
-        return out
-
     def __len__(self) -> int:
         return len(self._heap)

@@ -34,7 +34,7 @@ from tether_companion.service.config import ServiceConfig
 from tether_companion.service.ingest import ATTITUDE, IMU, PWM, Sample
 from tether_companion.service.publish import OK, Publication, health_text
 from tether_companion.service.recording import read_tlog
-from tether_companion.service.session import EstimationSession, Step
+from tether_companion.service.session import EstimationSession
 
 DATAFLASH_DOWNWARD = 25
 """RFND ``Orient`` of a downward rangefinder (ROTATION_PITCH_270)."""
@@ -105,7 +105,8 @@ def replay_log(
     out.write(Publication.CSV_HEADER + "\n")
     suffix = path.suffix.lower()
     if suffix == ".tlog":
-        steps = _tlog_steps(session, path, allow_truncated)
+        # as live: samples still in the reorder buffer at the end are not processed
+        steps = (session.on_message(msg) for msg in _tlog_messages(path, allow_truncated))
     elif suffix in (".bin", ".log"):
         dataflash = DataflashSource(path, vehicle.n_motors, allow_truncated=allow_truncated)
         steps = (session.on_sample(sample) for sample in dataflash)
@@ -153,14 +154,6 @@ def _check_inputs(path: Path, config: ServiceConfig, accepted: dict[str, int], s
         f"(found: {found or 'none of the inputs'}); "
         "the estimator needs IMU, attitude and motor outputs"
     )
-
-
-def _tlog_steps(session: EstimationSession, path: Path, allow_truncated: bool) -> Iterator[Step]:
-    """The session's steps for every message of a .tlog, then for what its reorder buffer
-    still holds at the end."""
-    for msg in _tlog_messages(path, allow_truncated):
-        yield session.on_message(msg)
-    yield session.flush()
 
 
 def _tlog_messages(path: Path, allow_truncated: bool) -> Iterator[MAVLinkMessage]:

@@ -269,10 +269,6 @@ class EstimationSession:
             self.restart()
         return self._on_samples(samples)
 
-    def flush(self) -> Step:
-        """Process the samples the reorder buffer still holds (end of a log)."""
-        return self._on_samples(self.ingest.flush())
-
     def _on_samples(self, samples: list[Sample]) -> Step:
         if len(samples) == 1:
             return self.on_sample(samples[0])

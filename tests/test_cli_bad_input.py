@@ -271,7 +271,10 @@ def test_an_open_that_hangs_is_reported_within_two_seconds(capsys) -> None:
     from tether_companion.service.config import load_service_config, load_vehicle_for
     from tether_companion.service.systemd import SystemdNotifier
 
+    started: list[float] = []
+
     async def hang():
+        started.append(time.monotonic())
         await asyncio.sleep(3600.0)
 
     config = load_service_config(None, {"recording": {"enabled": False}})
@@ -282,10 +285,9 @@ def test_an_open_that_hangs_is_reported_within_two_seconds(capsys) -> None:
     async def scenario() -> float:
         stop = asyncio.Event()
         task = asyncio.create_task(service.run(stop))
-        start = time.monotonic()
         while service.state.link_open_failures == 0:
             await asyncio.sleep(0.01)
-        elapsed = time.monotonic() - start
+        elapsed = time.monotonic() - started[0]  # from the start of the first attempt
         stop.set()
         await asyncio.wait_for(task, 10.0)
         return elapsed

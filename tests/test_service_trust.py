@@ -35,6 +35,18 @@ def test_a_stamp_far_ahead_is_implausible_and_does_not_move_the_clock() -> None:
     assert gate.check(15.1, 6.0) == ACCEPT
 
 
+def test_a_genuine_jump_after_a_stall_is_believed_once_confirmed_over_time() -> None:
+    """The link and our loop stalled together: the stamps after the gap arrive 1 s ahead at
+    once. Five of them in one datagram are not enough; the stream going on over 10 ms is."""
+    gate = FcTimeGate()
+    for k in range(100):
+        assert gate.check(10.0 + 0.005 * k, 1.0 + 0.005 * k) == ACCEPT
+    assert [gate.check(11.5 + 0.005 * i, 1.5) for i in range(5)] == [IMPLAUSIBLE] * 5
+    verdicts = [gate.check(11.525 + 0.006 * i, 1.5 + 0.006 * i) for i in range(4)]
+    assert verdicts == [IMPLAUSIBLE, IMPLAUSIBLE, ACCEPT, ACCEPT]
+    assert gate.latest_fc_s == pytest.approx(11.543)
+
+
 def test_one_sample_or_one_datagram_cannot_declare_a_reboot() -> None:
     gate = FcTimeGate()
     for k in range(100):

@@ -8,9 +8,12 @@ stamp, from the stamps it has believed and the local time they arrived at:
 * **implausible**: further ahead of the clock model than ``future_tolerance_s``: dropped, the
   clock does not move. The model is the newest believed stamp plus ``max_rate`` times the
   local time elapsed since it arrived (the flight controller's clock runs at the local rate,
-  but an emulator at 4x speed, or a burst after a stalled link, runs faster for a while);
-  when nothing but implausible stamps has arrived for ``fallback_s`` (the old clock is
-  silent), the clock jumps to the new one;
+  but an emulator at 4x speed, or a burst after a stalled link, runs faster for a while).
+  A genuine jump (the link, or our own loop, was stalled while the flight controller's clock
+  went on; the datagrams from before and after are then handled within microseconds) is
+  believed once ``confirmations`` stamps that agree with each other and arrive over at least
+  ``confirm_span_s`` of local time have all been ahead, with no stamp of the old clock between
+  them: one datagram cannot do that;
 * **backstep**: more than ``backstep_s`` behind the newest believed stamp: dropped (counted as
   out of order by the caller), unless it confirms a reboot;
 * **reboot**: believed only on the flight controller's own evidence: a SYSTEM_TIME whose
@@ -91,7 +94,8 @@ class FcTimeGate:
         self._confirm_local_s: list[float | None] = []
         self._backsteps = 0
         self._first_backstep_local_s: float | None = None
-        self._first_implausible_local_s: float | None = None
+        self._ahead: list[tuple[float, float]] = []
+        """(stamp, local time) of consecutive implausible stamps that agree with each other."""
 
     def _implausible(self, fc_s: float, local_s: float | None) -> bool:
         if local_s is None or self._latest_local_s is None:
@@ -115,12 +119,10 @@ class FcTimeGate:
     def check(self, fc_s: float, local_s: float | None) -> str:
         """Verdict on an input stamp [s] received at local time ``local_s`` [s] (or None)."""
         if self._implausible(fc_s, local_s):
-            if self._first_implausible_local_s is None:
-                self._first_implausible_local_s = local_s
             assert local_s is not None  # no plausibility check without local times
-            if local_s - self._first_implausible_local_s < self.fallback_s:
+            if not self._jump_confirmed(fc_s, local_s):
                 return IMPLAUSIBLE
-        self._first_implausible_local_s = None
+        self._ahead = []
         if fc_s < self.latest_fc_s - self.backstep_s:
             return self._backstep(fc_s, local_s)
         self._claim = None
@@ -130,6 +132,23 @@ class FcTimeGate:
             self.latest_fc_s = fc_s
             self._latest_local_s = local_s
         return ACCEPT
+
+    def _jump_confirmed(self, fc_s: float, local_s: float) -> bool:
+        """Whether ``fc_s``, ahead of the model, completes a run of agreeing stamps ahead."""
+        if self._ahead:
+            first_fc_s, first_local_s = self._ahead[0]
+            elapsed = local_s - first_local_s
+            agrees = (
+                first_fc_s - self.backstep_s
+                <= fc_s
+                <= first_fc_s + self.max_rate * elapsed + self.future_tolerance_s
+            )
+            if not agrees:
+                self._ahead = []
+        self._ahead.append((fc_s, local_s))
+        return len(self._ahead) >= self.confirmations and self._spans(
+            [t for _, t in self._ahead]
+        )
 
     def _backstep(self, fc_s: float, local_s: float | None) -> str:
         if self._backsteps == 0:

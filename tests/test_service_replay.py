@@ -192,7 +192,8 @@ def test_replay_says_why_nothing_was_published(tmp_path: Path, config, capsys) -
     instead of a bare "0 estimates"."""
     path = _write_tlog(tmp_path, config, 4.0, skip=("DISTANCE_SENSOR",))
     summary = replay_log(path, config, load_vehicle_for(config), io.StringIO())
-    assert summary.estimates == 800 and summary.not_ok.get("no_range", 0) > 0
+    # 800 IMU ticks, of which the last 20 ms (4) still wait in the reorder buffer at the end
+    assert summary.estimates == 796 and summary.not_ok.get("no_range", 0) > 0
     out = tmp_path / "estimates.csv"
     assert main(["replay", str(path), "--out", str(out)]) == 0
     err = capsys.readouterr().err

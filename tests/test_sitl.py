@@ -1,0 +1,112 @@
+"""ArduCopter SITL (the real flight code) against ``tether-companion run`` over TCP.
+
+SITL is a fixture beside the project (``../shared/ardupilot-sitl`` or ``TETHER_SITL_DIR``);
+without it these tests skip and say why. The long flights are ``slow`` (docs/ardupilot.md).
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+
+import pytest
+
+from tether_companion.ardupilot_sitl.companion import CompanionProcess, companion_config
+from tether_companion.ardupilot_sitl.ground_station import EKF_FLAG_POS_HORIZ_ABS, GroundStation
+from tether_companion.ardupilot_sitl.process import (
+    SitlFailed,
+    SitlOptions,
+    SitlProcess,
+    SitlUnavailable,
+    find_sitl,
+    ports_of,
+)
+from tether_companion.mavlink.geo import Geodetic
+
+pytestmark = [pytest.mark.integration, pytest.mark.sitl]
+
+GPS_LESS = {
+    "GPS1_TYPE": 0,
+    "EK3_SRC1_POSXY": 6,
+    "EK3_SRC1_VELXY": 0,
+    "EK3_SRC1_POSZ": 1,
+    "EK3_SRC1_VELZ": 0,
+    "EK3_SRC1_YAW": 1,
+}
+"""Source set 1 = external navigation, no GPS at all (extnav.parm's note)."""
+
+
+@pytest.fixture
+def sitl_available() -> None:
+    try:
+        find_sitl()
+    except SitlUnavailable as exc:
+        pytest.skip(str(exc))
+
+
+def test_companion_gives_a_gps_less_ekf3_its_origin_and_position(sitl_available, tmp_path) -> None:
+    """Start SITL without GPS, run the service as a user would: EKF3 takes our origin and
+    fuses our VISION_POSITION_ESTIMATE (its own words), and the service stops cleanly."""
+    options = SitlOptions(speedup=1.0, extra_params=GPS_LESS)
+    with SitlProcess(options) as sitl:
+        home = Geodetic(*options.home[:3])
+        with GroundStation(sitl.ports["serial0"], home) as gcs:
+            config = companion_config(
+                tmp_path, options.home, {"publish": {"on_unhealthy": "inflate"}}
+            )
+            companion = CompanionProcess(config, sitl.ports["serial1"], tmp_path / "run.log")
+            with companion:
+                gcs.request_streams()
+                texts = gcs.wait_for(
+                    "EKF3 using external navigation",
+                    lambda s: s["ekf_flags"] & EKF_FLAG_POS_HORIZ_ABS and s["forwarded_vision"] > 0,
+                    timeout_s=60.0,
+                )
+                gcs.request_message(49)  # GPS_GLOBAL_ORIGIN
+                snap = gcs.wait_for("GPS_GLOBAL_ORIGIN", lambda s: s["origin"] is not None, 10)
+                assert companion.alive(), companion.output()
+                exit_code = companion.stop()
+            log = companion.output()
+            autopilot_says = gcs.texts_since()
+    assert texts["ekf_flags"] & EKF_FLAG_POS_HORIZ_ABS
+    assert any("origin set" in t for t in autopilot_says), autopilot_says
+    assert any("is using external nav data" in t for t in autopilot_says), autopilot_says
+    origin = snap["origin"]
+    assert origin.latitude == round(options.home[0] * 1e7)
+    assert origin.longitude == round(options.home[1] * 1e7)
+    assert abs(origin.altitude - options.home[2] * 1e3) <= 1
+    assert exit_code == 0, log
+    assert "Traceback" not in log, log
+    assert list((tmp_path / "rec").glob("*.tlog")), "the service recorded nothing"
+
+
+def test_a_port_in_use_fails_with_the_reason(sitl_available) -> None:
+    """Asking for an instance whose SERIAL0 port is taken: SitlFailed naming the ports."""
+    with socket.socket() as blocker:
+        instance = 37
+        blocker.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        blocker.bind(("0.0.0.0", ports_of(instance)["serial0"]))
+        blocker.listen(1)
+        start = time.monotonic()
+        with pytest.raises(SitlFailed, match="in use"):
+            SitlProcess(SitlOptions(instance=instance)).start()
+        assert time.monotonic() - start < 5.0
+
+
+def test_missing_binary_is_unavailable_with_the_path(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("TETHER_SITL_DIR", str(tmp_path))
+    with pytest.raises(SitlUnavailable, match=str(tmp_path / "arducopter")):
+        find_sitl()
+
+
+def test_a_binary_that_dies_at_start_fails_with_its_output(tmp_path, monkeypatch) -> None:
+    """A 'SITL' that exits at once: SitlFailed with its exit code and last words, no hang."""
+    fake = tmp_path / "arducopter"
+    fake.write_text("#!/bin/sh\necho 'PANIC: no frame model'\nexit 3\n")
+    fake.chmod(0o755)
+    for name in ("copter.parm", "tether.parm", "extnav.parm"):
+        (tmp_path / name).write_text("")
+    monkeypatch.setenv("TETHER_SITL_DIR", str(tmp_path))
+    with pytest.raises(SitlFailed, match="exited with code 3.*PANIC: no frame model"):
+        with SitlProcess(SitlOptions(start_timeout_s=10.0)):
+            pass

@@ -1,0 +1,332 @@
+"""A ground station for ArduCopter SITL (pymavlink, an independent MAVLink implementation):
+commands (mode, arm, takeoff, position targets, EKF source set) and what the autopilot tells
+(SIM_STATE truth, EKF_STATUS_REPORT, LOCAL_POSITION_NED, STATUSTEXT, failsafes).
+
+A reader thread keeps the latest of each and a history; every wait is bounded in wall time.
+Positions are NED [m] from the SITL home, which is the tether's anchor.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from pymavlink import mavutil
+
+from tether_companion.mavlink.geo import Geodetic, geodetic_to_ned
+
+FC_SYSTEM, FC_COMPONENT = 1, 1
+COMPANION_COMPONENT = 191
+"""The service's component id (link.component_id in configs/companion.yaml)."""
+GCS_SYSTEM = 255
+MAV_CMD_SET_EKF_SOURCE_SET = 42007
+COPTER_MODES = {"STABILIZE": 0, "ALT_HOLD": 2, "AUTO": 3, "GUIDED": 4, "LOITER": 5, "RTL": 6,
+                "CIRCLE": 7, "LAND": 9}  # fmt: skip
+EKF_FLAG_POS_HORIZ_ABS = 16
+"""EKF_STATUS_REPORT.flags bit: horizontal absolute position OK (EKF_POS_HORIZ_ABS)."""
+MESSAGE_RATES_HZ = {
+    "SIM_STATE": 25.0,
+    "EKF_STATUS_REPORT": 10.0,
+    "LOCAL_POSITION_NED": 25.0,
+    "GLOBAL_POSITION_INT": 5.0,
+    "SYS_STATUS": 2.0,
+}
+"""What the ground station asks for on its own link (SET_MESSAGE_INTERVAL)."""
+
+
+class FlightError(RuntimeError):
+    """A flight step did not happen within its bound (the text says which and why)."""
+
+
+@dataclass
+class Sample:
+    """One SIM_STATE truth sample with what the autopilot believed at the same moment."""
+
+    wall_s: float
+    fc_s: float
+    truth_ned_m: np.ndarray
+    fc_ned_m: np.ndarray
+    """The autopilot's own LOCAL_POSITION_NED (EKF3) last received."""
+    vision_ned_m: np.ndarray
+    """The companion's last VISION_POSITION_ESTIMATE (nan before the first)."""
+    ekf_pos_ratio: float
+    """EKF_STATUS_REPORT.pos_horiz_variance: EKF3's horizontal position innovation test ratio."""
+    ekf_flags: int
+    mode: int
+    armed: bool
+
+
+@dataclass
+class Telemetry:
+    """Everything the reader thread collected (guarded by ``lock``)."""
+
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    fc_s: float = 0.0
+    heartbeat: object | None = None
+    truth_ned_m: np.ndarray | None = None
+    fc_ned_m: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    ekf: object | None = None
+    texts: list[tuple[float, str]] = field(default_factory=list)
+    acks: list[object] = field(default_factory=list)
+    samples: list[Sample] = field(default_factory=list)
+    forwarded_vision: int = 0
+    """VISION_POSITION_ESTIMATEs from our companion (system 1, component 191) routed to us."""
+    vision_ned_m: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    """The companion's last VISION_POSITION_ESTIMATE position (NED from the anchor) [m]."""
+    companion_texts: list[tuple[float, str]] = field(default_factory=list)
+    origin: object | None = None
+    """The autopilot's GPS_GLOBAL_ORIGIN, once received."""
+
+
+class GroundStation:
+    """The test's ground station on SITL's SERIAL0 (use as a context manager)."""
+
+    def __init__(self, port: int, home: Geodetic, *, connect_timeout_s: float = 20.0) -> None:
+        self.home = home
+        self.telemetry = Telemetry()
+        self._stop = threading.Event()
+        self.master = _connect(port, connect_timeout_s)
+        self._thread = threading.Thread(target=self._read_loop, name="sitl-gcs", daemon=True)
+        self._thread.start()
+
+    def __enter__(self) -> GroundStation:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop the reader and close the socket."""
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+        self.master.close()
+
+    # ------------------------------------------------------------------ reading
+    def _read_loop(self) -> None:
+        tel = self.telemetry
+        while not self._stop.is_set():
+            try:
+                msg = self.master.recv_match(blocking=True, timeout=0.2)
+            except (OSError, ValueError):
+                return
+            if msg is None:
+                continue
+            kind = msg.get_type()
+            src = (msg.get_srcSystem(), msg.get_srcComponent())
+            if src == (FC_SYSTEM, COMPANION_COMPONENT):
+                with tel.lock:
+                    if kind == "VISION_POSITION_ESTIMATE":
+                        tel.forwarded_vision += 1
+                        tel.vision_ned_m = np.array([msg.x, msg.y, msg.z])
+                    elif kind == "STATUSTEXT":
+                        tel.companion_texts.append((tel.fc_s, msg.text))
+                continue
+            if src != (FC_SYSTEM, FC_COMPONENT):
+                continue  # SITL's tether simulator (system 2) and anyone else
+            with tel.lock:
+                self._absorb(tel, kind, msg)
+
+    def _absorb(self, tel: Telemetry, kind: str, msg) -> None:  # noqa: ANN001 - pymavlink type
+        boot_ms = getattr(msg, "time_boot_ms", None)
+        if boot_ms is not None:
+            tel.fc_s = boot_ms * 1e-3
+        if kind == "HEARTBEAT":
+            tel.heartbeat = msg
+        elif kind == "STATUSTEXT":
+            tel.texts.append((tel.fc_s, msg.text))
+        elif kind == "COMMAND_ACK":
+            tel.acks.append(msg)
+        elif kind == "GPS_GLOBAL_ORIGIN":
+            tel.origin = msg
+        elif kind == "EKF_STATUS_REPORT":
+            tel.ekf = msg
+        elif kind == "LOCAL_POSITION_NED":
+            tel.fc_ned_m = np.array([msg.x, msg.y, msg.z])
+        elif kind == "SIM_STATE":
+            lat = msg.lat_int * 1e-7 if getattr(msg, "lat_int", 0) else msg.lat
+            lon = msg.lon_int * 1e-7 if getattr(msg, "lon_int", 0) else msg.lon
+            truth = geodetic_to_ned(self.home, Geodetic(lat, lon, msg.alt))
+            tel.truth_ned_m = truth
+            hb = tel.heartbeat
+            tel.samples.append(
+                Sample(
+                    wall_s=time.monotonic(),
+                    fc_s=tel.fc_s,
+                    truth_ned_m=truth,
+                    fc_ned_m=tel.fc_ned_m.copy(),
+                    vision_ned_m=tel.vision_ned_m.copy(),
+                    ekf_pos_ratio=float(tel.ekf.pos_horiz_variance) if tel.ekf else math.nan,
+                    ekf_flags=int(tel.ekf.flags) if tel.ekf else 0,
+                    mode=int(hb.custom_mode) if hb else -1,
+                    armed=bool(hb.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+                    if hb
+                    else False,
+                )
+            )
+
+    def snapshot(self) -> dict:
+        """The latest values (copies)."""
+        tel = self.telemetry
+        with tel.lock:
+            hb = tel.heartbeat
+            return {
+                "fc_s": tel.fc_s,
+                "truth_ned_m": None if tel.truth_ned_m is None else tel.truth_ned_m.copy(),
+                "fc_ned_m": tel.fc_ned_m.copy(),
+                "mode": int(hb.custom_mode) if hb else -1,
+                "armed": bool(hb.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+                if hb
+                else False,
+                "ekf_flags": int(tel.ekf.flags) if tel.ekf else 0,
+                "n_samples": len(tel.samples),
+                "vision_ned_m": tel.vision_ned_m.copy(),
+                "forwarded_vision": tel.forwarded_vision,
+                "origin": tel.origin,
+            }
+
+    def texts_since(self, index: int = 0) -> list[str]:
+        """STATUSTEXTs received from position ``index`` on."""
+        with self.telemetry.lock:
+            return [text for _, text in self.telemetry.texts[index:]]
+
+    def companion_texts(self) -> list[str]:
+        """STATUSTEXTs the companion sent (routed to us by the autopilot)."""
+        with self.telemetry.lock:
+            return [text for _, text in self.telemetry.companion_texts]
+
+    def samples_between(self, fc_start_s: float, fc_end_s: float) -> list[Sample]:
+        """Truth samples with flight-controller time in [start, end]."""
+        with self.telemetry.lock:
+            return [s for s in self.telemetry.samples if fc_start_s <= s.fc_s <= fc_end_s]
+
+    # ------------------------------------------------------------------ waiting
+    def wait_for(
+        self, what: str, predicate: Callable[[dict], bool], timeout_s: float, poll_s: float = 0.05
+    ) -> dict:
+        """Poll the snapshot until ``predicate`` holds; FlightError naming ``what`` after
+        ``timeout_s`` wall seconds (with the last STATUSTEXTs)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            snap = self.snapshot()
+            if predicate(snap):
+                return snap
+            time.sleep(poll_s)
+        raise FlightError(
+            f"{what}: not within {timeout_s:g} s (last autopilot messages: "
+            f"{' | '.join(self.texts_since()[-5:]) or 'none'})"
+        )
+
+    def wait_fc_time(self, fc_seconds: float, speedup: float) -> dict:
+        """Let ``fc_seconds`` of flight-controller time pass (bounded in wall time)."""
+        start = self.snapshot()["fc_s"]
+        return self.wait_for(
+            f"{fc_seconds:g} s of autopilot time",
+            lambda s: s["fc_s"] >= start + fc_seconds,
+            timeout_s=10.0 + 3.0 * fc_seconds / speedup,
+        )
+
+    # ------------------------------------------------------------------ commanding
+    def request_streams(self, rates_hz: dict[str, float] | None = None) -> None:
+        """SET_MESSAGE_INTERVAL for each message on this link."""
+        for name, rate in (rates_hz or MESSAGE_RATES_HZ).items():
+            msg_id = getattr(mavutil.mavlink, f"MAVLINK_MSG_ID_{name}")
+            self.command(mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / rate)
+
+    def command(self, command: int, *params: float, wait_s: float | None = None) -> int | None:
+        """COMMAND_LONG to the autopilot; with ``wait_s`` wait for its COMMAND_ACK result."""
+        p = [*params, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0][:7]
+        with self.telemetry.lock:
+            n_acks = len(self.telemetry.acks)
+        self.master.mav.command_long_send(FC_SYSTEM, FC_COMPONENT, command, 0, *p)
+        if wait_s is None:
+            return None
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline:
+            with self.telemetry.lock:
+                for ack in self.telemetry.acks[n_acks:]:
+                    if ack.command == command:
+                        return int(ack.result)
+            time.sleep(0.02)
+        raise FlightError(f"command {command}: no COMMAND_ACK within {wait_s:g} s")
+
+    def set_mode(self, name: str, timeout_s: float = 10.0) -> None:
+        """Switch flight mode and wait until the HEARTBEAT shows it."""
+        number = COPTER_MODES[name]
+        self.command(
+            mavutil.mavlink.MAV_CMD_DO_SET_MODE,
+            mavutil.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+            number,
+        )
+        self.wait_for(f"mode {name}", lambda s: s["mode"] == number, timeout_s)
+
+    def arm(self, timeout_s: float) -> None:
+        """Arm (retried every 2 s while the pre-arm checks refuse, bounded)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            self.command(mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+            try:
+                self.wait_for("armed", lambda s: s["armed"], 2.0)
+                return
+            except FlightError:
+                continue
+        raise FlightError(
+            f"arming refused for {timeout_s:g} s: {' | '.join(self.texts_since()[-5:])}"
+        )
+
+    def takeoff(self, height_m: float) -> None:
+        """MAV_CMD_NAV_TAKEOFF in GUIDED."""
+        self.command(mavutil.mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, height_m)
+
+    def go_to(self, ned_m: tuple[float, float, float], yaw_rad: float = 0.0) -> None:
+        """GUIDED position target, LOCAL_NED [m] from the EKF origin."""
+        type_mask = 0b0000_1001_1111_1000  # position and yaw only
+        self.master.mav.set_position_target_local_ned_send(
+            0, FC_SYSTEM, FC_COMPONENT, mavutil.mavlink.MAV_FRAME_LOCAL_NED, type_mask,
+            *ned_m, 0, 0, 0, 0, 0, 0, yaw_rad, 0,
+        )  # fmt: skip
+
+    def request_message(self, message_id: int) -> None:
+        """MAV_CMD_REQUEST_MESSAGE (answered on this link)."""
+        self.command(mavutil.mavlink.MAV_CMD_REQUEST_MESSAGE, float(message_id))
+
+    def set_ekf_source_set(self, source_set: int) -> int | None:
+        """MAV_CMD_SET_EKF_SOURCE_SET (1 = GPS, 2 = external navigation in our parameters)."""
+        return self.command(MAV_CMD_SET_EKF_SOURCE_SET, float(source_set), wait_s=5.0)
+
+    def set_param(self, name: str, value: float) -> None:
+        """PARAM_SET (not waited for)."""
+        self.master.mav.param_set_send(
+            FC_SYSTEM, FC_COMPONENT, name.encode(), value, mavutil.mavlink.MAV_PARAM_TYPE_REAL32
+        )
+
+
+def _connect(port: int, timeout_s: float):  # noqa: ANN202 - pymavlink connection type
+    """Open tcp:127.0.0.1:port and wait for the autopilot's HEARTBEAT (bounded)."""
+    deadline = time.monotonic() + timeout_s
+    last_error: Exception | None = None
+    while time.monotonic() < deadline:
+        try:
+            master = mavutil.mavlink_connection(
+                f"tcp:127.0.0.1:{port}", source_system=GCS_SYSTEM, autoreconnect=False,
+                retries=0,
+            )  # fmt: skip
+            break
+        except OSError as exc:
+            last_error = exc
+            time.sleep(0.2)
+    else:
+        raise FlightError(f"cannot connect to SITL on tcp {port}: {last_error}")
+    while time.monotonic() < deadline:
+        msg = master.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5)
+        if (
+            msg is not None
+            and msg.get_srcSystem() == FC_SYSTEM
+            and msg.get_srcComponent() == FC_COMPONENT
+        ):
+            return master
+    master.close()
+    raise FlightError(f"no HEARTBEAT from the autopilot on tcp {port} within {timeout_s:g} s")

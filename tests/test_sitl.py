@@ -110,3 +110,57 @@ def test_a_binary_that_dies_at_start_fails_with_its_output(tmp_path, monkeypatch
     with pytest.raises(SitlFailed, match="exited with code 3.*PANIC: no frame model"):
         with SitlProcess(SitlOptions(start_timeout_s=10.0)):
             pass
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_gps_to_external_navigation_switch_at_a_taut_hover(sitl_available, tmp_path) -> None:
+    """Issue 14's flight: take off on GPS, fly out until SITL's tether is taut, switch EKF3 to
+    our position (source set 2), hold 60 s, fly a 1 m/s circle about the anchor, land.
+
+    Bounds: no failsafe and EKF3 never without a horizontal position; during the hold the truth
+    stays within 0.3 m of the target (the issue's bound) and EKF3 accepts our position (test
+    ratio < 1). The circle's errors are printed (measured, not bounded: docs/ardupilot.md).
+    About 4 minutes at speedup 1.
+    """
+    from tether_companion.ardupilot_sitl.flights import FlightOptions, gps_to_external_nav
+
+    result = gps_to_external_nav(FlightOptions(workdir=tmp_path), log=print)
+    for phase in result.phases:
+        print(phase)
+    assert result.completed, result.stopped_at
+    assert result.failsafes == [], result.failsafes
+    hold = result.phase("extnav-hold")
+    assert hold.duration_s >= 59.0
+    assert hold.truth_to_target_max_m < 0.3
+    assert hold.test_ratio_max < 1.0
+    for phase in result.phases:
+        assert phase.position_lost_samples == 0, phase
+    circle = result.phase("extnav-circle")
+    assert circle.test_ratio_max < 1.0
+    assert result.companion_exit == 0
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_gps_less_flight_from_the_ground_up(sitl_available, tmp_path) -> None:
+    """GPS1_TYPE 0: arm, take off above the anchor until SITL's line is taut, fly out to the
+    target, hold 60 s and land, with EKF3 on our position alone. Bounds: no failsafe, EKF3
+    never without a horizontal position, taut above the anchor within 0.3 m, the hold within
+    0.6 m (our estimate's bias there measured 0.41 m: docs/ardupilot.md), test ratio < 1, and
+    it lands and disarms. About 3 minutes at speedup 1."""
+    from tether_companion.ardupilot_sitl.flights import FlightOptions, gps_less
+
+    result = gps_less(FlightOptions(workdir=tmp_path), log=print)
+    for phase in result.phases:
+        print(phase)
+    assert result.completed, result.stopped_at
+    assert result.failsafes == [], result.failsafes
+    assert result.phase("taut-above").truth_to_target_max_m < 0.3
+    hold = result.phase("hold")
+    assert hold.duration_s >= 59.0
+    assert hold.truth_to_target_max_m < 0.6
+    assert hold.test_ratio_max < 1.0
+    for phase in result.phases:
+        assert phase.position_lost_samples == 0, phase
+    assert result.companion_exit == 0

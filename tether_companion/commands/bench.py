@@ -20,6 +20,7 @@ BENCHMARKS: tuple[str, ...] = (
     "latency",
     "sysid",
     "estimators",
+    "sitl",
 )
 """Benchmark names, one per line, in the order ``bench --help`` lists them."""
 

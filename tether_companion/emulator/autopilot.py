@@ -111,7 +111,7 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions):
     ) -> None:
         self.scenario = scenario
         self.config = config
-        self.sim = Simulator(scenario, rng=rng)
+        self.sim = Simulator(scenario, rng=rng, stop_on_failure=False)
         self.unix_time_at_start_s = unix_time_at_start_s
         home = scenario.home
         self.home = geo.Geodetic(home.latitude_deg, home.longitude_deg, home.altitude_m)

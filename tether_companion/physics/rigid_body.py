@@ -16,14 +16,18 @@ Dynamics (R = R_v^b of eq. 2, F the sum of external forces in NED except thrust)
     d(p, q, r)/dt       = ((J_y - J_z) q r / J_x, (J_z - J_x) p r / J_y,
                            (J_x - J_y) p q / J_z) + (tau_l/J_x, tau_m/J_y, tau_n/J_z)  (eq. 6)
 
-    f_b = (0, 0, -T) + R (F_cable + F_tug + (0, 0, m g) - c_d (v_ned - v_wind))
+    f_b = (0, 0, -T) + R (F_cable + F_tug + (0, 0, m g) - c_d (v_ned - v_wind)) + m a_drag
+
+where ``a_drag`` is the body-horizontal rotor and body drag of
+:mod:`tether_companion.physics.aerodynamics` on the air velocity ``R (v_ned - v_wind)``.
 
 with ``T`` and ``(tau_l, tau_m, tau_n)`` the allocation matrix applied to the motor thrusts.
 Motor thrusts lag their PWM steady-state values with time constant ``tau`` (eq. of
 :mod:`tether_companion.physics.motors`); with PWM held over a step the lag is integrated
 exactly and the wrench is evaluated at each RK4 stage time, so the scheme stays fourth order.
 
-Ground contact: the ground is the plane ``p_d = 0`` through the anchor. A drone reaching it
+Ground contact: the ground is the surface ``p_d = ground_down_m(p_n, p_e)`` (by default the
+plane ``p_d = 0`` through the anchor; a winch on a tripod puts it below). A drone reaching it
 while descending (or at rest) is ``landed``: pinned there, level, at rest, yaw kept. A landed
 drone lifts off in the step where its thrust exceeds its weight plus the downward pull of the
 cable and any tug; horizontal forces on a landed drone are taken by friction.
@@ -38,6 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.constants import GRAVITY_MPS2
+from tether_companion.physics.aerodynamics import drag_accel_body_mps2
 from tether_companion.physics.motors import MotorLag
 from tether_companion.physics.vehicle import VehicleProfile
 
@@ -64,6 +69,11 @@ def motor_thrusts_slice(n_motors: int) -> slice:
 
 ExternalForce = Callable[[float, float, float, float, float, float], tuple[float, float, float]]
 """``(p_n, p_e, p_d, v_n, v_e, v_d) -> (F_n, F_e, F_d)``: a state-dependent NED force [N]."""
+
+
+def _flat_ground(north_m: float, east_m: float) -> float:
+    """The plane through the anchor: down = 0 everywhere."""
+    return 0.0
 
 
 def _no_force(
@@ -114,6 +124,11 @@ class RigidBody:
         self._gyro = ((jy - jz) / jx, (jz - jx) / jy, (jx - jy) / jz)
         self._inv_inertia = (1.0 / jx, 1.0 / jy, 1.0 / jz)
         self._drag = float(vehicle.drag_coefficient_n_s_per_m)
+        self._rotor_drag_per_s = float(vehicle.rotor_drag_per_s)
+        self._ballistic_coefficient = float(vehicle.ballistic_coefficient_kg_per_m2)
+        self._has_aero_drag = self._rotor_drag_per_s > 0.0 or self._ballistic_coefficient > 0.0
+        self.ground_down_m: Callable[[float, float], float] = _flat_ground
+        """Down coordinate of the ground under (north, east) [m] (default: the anchor's level)."""
         self._lag = MotorLag(vehicle.motor_time_constant_s)
         allocation = vehicle.allocation_matrix()
         self._allocation_rows = tuple(tuple(float(a) for a in row) for row in allocation)
@@ -257,6 +272,16 @@ class RigidBody:
         im = self._inv_mass
         ax = (r00 * fn + r01 * fe - sp * fd) * im
         ay = (r10 * fn + r11 * fe + r12 * fd) * im
+        if self._has_aero_drag:
+            wn, we, wd = self._wind_ned_m_s
+            dax, day = drag_accel_body_mps2(
+                u - (r00 * wn + r01 * we - sp * wd),
+                v - (r10 * wn + r11 * we + r12 * wd),
+                self._rotor_drag_per_s,
+                self._ballistic_coefficient,
+            )
+            ax += dax
+            ay += day
         az = (r20 * fn + r21 * fe + r22 * fd - thrust_n) * im
         # eq. 4
         du = r * v - q * w + ax
@@ -318,7 +343,7 @@ class RigidBody:
             a + h6 * (b1 + b4 + 2.0 * (b2 + b3))
             for a, b1, b2, b3, b4 in zip(x, k1, k2, k3, k4, strict=True)
         ]
-        if self.x[POS_D] >= 0.0:
+        if self.x[POS_D] >= self.ground_down_m(self.x[POS_N], self.x[POS_E]):
             self._touch_ground()
 
     # ------------------------------------------------------------------ ground contact
@@ -333,14 +358,14 @@ class RigidBody:
     def _touch_ground(self) -> None:
         x = self.x
         vd = self.velocity_ned_m_s()[2]
-        x[POS_D] = 0.0
+        x[POS_D] = self.ground_down_m(x[POS_N], x[POS_E])
         if vd >= 0.0:
             self.landed = True
             self._pin_to_ground()
 
     def _pin_to_ground(self) -> None:
         x = self.x
-        x[POS_D] = 0.0
+        x[POS_D] = self.ground_down_m(x[POS_N], x[POS_E])
         for i in (VEL_U, VEL_V, VEL_W, ROLL, PITCH, RATE_P, RATE_Q, RATE_R):
             x[i] = 0.0
 

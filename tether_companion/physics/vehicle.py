@@ -42,7 +42,19 @@ class VehicleProfile:
         0.016, minimum=0.0, doc="rotor drag torque per unit thrust [N m / N]"
     )
     drag_coefficient_n_s_per_m: float = spec(
-        0.0, minimum=0.0, doc="linear aerodynamic drag on the airframe [N per m/s]"
+        0.0, minimum=0.0, doc="isotropic linear drag on the airframe, NED [N per m/s] (legacy)"
+    )
+    rotor_drag_per_s: float = spec(
+        0.0,
+        minimum=0.0,
+        maximum=2.0,
+        doc="rotor drag mu: body-horizontal a = -mu v_air [1/s] (ArduPilot EK3_DRAG_MCOEF; "
+        "0.1-0.3 on small multirotors)",
+    )
+    ballistic_coefficient_kg_per_m2: float = spec(
+        0.0,
+        minimum=0.0,
+        doc="quadratic body drag B = m/(Cd A) [kg/m^2] (ArduPilot EK3_DRAG_BCOEF_X/Y); 0 = none",
     )
     motor_time_constant_s: float = spec(
         0.04, exclusive_minimum=0.0, doc="first-order lag of each motor's thrust [s]"

@@ -23,19 +23,24 @@ from tether_companion.physics.cable import CableConfig
 from tether_companion.resources import SCENARIOS_DIR, builtin_path
 from tether_companion.sim.controller import ControllerConfig
 from tether_companion.sim.events import Event
+from tether_companion.sim.ground import GroundConfig
+from tether_companion.sim.propulsion import PropulsionConfig
 from tether_companion.sim.sensors import SensorConfig
 from tether_companion.sim.trajectory import TrajectoryConfig
+from tether_companion.sim.wind import WindConfig
 
 MIN_PHYSICS_RATE_HZ = 500.0
-
-
-@dataclass(frozen=True)
-class WindConfig:
-    """The ``wind`` section: a steady wind, acting through the vehicle's linear drag."""
-
-    velocity_ned_m_s: tuple[float, float, float] = spec(
-        (0.0, 0.0, 0.0), minimum=-30.0, maximum=30.0, doc="wind velocity, NED [m/s]"
-    )
+REALISTIC_SCENARIOS: tuple[str, ...] = (
+    "realistic-circle",
+    "realistic-takeoff-figure8",
+    "realistic-gusty-hover",
+    "realistic-low-tension",
+    "realistic-sagging-hover",
+    "realistic-sagging-circle",
+    "realistic-heavy-sagging-hover",
+    "realistic-yaw-sweep",
+)
+"""Built-in scenarios with every real-world error source on (docs/simulator.md)."""
 
 
 @dataclass(frozen=True)
@@ -84,7 +89,13 @@ class Scenario:
         default_factory=TrajectoryConfig, doc="reference trajectory"
     )
     controller: ControllerConfig = spec(default_factory=ControllerConfig, doc="cascaded controller")
-    wind: WindConfig = spec(default_factory=WindConfig, doc="steady wind")
+    wind: WindConfig = spec(default_factory=WindConfig, doc="mean wind and Dryden turbulence")
+    propulsion: PropulsionConfig = spec(
+        default_factory=PropulsionConfig, doc="thrust-map scale error and battery sag"
+    )
+    ground: GroundConfig = spec(
+        default_factory=GroundConfig, doc="anchor height above the ground, terrain"
+    )
     events: tuple[Event, ...] = spec((), doc="timed ground-station events")
     home: HomeConfig = spec(default_factory=HomeConfig, doc="anchor location")
     initial: InitialConfig = spec(default_factory=InitialConfig, doc="initial condition")
@@ -99,6 +110,7 @@ class Scenario:
                 self.controller.rate_hz,
                 f"must divide physics_rate_hz ({self.physics_rate_hz}) into whole steps",
             )
+        self._validate_above_ground()
         start = self.initial.position_ned_m
         if self.initial.airborne and self.trajectory.kind == "none" and start[2] >= 0.0:
             raise ConfigError(
@@ -123,6 +135,18 @@ class Scenario:
                     f"must be <= duration_s ({self.duration_s})",
                 )
 
+    def _validate_above_ground(self) -> None:
+        """Hover points and waypoints lie above the mean ground (``anchor_height_m`` below)."""
+        ground = self.ground.anchor_height_m
+        trajectory = self.trajectory
+        allowed = f"down must be <= {ground} (above the ground, ground.anchor_height_m below)"
+        if trajectory.kind == "hover" and trajectory.position_ned_m[2] > ground:
+            raise ConfigError("", "trajectory.position_ned_m", trajectory.position_ned_m, allowed)
+        if trajectory.kind in ("waypoints", "figure8"):
+            for i, point in enumerate(trajectory.waypoints_ned_m):
+                if point[2] > ground:
+                    raise ConfigError("", f"trajectory.waypoints_ned_m[{i}]", point, allowed)
+
     @property
     def controller_steps(self) -> int:
         """Physics steps per controller update."""
@@ -146,17 +170,51 @@ def resolve_scenario_path(path_or_name: str | Path) -> Path:
     return path
 
 
+MAX_BASE_DEPTH = 8
+"""How many ``base:`` scenarios may stand behind one another."""
+
+
+def _merged(base: Mapping[str, Any], changes: Mapping[str, Any]) -> dict[str, Any]:
+    """``base`` with ``changes`` laid over it, section by section (mappings merge, rest replace)."""
+    out = dict(base)
+    for key, value in changes.items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
+            out[key] = _merged(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def _with_base(data: Mapping[str, Any], path: Path, depth: int = 0) -> Mapping[str, Any]:
+    """Resolve a ``base: NAME`` key: the named scenario's keys with this file's laid over."""
+    if "base" not in data:
+        return data
+    base_name = data["base"]
+    if not isinstance(base_name, str) or not base_name:
+        raise ConfigError(str(path), "base", base_name, "a scenario name or YAML path")
+    if depth >= MAX_BASE_DEPTH:
+        raise ConfigError(str(path), "base", base_name, f"at most {MAX_BASE_DEPTH} levels of base")
+    base_path = Path(base_name)
+    if base_path.suffix and not base_path.is_absolute():
+        base_path = path.parent / base_path
+    base_path = resolve_scenario_path(base_path if base_path.suffix else base_name)
+    base = _with_base(read_yaml(base_path), base_path, depth + 1)
+    return _merged(base, {k: v for k, v in data.items() if k != "base"})
+
+
 def scenario_from_mapping(data: Mapping[str, Any], path: Path) -> Scenario:
     """``data`` validated as a :class:`Scenario`, as if read from the file ``path``.
 
-    A relative ``vehicle`` path is resolved against the file's folder. For loaders of files
-    that hold more than a scenario (the emulator's section): they pass the rest of the file.
+    A relative ``vehicle`` path is resolved against the file's folder. ``base: NAME`` takes
+    another scenario's keys and lays this file's over them, section by section. For loaders
+    of files that hold more than a scenario (the emulator's section): they pass the rest.
 
     Raises
     ------
     ConfigError
         When any key is unknown, mistyped or out of range (naming ``path``).
     """
+    data = _with_base(data, path)
     vehicle = data.get("vehicle")
     if isinstance(vehicle, str) and Path(vehicle).suffix and (path.parent / vehicle).is_file():
         data = {**data, "vehicle": str((path.parent / vehicle).resolve())}

@@ -10,6 +10,7 @@ ultrasound sigma^2 = 0.1 m^2 (sigma = 0.316 m), gyro and attitude sigma^2 = 0.01
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,6 +50,15 @@ class SensorConfig:
     accel_bias_mps2: tuple[float, float, float] = spec(
         (0.0, 0.0, 0.0), minimum=-5.0, maximum=5.0, doc="constant accelerometer bias, FRD [m/s^2]"
     )
+    accel_turn_on_bias_std_mps2: float = spec(
+        0.0,
+        minimum=0.0,
+        maximum=2.0,
+        doc="sigma of the per-axis bias drawn at start, on top of accel_bias_mps2 [m/s^2]",
+    )
+    accel_bias_random_walk_mps2_per_sqrt_s: float = spec(
+        0.0, minimum=0.0, maximum=1.0, doc="accelerometer bias random walk [m/s^2/sqrt(s)]"
+    )
     accel_vibration_amplitude_mps2: float = spec(
         0.0,
         minimum=0.0,
@@ -63,6 +73,22 @@ class SensorConfig:
     gyro_bias_rad_s: tuple[float, float, float] = spec(
         (0.0, 0.0, 0.0), minimum=-1.0, maximum=1.0, doc="constant gyro bias, FRD [rad/s]"
     )
+    gyro_turn_on_bias_std_rad_s: float = spec(
+        0.0, minimum=0.0, maximum=1.0, doc="sigma of the per-axis gyro bias drawn at start [rad/s]"
+    )
+    gyro_bias_random_walk_rad_s_per_sqrt_s: float = spec(
+        0.0, minimum=0.0, maximum=1.0, doc="gyro bias random walk [rad/s/sqrt(s)]"
+    )
+    attitude_error_std_rad: float = spec(
+        0.0,
+        minimum=0.0,
+        maximum=0.2,
+        doc="the flight controller's attitude-estimate error: stationary sigma per axis of a "
+        "first-order Gauss-Markov process [rad]",
+    )
+    attitude_error_time_constant_s: float = spec(
+        30.0, exclusive_minimum=0.0, doc="correlation time of the attitude-estimate error [s]"
+    )
     attitude_noise_std_rad: float = spec(
         _PAPER_ANGLE_STD_RAD, minimum=0.0, doc="attitude (roll, pitch, yaw) noise sigma [rad]"
     )
@@ -75,6 +101,12 @@ class SensorConfig:
     range_max_m: float = spec(
         20.0, exclusive_minimum=0.0, doc="longest distance the rangefinder reports [m]"
     )
+    range_offset_frd_m: tuple[float, float, float] = spec(
+        (0.0, 0.0, 0.0),
+        minimum=-2.0,
+        maximum=2.0,
+        doc="rangefinder mounting point from the centre of mass, body FRD [m]",
+    )
 
     def validate(self) -> None:
         """The rangefinder's range must not be empty."""
@@ -82,6 +114,21 @@ class SensorConfig:
             raise ConfigError(
                 "", "range_max_m", self.range_max_m, f"must be > range_min_m ({self.range_min_m})"
             )
+
+
+def _turn_on(rng: np.random.Generator, std: float) -> list[float]:
+    """Three values drawn with sigma ``std`` (no draw, zeros, when ``std`` is 0)."""
+    return [float(v) for v in rng.normal(0.0, std, 3)] if std > 0.0 else [0.0, 0.0, 0.0]
+
+
+def _random_walk(
+    values: list[float], rate: float, dt_s: float, take: Callable[[], float]
+) -> None:
+    """Add a random-walk increment of ``rate * sqrt(dt_s)`` sigma to each of ``values``."""
+    if rate > 0.0 and dt_s > 0.0:
+        step = rate * math.sqrt(dt_s)
+        for i in range(len(values)):
+            values[i] += step * take()
 
 
 class NormalStream:
@@ -122,6 +169,14 @@ class SensorSuite:
         self.config = config
         self._noise = NormalStream(rng)
         self._vibration_phase_rad = tuple(float(v) for v in rng.uniform(0.0, 2.0 * math.pi, 3))
+        self.accel_bias_drift_mps2 = _turn_on(rng, config.accel_turn_on_bias_std_mps2)
+        """Bias on top of ``accel_bias_mps2``: turn-on draw plus random walk, FRD [m/s^2]."""
+        self.gyro_bias_drift_rad_s = _turn_on(rng, config.gyro_turn_on_bias_std_rad_s)
+        """Gyro bias on top of ``gyro_bias_rad_s``: turn-on draw plus random walk [rad/s]."""
+        self.attitude_error_rad = _turn_on(rng, config.attitude_error_std_rad)
+        """The flight controller's attitude-estimate error (roll, pitch, yaw) now [rad]."""
+        self._last_imu_s: float | None = None
+        self._last_attitude_s: float | None = None
 
     @property
     def config(self) -> SensorConfig:
@@ -142,11 +197,17 @@ class SensorSuite:
         """Accelerometer (truth + bias + vibration + noise) and gyro (truth + bias + noise)."""
         c = self._config
         take = self._noise.take
+        dt = 0.0 if self._last_imu_s is None else max(time_s - self._last_imu_s, 0.0)
+        self._last_imu_s = time_s
+        _random_walk(self.accel_bias_drift_mps2, c.accel_bias_random_walk_mps2_per_sqrt_s, dt, take)
+        _random_walk(self.gyro_bias_drift_rad_s, c.gyro_bias_random_walk_rad_s_per_sqrt_s, dt, take)
         sa, sg = c.accel_noise_std_mps2, c.gyro_noise_std_rad_s
         amp = c.accel_vibration_amplitude_mps2
         accel = [
-            f + b + sa * take()
-            for f, b in zip(specific_force_body_mps2, c.accel_bias_mps2, strict=True)
+            f + b + d + sa * take()
+            for f, b, d in zip(
+                specific_force_body_mps2, c.accel_bias_mps2, self.accel_bias_drift_mps2, strict=True
+            )
         ]
         if amp > 0.0:
             wt = self._vibration_omega_rad_s * time_s
@@ -155,19 +216,34 @@ class SensorSuite:
                 for a, ph in zip(accel, self._vibration_phase_rad, strict=True)
             ]
         gyro = [
-            w + b + sg * take() for w, b in zip(body_rates_rad_s, c.gyro_bias_rad_s, strict=True)
+            w + b + d + sg * take()
+            for w, b, d in zip(
+                body_rates_rad_s, c.gyro_bias_rad_s, self.gyro_bias_drift_rad_s, strict=True
+            )
         ]
         return ImuSample(time_s, np.array(accel), np.array(gyro))
 
     def attitude(
         self, time_s: float, roll_rad: float, pitch_rad: float, yaw_rad: float
     ) -> AttitudeSample:
-        """Euler angles with white noise; yaw wrapped to [-pi, pi)."""
-        s = self._config.attitude_noise_std_rad
+        """The flight controller's attitude estimate: truth + its slowly varying error + white
+        noise; yaw wrapped to [-pi, pi)."""
+        c = self._config
+        s = c.attitude_noise_std_rad
         take = self._noise.take
-        yaw = yaw_rad + s * take()
+        err = self.attitude_error_rad
+        if c.attitude_error_std_rad > 0.0:
+            dt = 0.0 if self._last_attitude_s is None else max(time_s - self._last_attitude_s, 0.0)
+            a = math.exp(-dt / c.attitude_error_time_constant_s)
+            kick = c.attitude_error_std_rad * math.sqrt(max(1.0 - a * a, 0.0))
+            for i in range(3):
+                err[i] = a * err[i] + kick * take()
+        self._last_attitude_s = time_s
+        yaw = yaw_rad + err[2] + s * take()
         yaw = (yaw + math.pi) % (2.0 * math.pi) - math.pi
-        return AttitudeSample(time_s, roll_rad + s * take(), pitch_rad + s * take(), yaw)
+        return AttitudeSample(
+            time_s, roll_rad + err[0] + s * take(), pitch_rad + err[1] + s * take(), yaw
+        )
 
     @staticmethod
     def pwm(time_s: float, pwm_us: FloatArray) -> PwmSample:
@@ -177,9 +253,11 @@ class SensorSuite:
     def rangefinder(
         self, time_s: float, height_m: float, roll_rad: float, pitch_rad: float
     ) -> RangeSample | None:
-        """Downward rangefinder along the body z axis over flat ground at the anchor's level.
+        """Downward rangefinder along the body z axis.
 
-        The true distance is ``height / (cos(roll) cos(pitch))``; ``None`` when it lies outside
+        ``height_m`` is the sensor's height above the ground under it (the simulator takes
+        the mounting offset and the terrain into account). The true distance is
+        ``height / (cos(roll) cos(pitch))``; ``None`` when it lies outside
         [range_min_m, range_max_m] or the beam points nearly horizontal (or up). The reported
         value is the true distance plus noise, clipped to the sensor's range.
         """

@@ -35,11 +35,25 @@ from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.sim.controller import CascadedController, Setpoint
 from tether_companion.sim.events import Event
+from tether_companion.sim.ground import Ground
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.sensors import SensorConfig, SensorSuite
 from tether_companion.sim.trajectory import Trajectory
+from tether_companion.sim.wind import DrydenParameters, DrydenTurbulence
 
 FloatArray = NDArray[np.float64]
+
+CRASH_SPEED_MPS = 3.0
+"""Touching the ground faster than this is a crash, not a landing."""
+SATURATION_LIMIT_S = 2.0
+"""Every motor at full command for this long: the vehicle cannot fly the scenario."""
+
+
+class FlightImpossibleError(ValueError):
+    """The scenario's flight cannot be flown (crash, saturation, non-finite state).
+
+    The message names the simulation time and the cause.
+    """
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,6 +81,10 @@ class TruthState:
     """Accelerometer specific force without noise or bias, FRD, shape (3,) [m/s^2]."""
     landed: bool
     """True while the drone rests on the ground."""
+    wind_ned_m_s: FloatArray
+    """Wind (mean + gusts) at the drone, NED, shape (3,) [m/s]."""
+    battery_voltage_v: float
+    """Battery pack voltage [V]."""
 
 
 class Simulator:
@@ -80,6 +98,10 @@ class Simulator:
         Overrides the scenario's vehicle profile when given.
     rng
         The one Generator every noise draw comes from; default ``default_rng(scenario.seed)``.
+    stop_on_failure
+        Raise :class:`FlightImpossibleError` (naming the time and the cause) when the flight
+        fails: a crash while armed, every motor saturated for 2 s, a non-finite state. The
+        emulator passes False: a crash is then recorded in ``failure`` and flying goes on.
 
     Notes
     -----
@@ -95,8 +117,13 @@ class Simulator:
         scenario: Scenario,
         vehicle: VehicleProfile | None = None,
         rng: np.random.Generator | None = None,
+        *,
+        stop_on_failure: bool = True,
     ) -> None:
         self.scenario = scenario
+        self.stop_on_failure = stop_on_failure
+        self.failure: str | None = None
+        """Why the flight failed first (a crash while armed, saturation, a non-finite state)."""
         self.vehicle = vehicle if vehicle is not None else load_vehicle(scenario.vehicle)
         self.rng = rng if rng is not None else np.random.default_rng(scenario.seed)
         self.gravity_mps2 = GRAVITY_MPS2
@@ -107,6 +134,11 @@ class Simulator:
         self.controller = CascadedController(scenario.controller, self.vehicle, self.gravity_mps2)
         self.trajectory = Trajectory(scenario.trajectory)
         self.sensors = SensorSuite(scenario.sensors, self.rng)
+        self.ground = Ground(scenario.ground, self.rng)
+        self.body.ground_down_m = self.ground.down_m
+        self._mean_wind_ned_m_s = scenario.wind.velocity_ned_m_s
+        self._gusts = self._make_gusts()
+        self._saturated_since_s = math.inf
         self._follow_trajectory = scenario.trajectory.kind != "none"
         self.navigation_position_override: tuple[float, float, float] | None = None
         self.armed = False
@@ -121,11 +153,30 @@ class Simulator:
         self._steady_thrust_n = self._thrusts_for(self._pwm_us)
         self._cache_step = -1
         self._specific_force: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self._thrust_varies = scenario.propulsion.battery.sag_v_per_cell_per_min > 0.0
         self._initialise()
 
     # ------------------------------------------------------------------ set-up
+    def _make_gusts(self) -> DrydenTurbulence | None:
+        wind = self.scenario.wind
+        if wind.turbulence_w20_mps <= 0.0:
+            return None
+        parameters = DrydenParameters.low_altitude(
+            wind.turbulence_w20_mps, wind.turbulence_height_m
+        )
+        return DrydenTurbulence(
+            parameters,
+            self._mean_wind_ned_m_s,
+            self.scenario.controller_steps / self.scenario.physics_rate_hz,
+            self.rng,
+            wind.min_airspeed_mps,
+        )
+
     def _thrusts_for(self, pwm_us: list[float]) -> list[float]:
-        return self.controller.mixer.thrusts_for_pwm_us(pwm_us)
+        """True steady-state motor thrusts [N]: the profile's curve times the scale and sag."""
+        thrusts = self.controller.mixer.thrusts_for_pwm_us(pwm_us)
+        factor = self.scenario.propulsion.thrust_factor(self.time_s)
+        return thrusts if factor == 1.0 else [f * factor for f in thrusts]
 
     def _initialise(self) -> None:
         init = self.scenario.initial
@@ -134,6 +185,7 @@ class Simulator:
         if not init.airborne:
             state = [0.0] * N_RIGID_STATES + idle_thrust
             state[0], state[1] = init.position_ned_m[0], init.position_ned_m[1]
+            state[2] = self.ground.down_m(state[0], state[1])
             state[8] = math.radians(init.yaw_deg)
             self.body.set_state(state, landed=True)
             self.armed = init.armed
@@ -178,10 +230,46 @@ class Simulator:
             self.body.tug_force_ned_n = (0.0, 0.0, 0.0)
             self._tug_end_s = math.inf
         if self._steps % self._controller_steps == 0:
+            if self._gusts is not None:
+                gust = self._gusts.step()
+                mean = self._mean_wind_ned_m_s
+                self.body.wind_ned_m_s = [m + g for m, g in zip(mean, gust, strict=True)]
             self._update_controller(t)
+            self._check_flyable(t)
+        was_landed = self.body.landed
+        descent_mps = self.body.velocity_ned_m_s()[2] if not was_landed else 0.0
         self.body.step(dt, self._steady_thrust_n)
         self.cable.advance(dt)
         self._steps += 1
+        crashed = self.body.landed and not was_landed and descent_mps > CRASH_SPEED_MPS
+        if crashed and self.armed:
+            self._fail(
+                f"t = {t:.2f} s: the drone hit the ground at {descent_mps:.1f} m/s "
+                f"(a landing is slower than {CRASH_SPEED_MPS} m/s)"
+            )
+
+    def _check_flyable(self, t: float) -> None:
+        """Fail on a non-finite state or a lasting saturation of every motor."""
+        if not all(math.isfinite(v) for v in self.body.x):
+            self._fail(f"t = {t:.2f} s: the vehicle's state is not finite")
+        top = self.vehicle.thrust_curve.pwm_max_us
+        if self.armed and all(p >= top - 0.5 for p in self._pwm_us):
+            self._saturated_since_s = min(self._saturated_since_s, t)
+            if t - self._saturated_since_s >= SATURATION_LIMIT_S:
+                self._saturated_since_s = math.inf
+                self._fail(
+                    f"t = {t:.2f} s: every motor at full command for {SATURATION_LIMIT_S:.0f} s "
+                    "(the controller saturates: the scenario asks more thrust than the vehicle has)"
+                )
+        else:
+            self._saturated_since_s = math.inf
+
+    def _fail(self, why: str) -> None:
+        """Record the first reason the flight failed; raise it when ``stop_on_failure``."""
+        if self.failure is None:
+            self.failure = why
+        if self.stop_on_failure:
+            raise FlightImpossibleError(why)
 
     def advance_to(self, time_s: float) -> None:
         """Step until the simulation time reaches ``time_s`` [s] (to the nearest physics step)."""
@@ -213,7 +301,7 @@ class Simulator:
                 (x[9], x[10], x[11]),
                 landed=self.body.landed,
             )
-        if pwm != self._pwm_us:
+        if pwm != self._pwm_us or self._thrust_varies:
             self._pwm_us = pwm
             self._steady_thrust_n = self._thrusts_for(pwm)
 
@@ -276,7 +364,14 @@ class Simulator:
             tension_n=self.cable.tension_n,
             specific_force_body_mps2=np.array(specific_force),
             landed=self.body.landed,
+            wind_ned_m_s=np.array(self.body.wind_ned_m_s),
+            battery_voltage_v=self.battery_voltage_v,
         )
+
+    @property
+    def battery_voltage_v(self) -> float:
+        """Battery pack voltage now [V]."""
+        return self.scenario.propulsion.battery.voltage_v(self.time_s)
 
     # ------------------------------------------------------------------ sensors
     def read_imu(self) -> ImuSample:
@@ -294,9 +389,17 @@ class Simulator:
         return self.sensors.pwm(self.time_s, np.array(self._pwm_us))
 
     def read_rangefinder(self) -> RangeSample | None:
-        """Downward rangefinder now (tilted beam, flat ground), or None when out of range."""
+        """Downward rangefinder now (tilted beam from its mounting point to the ground under
+        it), or None when out of range."""
         x = self.body.x
-        return self.sensors.rangefinder(self.time_s, -x[2], x[6], x[7])
+        offset = self.sensors.config.range_offset_frd_m
+        if offset == (0.0, 0.0, 0.0):
+            sensor_ned = (x[0], x[1], x[2])
+        else:
+            lever = rotation_ned_to_body(x[6], x[7], x[8]).T @ np.asarray(offset)
+            sensor_ned = (x[0] + lever[0], x[1] + lever[1], x[2] + lever[2])
+        height = self.ground.down_m(sensor_ned[0], sensor_ned[1]) - sensor_ned[2]
+        return self.sensors.rangefinder(self.time_s, height, x[6], x[7])
 
     # ------------------------------------------------------------------ flight control
     def arm(self) -> None:
@@ -325,12 +428,14 @@ class Simulator:
     # ------------------------------------------------------------------ environment
     @property
     def wind_ned_m_s(self) -> tuple[float, float, float]:
-        """Steady wind, NED [m/s]."""
-        return self.body.wind_ned_m_s
+        """The mean wind, NED [m/s] (the gusts come on top)."""
+        return self._mean_wind_ned_m_s
 
     def set_wind_ned_m_s(self, wind_ned_m_s: ArrayLike) -> None:
-        """Blow this steady wind, NED [m/s], shape (3,), from the next step on."""
-        self.body.wind_ned_m_s = np.asarray(wind_ned_m_s, dtype=float).reshape(3).tolist()
+        """Blow this mean wind, NED [m/s], shape (3,), from the next step on."""
+        mean = np.asarray(wind_ned_m_s, dtype=float).reshape(3).tolist()
+        self._mean_wind_ned_m_s = tuple(mean)  # type: ignore[assignment]
+        self.body.wind_ned_m_s = mean
 
     @property
     def sensor_config(self) -> SensorConfig:

@@ -10,7 +10,13 @@ Kinds (the ``trajectory`` section of a scenario):
   Velocity and acceleration feed-forward are the exact derivatives.
 - ``waypoints``: straight legs between ``waypoints_ned_m`` at ``speed_mps``, pausing
   ``dwell_s`` at each, holding the last one.
+- ``figure8``: fly the ``waypoints_ned_m`` legs (take-off and the way out), then ``loops``
+  figure-eights (a lemniscate of Gerono, ``n = c_n + (r/2) sin 2a``, ``e = c_e + r sin a``, at
+  the last waypoint's height, about the last waypoint, ``a`` growing so the mean speed is
+  ``speed_mps``), then the legs back in reverse order (the way home and the landing).
 - ``none``: no trajectory; the vehicle holds where it is until someone sends set-points.
+
+``yaw_rate_deg_s`` turns the heading at a constant rate from ``yaw_deg`` (a yaw sweep).
 """
 
 from __future__ import annotations
@@ -21,7 +27,13 @@ from dataclasses import dataclass
 from tether_companion.config import ConfigError, spec
 from tether_companion.sim.controller import Setpoint
 
-TRAJECTORY_KINDS: tuple[str, ...] = ("hover", "circle", "waypoints", "none")
+TRAJECTORY_KINDS: tuple[str, ...] = ("hover", "circle", "waypoints", "figure8", "none")
+_LEMNISCATE_PERIMETER_PER_R = 6.0972
+"""Perimeter of the lemniscate of Gerono of half-width r, in units of r (numerical)."""
+
+
+_Leg = tuple[float, float, tuple[float, float, float], tuple[float, float, float]]
+"""A straight leg: start time [s], duration [s], start point NED [m], velocity NED [m/s]."""
 
 
 @dataclass(frozen=True)
@@ -49,13 +61,13 @@ class TrajectoryConfig:
     yaw_deg: float = spec(
         0.0, minimum=-180.0, maximum=180.0, doc="heading held along the trajectory [deg]"
     )
+    yaw_rate_deg_s: float = spec(
+        0.0, minimum=-90.0, maximum=90.0, doc="heading rate from yaw_deg on (yaw sweep) [deg/s]"
+    )
+    loops: int = spec(2, minimum=1, maximum=1000, doc="figure-eights flown (figure8)")
 
     def validate(self) -> None:
         """Trajectories must stay above the ground plane."""
-        if self.kind == "hover" and self.position_ned_m[2] > 0.0:
-            raise ConfigError(
-                "", "position_ned_m", self.position_ned_m, "down must be <= 0 (above ground)"
-            )
         if self.kind == "circle" and self.altitude_amplitude_m >= self.mean_altitude_m:
             raise ConfigError(
                 "",
@@ -63,16 +75,11 @@ class TrajectoryConfig:
                 self.altitude_amplitude_m,
                 f"must be < mean_altitude_m ({self.mean_altitude_m}) to stay above ground",
             )
-        if self.kind == "waypoints":
+        if self.kind in ("waypoints", "figure8"):
             if not self.waypoints_ned_m:
                 raise ConfigError(
                     "", "waypoints_ned_m", self.waypoints_ned_m, "at least one waypoint is needed"
                 )
-            for i, point in enumerate(self.waypoints_ned_m):
-                if point[2] > 0.0:
-                    raise ConfigError(
-                        "", f"waypoints_ned_m[{i}]", point, "down must be <= 0 (above ground)"
-                    )
 
 
 class Trajectory:
@@ -81,17 +88,28 @@ class Trajectory:
     def __init__(self, config: TrajectoryConfig) -> None:
         self.config = config
         self._yaw_rad = math.radians(config.yaw_deg)
-        self._legs: list[
-            tuple[float, float, tuple[float, float, float], tuple[float, float, float]]
-        ] = []
+        self._legs: list[_Leg] = []
+        self._yaw_rate_rad_s = math.radians(config.yaw_rate_deg_s)
+        self._figure8_start_s = math.inf
+        self._figure8_end_s = math.inf
         if config.kind == "waypoints":
-            self._build_legs()
+            self._build_legs(config.waypoints_ned_m, 0.0)
+        elif config.kind == "figure8":
+            out = self._build_legs(config.waypoints_ned_m, 0.0)
+            self._figure8_start_s = out
+            omega = config.speed_mps / (_LEMNISCATE_PERIMETER_PER_R * config.radius_m)
+            self._figure8_omega = 2.0 * math.pi * omega
+            self._figure8_end_s = out + config.loops / omega
+            self._return_legs_from = len(self._legs)
+            self._build_legs(config.waypoints_ned_m[::-1], self._figure8_end_s)
 
-    def _build_legs(self) -> None:
-        """Legs (start time, duration, start point, velocity) including dwell at each waypoint."""
+    def _build_legs(
+        self, points: tuple[tuple[float, float, float], ...], start_s: float
+    ) -> float:
+        """Append the legs (start time, duration, start point, velocity) through ``points``
+        from ``start_s``, with the dwell at each waypoint; the time they end [s]."""
         c = self.config
-        t = 0.0
-        points = c.waypoints_ned_m
+        t = start_s
         for a, b in zip(points, points[1:], strict=False):
             t += c.dwell_s
             length = math.dist(a, b)
@@ -103,17 +121,39 @@ class Trajectory:
             )
             self._legs.append((t, duration, a, velocity))  # type: ignore[arg-type]
             t += duration
+        return t
 
     def setpoint_at(self, time_s: float) -> Setpoint:
         """The set-point at ``time_s`` (position, velocity and acceleration feed-forward, yaw)."""
         c = self.config
         if c.kind == "hover":
-            return Setpoint(c.position_ned_m, (0.0, 0.0, 0.0), None, self._yaw_rad)
+            return Setpoint(c.position_ned_m, (0.0, 0.0, 0.0), None, self._yaw_at(time_s))
         if c.kind == "circle":
             return self._circle(time_s)
         if c.kind == "waypoints":
-            return self._waypoints(time_s)
+            return self._waypoints(time_s, self._legs, c.waypoints_ned_m[-1])
+        if c.kind == "figure8":
+            return self._figure8(time_s)
         return Setpoint()
+
+    def _yaw_at(self, t: float) -> float:
+        yaw = self._yaw_rad + self._yaw_rate_rad_s * t
+        return (yaw + math.pi) % (2.0 * math.pi) - math.pi
+
+    def _figure8(self, t: float) -> Setpoint:
+        c = self.config
+        if t < self._figure8_start_s:
+            return self._waypoints(t, self._legs[: self._return_legs_from], c.waypoints_ned_m[-1])
+        if t >= self._figure8_end_s:
+            return self._waypoints(t, self._legs[self._return_legs_from :], c.waypoints_ned_m[0])
+        cn, ce, down = c.waypoints_ned_m[-1]
+        r, w = c.radius_m, self._figure8_omega
+        a = w * (t - self._figure8_start_s)
+        s2, c2, s1, c1 = math.sin(2 * a), math.cos(2 * a), math.sin(a), math.cos(a)
+        position = (cn + 0.5 * r * s2, ce + r * s1, down)
+        velocity = (r * w * c2, r * w * c1, 0.0)
+        acceleration = (-2.0 * r * w * w * s2, -r * w * w * s1, 0.0)
+        return Setpoint(position, velocity, acceleration, self._yaw_at(t))
 
     def _circle(self, t: float) -> Setpoint:
         c = self.config
@@ -135,15 +175,15 @@ class Trajectory:
             -radius * omega * omega * sa,
             amp * w_alt * w_alt * sh,
         )
-        return Setpoint(position, velocity, acceleration, self._yaw_rad)
+        return Setpoint(position, velocity, acceleration, self._yaw_at(t))
 
-    def _waypoints(self, t: float) -> Setpoint:
-        points = self.config.waypoints_ned_m
-        for start, duration, origin, velocity in self._legs:
+    def _waypoints(self, t: float, legs: list[_Leg], last: tuple[float, float, float]) -> Setpoint:
+        yaw = self._yaw_at(t)
+        for start, duration, origin, velocity in legs:
             if t < start:
-                return Setpoint(origin, (0.0, 0.0, 0.0), None, self._yaw_rad)
+                return Setpoint(origin, (0.0, 0.0, 0.0), None, yaw)
             if t < start + duration:
                 s = t - start
                 position = tuple(o + v * s for o, v in zip(origin, velocity, strict=True))
-                return Setpoint(position, velocity, None, self._yaw_rad)  # type: ignore[arg-type]
-        return Setpoint(points[-1], (0.0, 0.0, 0.0), None, self._yaw_rad)
+                return Setpoint(position, velocity, None, yaw)  # type: ignore[arg-type]
+        return Setpoint(last, (0.0, 0.0, 0.0), None, yaw)

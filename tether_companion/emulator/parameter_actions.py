@@ -52,6 +52,17 @@ class ParameterActions:
                 raise ValueError("set TETH_MODEL to re-attach the tether")
         elif name in _SENSOR_FIELDS:
             sim.set_sensor_config(replace(sim.sensor_config, **{_SENSOR_FIELDS[name]: value}))
+        elif name in ("SIM_ACC_BIAS_X", "SIM_ACC_BIAS_Y", "SIM_ACC_BIAS_Z"):
+            bias = list(sim.sensor_config.accel_bias_mps2)
+            bias["XYZ".index(name[-1])] = value
+            sim.set_sensor_config(replace(sim.sensor_config, accel_bias_mps2=tuple(bias)))
+        elif name == "SIM_THR_SCALE":
+            sim.set_propulsion(replace(sim.propulsion, thrust_scale=value))
+        elif name == "SIM_BATT_SAG":
+            battery = replace(sim.propulsion.battery, sag_v_per_cell_per_min=value)
+            sim.set_propulsion(replace(sim.propulsion, battery=battery))
+        elif name == "SIM_WIND_TURB":
+            sim.set_turbulence_w20_mps(value)
         elif name in ("SIM_WIND_N", "SIM_WIND_E", "SIM_WIND_D"):
             wind = list(sim.wind_ned_m_s)
             wind["NED".index(name[-1])] = value
@@ -113,4 +124,5 @@ _SENSOR_FIELDS = {
     "SIM_ATT_NOISE": "attitude_noise_std_rad",
     "SIM_RNG_NOISE": "range_noise_std_m",
     "SIM_VIB_AMP": "accel_vibration_amplitude_mps2",
+    "SIM_ATT_ERR": "attitude_error_std_rad",
 }

@@ -121,6 +121,44 @@ def parameter_definitions(scenario: Scenario, config: EmulatorConfig) -> list[Pa
             100.0,
             "accelerometer vibration amplitude [m/s^2]",
         ),
+        ParamDef(
+            "SIM_ATT_ERR",
+            sensors.attitude_error_std_rad,
+            0.0,
+            0.2,
+            "the FC's attitude-estimate error sigma (Gauss-Markov) [rad]",
+        ),
+        *(
+            ParamDef(
+                f"SIM_ACC_BIAS_{axis}",
+                sensors.accel_bias_mps2[i],
+                -5.0,
+                5.0,
+                f"accelerometer bias, body {axis.lower()} [m/s^2]",
+            )
+            for i, axis in enumerate("XYZ")
+        ),
+        ParamDef(
+            "SIM_THR_SCALE",
+            scenario.propulsion.thrust_scale,
+            0.5,
+            1.5,
+            "true thrust / the profile's curve at the reference voltage",
+        ),
+        ParamDef(
+            "SIM_BATT_SAG",
+            scenario.propulsion.battery.sag_v_per_cell_per_min,
+            0.0,
+            1.0,
+            "battery sag per cell [V/min]",
+        ),
+        ParamDef(
+            "SIM_WIND_TURB",
+            scenario.wind.turbulence_w20_mps,
+            0.0,
+            25.0,
+            "Dryden turbulence: wind at 6.1 m setting its intensity (0 = none) [m/s]",
+        ),
         ParamDef("SIM_WIND_N", wind[0], -30.0, 30.0, "wind velocity north [m/s]"),
         ParamDef("SIM_WIND_E", wind[1], -30.0, 30.0, "wind velocity east [m/s]"),
         ParamDef("SIM_WIND_D", wind[2], -30.0, 30.0, "wind velocity down [m/s]"),

@@ -39,6 +39,8 @@ _SENSOR_BITS_ALWAYS = (
     | dialect.MAV_SYS_STATUS_AHRS
 )
 UNKNOWN_U16 = 65535
+INT16_MAX = 32767
+"""BATTERY_STATUS.temperature when unknown [cdegC]."""
 LANDING_MODES = frozenset({CopterMode.LAND})
 
 
@@ -68,7 +70,8 @@ def heartbeat(fc: FlightController) -> MAVLinkMessage:
 
 
 def sys_status(fc: FlightController) -> MAVLinkMessage:
-    """SYS_STATUS: sensors present/enabled/healthy; battery unknown (not modelled)."""
+    """SYS_STATUS: sensors present/enabled/healthy; the battery's voltage (current and
+    remaining unknown)."""
     position_bit = (
         dialect.MAV_SYS_STATUS_SENSOR_VISION_POSITION
         if fc.vision_navigation
@@ -84,8 +87,26 @@ def sys_status(fc: FlightController) -> MAVLinkMessage:
     if fc.prearm_failure() is None:
         health |= dialect.MAV_SYS_STATUS_PREARM_CHECK
     errors = min(fc.counters.rejected, UNKNOWN_U16 - 1)
+    voltage_mv = min(round(fc.sim.battery_voltage_v * 1000.0), UNKNOWN_U16 - 1)
     return dialect.MAVLink_sys_status_message(
-        present, present, health, 0, UNKNOWN_U16, -1, -1, 0, errors, 0, 0, 0, 0, 0, 0, 0
+        present, present, health, 0, voltage_mv, -1, -1, 0, errors, 0, 0, 0, 0, 0, 0, 0
+    )
+
+
+def battery_status(fc: FlightController) -> MAVLinkMessage:
+    """BATTERY_STATUS: the pack voltage in voltages[0], the other cells UINT16_MAX (the spec's
+    form when cell voltages are not measured); current, charge and temperature unknown."""
+    voltage_mv = min(round(fc.sim.battery_voltage_v * 1000.0), UNKNOWN_U16 - 1)
+    return dialect.MAVLink_battery_status_message(
+        0,
+        dialect.MAV_BATTERY_FUNCTION_ALL,
+        dialect.MAV_BATTERY_TYPE_LIPO,
+        INT16_MAX,
+        [voltage_mv] + [UNKNOWN_U16] * 9,
+        -1,
+        -1,
+        -1,
+        -1,
     )
 
 
@@ -273,6 +294,7 @@ def autopilot_version(fc: FlightController) -> MAVLinkMessage:
 BUILDERS = {
     "HEARTBEAT": heartbeat,
     "SYS_STATUS": sys_status,
+    "BATTERY_STATUS": battery_status,
     "EXTENDED_SYS_STATE": extended_sys_state,
     "SYSTEM_TIME": system_time,
     "RAW_IMU": raw_imu,

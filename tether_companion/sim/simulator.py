@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tether_companion.constants import GRAVITY_MPS2
+from tether_companion.errors import InputError
 from tether_companion.frames import rotation_ned_to_body
 from tether_companion.physics.cable import CableConfig, CableModel, make_cable
 from tether_companion.physics.rigid_body import (
@@ -36,6 +37,7 @@ from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, Range
 from tether_companion.sim.controller import CascadedController, Setpoint
 from tether_companion.sim.events import Event
 from tether_companion.sim.ground import Ground
+from tether_companion.sim.propulsion import PropulsionConfig
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.sensors import SensorConfig, SensorSuite
 from tether_companion.sim.trajectory import Trajectory
@@ -49,10 +51,11 @@ SATURATION_LIMIT_S = 2.0
 """Every motor at full command for this long: the vehicle cannot fly the scenario."""
 
 
-class FlightImpossibleError(ValueError):
+class FlightImpossibleError(InputError):
     """The scenario's flight cannot be flown (crash, saturation, non-finite state).
 
-    The message names the simulation time and the cause.
+    The message names the simulation time and the cause; the command line prints it on one
+    line and exits with code 2, like any other bad input.
     """
 
 
@@ -121,6 +124,8 @@ class Simulator:
         stop_on_failure: bool = True,
     ) -> None:
         self.scenario = scenario
+        self.propulsion = scenario.propulsion
+        """How the true thrust differs from the profile's curve (change with set_propulsion)."""
         self.stop_on_failure = stop_on_failure
         self.failure: str | None = None
         """Why the flight failed first (a crash while armed, saturation, a non-finite state)."""
@@ -157,13 +162,12 @@ class Simulator:
         self._initialise()
 
     # ------------------------------------------------------------------ set-up
-    def _make_gusts(self) -> DrydenTurbulence | None:
+    def _make_gusts(self, w20_mps: float | None = None) -> DrydenTurbulence | None:
         wind = self.scenario.wind
-        if wind.turbulence_w20_mps <= 0.0:
+        w20 = wind.turbulence_w20_mps if w20_mps is None else w20_mps
+        if w20 <= 0.0:
             return None
-        parameters = DrydenParameters.low_altitude(
-            wind.turbulence_w20_mps, wind.turbulence_height_m
-        )
+        parameters = DrydenParameters.low_altitude(w20, wind.turbulence_height_m)
         return DrydenTurbulence(
             parameters,
             self._mean_wind_ned_m_s,
@@ -175,7 +179,7 @@ class Simulator:
     def _thrusts_for(self, pwm_us: list[float]) -> list[float]:
         """True steady-state motor thrusts [N]: the profile's curve times the scale and sag."""
         thrusts = self.controller.mixer.thrusts_for_pwm_us(pwm_us)
-        factor = self.scenario.propulsion.thrust_factor(self.time_s)
+        factor = self.propulsion.thrust_factor(self.time_s)
         return thrusts if factor == 1.0 else [f * factor for f in thrusts]
 
     def _initialise(self) -> None:
@@ -371,7 +375,7 @@ class Simulator:
     @property
     def battery_voltage_v(self) -> float:
         """Battery pack voltage now [V]."""
-        return self.scenario.propulsion.battery.voltage_v(self.time_s)
+        return self.propulsion.battery.voltage_v(self.time_s)
 
     # ------------------------------------------------------------------ sensors
     def read_imu(self) -> ImuSample:
@@ -436,6 +440,17 @@ class Simulator:
         mean = np.asarray(wind_ned_m_s, dtype=float).reshape(3).tolist()
         self._mean_wind_ned_m_s = tuple(mean)  # type: ignore[assignment]
         self.body.wind_ned_m_s = mean
+
+    def set_turbulence_w20_mps(self, w20_mps: float) -> None:
+        """Dryden turbulence of this intensity (wind at 6.1 m [m/s]; 0 = none) from now on."""
+        self._gusts = self._make_gusts(w20_mps)
+        if self._gusts is None:
+            self.body.wind_ned_m_s = self._mean_wind_ned_m_s
+
+    def set_propulsion(self, config: PropulsionConfig) -> None:
+        """Take the thrust scale and battery of ``config`` from the next controller update."""
+        self.propulsion = config
+        self._thrust_varies = True
 
     @property
     def sensor_config(self) -> SensorConfig:

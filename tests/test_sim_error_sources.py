@@ -1,0 +1,250 @@
+"""The simulator's real-world error sources, each measured back from what it outputs."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.signal import welch
+
+from tether_companion.config import ConfigError
+from tether_companion.frames import rotation_ned_to_body
+from tether_companion.physics.rigid_body import RigidBody
+from tether_companion.physics.vehicle import load_vehicle
+from tether_companion.sim.ground import Ground, GroundConfig
+from tether_companion.sim.propulsion import BatteryConfig, PropulsionConfig
+from tether_companion.sim.scenario import REALISTIC_SCENARIOS, load_scenario
+from tether_companion.sim.sensors import SensorConfig, SensorSuite
+from tether_companion.sim.simulator import FlightImpossibleError, Simulator
+from tether_companion.sim.wind import DrydenParameters, DrydenTurbulence, dryden_psd
+
+G = 9.80665
+
+
+def test_rotor_and_body_drag_in_the_specific_force() -> None:
+    """Level flight at 2 m/s along body x in still air: the accelerometer's x reads the drag."""
+    vehicle = load_vehicle("realistic-quad")
+    body = RigidBody(vehicle)
+    n = vehicle.n_motors
+    hover = vehicle.mass_kg * G / n
+    body.set_state([0, 0, -5, 2.0, -1.0, 0, 0, 0, 0, 0, 0, 0] + [hover] * n)
+    ax, ay, az = body.specific_force_body_mps2()
+    k = 0.5 * 1.225 / vehicle.ballistic_coefficient_kg_per_m2
+    assert ax == pytest.approx(-0.2 * 2.0 - k * 4.0, rel=1e-9)
+    assert ay == pytest.approx(-0.2 * -1.0 + k * 1.0, rel=1e-9)
+    assert az == pytest.approx(-G, rel=1e-9)
+
+
+def test_drag_measured_back_from_a_realistic_flight() -> None:
+    """On realistic-circle, m f - thrust - R F_cable is the drag: regress mu from the truth."""
+    scenario = replace(load_scenario("realistic-circle"), duration_s=20.0)
+    sim = Simulator(scenario)
+    vehicle = sim.vehicle
+    k = 0.5 * 1.225 / vehicle.ballistic_coefficient_kg_per_m2
+    air, residual = [], []
+    for step in range(1, 400):
+        sim.advance_to(step * 0.05)
+        t = sim.truth
+        r = rotation_ned_to_body(*t.euler_rad)
+        drag_body = vehicle.mass_kg * t.specific_force_body_mps2 - r @ t.cable_force_ned_n
+        air_body = r @ (t.velocity_ned_m_s - t.wind_ned_m_s)
+        for i in (0, 1):
+            air.append(air_body[i])
+            quadratic = k * air_body[i] * abs(air_body[i]) * vehicle.mass_kg
+            residual.append(drag_body[i] + quadratic)
+    air_a, res_a = np.array(air), np.array(residual)
+    mu = -float(air_a @ res_a / (air_a @ air_a)) / vehicle.mass_kg
+    assert mu == pytest.approx(vehicle.rotor_drag_per_s, rel=0.02)
+    assert np.max(np.abs(air_a)) > 1.0  # the flight really moved through the air
+
+
+def test_dryden_turbulence_has_the_dryden_spectrum_and_intensity() -> None:
+    parameters = DrydenParameters.low_altitude(7.7, 5.0)
+    gusts = DrydenTurbulence(parameters, (3.0, 0.0, 0.0), 0.01, np.random.default_rng(7))
+    samples = np.array([gusts.step() for _ in range(120_000)])
+    for axis in range(3):
+        f, psd = welch(samples[:, axis], fs=100.0, nperseg=4096)
+        band = (f > 0.05) & (f < 5.0)
+        model = dryden_psd(
+            f[band], parameters.sigma_mps[axis], parameters.length_m[axis], 3.0, axis
+        )
+        ratio = psd[band] / model
+        assert 0.8 < float(np.median(ratio)) < 1.25, axis
+    assert np.std(samples[:, 2]) == pytest.approx(parameters.sigma_mps[2], rel=0.15)
+
+
+def test_dryden_low_altitude_parameters() -> None:
+    """MIL-HDBK-1797 at 20 ft with W20 = 10 m/s: sigma_w = 1, sigma_u = 1/(0.177+0.01646)^0.4."""
+    p = DrydenParameters.low_altitude(10.0, 20 * 0.3048)
+    base = 0.177 + 0.000823 * 20
+    assert p.sigma_mps[2] == pytest.approx(1.0)
+    assert p.sigma_mps[0] == pytest.approx(1.0 / base**0.4)
+    assert p.length_m[2] == pytest.approx(20 * 0.3048)
+    assert p.length_m[0] == pytest.approx(20 / base**1.2 * 0.3048)
+
+
+def test_accelerometer_turn_on_bias_and_random_walk_statistics() -> None:
+    config = SensorConfig(
+        accel_noise_std_mps2=0.0,
+        accel_turn_on_bias_std_mps2=0.1,
+        accel_bias_random_walk_mps2_per_sqrt_s=0.01,
+    )
+    start, end = [], []
+    for seed in range(300):
+        suite = SensorSuite(config, np.random.default_rng(seed))
+        first = suite.imu(0.0, (0.0, 0.0, -G), (0.0, 0.0, 0.0)).specific_force_body_mps2.copy()
+        for k in range(1, 101):
+            last = suite.imu(k * 1.0, (0.0, 0.0, -G), (0.0, 0.0, 0.0)).specific_force_body_mps2
+        start.append(first)
+        end.append(last - first)
+    start_a, walk = np.array(start), np.array(end)
+    assert np.std(start_a[:, 0]) == pytest.approx(0.1, rel=0.15)
+    # 100 s of random walk at 0.01 m/s^2/sqrt(s): sigma 0.1 m/s^2
+    assert np.std(walk) == pytest.approx(0.01 * math.sqrt(100.0), rel=0.15)
+
+
+def test_flight_controller_attitude_error_is_a_slow_gauss_markov_process() -> None:
+    config = SensorConfig(
+        attitude_noise_std_rad=0.0,
+        attitude_error_std_rad=0.005,
+        attitude_error_time_constant_s=10.0,
+    )
+    suite = SensorSuite(config, np.random.default_rng(3))
+    rolls = np.array([suite.attitude(k * 0.1, 0.0, 0.0, 0.0).roll_rad for k in range(60_000)])
+    assert np.std(rolls) == pytest.approx(0.005, rel=0.25)
+    lag = 100  # one time constant
+    rho = np.corrcoef(rolls[:-lag], rolls[lag:])[0, 1]
+    assert rho == pytest.approx(math.exp(-1.0), abs=0.12)
+
+
+def test_battery_sag_lowers_the_thrust_for_the_same_command() -> None:
+    battery = BatteryConfig(
+        cells=4, full_cell_voltage_v=4.2, reference_cell_voltage_v=4.0, sag_v_per_cell_per_min=0.1
+    )
+    propulsion = PropulsionConfig(thrust_scale=0.95, battery=battery)
+    scenario = replace(load_scenario("hover"), propulsion=propulsion, duration_s=130.0)
+    sim = Simulator(scenario)
+    for t_s in (10.0, 70.0, 120.0):
+        sim.advance_to(t_s)
+        truth = sim.truth
+        expected_v = 4 * (4.2 - 0.1 * t_s / 60.0)
+        assert truth.battery_voltage_v == pytest.approx(expected_v, abs=0.005)
+        curve = sim.controller.mixer.thrusts_for_pwm_us(list(truth.pwm_us))
+        factor = 0.95 * (expected_v / 16.0) ** 2
+        steady = np.array(curve) * factor
+        # in a steady hover the motors sit at their steady-state thrust (lag settled)
+        assert truth.motor_thrust_n == pytest.approx(steady, rel=0.01)
+    assert battery.voltage_v(1e6) == pytest.approx(4 * 3.3)
+
+
+def test_rangefinder_measures_to_the_terrain_from_its_mounting_point() -> None:
+    base = load_scenario("realistic-gusty-hover")
+    sensors = replace(base.sensors, range_noise_std_m=0.0, range_rate_hz=200.0)
+    sim = Simulator(replace(base, sensors=sensors, duration_s=5.0))
+    for k in range(1, 40):
+        sim.advance_to(0.1 * k)
+        x = sim.body.x
+        reading = sim.read_rangefinder()
+        r = rotation_ned_to_body(x[6], x[7], x[8])
+        sensor = np.array(x[:3]) + r.T @ np.array(sensors.range_offset_frd_m)
+        height = sim.ground.down_m(sensor[0], sensor[1]) - sensor[2]
+        assert reading.distance_m * math.cos(x[6]) * math.cos(x[7]) == pytest.approx(
+            height, abs=1e-9
+        )
+    # the terrain is really uneven and the anchor really stands 1 m above the mean ground
+    ground = Ground(GroundConfig(anchor_height_m=1.0, terrain_std_m=0.05), np.random.default_rng(1))
+    heights = [
+        ground.elevation_m(n, e) for n in np.linspace(-20, 20, 60) for e in np.linspace(-20, 20, 60)
+    ]
+    assert np.std(heights) == pytest.approx(0.05, rel=0.3)
+    assert np.mean([ground.down_m(n, 0.0) for n in np.linspace(-20, 20, 200)]) == pytest.approx(
+        1.0, abs=0.03
+    )
+
+
+def test_a_landed_start_sits_on_the_ground_below_the_anchor() -> None:
+    sim = Simulator(replace(load_scenario("realistic-takeoff-figure8"), duration_s=1.0))
+    x = sim.body.x
+    assert sim.landed and x[2] == pytest.approx(sim.ground.down_m(x[0], x[1]))
+    assert x[2] > 0.8  # the anchor stands on a 1 m tripod
+
+
+def test_every_realistic_scenario_loads_with_every_error_source_on() -> None:
+    for name in REALISTIC_SCENARIOS:
+        s = load_scenario(name)
+        assert s.vehicle == "realistic-quad" and s.sensors.accel_turn_on_bias_std_mps2 > 0, name
+        assert s.wind.turbulence_w20_mps > 0 and s.propulsion.thrust_scale != 1.0, name
+        assert s.ground.anchor_height_m > 0 and s.ground.terrain_std_m > 0, name
+        assert s.propulsion.battery.sag_v_per_cell_per_min > 0, name
+
+
+def test_the_paper_scenario_stays_clean() -> None:
+    s = load_scenario("paper-circle")
+    assert s.propulsion == PropulsionConfig() and s.ground == GroundConfig()
+    assert s.wind.turbulence_w20_mps == 0.0 and load_vehicle(s.vehicle).rotor_drag_per_s == 0.0
+
+
+@pytest.mark.parametrize(
+    ("text", "key", "words"),
+    [
+        ("propulsion: {thrust_scale: 3}\n", "propulsion.thrust_scale", "<= 1.5"),
+        ("propulsion: {battery: {cells: 0}}\n", "propulsion.battery.cells", ">= 1"),
+        (
+            "propulsion: {battery: {full_cell_voltage_v: 3.2, empty_cell_voltage_v: 3.5}}\n",
+            "propulsion.battery.full_cell_voltage_v",
+            "> empty_cell_voltage_v",
+        ),
+        ("ground: {anchor_height_m: -1}\n", "ground.anchor_height_m", ">= 0"),
+        ("ground: {terrain_std_m: .nan}\n", "ground.terrain_std_m", "finite"),
+        ("wind: {turbulence_w20_mps: -2}\n", "wind.turbulence_w20_mps", ">= 0"),
+        ("sensors: {attitude_error_std_rad: 1}\n", "sensors.attitude_error_std_rad", "<= 0.2"),
+        ("sensors: {range_offset_frd_m: [0, 0]}\n", "sensors.range_offset_frd_m", "3 items"),
+        ("trajectory: {kind: figure8}\n", "trajectory.waypoints_ned_m", "at least one"),
+        ("trajectory: {kind: hover, yaw_rate_deg_s: 500}\n", "trajectory.yaw_rate_deg_s", "<= 90"),
+        ("base: no-such-scenario\n", "", "no-such-scenario"),
+        ("base: 5\n", "base", "scenario name"),
+        (
+            "ground: {anchor_height_m: 1}\ntrajectory: {kind: hover, position_ned_m: [0, 0, 2]}\n",
+            "trajectory.position_ned_m",
+            "<= 1.0",
+        ),
+    ],
+)
+def test_bad_error_source_keys_name_the_key(tmp_path, text: str, key: str, words: str) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as info:
+        load_scenario(path)
+    message = str(info.value)
+    assert (
+        key in message
+        and words in message
+        and str(path) in message
+        or (not key and words in message)
+    )
+
+
+def test_an_impossible_flight_names_the_time_and_the_cause(tmp_path) -> None:
+    """A thrust map 50 % weak cannot hold a 1.5 kg quad against 10 N of pull."""
+    path = tmp_path / "weak.yaml"
+    path.write_text(
+        "base: realistic-gusty-hover\npropulsion: {thrust_scale: 0.5}\ncable: {tension_n: 10}\n"
+    )
+    with pytest.raises(
+        FlightImpossibleError, match=r"t = \d+\.\d\d s: .*(full command|hit the ground)"
+    ):
+        sim = Simulator(load_scenario(path))
+        sim.advance_to(20.0)
+    result = subprocess.run(
+        [sys.executable, "-m", "tether_companion.cli", "simulate", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "t = " in lines[0] and "Traceback" not in result.stderr

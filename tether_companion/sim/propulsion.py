@@ -1,11 +1,12 @@
 """What the motors really give for a PWM: the profile's curve times a scale error and the
 battery's sag (the truth side; the estimator only sees the profile's curve and the voltage).
 
-A brushless motor's speed at a given duty cycle is proportional to the battery voltage, and
-its thrust to the speed squared, so at a fixed command the thrust scales as ``(V / V_ref)^2``
-with ``V_ref`` the voltage the profile's curve was measured at. ArduPilot compensates the
-same effect from the measured voltage (``MOT_BAT_VOLT_MAX/MIN``, AP_MotorsMulticopter's
-thrust linearisation); our simulated flight controller, like an uncompensated one, leaves it
+A brushless motor's speed at a given duty cycle is proportional to the battery voltage, so a
+command ``u`` at voltage ``V`` gives the thrust the profile's curve gives for ``u V / V_ref``,
+with ``V_ref`` the voltage the curve was measured at (``ThrustCurve.thrust_n(pwm,
+voltage_ratio)``, the assumption of ArduPilot's thrust linearisation, whose
+``MOT_BAT_VOLT_MAX/MIN`` compensation undoes it); the true thrust is that times
+``thrust_scale``. Our simulated flight controller, like an uncompensated one, leaves the sag
 to its integrators. The voltage falls linearly with time at ``sag_v_per_cell_per_min`` (a
 LiPo in a steady hover: about 0.05-0.15 V per cell per minute over the flat part of its
 discharge curve) and never below ``empty_cell_voltage_v``.
@@ -68,8 +69,17 @@ class PropulsionConfig:
     )
     battery: BatteryConfig = spec(default_factory=BatteryConfig, doc="battery pack")
 
-    def thrust_factor(self, time_s: float) -> float:
-        """True thrust over the profile's thrust for the same command at ``time_s`` [-]."""
+    def voltage_ratio(self, time_s: float) -> float:
+        """Battery voltage over the voltage the profile's curve holds at, at ``time_s`` [-]."""
         b = self.battery
-        ratio = b.voltage_v(time_s) / (b.cells * b.reference_cell_voltage_v)
-        return self.thrust_scale * ratio * ratio
+        return b.voltage_v(time_s) / (b.cells * b.reference_cell_voltage_v)
+
+    @property
+    def exact(self) -> bool:
+        """True when the real thrust is the profile's curve at every moment."""
+        b = self.battery
+        return (
+            self.thrust_scale == 1.0
+            and b.sag_v_per_cell_per_min == 0.0
+            and b.full_cell_voltage_v == b.reference_cell_voltage_v
+        )

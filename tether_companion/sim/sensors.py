@@ -121,9 +121,7 @@ def _turn_on(rng: np.random.Generator, std: float) -> list[float]:
     return [float(v) for v in rng.normal(0.0, std, 3)] if std > 0.0 else [0.0, 0.0, 0.0]
 
 
-def _random_walk(
-    values: list[float], rate: float, dt_s: float, take: Callable[[], float]
-) -> None:
+def _random_walk(values: list[float], rate: float, dt_s: float, take: Callable[[], float]) -> None:
     """Add a random-walk increment of ``rate * sqrt(dt_s)`` sigma to each of ``values``."""
     if rate > 0.0 and dt_s > 0.0:
         step = rate * math.sqrt(dt_s)

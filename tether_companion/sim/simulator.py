@@ -178,9 +178,12 @@ class Simulator:
 
     def _thrusts_for(self, pwm_us: list[float]) -> list[float]:
         """True steady-state motor thrusts [N]: the profile's curve times the scale and sag."""
-        thrusts = self.controller.mixer.thrusts_for_pwm_us(pwm_us)
-        factor = self.propulsion.thrust_factor(self.time_s)
-        return thrusts if factor == 1.0 else [f * factor for f in thrusts]
+        propulsion = self.propulsion
+        if propulsion.exact:
+            return self.controller.mixer.thrusts_for_pwm_us(pwm_us)
+        ratio = propulsion.voltage_ratio(self.time_s)
+        thrusts = self.vehicle.thrust_curve.thrust_n(np.asarray(pwm_us), ratio)
+        return (propulsion.thrust_scale * thrusts).tolist()
 
     def _initialise(self) -> None:
         init = self.scenario.initial

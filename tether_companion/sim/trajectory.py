@@ -103,9 +103,7 @@ class Trajectory:
             self._return_legs_from = len(self._legs)
             self._build_legs(config.waypoints_ned_m[::-1], self._figure8_end_s)
 
-    def _build_legs(
-        self, points: tuple[tuple[float, float, float], ...], start_s: float
-    ) -> float:
+    def _build_legs(self, points: tuple[tuple[float, float, float], ...], start_s: float) -> float:
         """Append the legs (start time, duration, start point, velocity) through ``points``
         from ``start_s``, with the dwell at each waypoint; the time they end [s]."""
         c = self.config

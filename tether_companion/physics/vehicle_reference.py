@@ -22,6 +22,11 @@ WHERE: dict[str, str] = {
     "simulator/emulator only",
     "drag_coefficient_n_s_per_m": "identified by `tether-companion sysid` from a log with "
     "velocity, or from ArduPilot's EK3_DRAG_BCOEF_*/MCOEF; 0 ignores drag",
+    "rotor_drag_per_s": "ArduPilot's EK3_DRAG_MCOEF (the SITL quad prints 0.209) or identified "
+    "by `sysid` from a log with velocity; 0.1-0.3 1/s on small multirotors. Matters in forward "
+    "flight: 0.2 1/s at 1 m/s is 0.2 m/s^2 of pull the tether does not make",
+    "ballistic_coefficient_kg_per_m2": "ArduPilot's EK3_DRAG_BCOEF_X/Y (m / (Cd A)); 0 ignores "
+    "quadratic body drag, which is small below 3 m/s",
     "motor_time_constant_s": "motor step response on a thrust stand, or identified by "
     "`sysid` (the first-order model's time constant); 0.02-0.08 s for 5-12 inch propellers",
     "thrust_curve.command_unit": "what your flight controller's SERVO_OUTPUT_RAW carries: "

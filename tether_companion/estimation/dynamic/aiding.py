@@ -2,7 +2,8 @@
 
 Each sensor module (``aid_*.py``) decides when to fuse, forms the measurement and hands it to
 :func:`fuse`, which runs the filter's gated Joseph-form update
-(:meth:`~tether_companion.estimation.ekf.ExtendedKalmanFilter.update`) and records what
+(:meth:`~tether_companion.estimation.ekf.ExtendedKalmanFilter.update`) on every member of
+the :class:`~tether_companion.estimation.dynamic.bank.FilterBank` and records what
 happened in that sensor's :class:`AidStatus`: innovation and its variance, test ratio, fused
 or why not, the time of the last fusion, and counters.
 """
@@ -16,11 +17,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.ekf import (
     FUSED,
     GATED,
     NONFINITE,
-    ExtendedKalmanFilter,
     MeasurementFunction,
     chi2_threshold,
 )
@@ -72,7 +73,7 @@ class AidStatus:
 
 
 def fuse(
-    kf: ExtendedKalmanFilter,
+    bank: FilterBank,
     name: str,
     status: AidStatus,
     z: FloatArray,
@@ -80,10 +81,14 @@ def fuse(
     r: FloatArray,
     time_s: float,
 ) -> bool:
-    """Fuse ``z`` (shape (m,)) with noise ``r`` (m, m) into ``kf``; record it in ``status``.
+    """Fuse ``z`` (shape (m,)) with noise ``r`` (m, m) into every member of ``bank``; record
+    the best member's outcome in ``status``.
 
-    Returns whether the sample was fused.
+    Returns whether the sample was fused into the best member.
     """
+    if not bank.decided:
+        bank.update_others(name, z, measure, r)
+    kf = bank.best
     p_before = kf.P
     jacobians: list[FloatArray] = []
 
@@ -93,6 +98,8 @@ def fuse(
         return value, h_jac
 
     result = kf.update(name, z, measure_and_keep, r)
+    if not bank.decided:
+        bank.add_best_nis(result.nis)
     if math.isfinite(result.nis):
         h_jac = jacobians[0]
         status.last_innovation = kf.sensors[name].last_innovation

@@ -25,12 +25,12 @@ class DynamicNoise:
     """Process noise spectral densities (random walks and unmodelled forces)."""
 
     acceleration_m2ps3: float = spec(
-        0.002,
+        1e-4,
         exclusive_minimum=0.0,
         doc="unmodelled forces per unit mass (gusts, motor lag, model error) [m^2/s^3]",
     )
     position_m2ps: float = spec(1e-6, exclusive_minimum=0.0, doc="position [m^2/s]")
-    tension_n2ps: float = spec(0.5, exclusive_minimum=0.0, doc="chord tension [N^2/s]")
+    tension_n2ps: float = spec(0.05, exclusive_minimum=0.0, doc="chord tension [N^2/s]")
     thrust_scale_per_s: float = spec(
         1e-5, exclusive_minimum=0.0, doc="thrust scale factor (battery sag) [1/s]"
     )
@@ -45,7 +45,16 @@ class DynamicInitial:
     """Prior uncertainty of the states the first second of data does not measure."""
 
     velocity_std_mps: float = spec(0.5, exclusive_minimum=0.0, doc="velocity [m/s]")
+    thrust_scale: float = spec(
+        1.0, exclusive_minimum=0.0, doc="prior mean of the thrust scale factor [1]"
+    )
     thrust_scale_std: float = spec(0.1, exclusive_minimum=0.0, doc="thrust scale factor [1]")
+    thrust_scale_hypotheses: int = spec(
+        5,
+        minimum=1,
+        maximum=15,
+        doc="filters started side by side over +-1.5 std of the thrust scale (1: one filter)",
+    )
     accel_bias_std_mps2: tuple[float, float, float] = spec(
         (0.2, 0.2, 0.2), exclusive_minimum=0.0, doc="accelerometer bias, body x y z [m/s^2]"
     )
@@ -65,7 +74,7 @@ class DynamicFilterConfig:
         doc="force_balance: dynamics predict, accelerometer measured; inertial: the reverse",
     )
     accel_noise_std_mps2: float = spec(
-        0.3, exclusive_minimum=0.0, doc="accelerometer force-balance noise per axis [m/s^2]"
+        0.15, exclusive_minimum=0.0, doc="accelerometer force-balance noise per axis [m/s^2]"
     )
     drag_per_s: float | None = spec(
         None,

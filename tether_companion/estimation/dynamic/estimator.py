@@ -45,6 +45,7 @@ from tether_companion.estimation.dynamic.aid.cable_angle import CableAngleAid
 from tether_companion.estimation.dynamic.aid.load_cell import LoadCellAid
 from tether_companion.estimation.dynamic.aid.rangefinder import RangefinderAid
 from tether_companion.estimation.dynamic.aid.winch import WinchAid
+from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterConfig
 from tether_companion.estimation.dynamic.initialise import Initialiser
 from tether_companion.estimation.dynamic.models import (
@@ -176,7 +177,7 @@ class DynamicTetherEstimator:
         self.load_cell = LoadCellAid(dynamic.load_cell_noise_std_n)
         self.winch = WinchAid(dynamic.winch_length_noise_std_m, dynamic.slack_tension_n)
         self.cable_angle = CableAngleAid(dynamic.cable_angle_noise_std_rad, dynamic.slack_tension_n)
-        self.filter: ExtendedKalmanFilter | None = None
+        self.bank: FilterBank | None = None
         self._initialiser = self._new_initialiser()
         self._time_s = math.nan
         self._inputs: list[float] | None = None
@@ -231,7 +232,12 @@ class DynamicTetherEstimator:
     @property
     def initialised(self) -> bool:
         """Whether the filter has a state."""
-        return self.filter is not None
+        return self.bank is not None
+
+    @property
+    def filter(self) -> ExtendedKalmanFilter | None:
+        """The filter (the most likely member while several thrust-scale hypotheses run)."""
+        return None if self.bank is None else self.bank.best
 
     # ------------------------------------------------------------------ inputs
     def on_attitude(self, sample: AttitudeSample) -> None:
@@ -254,8 +260,8 @@ class DynamicTetherEstimator:
         if not (math.isfinite(tension_n) and math.isfinite(time_s)) or tension_n < 0.0:
             self.health.nonfinite_rejected += 1
             return
-        if self.filter is not None and self._fresh(time_s, self.config.staleness.tension_s):
-            if self.load_cell.fuse(self.filter, self.constants, tension_n, self._time_s):
+        if self.bank is not None and self._fresh(time_s, self.config.staleness.tension_s):
+            if self.load_cell.fuse(self.bank, self.constants, tension_n, self._time_s):
                 self.health.load_cell_fused += 1
 
     def set_paid_out_length_m(self, length_m: float, time_s: float) -> None:
@@ -264,8 +270,8 @@ class DynamicTetherEstimator:
             self.health.nonfinite_rejected += 1
             return
         self.constants.length_m = length_m
-        if self.filter is not None and self._fresh(time_s, self.config.staleness.tension_s):
-            if self.winch.fuse(self.filter, self.constants, length_m, self._time_s):
+        if self.bank is not None and self._fresh(time_s, self.config.staleness.tension_s):
+            if self.winch.fuse(self.bank, self.constants, length_m, self._time_s):
                 self.health.winch_fused += 1
 
     def on_cable_angle(self, elevation_rad: float, azimuth_rad: float, time_s: float) -> None:
@@ -274,9 +280,9 @@ class DynamicTetherEstimator:
         if not all(math.isfinite(v) for v in values) or abs(elevation_rad) > math.pi / 2:
             self.health.nonfinite_rejected += 1
             return
-        if self.filter is not None and self._fresh(time_s, self.config.staleness.tension_s):
+        if self.bank is not None and self._fresh(time_s, self.config.staleness.tension_s):
             if self.cable_angle.fuse(
-                self.filter, self.constants, elevation_rad, azimuth_rad, self._time_s
+                self.bank, self.constants, elevation_rad, azimuth_rad, self._time_s
             ):
                 self.health.cable_angle_fused += 1
 
@@ -299,14 +305,14 @@ class DynamicTetherEstimator:
             health.range_out_of_range += 1
             return
         height_m = sample.distance_m * cos_tilt
-        if self.filter is None:
+        if self.bank is None:
             self._initialiser.add_height(height_m - self.dynamic.anchor_height_m)
             return
         if not self._fresh(sample.time_s, self.config.staleness.range_s):
             health.range_stale += 1
             return
-        fused = self.rangefinder.fuse(self.filter, height_m, self._time_s)
-        health.last_range_nis = self.filter.sensors["rangefinder"].last_nis
+        fused = self.rangefinder.fuse(self.bank, height_m, self._time_s)
+        health.last_range_nis = self.bank.best.sensors["rangefinder"].last_nis
         if fused:
             health.range_fused += 1
         elif self.rangefinder.status.gated:
@@ -329,7 +335,7 @@ class DynamicTetherEstimator:
                 health.out_of_order += 1
                 return None
             gap_s = t - previous_s
-            if gap_s > self.config.staleness.max_gap_s and self.filter is not None:
+            if gap_s > self.config.staleness.max_gap_s and self.bank is not None:
                 self._restart(f"IMU gap of {gap_s:.2f} s")
         self._time_s = t
         health.imu_ticks += 1
@@ -338,11 +344,11 @@ class DynamicTetherEstimator:
             health.stale_attitude += 1
         elif aligned is STALE_PWM:
             health.stale_pwm += 1
-        if self.filter is None:
+        if self.bank is None:
             return self._initialise_tick(aligned, stale)
         self._predict(t - self._last_tick_s)
         self._last_tick_s = t
-        if self.filter is None:  # the prediction diverged and restarted
+        if self.bank is None:  # the prediction diverged and restarted
             return self._estimate(False, stale, False)
         on_ground = False
         accel_fused = False
@@ -362,7 +368,7 @@ class DynamicTetherEstimator:
     @property
     def initialising_reason(self) -> str:
         """Why there is no state yet (empty once initialised)."""
-        return "" if self.filter is not None else self._initialiser.reason
+        return "" if self.bank is not None else self._initialiser.reason
 
     # ------------------------------------------------------------------ internals
     def _fresh(self, time_s: float, bound_s: float) -> bool:
@@ -374,8 +380,8 @@ class DynamicTetherEstimator:
         assert isinstance(aligned, AlignedInputs)
         t, force, rotation, thrust = aligned
         self._initialiser.add_tick(t, force, rotation, thrust)
-        start = self._initialiser.try_start(t, self.constants.length_m)
-        if start.x is None:
+        starts = self._hypotheses(t)
+        if not starts:
             return self._estimate(False, False, False)
         process = (
             InertialProcess(self.constants)
@@ -383,14 +389,18 @@ class DynamicTetherEstimator:
             else ForceBalanceProcess(self.constants)
         )
         gate = self.config.gate
-        self.filter = ExtendedKalmanFilter(
-            start.x,
-            start.p,
-            self._q,
-            process,
-            gate_probability=gate.probability,
-            max_consecutive_rejections=gate.max_consecutive_rejections,
-        )
+        members = [
+            ExtendedKalmanFilter(
+                x0,
+                p0,
+                self._q,
+                process,
+                gate_probability=gate.probability,
+                max_consecutive_rejections=gate.max_consecutive_rejections,
+            )
+            for x0, p0 in starts
+        ]
+        self.bank = FilterBank(members, t)
         self.health.initialisations += 1
         inputs = [*rotation.ravel().tolist(), thrust]
         self._inputs = [*inputs[:9], *force.tolist()] if self._inertial else inputs
@@ -398,18 +408,44 @@ class DynamicTetherEstimator:
         self._gated_since_s = math.nan
         return self._estimate(False, False, False)
 
+    def _hypotheses(self, t: float) -> list[tuple[FloatArray, FloatArray]]:
+        """Starting states of the thrust-scale hypotheses (empty: not yet, reason kept)."""
+        init = self.dynamic.initial
+        n = init.thrust_scale_hypotheses
+        initialiser = self._initialiser
+        if not initialiser.window_full(t):
+            return []
+        if n == 1:
+            scales, member_std = [init.thrust_scale], init.thrust_scale_std
+        else:
+            spacing = 3.0 * init.thrust_scale_std / (n - 1)
+            scales = [init.thrust_scale + (i - (n - 1) / 2) * spacing for i in range(n)]
+            member_std = 0.5 * spacing
+        length = self.constants.length_m
+        results = [initialiser.solve(t, length, s, member_std) for s in scales]
+        starts = [(r.x, r.p) for r in results if r.x is not None and r.p is not None]
+        if not starts:
+            initialiser.restart(t, results[len(results) // 2].reason)
+        return starts
+
     def _predict(self, dt_s: float) -> None:
-        kf = self.filter
-        assert kf is not None and self._inputs is not None
-        resets_before = kf.resets
+        bank = self.bank
+        assert bank is not None and self._inputs is not None
+        resets_before = [kf.resets for kf in bank.filters]
         try:
-            kf.predict(dt_s, np.array(self._inputs))
-        except ZeroDivisionError:  # the state reached the anchor: the cable model is undefined
+            bank.predict(dt_s, np.array(self._inputs))
+        except ZeroDivisionError:  # a state reached the anchor: the cable model is undefined
             self._restart("position at the anchor")
             return
-        self.health.pd_repairs = kf.pd_repairs
-        if kf.resets != resets_before:
+        reset = [kf.resets != r for kf, r in zip(bank.filters, resets_before, strict=True)]
+        if all(reset):
             self._restart("state or covariance not finite")
+            return
+        if any(reset):  # drop the members that restarted
+            keep = [i for i, r in enumerate(reset) if not r]
+            bank.filters = [bank.filters[i] for i in keep]
+            bank.log_likelihood = bank.log_likelihood[keep]
+        self.health.pd_repairs = sum(kf.pd_repairs for kf in bank.filters)
 
     def _fuse_accel(
         self, inputs: list[float], aligned: AlignedInputs, on_ground: bool, t: float
@@ -417,16 +453,17 @@ class DynamicTetherEstimator:
         health = self.health
         status = self.accel.status
         gated_before = status.gated
-        kf = self.filter
-        assert kf is not None
+        bank = self.bank
+        assert bank is not None
         fused = self.accel.fuse(
-            kf, self.constants, inputs, aligned.specific_force_body_mps2, t, on_ground
+            bank, self.constants, inputs, aligned.specific_force_body_mps2, t, on_ground
         )
         health.on_ground = status.skipped_by_reason.get(ON_GROUND, 0)
         health.near_anchor = status.skipped_by_reason.get(NEAR_ANCHOR, 0)
         health.accel_gated = status.gated
-        if "accel" in kf.sensors:
-            health.last_accel_nis = kf.sensors["accel"].last_nis
+        sensors = bank.best.sensors
+        if "accel" in sensors:
+            health.last_accel_nis = sensors["accel"].last_nis
         if fused:
             health.accel_fused += 1
             self._gated_since_s = math.nan
@@ -435,31 +472,34 @@ class DynamicTetherEstimator:
         return fused
 
     def _check_divergence(self, t: float) -> None:
-        kf = self.filter
-        if kf is None:
+        bank = self.bank
+        if bank is None:
             return
+        bank.drop_unhealthy(MAX_DISTANCE_M)
+        bank.maybe_decide(t)
+        x = bank.best.x
         if not math.isnan(self._gated_since_s) and t - self._gated_since_s >= DIVERGED_AFTER_S:
             self._restart(f"accelerometer innovations gated for {DIVERGED_AFTER_S:g} s")
-        elif float(np.dot(kf.x[state.POSITION], kf.x[state.POSITION])) > MAX_DISTANCE_M**2:
+        elif float(np.dot(x[state.POSITION], x[state.POSITION])) > MAX_DISTANCE_M**2:
             self._restart(f"position beyond {MAX_DISTANCE_M:g} m")
 
     def _restart(self, reason: str) -> None:
         """Drop the state and initialise again from fresh data; counted in reset_counter."""
-        self.filter = None
+        self.bank = None
         self._initialiser = self._new_initialiser()
         self._resets += 1
         self.health.resets = self._resets
         self._reset_reason = f"filter restarted: {reason}"
 
     def _estimate(self, accel_fused: bool, stale: bool, on_ground: bool) -> NavigationEstimate:
-        kf = self.filter
+        bank = self.bank
         reset_reason, self._reset_reason = self._reset_reason, None
-        if kf is None:  # no state: zeros with a covariance that says "unknown"
+        if bank is None:  # no state: zeros with a covariance that says "unknown"
             x = np.zeros(state.N_STATES)
             p = np.eye(state.N_STATES) * UNKNOWN_VARIANCE
             tension, tension_var = 0.0, UNKNOWN_VARIANCE
         else:
-            x, p = kf.x, kf.P
+            x, p = bank.mixture()
             c = self.constants
             try:
                 (tension,), jac = c.models.tension(x.tolist(), (), c.values())
@@ -468,7 +508,7 @@ class DynamicTetherEstimator:
             except ZeroDivisionError:  # exactly at the anchor: the chord term alone
                 tension, tension_var = float(x[state.TENSION]), float(p[6, 6])
         status, reason = assess(
-            initialised_reason=None if kf is not None else self._initialiser.reason,
+            initialised_reason=None if bank is not None else self._initialiser.reason,
             reset_reason=reset_reason,
             on_ground=on_ground,
             inputs_stale=stale,

@@ -84,7 +84,7 @@ class Initialiser:
         self.drag_per_s = drag_per_s
         self.accel_std_mps2 = accel_std_mps2
         self.range_std_m = range_std_m
-        self.reason = "waiting for the first second of data"
+        self.reason = self.reason_not_full
         self._restart(math.nan)
 
     def _restart(self, time_s: float) -> None:
@@ -98,8 +98,7 @@ class Initialiser:
         self._n_height = 0
         self._sum_height = 0.0
         self._latest_height = math.nan
-        self._snap_t: list[float] = []
-        self._snap_p: list[FloatArray] = []
+        self._snapshots: list[tuple[float, FloatArray, FloatArray, float]] = []
 
     def add_tick(
         self,
@@ -119,12 +118,15 @@ class Initialiser:
         horizontal = rt[:, :2] @ rotation_ned_to_body[:2, :]
         self._sum_d += horizontal
         self._sum_thrust += thrust_n
-        if not math.isnan(self._latest_height):
-            force = self.mass_kg * (rt @ specific_force_body + rt[:, 2] * (thrust_n / self.mass_kg))
-            snapshot = self._place(force, self._latest_height, math.nan)
-            if snapshot is not None:
-                self._snap_t.append(time_s)
-                self._snap_p.append(snapshot[:3])
+        if not math.isnan(self._latest_height):  # for the motion fit: (t, m R^T f, R^T e_z T, h)
+            self._snapshots.append(
+                (
+                    time_s,
+                    self.mass_kg * (rt @ specific_force_body),
+                    rt[:, 2] * thrust_n,
+                    self._latest_height,
+                )
+            )
 
     def add_height(self, height_above_anchor_m: float) -> None:
         """One rangefinder height above the anchor [m] (tilt-corrected, anchor height off)."""
@@ -132,42 +134,78 @@ class Initialiser:
         self._sum_height += height_above_anchor_m
         self._latest_height = height_above_anchor_m
 
-    def try_start(self, time_s: float, length_m: float = math.nan) -> Initialisation:
-        """The starting state once the window is full, else why not (``x`` None).
+    def try_start(
+        self,
+        time_s: float,
+        length_m: float = math.nan,
+        thrust_scale: float | None = None,
+        thrust_scale_std: float | None = None,
+    ) -> Initialisation:
+        """The starting state once the window is full, else why not (``x`` None); a failed
+        attempt starts the window again (see :meth:`solve`)."""
+        start = self.solve(time_s, length_m, thrust_scale, thrust_scale_std)
+        if start.x is None and self.window_full(time_s):
+            self.restart(time_s, start.reason)
+        return start
 
-        ``length_m``: the winch's paid-out length [m] when known (``nan`` otherwise).
+    reason_not_full = "waiting for the first second of data"
+
+    def window_full(self, time_s: float) -> bool:
+        """Whether the window holds ``initial.window_s`` of ticks at ``time_s`` [s]."""
+        return self._n > 0 and time_s - self._start_s >= self.config.initial.window_s
+
+    def solve(
+        self,
+        time_s: float,
+        length_m: float = math.nan,
+        thrust_scale: float | None = None,
+        thrust_scale_std: float | None = None,
+    ) -> Initialisation:
+        """The starting state from the window, or why not (``x`` None); no side effect.
+
+        Parameters
+        ----------
+        time_s
+            Now [s] (the state is for this time).
+        length_m
+            The winch's paid-out length [m] when known (``nan`` otherwise).
+        thrust_scale, thrust_scale_std
+            Prior mean and standard deviation of the thrust scale (default: the config's).
         """
         cfg = self.config
-        if self._n == 0 or time_s - self._start_s < cfg.initial.window_s:
-            return self._not_yet(self.reason)
+        scale = cfg.initial.thrust_scale if thrust_scale is None else thrust_scale
+        scale_std = cfg.initial.thrust_scale_std if thrust_scale_std is None else thrust_scale_std
+        if not self.window_full(time_s):
+            return Initialisation(None, None, self.reason)
         n = self._n
         weight_n = self.mass_kg * GRAVITY_MPS2
         mean_thrust = self._sum_thrust / n
         height = self._sum_height / self._n_height if self._n_height else math.nan
         if mean_thrust < cfg.min_thrust_fraction * weight_n:
-            return self._again(
-                time_s,
+            return Initialisation(
+                None,
+                None,
                 f"thrust {mean_thrust:.1f} N below {cfg.min_thrust_fraction:.0%} of the "
                 f"weight: on the ground",
             )
         if math.isnan(height) and math.isnan(length_m):
-            return self._again(time_s, "no rangefinder height and no winch length yet")
+            return Initialisation(None, None, "no rangefinder height and no winch length yet")
         theta = np.zeros(_THETA)
         theta[_A] = self._sum_a / n
-        theta[_S] = 1.0
+        theta[_S] = scale
         theta[_H] = height
         theta[_L] = length_m
         y = self._solve(theta)
         if y is None or not np.all(np.isfinite(y)):
-            return self._again(time_s, "the cable does not rise to the drone: no height fix")
+            return Initialisation(None, None, "the cable does not rise to the drone: no height fix")
         if y[3] < cfg.slack_tension_n:
-            return self._again(
-                time_s, f"cable slack (chord tension {y[3]:.2f} N < {cfg.slack_tension_n} N)"
+            return Initialisation(
+                None, None, f"cable slack (chord tension {y[3]:.2f} N < {cfg.slack_tension_n} N)"
             )
-        x, p = self._state_and_covariance(theta, y, n)
+        x, p = self._state_and_covariance(theta, y, n, scale_std)
         if x is None or p is None:
-            return self._again(time_s, "initial covariance not finite (geometry degenerate)")
-        motion = self._fitted_motion(time_s)
+            return Initialisation(None, None, "initial covariance not finite (degenerate)")
+        motion = self._fitted_motion(time_s, scale)
         if motion is not None:  # the window's motion: position now and velocity
             position, velocity, velocity_se = motion
             x[state.POSITION] = position
@@ -178,15 +216,12 @@ class Initialiser:
         self.reason = ""
         return Initialisation(x, p, "")
 
-    # ------------------------------------------------------------------ internals
-    def _not_yet(self, reason: str) -> Initialisation:
-        self.reason = reason
-        return Initialisation(None, None, reason)
-
-    def _again(self, time_s: float, reason: str) -> Initialisation:
+    def restart(self, time_s: float, reason: str) -> None:
+        """Start the window again from ``time_s`` [s], remembering why."""
         self._restart(time_s)
-        return self._not_yet(reason)
+        self.reason = reason
 
+    # ------------------------------------------------------------------ internals
     def _solve(self, theta: FloatArray) -> FloatArray | None:
         """``(p_n, p_e, p_d, T_ch)`` from the parameters, or None (no rising cable)."""
         n = self._n
@@ -223,28 +258,38 @@ class Initialiser:
             position = u * span
         return np.array((*position, tension))
 
-    def _fitted_motion(self, time_s: float) -> tuple[FloatArray, FloatArray, float] | None:
+    def _fitted_motion(
+        self, time_s: float, scale: float
+    ) -> tuple[FloatArray, FloatArray, float] | None:
         """Position [m] and velocity [m/s] at ``time_s`` from a quadratic fit of the
-        window's per-tick positions, and the velocity's standard error [m/s]."""
-        if len(self._snap_t) < 10:
+        window's per-tick positions (thrust scale ``scale``), and the velocity's standard
+        error [m/s]."""
+        times, positions = [], []
+        for t, accel_force, thrust_vector, height in self._snapshots:
+            placed = self._place(accel_force + scale * thrust_vector, height, math.nan)
+            if placed is not None:
+                times.append(t)
+                positions.append(placed[:3])
+        if len(times) < 10:
             return None
-        t = np.asarray(self._snap_t) - time_s
+        t = np.asarray(times) - time_s
         design = np.stack((np.ones_like(t), t, t * t), axis=1)
-        coef, *_ = np.linalg.lstsq(design, np.asarray(self._snap_p), rcond=None)
-        residual = np.asarray(self._snap_p) - design @ coef
+        coef, *_ = np.linalg.lstsq(design, np.asarray(positions), rcond=None)
+        residual = np.asarray(positions) - design @ coef
         sigma = float(np.sqrt(np.mean(residual**2)))
         # standard error of the slope at t = 0 (the window's end), per axis
         slope_se = float(sigma * np.sqrt(np.linalg.inv(design.T @ design)[1, 1]))
         return coef[0], coef[1], slope_se
 
     def _state_and_covariance(
-        self, theta: FloatArray, y: FloatArray, n: int
+        self, theta: FloatArray, y: FloatArray, n: int, scale_std: float
     ) -> tuple[FloatArray | None, FloatArray | None]:
+        theta_scale = float(theta[_S])
         cfg = self.config
         init = cfg.initial
         sigma = np.zeros(_THETA)
         sigma[_A] = self.accel_std_mps2 / math.sqrt(n)
-        sigma[_S] = init.thrust_scale_std
+        sigma[_S] = scale_std
         sigma[_B] = init.accel_bias_std_mps2
         sigma[_W] = init.wind_std_mps
         sigma[_H] = self.range_std_m / math.sqrt(max(self._n_height, 1))
@@ -279,5 +324,5 @@ class Initialiser:
         x = np.zeros(state.N_STATES)
         x[state.POSITION] = y[:3]
         x[state.TENSION] = y[3]
-        x[state.SCALE] = 1.0
+        x[state.SCALE] = theta_scale
         return x, p

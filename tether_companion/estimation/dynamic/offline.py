@@ -21,10 +21,24 @@ from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.output import OK
 from tether_companion.estimation.pipeline import TetherEstimator
 from tether_companion.estimation.runner import _ATTITUDE, _PWM, _RANGE, _schedule
+from tether_companion.estimation.thrust_input import ThrustInput
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.simulator import Simulator
 
 FloatArray = NDArray[np.float64]
+
+
+class ScaledThrustInput:
+    """Another thrust map times ``scale``: a thrust map ``scale - 1`` off (e.g. 1/1.1 when the
+    true thrust is 10 % above the map's)."""
+
+    def __init__(self, inner: ThrustInput, scale: float) -> None:
+        self.inner = inner
+        self.scale = scale
+
+    def total_thrust_n(self, pwm_us: FloatArray, time_s: float) -> float:
+        """The inner map's total thrust [N] times the scale."""
+        return self.scale * self.inner.total_thrust_n(pwm_us, time_s)
 
 
 @dataclass(frozen=True)
@@ -48,6 +62,8 @@ class DynamicRun:
     paper_position_ned_m, paper_variance_m2
         The paper's 4-state filter on the same samples: (N, 3) [m] and its position
         variances (N, 3) [m^2].
+    accel_nis
+        NIS of the accelerometer force balance at each tick (N,) (``nan`` when not fused).
     estimator
         The dynamic estimator at the end (health, aid statuses).
     """
@@ -65,6 +81,7 @@ class DynamicRun:
     accel_bias_body_mps2: FloatArray
     paper_position_ned_m: FloatArray
     paper_variance_m2: FloatArray
+    accel_nis: FloatArray
     estimator: DynamicTetherEstimator
 
     @property
@@ -79,11 +96,16 @@ def run_dynamic(
     dynamic: DynamicFilterConfig | None = None,
     *,
     rng: np.random.Generator | None = None,
+    thrust_input: ThrustInput | None = None,
 ) -> DynamicRun:
-    """Fly ``scenario``; run the dynamic filter and the paper's 4-state filter on its sensors."""
+    """Fly ``scenario``; run the dynamic filter and the paper's 4-state filter on its sensors.
+
+    ``thrust_input``: the PWM-to-thrust map both filters use (default: the vehicle profile's
+    static curve; a :class:`ScaledThrustInput` makes it wrong on purpose).
+    """
     sim = Simulator(scenario, rng=rng)
     vehicle = sim.vehicle
-    paper = TetherEstimator(dataclasses.replace(config, kind="four_state"), vehicle)
+    paper = TetherEstimator(dataclasses.replace(config, kind="four_state"), vehicle, thrust_input)
     est = DynamicTetherEstimator(config, vehicle, dynamic, aligner=paper.aligner)
     schedule = _schedule(scenario)
     n = sum(1 for _, kind in schedule if kind not in (_ATTITUDE, _PWM, _RANGE))
@@ -94,6 +116,7 @@ def run_dynamic(
     status = np.full(n, "none", dtype=object)
     scale, bias = np.full(n, np.nan), np.full((n, 3), np.nan)
     pp, pv = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+    nis = np.full(n, np.nan)
     tick = 0
     for step, kind in schedule:
         sim.advance_to(step * sim.physics_dt_s)
@@ -128,20 +151,23 @@ def run_dynamic(
                 cov[tick] = e.position_velocity_covariance
                 status[tick] = e.status
                 scale[tick], bias[tick] = e.thrust_scale, e.accel_bias_body_mps2
+                if e.accel_fused:
+                    nis[tick] = est.health.last_accel_nis
             tick += 1
     return DynamicRun(
-        t[:tick],
-        tp[:tick],
-        tv[:tick],
-        tt[:tick],
-        pos[:tick],
-        vel[:tick],
-        ten[:tick],
-        cov[:tick],
-        status[:tick].astype(str),
-        scale[:tick],
-        bias[:tick],
-        pp[:tick],
-        pv[:tick],
-        est,
+        time_s=t[:tick],
+        truth_position_ned_m=tp[:tick],
+        truth_velocity_ned_mps=tv[:tick],
+        truth_tension_n=tt[:tick],
+        position_ned_m=pos[:tick],
+        velocity_ned_mps=vel[:tick],
+        tension_n=ten[:tick],
+        covariance=cov[:tick],
+        status=status[:tick].astype(str),
+        thrust_scale=scale[:tick],
+        accel_bias_body_mps2=bias[:tick],
+        paper_position_ned_m=pp[:tick],
+        paper_variance_m2=pv[:tick],
+        accel_nis=nis[:tick],
+        estimator=est,
     )

@@ -9,8 +9,8 @@ from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
+from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.models import ModelConstants
-from tether_companion.estimation.ekf import ExtendedKalmanFilter
 
 FloatArray = NDArray[np.float64]
 
@@ -37,7 +37,7 @@ class AccelAid:
 
     def fuse(
         self,
-        kf: ExtendedKalmanFilter,
+        bank: FilterBank,
         constants: ModelConstants,
         inputs: list[float],
         specific_force_body_mps2: FloatArray,
@@ -48,7 +48,7 @@ class AccelAid:
         if on_ground:
             self.status.skip(ON_GROUND)
             return False
-        x = kf.x
+        x = bank.best.x
         if x[0] * x[0] + x[1] * x[1] + x[2] * x[2] < self._min_distance_sq:
             self.status.skip(NEAR_ANCHOR)
             return False
@@ -59,4 +59,4 @@ class AccelAid:
             h, jac = model(xs.tolist(), inputs, c)
             return np.array(h), np.array(jac).reshape(3, state.N_STATES)
 
-        return fuse(kf, NAME, self.status, specific_force_body_mps2, measure, self._r, time_s)
+        return fuse(bank, NAME, self.status, specific_force_body_mps2, measure, self._r, time_s)

@@ -9,8 +9,8 @@ from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
+from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.models import ModelConstants
-from tether_companion.estimation.ekf import ExtendedKalmanFilter
 from tether_companion.frames import wrap_pi
 
 FloatArray = NDArray[np.float64]
@@ -29,14 +29,14 @@ class CableAngleAid:
 
     def fuse(
         self,
-        kf: ExtendedKalmanFilter,
+        bank: FilterBank,
         constants: ModelConstants,
         elevation_rad: float,
         azimuth_rad: float,
         time_s: float,
     ) -> bool:
         """Fuse one reading [rad]."""
-        if kf.x[state.TENSION] < self._slack_n:
+        if bank.best.x[state.TENSION] < self._slack_n:
             self.status.skip(SLACK)
             return False
         model = constants.models.cable_angle
@@ -49,4 +49,4 @@ class CableAngleAid:
             return np.array((elevation, azimuth)), np.array(jac).reshape(2, state.N_STATES)
 
         z = np.array((elevation_rad, azimuth_rad))
-        return fuse(kf, NAME, self.status, z, measure, self._r, time_s)
+        return fuse(bank, NAME, self.status, z, measure, self._r, time_s)

@@ -8,8 +8,8 @@ from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
+from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.models import ModelConstants
-from tether_companion.estimation.ekf import ExtendedKalmanFilter
 
 FloatArray = NDArray[np.float64]
 
@@ -24,7 +24,7 @@ class LoadCellAid:
         self._r = np.array([[noise_std_n**2]])
 
     def fuse(
-        self, kf: ExtendedKalmanFilter, constants: ModelConstants, tension_n: float, time_s: float
+        self, bank: FilterBank, constants: ModelConstants, tension_n: float, time_s: float
     ) -> bool:
         """Fuse one reading [N]."""
         model = constants.models.tension
@@ -34,4 +34,4 @@ class LoadCellAid:
             h, jac = model(xs.tolist(), (), c)
             return np.array(h), np.array(jac).reshape(1, state.N_STATES)
 
-        return fuse(kf, NAME, self.status, np.array((tension_n,)), measure, self._r, time_s)
+        return fuse(bank, NAME, self.status, np.array((tension_n,)), measure, self._r, time_s)

@@ -9,7 +9,7 @@ from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import generated, state
 from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
-from tether_companion.estimation.ekf import ExtendedKalmanFilter
+from tether_companion.estimation.dynamic.bank import FilterBank
 
 FloatArray = NDArray[np.float64]
 
@@ -34,7 +34,7 @@ class RangefinderAid:
         self._r = np.array([[noise_variance_m2]])
         self._u = [anchor_height_m]
 
-    def fuse(self, kf: ExtendedKalmanFilter, height_above_ground_m: float, time_s: float) -> bool:
+    def fuse(self, bank: FilterBank, height_above_ground_m: float, time_s: float) -> bool:
         """Fuse one tilt-corrected reading [m]."""
         u = self._u
 
@@ -43,4 +43,4 @@ class RangefinderAid:
             return np.array(h), np.array(jac, dtype=float).reshape(1, state.N_STATES)
 
         z = np.array((height_above_ground_m,))
-        return fuse(kf, NAME, self.status, z, measure, self._r, time_s)
+        return fuse(bank, NAME, self.status, z, measure, self._r, time_s)

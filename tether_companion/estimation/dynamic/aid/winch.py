@@ -9,8 +9,8 @@ from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import generated, state
 from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
+from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.models import ModelConstants
-from tether_companion.estimation.ekf import ExtendedKalmanFilter
 
 FloatArray = NDArray[np.float64]
 
@@ -28,10 +28,10 @@ class WinchAid:
         self._slack_n = slack_tension_n
 
     def fuse(
-        self, kf: ExtendedKalmanFilter, constants: ModelConstants, length_m: float, time_s: float
+        self, bank: FilterBank, constants: ModelConstants, length_m: float, time_s: float
     ) -> bool:
         """Fuse one reading [m]."""
-        if kf.x[state.TENSION] < self._slack_n:
+        if bank.best.x[state.TENSION] < self._slack_n:
             self.status.skip(SLACK)
             return False
         c = constants.values()
@@ -40,4 +40,4 @@ class WinchAid:
             h, jac = generated.winch_length(xs.tolist(), (), c)
             return np.array(h), np.array(jac).reshape(1, state.N_STATES)
 
-        return fuse(kf, NAME, self.status, np.array((length_m,)), measure, self._r, time_s)
+        return fuse(bank, NAME, self.status, np.array((length_m,)), measure, self._r, time_s)

@@ -1,0 +1,64 @@
+"""The thrust-scale filter bank: mixture moments, selection, collapse, dropping members."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tether_companion.estimation.dynamic import bank as bank_module
+from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.bank import FilterBank
+from tether_companion.estimation.ekf import ExtendedKalmanFilter
+
+N = state.N_STATES
+
+
+def _member(offset: float) -> ExtendedKalmanFilter:
+    x = np.zeros(N)
+    x[state.POSITION] = (2.0 + offset, 0.0, -2.0)
+    return ExtendedKalmanFilter(x, np.eye(N) * 0.01, np.zeros((N, N)))
+
+
+def _direct(xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    jac = np.zeros((1, N))
+    jac[0, 0] = 1.0
+    return np.array((xs[0],)), jac
+
+
+def test_mixture_covariance_holds_the_spread_between_members() -> None:
+    bank = FilterBank([_member(-0.5), _member(0.5)], start_s=0.0)
+    mean, cov = bank.mixture()
+    assert mean[0] == 2.0
+    assert cov[0, 0] == 0.01 + 0.25  # own variance + spread
+    np.testing.assert_allclose(cov, cov.T)
+
+
+def test_the_member_the_data_favour_is_kept() -> None:
+    bank = FilterBank([_member(-0.5), _member(0.0), _member(0.5)], start_s=0.0)
+    for k in range(50):
+        bank.update_others("x", np.array((2.5,)), _direct, np.array([[0.01]]))
+        result = bank.best.update("x", np.array((2.5,)), _direct, np.array([[0.01]]))
+        bank.add_best_nis(result.nis)
+        bank.maybe_decide(0.1 * k)
+    assert bank.decided
+    assert bank.best.x[0] > 2.4
+
+
+def test_undecided_bank_collapses_to_its_moments() -> None:
+    bank = FilterBank([_member(-0.5), _member(0.5)], start_s=0.0)
+    mean, cov = bank.mixture()
+    bank.maybe_decide(bank_module.MAX_BANK_S + 1.0)
+    assert bank.decided
+    np.testing.assert_allclose(bank.best.x, mean)
+    np.testing.assert_allclose(bank.best.P, cov)
+    assert bank.best.resets == 0
+
+
+def test_members_far_away_or_not_finite_are_dropped() -> None:
+    far, nan_member = _member(0.0), _member(0.0)
+    far.x = far.x.copy()
+    far.x[0] = 5000.0
+    nan_member.x = nan_member.x.copy()
+    nan_member.x[1] = np.nan
+    bank = FilterBank([_member(0.0), far, nan_member], start_s=0.0)
+    bank.drop_unhealthy(1000.0)
+    assert bank.decided and bank.best.x[0] == 2.0

@@ -1,0 +1,138 @@
+"""A bank of filters that differ in their thrust-scale hypothesis, until the data pick one.
+
+Why: the thrust scale ``s`` (thrust map error, battery sag) trades against the cable's
+vertical pull, so a 10 % error moves the first position fix by metres; one EKF started with
+``s = 1 +- 0.1`` linearises far from the truth and can converge to a wrong, over-confident
+state. Each member starts from the same window with a narrow prior around its own ``s``
+(spaced so that the truth is within about one prior standard deviation of one member), the
+members run side by side on the same measurements, and each accumulates the log-likelihood
+``-NIS/2`` of its innovations. The published state is the mixture's mean and covariance
+(weights from the log-likelihoods; the covariance includes the spread between members, so it
+stays honest while they disagree). When one member's weight passes ``SELECT_WEIGHT`` after
+``MIN_BANK_S`` the others are dropped; after ``MAX_BANK_S`` without a decision (a steady hover
+gives the thrust scale no information) the bank collapses into one filter holding the
+mixture's moments.
+
+Pure and synchronous.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.ekf import ExtendedKalmanFilter, MeasurementFunction
+
+FloatArray = NDArray[np.float64]
+
+SELECT_WEIGHT = 0.99
+"""Posterior weight at which one member is kept and the others dropped."""
+MIN_BANK_S = 3.0
+"""Shortest time the members run side by side [s]."""
+MAX_BANK_S = 30.0
+"""Longest time [s]: then the bank collapses to its moments."""
+
+
+class FilterBank:
+    """Members (``ExtendedKalmanFilter``) with log-likelihood weights.
+
+    Parameters
+    ----------
+    filters
+        The members, one per hypothesis (at least one).
+    start_s
+        Time the bank started [s].
+    """
+
+    def __init__(self, filters: list[ExtendedKalmanFilter], start_s: float) -> None:
+        self.filters = filters
+        self.log_likelihood = np.zeros(len(filters))
+        self.start_s = start_s
+
+    @property
+    def decided(self) -> bool:
+        """Whether one member is left."""
+        return len(self.filters) == 1
+
+    @property
+    def best(self) -> ExtendedKalmanFilter:
+        """The member with the largest weight."""
+        return self.filters[int(np.argmax(self.log_likelihood))]
+
+    def weights(self) -> FloatArray:
+        """Normalised posterior weights, shape (members,)."""
+        w = np.exp(self.log_likelihood - self.log_likelihood.max())
+        return w / w.sum()
+
+    def predict(self, dt_s: float, u: FloatArray) -> None:
+        """Predict every member."""
+        for kf in self.filters:
+            kf.predict(dt_s, u)
+
+    def update_others(
+        self, name: str, z: FloatArray, measure: MeasurementFunction, r: FloatArray
+    ) -> None:
+        """Fuse into every member but the best (the caller fuses the best with its status
+        record) and add each member's ``-NIS/2``."""
+        best = self.best
+        for i, kf in enumerate(self.filters):
+            if kf is not best:
+                result = kf.update(name, z, measure, r)
+                if math.isfinite(result.nis):
+                    self.log_likelihood[i] -= 0.5 * result.nis
+
+    def add_best_nis(self, nis: float) -> None:
+        """The best member's NIS of the sample just fused."""
+        if math.isfinite(nis):
+            self.log_likelihood[int(np.argmax(self.log_likelihood))] -= 0.5 * nis
+
+    def drop_unhealthy(self, max_distance_m: float) -> None:
+        """Drop members whose state is not finite or farther than ``max_distance_m``."""
+        keep = [
+            i
+            for i, kf in enumerate(self.filters)
+            if np.all(np.isfinite(kf.x))
+            and float(np.dot(kf.x[state.POSITION], kf.x[state.POSITION])) <= max_distance_m**2
+        ]
+        if keep and len(keep) < len(self.filters):
+            self.filters = [self.filters[i] for i in keep]
+            self.log_likelihood = self.log_likelihood[keep]
+
+    def mixture(self) -> tuple[FloatArray, FloatArray]:
+        """Mean (n,) and covariance (n, n) of the weighted mixture."""
+        if self.decided:
+            kf = self.filters[0]
+            return kf.x, kf.P
+        w = self.weights()
+        xs = np.array([kf.x for kf in self.filters])
+        mean = w @ xs
+        cov = np.zeros((state.N_STATES, state.N_STATES))
+        for wi, kf, xi in zip(w, self.filters, xs, strict=True):
+            d = xi - mean
+            cov += wi * (kf.P + np.outer(d, d))
+        return mean, 0.5 * (cov + cov.T)
+
+    def maybe_decide(self, time_s: float) -> None:
+        """Keep one member when its weight passes :data:`SELECT_WEIGHT` (after
+        :data:`MIN_BANK_S`), or collapse to the moments after :data:`MAX_BANK_S`."""
+        if self.decided:
+            return
+        elapsed = time_s - self.start_s
+        if elapsed < MIN_BANK_S:
+            return
+        w = self.weights()
+        best = int(np.argmax(w))
+        if w[best] >= SELECT_WEIGHT:
+            self.filters = [self.filters[best]]
+            self.log_likelihood = np.zeros(1)
+        elif elapsed >= MAX_BANK_S:
+            mean, cov = self.mixture()
+            kf = self.filters[best]
+            resets = kf.resets
+            kf.reset(mean, cov)
+            kf.resets = resets  # a collapse is not a restart
+            self.filters = [kf]
+            self.log_likelihood = np.zeros(1)

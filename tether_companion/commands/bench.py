@@ -21,6 +21,7 @@ BENCHMARKS: tuple[str, ...] = (
     "sysid",
     "estimators",
     "sitl",
+    "dynamic",
 )
 """Benchmark names, one per line, in the order ``bench --help`` lists them."""
 

@@ -44,7 +44,7 @@ class AidStatus:
     last_innovation
         ``z - h(x)`` of the last sample that reached the gate, shape (m,).
     last_innovation_variance
-        Diagonal of its innovation covariance ``H P H^T + R``, shape (m,).
+        Diagonal of its innovation covariance ``H P H^T + R``, shape (m,) (a property).
     last_test_ratio
         NIS over the gate threshold (``> 1``: gated; 0 when the gate is off).
     last_fused
@@ -60,10 +60,21 @@ class AidStatus:
     skipped: int = 0
     skipped_by_reason: dict[str, int] = field(default_factory=dict)
     last_innovation: FloatArray = field(default_factory=lambda: np.zeros(0))
-    last_innovation_variance: FloatArray = field(default_factory=lambda: np.zeros(0))
     last_test_ratio: float = math.nan
     last_fused: bool = False
     last_fused_time_s: float = math.nan
+    _last_jacobian: FloatArray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
+    _last_prior: FloatArray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
+    _last_noise: FloatArray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
+
+    @property
+    def last_innovation_variance(self) -> FloatArray:
+        """Diagonal of the last innovation covariance ``H P H^T + R``, shape (m,) (computed
+        when asked: the filter does not need it)."""
+        h_jac = self._last_jacobian
+        if h_jac.size == 0:
+            return np.zeros(0)
+        return ((h_jac @ self._last_prior) * h_jac).sum(axis=1) + np.diag(self._last_noise)
 
     def skip(self, reason: str) -> None:
         """Count a sample the module did not offer to the filter, with why."""
@@ -101,9 +112,8 @@ def fuse(
     if not bank.decided:
         bank.add_best_nis(result.nis)
     if math.isfinite(result.nis):
-        h_jac = jacobians[0]
         status.last_innovation = kf.sensors[name].last_innovation
-        status.last_innovation_variance = ((h_jac @ p_before) * h_jac).sum(axis=1) + np.diag(r)
+        status._last_jacobian, status._last_prior, status._last_noise = jacobians[0], p_before, r
         threshold = _threshold(kf.gate_probability, z.size)
         status.last_test_ratio = result.nis / threshold if math.isfinite(threshold) else 0.0
     status.last_fused = result.status == FUSED

@@ -60,7 +60,10 @@ class FilterBank:
     @property
     def best(self) -> ExtendedKalmanFilter:
         """The member with the largest weight."""
-        return self.filters[int(np.argmax(self.log_likelihood))]
+        filters = self.filters
+        if len(filters) == 1:
+            return filters[0]
+        return filters[int(np.argmax(self.log_likelihood))]
 
     def weights(self) -> FloatArray:
         """Normalised posterior weights, shape (members,)."""
@@ -91,12 +94,15 @@ class FilterBank:
 
     def drop_unhealthy(self, max_distance_m: float) -> None:
         """Drop members whose state is not finite or farther than ``max_distance_m``."""
-        keep = [
-            i
-            for i, kf in enumerate(self.filters)
-            if np.all(np.isfinite(kf.x))
-            and float(np.dot(kf.x[state.POSITION], kf.x[state.POSITION])) <= max_distance_m**2
-        ]
+        if len(self.filters) == 1:  # nothing to choose between: the caller restarts
+            return
+        limit = max_distance_m**2
+        keep = []
+        for i, kf in enumerate(self.filters):
+            pn, pe, pd = kf.x[state.POSITION].tolist()
+            distance_sq = pn * pn + pe * pe + pd * pd
+            if math.isfinite(float(kf.x.sum())) and distance_sq <= limit:
+                keep.append(i)
         if keep and len(keep) < len(self.filters):
             self.filters = [self.filters[i] for i in keep]
             self.log_likelihood = self.log_likelihood[keep]

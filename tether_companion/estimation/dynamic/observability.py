@@ -65,8 +65,9 @@ def assess(
         return STALE_INPUTS, "attitude or motor outputs stale: prediction only"
     if tension_n < slack_tension_n:
         return SLACK, f"cable slack ({tension_n:.2f} N < {slack_tension_n:g} N)"
-    horizontal = position_covariance_m2[:2, :2]
-    std = math.sqrt(max(float(np.linalg.eigvalsh(horizontal)[-1]), 0.0))
+    (a, b), (_, c) = position_covariance_m2[:2, :2].tolist()
+    largest = 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)  # 2x2 eigenvalue
+    std = math.sqrt(max(largest, 0.0))
     if std > max_horizontal_std_m:
         return WEAK_PULL, (
             f"horizontal std {std:.2f} m > {max_horizontal_std_m:g} m: pull too weak "

@@ -33,14 +33,17 @@ class RangefinderAid:
         self.status = AidStatus()
         self._r = np.array([[noise_variance_m2]])
         self._u = [anchor_height_m]
+        # the model is linear: its Jacobian is the same everywhere
+        _, jac = generated.height_above_ground([0.0] * state.N_STATES, self._u, _NO_CONSTANTS)
+        self._jacobian = np.array(jac, dtype=float).reshape(1, state.N_STATES)
 
     def fuse(self, bank: FilterBank, height_above_ground_m: float, time_s: float) -> bool:
         """Fuse one tilt-corrected reading [m]."""
-        u = self._u
+        u, jacobian = self._u, self._jacobian
 
         def measure(xs: FloatArray) -> tuple[FloatArray, FloatArray]:
-            h, jac = generated.height_above_ground(xs.tolist(), u, _NO_CONSTANTS)
-            return np.array(h), np.array(jac, dtype=float).reshape(1, state.N_STATES)
+            h, _ = generated.height_above_ground(xs.tolist(), u, _NO_CONSTANTS)
+            return np.array(h), jacobian
 
         z = np.array((height_above_ground_m,))
         return fuse(bank, NAME, self.status, z, measure, self._r, time_s)

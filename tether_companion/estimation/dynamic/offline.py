@@ -22,6 +22,7 @@ from tether_companion.estimation.dynamic.output import OK
 from tether_companion.estimation.pipeline import TetherEstimator
 from tether_companion.estimation.runner import _ATTITUDE, _PWM, _RANGE, _schedule
 from tether_companion.estimation.thrust_input import ThrustInput
+from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.simulator import Simulator
 
@@ -97,13 +98,15 @@ def run_dynamic(
     *,
     rng: np.random.Generator | None = None,
     thrust_input: ThrustInput | None = None,
+    vehicle: VehicleProfile | None = None,
 ) -> DynamicRun:
     """Fly ``scenario``; run the dynamic filter and the paper's 4-state filter on its sensors.
 
     ``thrust_input``: the PWM-to-thrust map both filters use (default: the vehicle profile's
-    static curve; a :class:`ScaledThrustInput` makes it wrong on purpose).
+    static curve; a :class:`ScaledThrustInput` makes it wrong on purpose). ``vehicle``: the
+    simulated vehicle when not the scenario's profile (both filters are given it too).
     """
-    sim = Simulator(scenario, rng=rng)
+    sim = Simulator(scenario, vehicle, rng=rng)
     vehicle = sim.vehicle
     paper = TetherEstimator(dataclasses.replace(config, kind="four_state"), vehicle, thrust_input)
     est = DynamicTetherEstimator(config, vehicle, dynamic, aligner=paper.aligner)

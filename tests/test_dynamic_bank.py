@@ -34,7 +34,7 @@ def test_mixture_covariance_holds_the_spread_between_members() -> None:
 
 def test_the_member_the_data_favour_is_kept() -> None:
     bank = FilterBank([_member(-0.5), _member(0.0), _member(0.5)], start_s=0.0)
-    for k in range(50):
+    for k in range(400):
         bank.update_others("x", np.array((2.5,)), _direct, np.array([[0.01]]))
         result = bank.best.update("x", np.array((2.5,)), _direct, np.array([[0.01]]))
         bank.add_best_nis(result.nis)

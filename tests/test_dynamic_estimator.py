@@ -60,7 +60,8 @@ def test_paper_circle_from_no_guess(formulation: str) -> None:
     assert rmse[0] < 0.3 and rmse[1] < 0.3 and rmse[2] < 0.1, rmse
     v_error = run.velocity_ned_mps[settled] - run.truth_velocity_ned_mps[settled]
     assert np.sqrt(np.mean(v_error**2)) < 0.2
-    assert np.mean(run.status[settled] == OK) > 0.95
+    # published once the thrust-scale bank has learned enough (weak_pull until then), and on
+    assert np.all(run.status[run.time_s > 13.0] == OK)
     nees = _nees(run, settled)
     assert 0.3 < nees < 20.0, nees  # chi-square 6 dof has mean 6; loose: 10 s of one seed
 

@@ -6,8 +6,8 @@ vertical pull, so a 10 % error moves the first position fix by metres; one EKF s
 state. Each member starts from the same window with a narrow prior around its own ``s``
 (spaced so that the truth is within about one prior standard deviation of one member), the
 members run side by side on the same measurements, and each accumulates the log-likelihood
-``-NIS/2`` of its innovations. The published state is the mixture's mean and covariance
-(weights from the log-likelihoods; the covariance includes the spread between members, so it
+``-NIS/2`` of its innovations (tempered: :data:`LIKELIHOOD_TEMPERING`). The published state
+is the mixture's mean and covariance (weights from the log-likelihoods; the covariance includes the spread between members, so it
 stays honest while they disagree). When one member's weight passes ``SELECT_WEIGHT`` after
 ``MIN_BANK_S`` the others are dropped; after ``MAX_BANK_S`` without a decision (a steady hover
 gives the thrust scale no information) the bank collapses into one filter holding the
@@ -34,6 +34,12 @@ MIN_BANK_S = 3.0
 """Shortest time the members run side by side [s]."""
 MAX_BANK_S = 30.0
 """Longest time [s]: then the bank collapses to its moments."""
+LIKELIHOOD_TEMPERING = 20.0
+"""Each sample's ``-NIS/2`` is divided by this: the innovations of consecutive IMU ticks are
+not independent (motor lag, unmodelled forces and the FC's attitude error last tens of
+milliseconds to seconds), and counting 200 of them per second as independent evidence made
+the bank pick a member within seconds in a steady hover, where the thrust scale is not
+observable at all (a member 1.6-2 m off published at 3.2 sigma in the service's closed loop)."""
 
 
 class FilterBank:
@@ -85,12 +91,13 @@ class FilterBank:
             if kf is not best:
                 result = kf.update(name, z, measure, r)
                 if math.isfinite(result.nis):
-                    self.log_likelihood[i] -= 0.5 * result.nis
+                    self.log_likelihood[i] -= 0.5 * result.nis / LIKELIHOOD_TEMPERING
 
     def add_best_nis(self, nis: float) -> None:
         """The best member's NIS of the sample just fused."""
         if math.isfinite(nis):
-            self.log_likelihood[int(np.argmax(self.log_likelihood))] -= 0.5 * nis
+            best = int(np.argmax(self.log_likelihood))
+            self.log_likelihood[best] -= 0.5 * nis / LIKELIHOOD_TEMPERING
 
     def drop_unhealthy(self, max_distance_m: float) -> None:
         """Drop members whose state is not finite or farther than ``max_distance_m``."""

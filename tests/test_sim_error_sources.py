@@ -13,6 +13,7 @@ from scipy.signal import welch
 
 from tether_companion.config import ConfigError
 from tether_companion.frames import rotation_ned_to_body
+from tether_companion.physics.cable_drag import cable_drag_force_ned_n
 from tether_companion.physics.rigid_body import RigidBody
 from tether_companion.physics.vehicle import load_vehicle
 from tether_companion.sim.ground import Ground, GroundConfig
@@ -60,6 +61,27 @@ def test_drag_measured_back_from_a_realistic_flight() -> None:
     mu = -float(air_a @ res_a / (air_a @ air_a)) / vehicle.mass_kg
     assert mu == pytest.approx(vehicle.rotor_drag_per_s, rel=0.02)
     assert np.max(np.abs(air_a)) > 1.0  # the flight really moved through the air
+
+
+def test_wind_drag_on_the_cable_at_the_drone() -> None:
+    """Cross wind on a 4 mm cable along the chord (5, 0, -3): half of q L reaches the drone;
+    wind along the chord drags nothing (skin friction neglected)."""
+    p = (5.0, 0.0, -3.0)
+    length = math.sqrt(34.0)
+    force = cable_drag_force_ned_n(p, (0.0, 6.0, 0.0), 0.004)
+    q = 0.5 * 1.225 * 1.2 * 0.004 * 36.0
+    assert force == pytest.approx((0.0, 0.5 * q * length, 0.0), abs=1e-12)
+    along = cable_drag_force_ned_n(p, tuple(2.0 * c / length for c in p), 0.004)
+    assert along == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
+    # in flight: the simulator's cable force is the winch's pull plus that drag
+    scenario = replace(load_scenario("realistic-gusty-hover"), duration_s=2.0)
+    sim = Simulator(scenario)
+    sim.advance_to(1.0)
+    t = sim.truth
+    pull = sim.cable.force_components(*t.position_ned_m, *t.velocity_ned_m_s)
+    drag = cable_drag_force_ned_n(tuple(t.position_ned_m), tuple(t.wind_ned_m_s), 0.004)
+    assert t.cable_force_ned_n == pytest.approx(np.add(pull, drag), abs=1e-12)
+    assert np.linalg.norm(drag) > 1e-3
 
 
 def test_dryden_turbulence_has_the_dryden_spectrum_and_intensity() -> None:
@@ -178,6 +200,7 @@ def test_every_realistic_scenario_loads_with_every_error_source_on() -> None:
         assert s.wind.turbulence_w20_mps > 0 and s.propulsion.thrust_scale != 1.0, name
         assert s.ground.anchor_height_m > 0 and s.ground.terrain_std_m > 0, name
         assert s.propulsion.battery.sag_v_per_cell_per_min > 0, name
+        assert s.cable.diameter_m > 0, name
 
 
 def test_the_paper_scenario_stays_clean() -> None:

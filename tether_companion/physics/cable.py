@@ -82,6 +82,12 @@ class CableConfig:
     linear_density_kg_per_m: float = spec(
         0.0167, minimum=0.0, doc="cable mass per length (elastic, catenary) [kg/m]"
     )
+    diameter_m: float = spec(
+        0.0,
+        minimum=0.0,
+        maximum=0.05,
+        doc="cable diameter for the wind's drag on it (physics/cable_drag.py); 0 = no drag [m]",
+    )
     winch_rate_mps: float = spec(
         0.0, minimum=-10.0, maximum=10.0, doc="initial winch rate, + pays out, - reels in [m/s]"
     )

@@ -25,6 +25,7 @@ from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.errors import InputError
 from tether_companion.frames import rotation_ned_to_body
 from tether_companion.physics.cable import CableConfig, CableModel, make_cable
+from tether_companion.physics.cable_drag import cable_drag_force_ned_n
 from tether_companion.physics.rigid_body import (
     BODY_RATES,
     EULER,
@@ -133,8 +134,8 @@ class Simulator:
         self.rng = rng if rng is not None else np.random.default_rng(scenario.seed)
         self.gravity_mps2 = GRAVITY_MPS2
         self.physics_dt_s = 1.0 / scenario.physics_rate_hz
-        self.cable: CableModel = make_cable(scenario.cable, self.gravity_mps2)
-        self.body = RigidBody(self.vehicle, self.cable.force_components, self.gravity_mps2)
+        self.body = RigidBody(self.vehicle, gravity_mps2=self.gravity_mps2)
+        self._attach_cable(scenario.cable)
         self.body.wind_ned_m_s = scenario.wind.velocity_ned_m_s
         self.controller = CascadedController(scenario.controller, self.vehicle, self.gravity_mps2)
         self.trajectory = Trajectory(scenario.trajectory)
@@ -162,6 +163,24 @@ class Simulator:
         self._initialise()
 
     # ------------------------------------------------------------------ set-up
+    def _cable_force(
+        self, pn: float, pe: float, pd: float, vn: float, ve: float, vd: float
+    ) -> tuple[float, float, float]:
+        """The tether's force on the drone, NED [N]: its tension plus the wind's drag on it."""
+        fn, fe, fd = self.cable.force_components(pn, pe, pd, vn, ve, vd)
+        if self.cable.released:
+            return (fn, fe, fd)
+        wind = self.body.wind_ned_m_s
+        dn, de, dd = cable_drag_force_ned_n((pn, pe, pd), wind, self._cable_diameter_m)
+        return (fn + dn, fe + de, fd + dd)
+
+    def _attach_cable(self, config: CableConfig) -> None:
+        """Make the cable of ``config`` the one the rigid body pulls on."""
+        self.cable: CableModel = make_cable(config, self.gravity_mps2)
+        self._cable_diameter_m = config.diameter_m
+        force = self._cable_force if config.diameter_m > 0.0 else self.cable.force_components
+        self.body.external_force = force
+
     def _make_gusts(self, w20_mps: float | None = None) -> DrydenTurbulence | None:
         wind = self.scenario.wind
         w20 = wind.turbulence_w20_mps if w20_mps is None else w20_mps
@@ -203,7 +222,7 @@ class Simulator:
         accel = sp.acceleration_ned_mps2 or (0.0, 0.0, 0.0)
         yaw = sp.yaw_rad if sp.yaw_rad is not None else math.radians(init.yaw_deg)
         m, g = self.vehicle.mass_kg, self.gravity_mps2
-        cable = self.cable.force_components(*position, *velocity)
+        cable = self.body.external_force(*position, *velocity)
         thrust_ned = [m * accel[i] - cable[i] for i in range(3)]
         thrust_ned[2] -= m * g
         collective = math.sqrt(sum(f * f for f in thrust_ned))
@@ -358,7 +377,7 @@ class Simulator:
         state = self.body.state
         specific_force = self._specific_force_now()
         velocity = self.body.velocity_ned_m_s()
-        cable = self.cable.force_components(*state[POSITION].tolist(), *velocity)
+        cable = self.body.external_force(*state[POSITION].tolist(), *velocity)
         return TruthState(
             time_s=self.time_s,
             position_ned_m=state[POSITION].copy(),
@@ -466,8 +485,7 @@ class Simulator:
 
     def replace_cable(self, config: CableConfig) -> None:
         """Swap the tether for a fresh one built from ``config`` (attached, its own winch state)."""
-        self.cable = make_cable(config, self.gravity_mps2)
-        self.body.external_force = self.cable.force_components
+        self._attach_cable(config)
 
     # ------------------------------------------------------------------ ground-station events
     def set_tension_n(self, tension_n: float) -> None:

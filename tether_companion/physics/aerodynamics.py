@@ -48,7 +48,3 @@ def drag_accel_body_mps2(
         ay -= k * air_v_mps * abs(air_v_mps)
     return ax, ay
 
-
-def rotor_drag_force_n(mass_kg: float, rotor_drag_per_s: float, air_speed_mps: float) -> float:
-    """Magnitude of the rotor drag force [N] at a body-horizontal air speed [m/s]."""
-    return mass_kg * rotor_drag_per_s * abs(air_speed_mps)

@@ -243,3 +243,41 @@ def test_signing_required_live_spoofers_change_nothing(tmp_path) -> None:
     assert acks and acks[0].result == dialect.MAV_RESULT_ACCEPTED and acks[0].get_signed()
     assert session.modes.modes.enabled
     assert session.commands_refused == {NOT_A_COMMAND_SOURCE: 20}  # each stranger's, DENIED
+
+
+class _CapturingLink:
+    """Just enough of a Link for CompanionService.housekeep: frames what is sent."""
+
+    def __init__(self) -> None:
+        self.encoder = FrameEncoder(1, 191)
+        self.frames: list[bytes] = []
+        self.trust = None
+
+    def send_bytes(self, frame: bytes) -> None:
+        self.frames.append(frame)
+
+
+def test_install_key_sends_setup_signing_once_per_flight_controller_boot(tmp_path) -> None:
+    config = load_service_config(
+        None,
+        {
+            "link": {"connect": "serial:/dev/ttyAMA0:921600"},
+            "recording": {"enabled": False},
+            "security": {
+                "signing": "required",
+                "key_file": str(_key_file(tmp_path)),
+                "install_key": True,
+            },
+        },
+    )
+    service = CompanionService(config, load_vehicle_for(config), notifier=SystemdNotifier({}))
+    link = _CapturingLink()
+    service._fc_heard_s = 10.0  # the flight controller is present
+    for t in (10.0, 10.1, 10.2):
+        service.housekeep(link, t)  # type: ignore[arg-type]
+    setups = [
+        m for f in link.frames for m in FrameParser().feed(f) if m.get_type() == "SETUP_SIGNING"
+    ]
+    assert len(setups) == 1
+    assert bytes(setups[0].secret_key) == KEY and setups[0].target_system == 1
+    assert setups[0].initial_timestamp > 0

@@ -9,8 +9,10 @@ way out):
   loop sends our HEARTBEAT, TIMESYNC requests, stream requests (MAV_CMD_SET_MESSAGE_INTERVAL,
   then REQUEST_DATA_STREAM when that does not work), the EKF origin after every
   flight-controller boot, and notices link loss and silent inputs;
-* ``watchdog``: ``WATCHDOG=1`` and ``STATUS=`` to systemd (only if systemd asked);
-* ``recording-sync``: fsyncs the .tlog from a worker thread every ``flush_interval_s``.
+* ``watchdog``: ``WATCHDOG=1`` and ``STATUS=`` to systemd (only if systemd asked).
+
+The recording is written by its own thread (:class:`RecorderThread`: write, rotate, fsync),
+so the receive path only queues each frame.
 
 Nothing in the receive path blocks: decoding, the EKF update and the reply happen inline
 within the datagram's callback turn, which is what keeps the IMU-to-estimate latency low.
@@ -47,6 +49,7 @@ from tether_companion.service.ingest import (
 )
 from tether_companion.service.publish import NO_IMU, STALE, Publication
 from tether_companion.service.recording import RecordingLimits, TlogWriter
+from tether_companion.service.recording_thread import RecorderThread
 from tether_companion.service.security import LinkSecurity
 from tether_companion.service.session import EstimationSession
 from tether_companion.service.systemd import SystemdNotifier
@@ -152,7 +155,7 @@ class CompanionService:
         self.notifier = notifier if notifier is not None else SystemdNotifier()
         self.clock = FcClock()
         self.state = ServiceState()
-        self.recorder: TlogWriter | None = None
+        self.recorder: RecorderThread | None = None
         self.link: Link | None = None
         self._monotonic_s = monotonic_s
         self._on_publication = on_publication
@@ -192,8 +195,6 @@ class CompanionService:
             asyncio.create_task(self._supervise_link(stop), name="link"),
             asyncio.create_task(self._watchdog(stop), name="watchdog"),
         ]
-        if self.recorder is not None:
-            tasks.append(asyncio.create_task(self._sync_recording(stop), name="recording-sync"))
         stopper = asyncio.create_task(stop.wait(), name="stop")
         try:
             done, _ = await asyncio.wait([*tasks, stopper], return_when=asyncio.FIRST_COMPLETED)
@@ -219,7 +220,7 @@ class CompanionService:
             flush_interval_s=rec.flush_interval_s,
         )
         try:
-            self.recorder = TlogWriter(rec.directory, limits)
+            self.recorder = RecorderThread(TlogWriter(rec.directory, limits), rec.flush_interval_s)
         except OSError as exc:
             raise ConfigError(
                 "",
@@ -593,12 +594,6 @@ class CompanionService:
                 next_status = now + status_every_s
                 self.notifier.status(self.status_line())
             await _wait_or_stop(stop, min(interval or status_every_s, status_every_s))
-
-    async def _sync_recording(self, stop: asyncio.Event) -> None:
-        assert self.recorder is not None
-        while not stop.is_set():
-            await _wait_or_stop(stop, self.config.recording.flush_interval_s)
-            await asyncio.to_thread(self.recorder.sync)
 
     def status_line(self) -> str:
         """One line for ``systemctl status`` and logs."""

@@ -109,11 +109,12 @@ class TlogWriter:
         self.directory.mkdir(parents=True, exist_ok=True)
         self._open_new()
 
-    def write(self, frame: bytes) -> None:
-        """Record one raw MAVLink frame with the current Unix time."""
+    def write(self, frame: bytes, unix_us: int | None = None) -> None:
+        """Record one raw MAVLink frame with its Unix time [us] (default: now)."""
         if self._file is None:
             return
-        record = _STAMP.pack(int(self._wall_clock_s() * 1e6)) + frame
+        stamp_us = int(self._wall_clock_s() * 1e6) if unix_us is None else unix_us
+        record = _STAMP.pack(stamp_us) + frame
         try:
             if self._file_bytes + len(record) > self.limits.max_file_bytes and self._file_bytes > 0:
                 self._rotate()

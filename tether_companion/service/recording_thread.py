@@ -70,11 +70,6 @@ class RecorderThread:
         self._queue.append((int(self._wall_clock_s() * 1e6), frame))
         self._pending_bytes += len(frame)  # a race with the thread's decrement only skews the bound
 
-    @property
-    def current_path(self):  # noqa: ANN201 - the writer's Path | None
-        """The file being written."""
-        return self.writer.current_path
-
     def _drain(self) -> None:
         queue = self._queue
         writer = self.writer

@@ -73,11 +73,19 @@ def render(service: CompanionService) -> Group:
         "out_of_range",
         "duplicate",
         "out_of_order",
+        "implausible",
         "reboots",
     ):
         drops.add_row(name.replace("_", " "), str(getattr(counters, name)))
     for name in ("garbage_bytes", "bad_crc", "unknown_id", "truncated"):
         drops.add_row(name.replace("_", " "), str(framing.get(name, 0)))
+    trust = getattr(link, "trust", None)
+    if trust is not None:  # signing and address checks (docs/security.md), by reason
+        for name, count in trust.counters.as_dict().items():
+            if name not in ("admitted", "repins") and count:
+                drops.add_row(name.replace("_", " "), str(count))
+    for reason, count in sorted(session.commands_refused.items()):
+        drops.add_row(f"commands denied: {reason.replace('_', ' ')}", str(count))
     drops.add_row("withheld estimates", str(publisher.counters.withheld))
     drops.add_row("handler errors", str(state.handler_errors))
 

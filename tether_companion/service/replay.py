@@ -105,8 +105,12 @@ def replay_log(
     out.write(Publication.CSV_HEADER + "\n")
     suffix = path.suffix.lower()
     if suffix == ".tlog":
-        # as live: samples still in the reorder buffer at the end are not processed
-        steps = (session.on_message(msg) for msg in _tlog_messages(path, allow_truncated))
+        # as live: each message at the time it was received (the clock checks), and samples
+        # still in the reorder buffer at the end are not processed
+        steps = (
+            session.on_message(msg, received_s)
+            for msg, received_s in _tlog_messages(path, allow_truncated)
+        )
     elif suffix in (".bin", ".log"):
         dataflash = DataflashSource(path, vehicle.n_motors, allow_truncated=allow_truncated)
         steps = (session.on_sample(sample) for sample in dataflash)
@@ -156,10 +160,13 @@ def _check_inputs(path: Path, config: ServiceConfig, accepted: dict[str, int], s
     )
 
 
-def _tlog_messages(path: Path, allow_truncated: bool) -> Iterator[MAVLinkMessage]:
+def _tlog_messages(path: Path, allow_truncated: bool) -> Iterator[tuple[MAVLinkMessage, float]]:
+    """Every message of a .tlog with the Unix time [s] it was recorded at (received, for
+    what the service received)."""
     parser = FrameParser()
-    for _stamp_us, frame in read_tlog(path, allow_truncated=allow_truncated):
-        yield from parser.feed(frame)
+    for stamp_us, frame in read_tlog(path, allow_truncated=allow_truncated):
+        for msg in parser.feed(frame):
+            yield msg, stamp_us * 1e-6
         parser.end_datagram()
 
 

@@ -296,3 +296,36 @@ def test_an_open_that_hangs_is_reported_within_two_seconds(capsys) -> None:
     assert LINK_OPEN_TIMEOUT_S <= elapsed < LINK_OPEN_TIMEOUT_S + 1.0
     err = capsys.readouterr().err
     assert err.count("cannot open") == 1 and "no answer within 2 s" in err, err
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize(
+    ("connect", "cause"),
+    [
+        ("udpin:192.0.2.1:14550", "Cannot assign requested address"),  # not this machine's
+        ("udpout:no-such-host.invalid:14550", "cannot resolve the host"),
+        ("tcpout:127.0.0.1:9", "Connect call failed"),  # nobody listens on port 9
+    ],
+    ids=["non-local-bind", "unresolvable-host", "tcp-refused"],
+)
+def test_links_that_cannot_open_are_named_with_their_cause(capsys, connect, cause) -> None:
+    from tether_companion.service.app import CompanionService
+    from tether_companion.service.config import load_service_config, load_vehicle_for
+    from tether_companion.service.systemd import SystemdNotifier
+
+    config = load_service_config(
+        None, {"link": {"connect": connect}, "recording": {"enabled": False}}
+    )
+    service = CompanionService(config, load_vehicle_for(config), notifier=SystemdNotifier({}))
+
+    async def scenario() -> None:
+        stop = asyncio.Event()
+        task = asyncio.create_task(service.run(stop))
+        while service.state.link_open_failures < 2:  # retried, and said only once
+            await asyncio.sleep(0.01)
+        stop.set()
+        await asyncio.wait_for(task, 10.0)
+
+    asyncio.run(scenario())
+    lines = [line for line in capsys.readouterr().err.splitlines() if "cannot open" in line]
+    assert len(lines) == 1 and cause in lines[0] and connect in lines[0], lines

@@ -117,6 +117,24 @@ class Rangefinder:
         maximum=1.5,
         doc="readings at larger tilt (from vertical) are dropped [rad]",
     )
+    offset_frd_m: tuple[float, float, float] = spec(
+        (0.0, 0.0, 0.0),
+        minimum=-5.0,
+        maximum=5.0,
+        doc="sensor mounting point from the centre of mass, body FRD [m]",
+    )
+
+
+@dataclass(frozen=True)
+class GroundStation:
+    """Where the tether's anchor is relative to the ground the rangefinder sees."""
+
+    anchor_height_m: float = spec(
+        0.0,
+        minimum=-100.0,
+        maximum=100.0,
+        doc="anchor (winch outlet) height above the ground under the drone [m] (tripod, truck)",
+    )
 
 
 @dataclass(frozen=True)
@@ -143,7 +161,12 @@ class EstimatorConfig:
     )
     gate: Gate = spec(default_factory=Gate, doc="innovation gate")
     staleness: Staleness = spec(default_factory=Staleness, doc="time-alignment bounds")
-    rangefinder: Rangefinder = spec(default_factory=Rangefinder, doc="rangefinder validity")
+    rangefinder: Rangefinder = spec(
+        default_factory=Rangefinder, doc="rangefinder validity and mounting"
+    )
+    ground_station: GroundStation = spec(
+        default_factory=GroundStation, doc="anchor height for the altimeter model"
+    )
     min_cable_length_m: float = spec(
         0.3, exclusive_minimum=0.0, doc="no accelerometer update closer than this to the anchor [m]"
     )

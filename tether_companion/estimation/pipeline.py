@@ -12,7 +12,9 @@ and it returns an :class:`Estimate` per IMU tick.
   aligner's inputs if attitude and PWM are each within their staleness bound of the IMU time;
   otherwise the update is skipped and counted.
 * ``on_range`` tilt-corrects the rangefinder with the latest attitude (``d cos(phi) cos(theta)``,
-  flat ground) and fuses it as the height above the anchor at the filter's time (the last IMU
+  flat ground), adds the sensor's mounting offset and takes off the anchor's height above the
+  ground (:mod:`tether_companion.estimation.altimeter_geometry`), and fuses it as the height
+  above the anchor at the filter's time (the last IMU
   tick; the random walk makes a few milliseconds' offset immaterial, and the filter's clock
   only ever moves with the IMU, so a range stamped slightly ahead cannot make the next IMU
   sample look out of order); out-of-range or stale readings are dropped and counted.
@@ -36,6 +38,7 @@ from tether_companion.estimation.alignment import (
     InputAligner,
     aligner_for,
 )
+from tether_companion.estimation.altimeter_geometry import height_above_anchor_m
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.ekf import FUSED, GATED, NONFINITE, ExtendedKalmanFilter
 from tether_companion.estimation.observability import RANGEFINDER, RangeWatch, grow_for_imu_gap
@@ -342,7 +345,16 @@ class TetherEstimator:
         if cos_tilt < math.cos(cfg.max_tilt_rad):
             health.range_out_of_range += 1
             return
-        height_m = np.array((sample.distance_m * cos_tilt,))
+        height_m = np.array(
+            (
+                height_above_anchor_m(
+                    sample.distance_m,
+                    aligner.rotation_ned_to_body,
+                    cfg.offset_frd_m,
+                    self.config.ground_station.anchor_height_m,
+                ),
+            )
+        )
         result = self.filter.update(ALTIMETER, height_m, altimeter, self._r_alt)
         health.last_range_nis = result.nis
         if result.status == FUSED:

@@ -7,7 +7,8 @@
    60 s) is flown with the 4-state EKF fed by three thrust inputs in turn:
    a naive linear map (the paper's eq. 19, ``f = k cmd`` per motor with ``k`` fitted by least
    squares on the same identification data), the identified model (the one ``sysid --out``
-   would write), and, for reference, the vehicle's true static curve;
+   writes, :mod:`tether_companion.sysid.selection`), the one the old rule (best simulation
+   Fit%) picked, and, for reference, the vehicle's true static curve;
 4. position and tension RMSE per axis (mean over seeds) and the thrust RMSE against the
    simulator's true rotor thrust are printed for each.
 """
@@ -37,6 +38,7 @@ from tether_companion.sysid.identify import best_result, identify
 from tether_companion.sysid.logs import load_flight_log
 from tether_companion.sysid.processing import IdData, prepare
 from tether_companion.sysid.report import results_table
+from tether_companion.sysid.selection import select
 from tether_companion.sysid.thrust_model import StaticModelFile, thrust_input_from_mapping
 
 HELP = "Identify a thrust model from an emulated flight; EKF RMSE with it vs a naive linear map."
@@ -131,11 +133,16 @@ def run(args: argparse.Namespace) -> int:
         pwm_range = (curve.pwm_min_us, curve.pwm_max_us)
         data = prepare(load_flight_log(log_path), vehicle.mass_kg, pwm_range)
     results = identify([data.estimation], [data.validation], pwm_range)
-    chosen = best_result(results, "simulation")
+    chosen, scores = select(results, [data.validation], pwm_range)
+    by_fit = best_result(results, "simulation")
     best = best_result(results, "prediction")
     console.print(
         results_table(
-            results, 5, best.structure if best else None, chosen.structure if chosen else None
+            results,
+            5,
+            best.structure if best else None,
+            chosen.structure if chosen else None,
+            scores=scores,
         )
     )
     if chosen is None:
@@ -148,8 +155,11 @@ def run(args: argparse.Namespace) -> int:
                 thrust_curve=naive_linear_curve([data.estimation], pwm_range),
             )
         ),
-        f"identified ({chosen.structure})": lambda: thrust_input_from_mapping(
+        f"identified, written ({chosen.structure})": lambda: thrust_input_from_mapping(
             chosen.model.to_mapping()
+        ),
+        f"best simulation Fit%, the old rule ({by_fit.structure})": lambda: (
+            thrust_input_from_mapping(by_fit.model.to_mapping())
         ),
         "true static curve": lambda: StaticThrustInput(vehicle),
     }

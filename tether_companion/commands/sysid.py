@@ -17,6 +17,7 @@ from tether_companion.sysid.logs import load_flight_log
 from tether_companion.sysid.metrics import DEFAULT_K_STEPS
 from tether_companion.sysid.processing import ProcessingOptions, prepare
 from tether_companion.sysid.report import plot_validation, results_table
+from tether_companion.sysid.selection import select
 from tether_companion.sysid.thrust_model import model_file_mapping, save_thrust_model
 
 HELP = "Identify a PWM-to-thrust model from flight logs (.tlog, .bin, .ulg, .csv)."
@@ -57,7 +58,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--write",
         choices=tuple(STRUCTURES),
-        help="structure to write (default: best simulation Fit%%)",
+        help="structure to write (default: the admitted model with the smallest steady and "
+        "transient thrust error from PWM alone, docs/sysid.md)",
     )
     parser.add_argument(
         "--plot", type=Path, metavar="PNG", help="save measured vs model thrust plots"
@@ -126,20 +128,24 @@ def run(args: argparse.Namespace) -> int:
     estimation = [d.estimation for d in datasets]
     validation = [d.validation for d in datasets]
     structures = args.structure or tuple(STRUCTURES)
+    if "static" not in structures:  # the steady-state reference of every dynamic model
+        structures = ("static", *structures)
     results = identify(estimation, validation, pwm_range, structures, args.k_steps, args.input_map)
     best = best_result(results, "prediction")
+    chosen, scores = select(results, validation, pwm_range)
     if args.write is not None:
         written = next((r for r in results if r.structure == args.write and r.ok), None)
         if written is None:
             raise InputError(f"--write {args.write}: that structure was not fitted or failed")
     else:
-        written = best_result(results, "simulation")
+        written = chosen
     console.print(
         results_table(
             results,
             args.k_steps,
             best.structure if best else None,
             written.structure if written and args.out else None,
+            scores=scores,
         )
     )
     if written is None:

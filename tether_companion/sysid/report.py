@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from rich.markup import escape
@@ -11,6 +11,7 @@ from rich.table import Table
 from tether_companion.errors import InputError
 from tether_companion.sysid.identify import StructureResult
 from tether_companion.sysid.processing import IdData
+from tether_companion.sysid.selection import DC_TOLERANCE_PCT, SelectionScore
 
 BEST_MARK = "*"
 WRITTEN_MARK = "->"
@@ -22,12 +23,16 @@ def results_table(
     best: str | None,
     written: str | None,
     title: str = "Thrust-model identification (validation data)",
+    scores: Mapping[str, SelectionScore] | None = None,
 ) -> Table:
-    """Table 1: Fit% of the k-step prediction and of simulation, FPE, MSE per structure.
+    """Table 1: Fit% of the k-step prediction and of simulation, FPE, MSE per structure, and
+    with ``scores`` the selection figures: steady-state (DC) error against the static fit,
+    stability, simulated-thrust RMSE at steady state and in transients.
 
     ``best`` (highest k-step Fit%) is marked with ``*``; ``written`` (the model saved to the
     output file) with ``->``. A failed structure shows its error instead of numbers.
     """
+    scores = scores or {}
     table = Table(title=title)
     table.add_column("", no_wrap=True)
     table.add_column("Structure")
@@ -36,6 +41,11 @@ def results_table(
     table.add_column("Fit% sim", justify="right")
     table.add_column(escape("FPE [N^2]"), justify="right")
     table.add_column(escape("MSE [N^2]"), justify="right")
+    if scores:
+        table.add_column("DC err %", justify="right")
+        table.add_column(escape("RMSE steady [N]"), justify="right")
+        table.add_column(escape("RMSE trans. [N]"), justify="right")
+        table.add_column("admitted")
     for result in results:
         mark = " ".join(
             m
@@ -44,22 +54,31 @@ def results_table(
         )
         if not result.ok:
             failure = f"[red]failed: {escape(str(result.error))}[/red]"
-            table.add_row(mark, result.structure, failure, "-", "-", "-", "-")
+            table.add_row(mark, result.structure, failure, *["-"] * (8 if scores else 4))
             continue
         metrics = result.metrics
-        table.add_row(
-            mark,
-            result.structure,
-            result.model.orders,
+        cells = [
             f"{metrics.fit_prediction_pct:.2f}",
             f"{metrics.fit_simulation_pct:.2f}",
             f"{metrics.fpe_n2:.4g}",
             f"{metrics.mse_n2:.4g}",
-        )
+        ]
+        if scores:
+            s = scores[result.structure]
+            admitted = "yes" if s.admitted() else ("unstable" if not s.stable else "DC off")
+            cells += [
+                f"{s.dc_error_pct:.2f}",
+                f"{s.steady_rmse_n:.3f}",
+                f"{s.transient_rmse_n:.3f}",
+                admitted,
+            ]
+        table.add_row(mark, result.structure, result.model.orders, *cells)
     table.caption = (
         f"{BEST_MARK} best {k_steps}-step-ahead Fit% (Table 1's criterion); "
-        f"{WRITTEN_MARK} written model (best simulation Fit% unless chosen: the estimator runs it "
-        "from PWM alone). FPE and MSE: one-step errors on the estimation data."
+        f"{WRITTEN_MARK} written model (unless chosen with --write: the admitted one with the "
+        "smallest RMS of the steady and transient errors of thrust simulated from PWM alone; a "
+        f"dynamic model is admitted when stable and within {DC_TOLERANCE_PCT:g} % of the static "
+        "fit at steady state). FPE and MSE: one-step errors on the estimation data."
     )
     return table
 

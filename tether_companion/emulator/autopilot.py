@@ -39,6 +39,7 @@ from tether_companion.emulator.params import (
     NAV_SOURCE_EXTERNAL,
     ParameterStore,
     parameter_definitions,
+    vehicle_parameter_definitions,
 )
 from tether_companion.emulator.scoring import Scorer, ScoreReport, TruthHistory
 from tether_companion.emulator.streams import (
@@ -124,7 +125,12 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions):
             config.faults.delay_ms * 1e-3,
             config.faults.delay_jitter_ms * 1e-3,
         )
-        self.params = ParameterStore(parameter_definitions(scenario, config), self._apply_param)
+        vehicle_params = vehicle_parameter_definitions(self.sim.vehicle)
+        self.params = ParameterStore(
+            [*parameter_definitions(scenario, config), *vehicle_params],
+            self._apply_param,
+            read_only=frozenset({"SYSID_THISMAV", *(d.name for d in vehicle_params)}),
+        )
         self.truth_history = TruthHistory(self.sim.physics_dt_s)
         self.scorer = Scorer(config.score_start_s)
         self._stream_defaults = self._default_rates(scenario, config)

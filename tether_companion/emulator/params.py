@@ -15,7 +15,9 @@ from dataclasses import dataclass
 from tether_companion.emulator.config import EmulatorConfig
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.physics.cable import CABLE_MODELS
+from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.sim.scenario import Scenario
+from tether_companion.vehicle_params.emulated import ardupilot_parameters
 
 PARAM_ID_LEN = 16
 
@@ -182,6 +184,35 @@ def parameter_definitions(scenario: Scenario, config: EmulatorConfig) -> list[Pa
         ParamDef("EMU_DELAY_MS", faults.delay_ms, 0.0, 5000.0, "extra latency of sent frames [ms]"),
         ParamDef("EMU_JITTER_MS", faults.delay_jitter_ms, 0.0, 5000.0, "random extra latency [ms]"),
         ParamDef("EMU_RNG_OOR", 0, 0, 1, "1 forces the rangefinder out of range", True),
+    ]
+
+
+_VEHICLE_PARAM_DOCS = {
+    "FRAME_CLASS": ("frame class (1 quad, 2 hexa, 3 octa, 4 octaquad, 5 Y6)", True),
+    "FRAME_TYPE": ("frame type (0 +, 1 X, 2 V, 3 H)", True),
+    "MOT_PWM_MIN": ("PWM at zero output [us]", True),
+    "MOT_PWM_MAX": ("PWM at full output [us]", True),
+    "MOT_SPIN_MIN": ("output where thrust starts (0-1)", False),
+    "MOT_SPIN_MAX": ("output where thrust saturates (0-1)", False),
+    "MOT_THST_EXPO": ("thrust curve expo", False),
+    "MOT_THST_HOVER": ("hover throttle (thrust demand, 0-1)", False),
+    "MOT_BAT_VOLT_MAX": ("battery compensation maximum voltage [V] (0 = off)", False),
+    "MOT_BAT_VOLT_MIN": ("battery compensation minimum voltage [V]", False),
+}
+
+
+def vehicle_parameter_definitions(vehicle: VehicleProfile) -> list[ParamDef]:
+    """ArduPilot's frame and motor parameters of the simulated vehicle (read only), so that a
+    companion can build its profile with ``vehicle: from_autopilot``; none when ArduPilot's
+    parameters cannot express the profile (a raw-command or custom-layout vehicle)."""
+    try:
+        values = ardupilot_parameters(vehicle)
+    except ValueError:
+        return []
+    return [
+        ParamDef(name, value, value, value, doc + " (read only: the simulated vehicle's)", integer)
+        for name, value in values.items()
+        for doc, integer in (_VEHICLE_PARAM_DOCS[name],)
     ]
 
 

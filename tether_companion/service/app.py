@@ -35,7 +35,7 @@ from tether_companion.config import ConfigError
 from tether_companion.mavlink.endpoints import Link, LinkClosed, open_link, parse_endpoint
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.mavlink.units import seconds_to_usec
-from tether_companion.physics.vehicle import VehicleProfile
+from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.service.clock import FcClock
 from tether_companion.service.config import ServiceConfig
 from tether_companion.service.ingest import (
@@ -53,6 +53,8 @@ from tether_companion.service.recording_thread import RecorderThread
 from tether_companion.service.security import LinkSecurity
 from tether_companion.service.session import EstimationSession
 from tether_companion.service.systemd import SystemdNotifier
+from tether_companion.service.vehicle_fetch import FROM_AUTOPILOT, VehicleFetch
+from tether_companion.vehicle_params.profile import profile_from_parameters
 
 HOUSEKEEPING_PERIOD_S = 0.05
 LINK_OPEN_TIMEOUT_S = 2.0
@@ -152,6 +154,20 @@ class CompanionService:
         self.session = EstimationSession(config, vehicle)
         self.security = LinkSecurity(config.security, config.link, monotonic_s=monotonic_s)
         """Signing key, signer and verifier; a trust gate per opened link (docs/security.md)."""
+        self.vehicle_fetch = (
+            VehicleFetch(
+                config.link.autopilot,
+                config.link.fc_system_id,
+                config.link.fc_component_id,
+                config.autopilot_vehicle,
+            )
+            if config.vehicle == FROM_AUTOPILOT
+            else None
+        )
+        """Reads the profile from the flight controller (vehicle: from_autopilot); while it is
+        not done the inputs are held (no estimate from a profile the vehicle may not have)."""
+        self._vehicle_ready = False
+        self._fatal: ConfigError | None = None
         self.notifier = notifier if notifier is not None else SystemdNotifier()
         self.clock = FcClock()
         self.state = ServiceState()
@@ -294,6 +310,8 @@ class CompanionService:
                 self._handle_guarded(link, msg)
                 while (msg := link.recv_nowait()) is not None:
                     self._handle_guarded(link, msg)
+                if self._fatal is not None:  # vehicle: from_autopilot, bad parameters
+                    raise self._fatal
         finally:
             housekeeping.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -338,6 +356,12 @@ class CompanionService:
             if kind in ("HEARTBEAT", "TIMESYNC", "COMMAND_ACK", "GPS_GLOBAL_ORIGIN"):
                 self._handle_control(link, msg, kind, now_s)
                 return
+            fetch = self.vehicle_fetch
+            if fetch is not None and kind == "PARAM_VALUE":
+                fetch.on_param_value(msg)
+                return
+        if self.vehicle_fetch is not None and not self._vehicle_read(link):
+            return
         step = session.on_message(msg, now_s)
         if session.ingest.rebooted:
             self._on_fc_reboot()
@@ -371,8 +395,49 @@ class CompanionService:
         elif kind == "GPS_GLOBAL_ORIGIN":
             self.state.origin_confirmed = True
 
+    def _vehicle_read(self, link: Link) -> bool:
+        """Whether the profile from the flight controller is in use (built on the first call
+        after the fetch completes; a bad parameter set falls back or stops the service)."""
+        fetch = self.vehicle_fetch
+        if fetch is None or self._vehicle_ready:
+            return True
+        if not fetch.done:
+            return False
+        settings = self.config.autopilot_vehicle
+        ids = f"{self.config.link.fc_system_id}/{self.config.link.fc_component_id}"
+        try:
+            profile = profile_from_parameters(
+                fetch.params,
+                float(settings.mass_kg or 0.0),
+                load_vehicle(settings.base),
+                source=f"flight controller {ids} parameters",
+            )
+        except ConfigError as exc:
+            if settings.fallback is None:
+                self._fatal = exc
+                return False
+            self._vehicle_ready = True  # keep the fallback profile the session was built with
+            self._send_text(
+                link,
+                dialect.MAV_SEVERITY_WARNING,
+                f"{exc.key}={exc.value} bad: vehicle {settings.fallback}",
+            )
+            self.state.last_error = f"vehicle from autopilot: {exc}; using {settings.fallback}"
+            return True
+        self._vehicle_ready = True
+        self.vehicle = profile
+        self.session = EstimationSession(self.config, profile)
+        self._send_text(link, dialect.MAV_SEVERITY_INFO, f"vehicle {profile.frame} from FC params")
+        return True
+
+    def _send_text(self, link: Link, severity: int, text: str) -> None:
+        self._send(link, dialect.MAVLink_statustext_message(severity, text[:50].encode(), 0, 0))
+
     def _on_fc_reboot(self) -> None:
         """The flight controller restarted: new clock, new origin, streams asked for again."""
+        if self.vehicle_fetch is not None:  # its parameters may have changed: read them again
+            self.vehicle_fetch.restart()
+            self._vehicle_ready = False
         self.clock.reset()
         self._last_latest_fc_s = -math.inf
         self._streams = self._stream_table()
@@ -402,6 +467,10 @@ class CompanionService:
         requests, origin, link-loss and silent-input detection (public for lock-step use).
         """
         cfg = self.config.link
+        fetch = self.vehicle_fetch
+        if fetch is not None and not self._vehicle_ready and self.state.link_up:
+            for request in fetch.requests(now_s):
+                self._send(link, request)
         if now_s >= self._next_heartbeat_s:
             self._next_heartbeat_s = now_s + 1.0 / cfg.heartbeat_hz
             status = (

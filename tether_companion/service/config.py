@@ -8,6 +8,7 @@ the value and what is allowed (exit code 2). ``docs/config-reference.md`` lists 
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +19,11 @@ from tether_companion.estimation.tension_kf import TensionFilterConfig
 from tether_companion.mavlink.endpoints import parse_endpoint
 from tether_companion.modes.config import TensionModeConfig
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
+from tether_companion.service.vehicle_fetch import (
+    FROM_AUTOPILOT,
+    AutopilotVehicleConfig,
+    require_mass,
+)
 
 MAV_COMP_ID_ONBOARD_COMPUTER = 191
 
@@ -391,8 +397,12 @@ class ServiceConfig:
 
     vehicle: str = spec(
         "default-quad",
-        doc="vehicle profile: a name in configs/vehicles/ or a YAML path (relative to this "
-        "file's folder); docs/vehicle-reference.md lists its keys",
+        doc="vehicle profile: a name in configs/vehicles/, a YAML path (relative to this "
+        "file's folder; docs/vehicle-reference.md lists its keys), or from_autopilot",
+    )
+    autopilot_vehicle: AutopilotVehicleConfig = spec(
+        default_factory=AutopilotVehicleConfig,
+        doc="vehicle: from_autopilot (the profile from the flight controller's parameters)",
     )
     link: LinkConfig = spec(default_factory=LinkConfig)
     streams: StreamsConfig = spec(default_factory=StreamsConfig)
@@ -455,6 +465,7 @@ class ServiceConfig:
                 f"only over a serial link (link.connect is {self.link.connect!r}): SETUP_SIGNING "
                 "carries the key in clear",
             )
+        require_mass(self.vehicle, self.autopilot_vehicle)
         kind = self.estimator.kind
         if kind == "three_state" and self.tension.source == "estimate":
             raise ConfigError(
@@ -506,12 +517,27 @@ def load_service_config(path: str | Path | None, overrides: dict | None = None) 
 
 
 def load_vehicle_for(config: ServiceConfig) -> VehicleProfile:
-    """The vehicle profile the config names (ConfigError naming ``vehicle`` when missing)."""
+    """The vehicle profile the config names (ConfigError naming ``vehicle`` when missing).
+
+    With ``vehicle: from_autopilot`` this is the profile used until the flight controller's
+    parameters are read: the fallback if one is given, else the base profile at the given
+    mass (the service holds its inputs until the parameters arrive).
+    """
+    if config.vehicle == FROM_AUTOPILOT:
+        settings = config.autopilot_vehicle
+        if settings.fallback is not None:
+            return _load_named(settings.fallback, "autopilot_vehicle.fallback")
+        base = _load_named(settings.base, "autopilot_vehicle.base")
+        return dataclasses.replace(base, mass_kg=settings.mass_kg)
+    return _load_named(config.vehicle, "vehicle")
+
+
+def _load_named(name: str, key: str) -> VehicleProfile:
     try:
-        return load_vehicle(config.vehicle)
+        return load_vehicle(name)
     except ConfigError as exc:
         raise ConfigError(
-            exc.source, f"vehicle{'.' + exc.key if exc.key else ''}", exc.value, exc.allowed
+            exc.source, f"{key}{'.' + exc.key if exc.key else ''}", exc.value, exc.allowed
         ) from None
 
 

@@ -1,0 +1,194 @@
+"""vehicle: from_autopilot: the emulator answers ArduPilot's frame and motor parameters over
+the parameter protocol; a pymavlink client reads them over UDP; the service reads them at start
+and flies the emulator with the profile they define; bad parameter sets stop the service with
+the parameter named, or fall back with a STATUSTEXT."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+import numpy as np
+import pytest
+
+from tether_companion.config import ConfigError
+from tether_companion.mavlink.framing import FrameEncoder, dialect
+from tether_companion.physics.vehicle import load_vehicle
+from tether_companion.service.app import CompanionService
+from tether_companion.service.config import load_service_config, load_vehicle_for
+from tether_companion.service.emulator_process import EmulatorProcess
+from tether_companion.service.systemd import SystemdNotifier
+from tether_companion.vehicle_params.ardupilot import PARAMETERS
+from tether_companion.vehicle_params.emulated import ardupilot_parameters
+from tether_companion.vehicle_params.profile import profile_from_parameters
+
+MASS_KG = 1.5  # the hover scenario's default-quad
+
+
+def _read_over_udp(port: int, names: list[str]) -> dict[str, float]:
+    """pymavlink (an independent client) asks the emulator for each name."""
+    from pymavlink import mavutil
+
+    link = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=250)
+    try:
+        got: dict[str, float] = {}
+        for _ in range(5):
+            for name in names:
+                if name not in got:
+                    link.mav.param_request_read_send(1, 1, name.encode(), -1)
+            deadline = 2.0
+            while len(got) < len(names):
+                msg = link.recv_match(type="PARAM_VALUE", blocking=True, timeout=deadline)
+                if msg is None:
+                    break
+                got[msg.param_id] = msg.param_value
+            if len(got) == len(names):
+                break
+        return got
+    finally:
+        link.close()
+
+
+@pytest.mark.integration
+def test_emulator_answers_ardupilot_vehicle_parameters_over_udp(tmp_path) -> None:
+    names = [n for n in PARAMETERS if not n.startswith("RC3")]
+
+    async def fetch() -> dict[str, float]:
+        async with EmulatorProcess(
+            "hover", duration_s=30.0, score_path=tmp_path / "s.json", speed=1.0
+        ) as emulator:
+            return await asyncio.to_thread(_read_over_udp, emulator.port, names)
+
+    params = asyncio.run(fetch())
+    vehicle = load_vehicle("default-quad")
+    assert params == pytest.approx(ardupilot_parameters(vehicle), rel=1e-6)  # float32 on the wire
+    profile = profile_from_parameters(params, MASS_KG)
+    assert profile.frame == "quad-x"
+    pwm = np.linspace(1000.0, 2000.0, 21)
+    assert profile.thrust_curve.thrust_n(pwm) == pytest.approx(
+        vehicle.thrust_curve.thrust_n(pwm), rel=1e-5, abs=1e-6
+    )
+
+
+@pytest.mark.integration
+def test_service_reads_the_vehicle_from_the_emulator_and_estimates(tmp_path) -> None:
+    async def fly() -> CompanionService:
+        async with EmulatorProcess(
+            "hover", duration_s=25.0, score_path=tmp_path / "s.json", speed=4.0
+        ) as emulator:
+            config = load_service_config(
+                None,
+                {
+                    "vehicle": "from_autopilot",
+                    "autopilot_vehicle": {"mass_kg": MASS_KG},
+                    "recording": {"enabled": False},
+                    "link": {"connect": f"udpout:127.0.0.1:{emulator.port}"},
+                },
+            )
+            service = CompanionService(
+                config, load_vehicle_for(config), notifier=SystemdNotifier({})
+            )
+            stop = asyncio.Event()
+            task = asyncio.create_task(service.run(stop), name="service")
+            try:
+                assert await asyncio.wait_for(emulator.wait(), timeout=120.0) == 0
+            finally:
+                stop.set()
+                await asyncio.wait_for(task, timeout=10.0)
+            return service, emulator.score()
+
+    service, score = asyncio.run(fly())
+    truth = load_vehicle("default-quad").thrust_curve
+    assert service.vehicle.frame == "quad-x"
+    assert service.vehicle.thrust_curve.thrust_n(1668.0) == pytest.approx(
+        float(truth.thrust_n(1668.0)), rel=1e-5
+    )
+    assert service.state.sent_by_type.get("PARAM_REQUEST_READ", 0) >= len(PARAMETERS) - 2
+    assert service.state.sent_by_type.get("STATUSTEXT", 0) >= 1
+    assert score["scored"] > 100 and math.isfinite(score["rmse_m"]["3d"])
+    assert score["rmse_m"]["3d"] < 0.5
+
+
+class _Link:
+    """Collects what the service sends (lock-step, no socket)."""
+
+    def __init__(self) -> None:
+        self.encoder = FrameEncoder(1, 191)
+        self.sent: list[bytes] = []
+
+    def send_bytes(self, frame: bytes) -> None:
+        self.sent.append(frame)
+
+
+def _service(**settings) -> tuple[CompanionService, _Link]:
+    config = load_service_config(
+        None,
+        {
+            "vehicle": "from_autopilot",
+            "autopilot_vehicle": {"mass_kg": 2.0, "attempts": 1, **settings},
+            "recording": {"enabled": False},
+        },
+    )
+    return CompanionService(config, load_vehicle_for(config), notifier=SystemdNotifier({})), _Link()
+
+
+def _fc(msg):
+    msg.pack(dialect.MAVLink(None, srcSystem=1, srcComponent=1))
+    return msg
+
+
+def _heartbeat():
+    return _fc(dialect.MAVLink_heartbeat_message(2, 3, 0, 0, 4, 3))
+
+
+def _param(name: str, value: float):
+    return _fc(dialect.MAVLink_param_value_message(name.encode(), value, 9, 1, 0))
+
+
+def _feed(service: CompanionService, link: _Link, params: dict[str, float]) -> None:
+    service.handle_message(link, _heartbeat(), 0.0)
+    service.housekeep(link, 0.0)
+    for name, value in params.items():
+        service.handle_message(link, _param(name, value), 0.1)
+    service.housekeep(link, 5.0)  # nothing pending: every name answered or asked once
+    service.handle_message(link, _heartbeat(), 5.1)
+    service.handle_message(link, _fc(dialect.MAVLink_attitude_message(1, 0, 0, 0, 0, 0, 0)), 5.2)
+
+
+GOOD = {"FRAME_CLASS": 2, "FRAME_TYPE": 1, "MOT_THST_HOVER": 0.3, "MOT_SPIN_MIN": 0.1}
+
+
+def test_good_parameters_build_the_profile_in_the_session() -> None:
+    service, link = _service()
+    _feed(service, link, GOOD)
+    assert service.vehicle.frame == "hexa-x" and service.session.vehicle.n_motors == 6
+    assert service._fatal is None
+
+
+@pytest.mark.parametrize(
+    ("change", "key"),
+    [({"MOT_SPIN_MIN": 0.5}, "MOT_SPIN_MIN"), ({"FRAME_CLASS": 7}, "FRAME_CLASS")],
+)
+def test_bad_parameters_stop_the_service_naming_them(change: dict, key: str) -> None:
+    service, link = _service()
+    _feed(service, link, {**GOOD, **change})
+    assert isinstance(service._fatal, ConfigError) and service._fatal.key == key
+    assert str(service._fatal).startswith(f"flight controller 1/1 parameters: {key} = ")
+
+
+def test_missing_parameter_with_fallback_uses_it_and_says_why() -> None:
+    service, link = _service(fallback="crazyflie")
+    params = {k: v for k, v in GOOD.items() if k != "MOT_THST_HOVER"}
+    _feed(service, link, params)
+    assert service._fatal is None and service.vehicle.name == "crazyflie"
+    texts = [
+        m.text
+        for m in (dialect.MAVLink(None).decode(bytearray(f)) for f in link.sent)
+        if m.get_type() == "STATUSTEXT"
+    ]
+    assert any("MOT_THST_HOVER" in t and "crazyflie" in t for t in texts), texts
+
+
+def test_from_autopilot_needs_the_mass() -> None:
+    with pytest.raises(ConfigError, match="autopilot_vehicle.mass_kg"):
+        load_service_config(None, {"vehicle": "from_autopilot"})

@@ -22,6 +22,7 @@ BENCHMARKS: tuple[str, ...] = (
     "estimators",
     "sitl",
     "dynamic",
+    "vehicle",
 )
 """Benchmark names, one per line, in the order ``bench --help`` lists them."""
 

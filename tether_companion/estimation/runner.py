@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.pipeline import EstimatorHealth, TetherEstimator
+from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.simulator import Simulator
 
@@ -78,6 +79,7 @@ def run_scenario(
     *,
     rng: np.random.Generator | None = None,
     progress: Callable[[float], None] | None = None,
+    estimator_vehicle: VehicleProfile | None = None,
 ) -> RunResult:
     """Fly ``scenario`` and run both EKFs on its sensors.
 
@@ -91,9 +93,11 @@ def run_scenario(
         Generator for the simulator's noise.
     progress
         Called now and then with the fraction of the run done (0..1).
+    estimator_vehicle
+        The profile the estimators are given (default: the simulated vehicle's, the truth).
     """
     sim = Simulator(scenario, rng=rng)
-    vehicle = sim.vehicle
+    vehicle = estimator_vehicle if estimator_vehicle is not None else sim.vehicle
     est4 = TetherEstimator(dataclasses.replace(config, kind="four_state"), vehicle)
     est3 = TetherEstimator(  # same inputs, aligned once for both
         dataclasses.replace(config, kind="three_state"), vehicle, aligner=est4.aligner

@@ -68,6 +68,16 @@ class StaticThrustInput:
         self._per_us = 1.0 / (curve.pwm_max_us - curve.pwm_min_us)
         self._full_scale = curve.command_full_scale
         self._c0, self._c1, self._c2 = curve.coefficients_n
+        self._battery = getattr(vehicle, "battery", None)
+        self.voltage_ratio = 1.0
+        """Battery voltage over the curve's (1 until a voltage is measured, or when the
+        profile has no battery model): each motor command is scaled by it."""
+
+    def set_battery_voltage_v(self, voltage_v: float) -> None:
+        """Measured battery voltage [V] (SYS_STATUS / BATTERY_STATUS); ignored without a
+        battery model in the profile, a non-finite value keeps the ratio at 1."""
+        if self._battery is not None and self._battery.enabled:
+            self.voltage_ratio = self._battery.ratio(voltage_v)
 
     def total_thrust_n(self, pwm_us: FloatArray, time_s: float) -> float:
         """Total thrust [N]; ``time_s`` is unused (the map is static).
@@ -80,10 +90,11 @@ class StaticThrustInput:
         if len(pwm_us) != self.n_motors:
             raise ValueError(f"expected {self.n_motors} pulse widths, got {len(pwm_us)}")
         c1, c2 = self._c1, self._c2
+        scale = self._full_scale * self.voltage_ratio
         total = self._c0 * self.n_motors
         for pwm in pwm_us.tolist() if isinstance(pwm_us, np.ndarray) else pwm_us:
             u = (pwm - self._pwm_min_us) * self._per_us
-            cmd = (0.0 if u < 0.0 else 1.0 if u > 1.0 else u) * self._full_scale
+            cmd = (0.0 if u < 0.0 else 1.0 if u > 1.0 else u) * scale
             total += cmd * (c1 + c2 * cmd)
         return total
 
@@ -128,6 +139,10 @@ class MotorLagThrustInput:
         self._command_n = math.nan
         self._time_s = math.nan
         self._interval_s = 0.0
+
+    def set_battery_voltage_v(self, voltage_v: float) -> None:
+        """Measured battery voltage [V] for the static curve (see :class:`StaticThrustInput`)."""
+        self._static.set_battery_voltage_v(voltage_v)
 
     @property
     def time_constant_s(self) -> float:

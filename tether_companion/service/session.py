@@ -44,6 +44,7 @@ from tether_companion.estimation.thrust_input import (
     StaticThrustInput,
     ThrustInput,
 )
+from tether_companion.mavlink.battery import BATTERY_MESSAGES, battery_voltage_v
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.modes.session import TensionModeSession
 from tether_companion.physics.vehicle import VehicleProfile
@@ -264,6 +265,8 @@ class EstimationSession:
         ``local_s`` [s] (None in replay: stamps are not checked against the clock model)."""
         if msg.get_type() == "COMMAND_LONG" and self._for_us(msg):
             return Step(messages=[self._mode_command(msg)])
+        if msg.get_type() in BATTERY_MESSAGES and self.ingest.from_flight_controller(msg):
+            self.on_battery_voltage_v(battery_voltage_v(msg))
         samples = self.ingest.receive(msg, local_s)
         if self.ingest.rebooted:
             self.restart()
@@ -281,6 +284,14 @@ class EstimationSession:
             if out.estimate is not None:
                 step.estimate = out.estimate
         return step
+
+    def on_battery_voltage_v(self, voltage_v: float) -> None:
+        """The flight controller's battery voltage [V]: the thrust inputs scale each motor
+        command by it as the autopilot's compensation assumes (profile ``battery``)."""
+        for thrust in (self.aligner.thrust_input, self._static_thrust):
+            setter = getattr(thrust, "set_battery_voltage_v", None)
+            if setter is not None:
+                setter(voltage_v)
 
     def on_sample(self, sample: Sample) -> Step:
         """Process one checked sample (from :meth:`on_message` or a dataflash log).

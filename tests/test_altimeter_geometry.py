@@ -67,3 +67,25 @@ def test_anchor_one_metre_up_gives_the_same_down_rmse(monkeypatch) -> None:
     ignored = _down_rmse(monkeypatch, 1.0, 0.0)
     assert raised == pytest.approx(on_ground, rel=0.02)
     assert ignored > on_ground + 0.5  # without the key the metre shows up in the estimate
+
+
+def test_noise_as_standard_deviations_and_the_old_variance_keys() -> None:
+    """One convention (standard deviations with units, as datasheets and the tension filter's
+    keys give them); the variance keys still read."""
+    by_std = from_mapping(
+        EstimatorConfig, {"accel_noise": {"std_mps2": 0.2}, "altimeter_noise_std_m": 0.05}
+    )
+    assert by_std.accel_noise.variance_mps2_sq == pytest.approx(0.04)
+    assert by_std.altimeter_noise_variance_m2 == pytest.approx(0.0025)
+    old = from_mapping(
+        EstimatorConfig,
+        {"accel_noise": {"variance": 0.04}, "altimeter_noise_variance_m2": 0.0025},
+    )
+    assert old.accel_noise.variance_mps2_sq == pytest.approx(by_std.accel_noise.variance_mps2_sq)
+    assert old.altimeter_noise_variance_m2 == pytest.approx(by_std.altimeter_noise_variance_m2)
+    with pytest.raises(ConfigError, match="give either std_mps2 or variance"):
+        from_mapping(EstimatorConfig, {"accel_noise": {"std_mps2": 0.2, "variance": 0.5}})
+    with pytest.raises(ConfigError, match="altimeter_noise_std_m"):
+        from_mapping(
+            EstimatorConfig, {"altimeter_noise_std_m": 0.2, "altimeter_noise_variance_m2": 0.5}
+        )

@@ -56,16 +56,39 @@ class ProcessNoise:
         return np.diag(np.asarray(values) * scale)
 
 
+_DEFAULT_ACCEL_VARIANCE = 0.01
+_DEFAULT_ALTIMETER_VARIANCE_M2 = 0.1
+
+
 @dataclass(frozen=True)
 class AccelNoise:
     """Accelerometer white-noise variance per axis, with its unit made explicit."""
 
-    variance: float = spec(0.01, exclusive_minimum=0.0, doc="variance per axis, in `unit`")
+    variance: float = spec(
+        _DEFAULT_ACCEL_VARIANCE, exclusive_minimum=0.0, doc="variance per axis, in `unit`"
+    )
     unit: str = spec(
         "mps2_squared",
         choices=("mps2_squared", "g_squared"),
         doc="mps2_squared: (m/s^2)^2; g_squared: g^2 (the paper's R is in g units)",
     )
+
+    std_mps2: float | None = spec(
+        None,
+        exclusive_minimum=0.0,
+        doc="standard deviation per axis [m/s^2], as datasheets give it (replaces variance "
+        "and unit; the convention of every sensor-noise key: tension_filter.accel_noise_std_mps2)",
+    )
+
+    def __post_init__(self) -> None:
+        if self.std_mps2 is not None and self.variance == _DEFAULT_ACCEL_VARIANCE:
+            object.__setattr__(self, "variance", self.std_mps2**2)
+            object.__setattr__(self, "unit", "mps2_squared")
+
+    def validate(self) -> None:
+        """A standard deviation and a variance are two answers to one question."""
+        if self.std_mps2 is not None and self.variance != self.std_mps2**2:
+            raise ConfigError("", "std_mps2", self.std_mps2, "give either std_mps2 or variance")
 
     @property
     def variance_mps2_sq(self) -> float:
@@ -146,7 +169,14 @@ class EstimatorConfig:
     )
     process_noise: ProcessNoise = spec(default_factory=ProcessNoise, doc="random-walk Q")
     accel_noise: AccelNoise = spec(default_factory=AccelNoise, doc="accelerometer R")
-    altimeter_noise_variance_m2: float = spec(0.1, exclusive_minimum=0.0, doc="altimeter R [m^2]")
+    altimeter_noise_variance_m2: float = spec(
+        _DEFAULT_ALTIMETER_VARIANCE_M2, exclusive_minimum=0.0, doc="altimeter R [m^2]"
+    )
+    altimeter_noise_std_m: float | None = spec(
+        None,
+        exclusive_minimum=0.0,
+        doc="altimeter standard deviation [m] (replaces altimeter_noise_variance_m2)",
+    )
     initial_position_ned_m: tuple[float, float, float] = spec(
         (1.5, 2.5, -1.5), doc="x0 position, NED relative to the anchor [m]"
     )
@@ -178,8 +208,21 @@ class EstimatorConfig:
         doc="covariance growth along the cable while no height is measured",
     )
 
+    def __post_init__(self) -> None:
+        std = self.altimeter_noise_std_m
+        if std is not None and self.altimeter_noise_variance_m2 == _DEFAULT_ALTIMETER_VARIANCE_M2:
+            object.__setattr__(self, "altimeter_noise_variance_m2", std * std)
+
     def validate(self) -> None:
         """Cross-field checks."""
+        std = self.altimeter_noise_std_m
+        if std is not None and self.altimeter_noise_variance_m2 != std * std:
+            raise ConfigError(
+                "",
+                "altimeter_noise_std_m",
+                std,
+                "give either altimeter_noise_std_m or altimeter_noise_variance_m2",
+            )
         if self.rangefinder.max_m <= self.rangefinder.min_m:
             raise ConfigError(
                 "",

@@ -27,7 +27,7 @@ def _hover_error_m(vehicle: VehicleProfile, seconds: float = 8.0) -> float:
     return worst
 
 
-@pytest.mark.parametrize("name", ["plus-quad-ardupilot", "hexa-x", "octa-x"])
+@pytest.mark.parametrize("name", ["ardupilot-sitl-plus", "hexa-x", "octa-x"])
 def test_builtin_frames_hold_a_tethered_hover(name: str) -> None:
     vehicle = load_vehicle(name)
     assert vehicle.frame in FRAMES and vehicle.n_motors == len(FRAMES[vehicle.frame])

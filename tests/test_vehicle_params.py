@@ -278,3 +278,16 @@ def test_relative_vehicle_path_is_taken_from_the_config_folder(tmp_path: Path, m
     assert vehicle.name == "mine" and vehicle.n_motors == 6
     (folder / "companion.yaml").write_text("vehicle: crazyflie\n")  # built-in names unchanged
     assert load_vehicle_for(load_service_config(folder / "companion.yaml")).name == "crazyflie"
+
+
+def test_sitl_parameters_give_the_curve_read_from_sitls_frame_model() -> None:
+    """ArduPilot SITL's '+' model (configs/vehicles/ardupilot-sitl-plus.yaml, written by another
+    helper from SITL's SIM_Frame/SIM_Motor source) against the profile built from the
+    parameters SITL flies it with (Tools/autotest/default_params/copter.parm values)."""
+    sitl = load_vehicle("ardupilot-sitl-plus")
+    ours = profile_from_parameters(ARDUPILOT_PLUS, sitl.mass_kg)
+    assert ours.frame == sitl.frame == "quad-plus"
+    pwm = np.linspace(1100.0, 2000.0, 46)
+    assert ours.thrust_curve.thrust_n(pwm) == pytest.approx(
+        sitl.thrust_curve.thrust_n(pwm), rel=2e-4, abs=1e-3
+    )

@@ -34,7 +34,7 @@ from tether_companion.vehicle_params.profile import profile_from_parameters
 
 HELP = "EKF RMSE with vehicle: from_autopilot (mass only) vs the true profile, per frame."
 
-VEHICLES = ("plus-quad-ardupilot", "hexa-x", "octa-x")
+VEHICLES = ("ardupilot-sitl-plus", "hexa-x", "octa-x")
 SETTLE_S = 5.0
 HOVER_ERROR = 1.05
 

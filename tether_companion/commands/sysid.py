@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 from rich.console import Console
 
 from tether_companion.config import from_mapping
 from tether_companion.errors import InputError
-from tether_companion.physics.vehicle import load_vehicle
+from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
+from tether_companion.sysid.drag import DragFit, identify_drag
 from tether_companion.sysid.flight import FlightPlan, record_identification_flight
 from tether_companion.sysid.identify import STRUCTURES, best_result, identify
 from tether_companion.sysid.input_map import INPUT_MAPS
@@ -82,6 +84,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--mass-kg", type=float, help="take-off mass for --from-params [kg]")
     parser.add_argument(
+        "--profile-out",
+        type=Path,
+        metavar="YAML",
+        help="write --vehicle's profile with the rotor drag identified from the logs' velocity "
+        "(LOCAL_POSITION_NED) to this file",
+    )
+    parser.add_argument(
         "--fly-tension-n", type=float, default=0.0, help="cable tension in the emulated flight [N]"
     )
 
@@ -117,9 +126,12 @@ def run(args: argparse.Namespace) -> int:
     if not logs:
         raise InputError("give at least one LOG, or --fly-emulated OUT to fly one in the simulator")
     pwm_range = (vehicle.thrust_curve.pwm_min_us, vehicle.thrust_curve.pwm_max_us)
-    datasets = [
-        prepare(load_flight_log(path), vehicle.mass_kg, pwm_range, options) for path in logs
-    ]
+    flight_logs = [load_flight_log(path) for path in logs]
+    datasets = [prepare(log, vehicle.mass_kg, pwm_range, options) for log in flight_logs]
+    drag = next(
+        (fit for log in flight_logs if (fit := identify_drag(log, vehicle.mass_kg)) is not None),
+        None,
+    )
     for data in datasets:
         console.print(
             f"{data.source}: airborne {data.airborne_s[0]:.1f}-{data.airborne_s[1]:.1f} s, "
@@ -162,6 +174,7 @@ def run(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise InputError(f"{args.out}: cannot write ({exc.strerror})") from None
         console.print(f"wrote {written.structure} model to {args.out}")
+    report_drag(console, drag, vehicle, args.profile_out)
     if args.plot is not None:
         plot_validation(args.plot, results, validation[0], args.k_steps)
         console.print(f"plot saved to {args.plot}")
@@ -197,3 +210,29 @@ def write_profile_from_parameters(args: argparse.Namespace, console: Console) ->
         f"{curve.max_thrust_n:.2f} N each at {curve.pwm_max_us:.0f} us"
     )
     return 0
+
+
+def report_drag(
+    console: Console, drag: DragFit | None, vehicle: VehicleProfile, path: Path | None
+) -> None:
+    """Print the identified rotor drag; with ``path``, write the profile carrying it."""
+    if drag is None:
+        console.print("rotor drag: not identified (no velocity in the logs, or too slow)")
+        if path is not None:
+            raise InputError(f"--profile-out {path}: no rotor drag could be identified")
+        return
+    console.print(
+        f"rotor drag: mu = {drag.mu_per_s:.3f} 1/s (EK3_DRAG_MCOEF), "
+        f"{drag.coefficient_n_s_per_m:.3f} N per m/s, {drag.samples} samples, "
+        f"residual {drag.residual_rms_mps2:.3f} m/s^2"
+    )
+    if path is None:
+        return
+    from tether_companion.vehicle_params.profile_file import save_profile
+
+    profile = dataclasses.replace(vehicle, drag_coefficient_n_s_per_m=drag.coefficient_n_s_per_m)
+    try:
+        save_profile(path, profile, "Rotor drag identified by tether-companion sysid")
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write ({exc.strerror})") from None
+    console.print(f"wrote {profile.name} with the identified drag to {path}")

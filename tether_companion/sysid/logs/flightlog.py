@@ -57,6 +57,9 @@ class FlightLog:
         (n, 1), or None when the log has none.
     tension_n
         Measured cable tension [N] (load cell), values shape (n, 1), or None.
+    velocity_ned_mps
+        Velocity over ground, NED [m/s] (LOCAL_POSITION_NED, GPS), values shape (n, 3), or
+        None; used to identify the rotor drag (:mod:`tether_companion.sysid.drag`).
     notes
         Non-fatal remarks from loading (e.g. a trailing partial record dropped).
     """
@@ -67,6 +70,7 @@ class FlightLog:
     euler_rad: Series
     height_m: Series | None = None
     tension_n: Series | None = None
+    velocity_ned_mps: Series | None = None
     notes: tuple[str, ...] = field(default=())
 
 

@@ -26,7 +26,15 @@ from tether_companion.errors import InputError
 from tether_companion.mavlink import units
 from tether_companion.sysid.logs.flightlog import N_MOTORS, FlightLog, make_series
 
-WANTED = ("HIGHRES_IMU", "RAW_IMU", "SCALED_IMU", "ATTITUDE", "SERVO_OUTPUT_RAW", "DISTANCE_SENSOR")
+WANTED = (
+    "HIGHRES_IMU",
+    "RAW_IMU",
+    "SCALED_IMU",
+    "ATTITUDE",
+    "SERVO_OUTPUT_RAW",
+    "DISTANCE_SENSOR",
+    "LOCAL_POSITION_NED",
+)
 _UINT32_SPAN = 2**32
 _STAMP_BYTES = 8
 _MAGIC_V1, _MAGIC_V2 = 0xFE, 0xFD
@@ -144,6 +152,16 @@ def load_tlog(path: Path) -> FlightLog:
             source, "DISTANCE_SENSOR", [r.time_s for r in ranges], [r.distance_m for r in ranges], 1
         )
     attitude = [units.attitude_from_attitude(m) for m in att_msgs]
+    local = messages.get("LOCAL_POSITION_NED", [])
+    velocity = None
+    if len(local) >= 2:
+        velocity = make_series(
+            source,
+            "LOCAL_POSITION_NED",
+            [m.time_boot_ms * 1e-3 for m in local],
+            [[m.vx, m.vy, m.vz] for m in local],
+            3,
+        )
     return FlightLog(
         source=source,
         pwm_us=make_series(
@@ -164,5 +182,6 @@ def load_tlog(path: Path) -> FlightLog:
             3,
         ),
         height_m=height,
+        velocity_ned_mps=velocity,
         notes=notes,
     )

@@ -18,15 +18,13 @@ from tether_companion.sysid.flight import FlightPlan, fly, identification_scenar
 from tether_companion.sysid.logs import load_flight_log
 from tether_companion.sysid.recorders import TlogRecorder
 
-DRAG_N_S_PER_M = 0.6
+MU_PER_S = 0.4
 
 
 @pytest.fixture(scope="module")
 def flight_with_velocity(tmp_path_factory):
     plan = FlightPlan(cycle_amplitudes=(1.0, 1.3))
-    vehicle = dataclasses.replace(
-        load_vehicle("default-quad"), drag_coefficient_n_s_per_m=DRAG_N_S_PER_M
-    )
+    vehicle = dataclasses.replace(load_vehicle("default-quad"), rotor_drag_per_s=MU_PER_S)
     simulator = Simulator(identification_scenario(plan), vehicle, rng=np.random.default_rng(7))
     path = tmp_path_factory.mktemp("drag") / "flight.tlog"
     sensors = simulator.scenario.sensors
@@ -48,8 +46,8 @@ def test_drag_coefficient_is_recovered(flight_with_velocity) -> None:
     assert log.velocity_ned_mps is not None and len(log.velocity_ned_mps) > 100
     fit = identify_drag(log, vehicle.mass_kg)
     assert fit is not None and fit.samples >= 50
-    assert fit.coefficient_n_s_per_m == pytest.approx(DRAG_N_S_PER_M, rel=0.15)
-    assert fit.mu_per_s == pytest.approx(DRAG_N_S_PER_M / vehicle.mass_kg, rel=0.15)
+    assert fit.mu_per_s == pytest.approx(MU_PER_S, rel=0.15)
+    assert fit.coefficient_n_s_per_m == pytest.approx(MU_PER_S * vehicle.mass_kg, rel=0.15)
 
 
 def test_no_velocity_no_drag(flight_with_velocity) -> None:
@@ -65,4 +63,4 @@ def test_cli_writes_the_profile_with_the_identified_drag(flight_with_velocity, t
     out = tmp_path / "with-drag.yaml"
     args = ["sysid", str(path), "--structure", "static", "--profile-out", str(out)]
     assert main(args) == 0
-    assert load_vehicle(out).drag_coefficient_n_s_per_m == pytest.approx(DRAG_N_S_PER_M, rel=0.15)
+    assert load_vehicle(out).rotor_drag_per_s == pytest.approx(MU_PER_S, rel=0.15)

@@ -87,8 +87,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--profile-out",
         type=Path,
         metavar="YAML",
-        help="write --vehicle's profile with the rotor drag identified from the logs' velocity "
-        "(LOCAL_POSITION_NED) to this file",
+        help="write --vehicle's profile with rotor_drag_per_s identified from the logs' "
+        "velocity (LOCAL_POSITION_NED) to this file",
     )
     parser.add_argument(
         "--fly-tension-n", type=float, default=0.0, help="cable tension in the emulated flight [N]"
@@ -230,7 +230,11 @@ def report_drag(
         return
     from tether_companion.vehicle_params.profile_file import save_profile
 
-    profile = dataclasses.replace(vehicle, drag_coefficient_n_s_per_m=drag.coefficient_n_s_per_m)
+    if not 0.0 <= drag.mu_per_s <= 2.0:
+        raise InputError(
+            f"--profile-out {path}: identified mu {drag.mu_per_s:.3f} 1/s is implausible"
+        )
+    profile = dataclasses.replace(vehicle, rotor_drag_per_s=drag.mu_per_s)
     try:
         save_profile(path, profile, "Rotor drag identified by tether-companion sysid")
     except OSError as exc:

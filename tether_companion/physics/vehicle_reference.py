@@ -20,8 +20,8 @@ WHERE: dict[str, str] = {
     "arm_length_m": "measure centre to motor axis; simulator/emulator only",
     "yaw_moment_per_thrust_m": "propeller data (torque / thrust coefficient ratio, ~0.01-0.02 m); "
     "simulator/emulator only",
-    "drag_coefficient_n_s_per_m": "identified by `tether-companion sysid` from a log with "
-    "velocity, or from ArduPilot's EK3_DRAG_BCOEF_*/MCOEF; 0 ignores drag",
+    "drag_coefficient_n_s_per_m": "linear airframe drag, isotropic; usually 0 with "
+    "rotor_drag_per_s set (which `sysid --profile-out` identifies from a log with velocity)",
     "rotor_drag_per_s": "ArduPilot's EK3_DRAG_MCOEF (the SITL quad prints 0.209) or identified "
     "by `sysid` from a log with velocity; 0.1-0.3 1/s on small multirotors. Matters in forward "
     "flight: 0.2 1/s at 1 m/s is 0.2 m/s^2 of pull the tether does not make",

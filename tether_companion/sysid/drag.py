@@ -8,8 +8,8 @@ acts along body -z only, so in the body x-y plane the accelerometer reads only t
     f_b,xy = -(mu) v_b,xy        [m/s^2],   mu [1/s]
 
 ``mu`` is fitted by least squares over the airborne samples (still air assumed: wind makes
-``v`` the ground velocity, not the air velocity, and biases ``mu``), and the profile's
-``drag_coefficient_n_s_per_m`` is ``mu * mass`` (ArduPilot's ``EK3_DRAG_MCOEF`` is ``mu``).
+``v`` the ground velocity, not the air velocity, and biases ``mu``): the profile's
+``rotor_drag_per_s`` (ArduPilot's ``EK3_DRAG_MCOEF``).
 The velocity comes from the log (LOCAL_POSITION_NED or GPS); IMU and attitude are interpolated
 onto its stamps.
 """
@@ -37,7 +37,7 @@ class DragFit:
     mu_per_s: float
     """Drag per unit mass and speed [1/s] (``EK3_DRAG_MCOEF``)."""
     coefficient_n_s_per_m: float
-    """``mu * mass`` [N per m/s], the profile's ``drag_coefficient_n_s_per_m``."""
+    """``mu * mass`` [N per m/s]: the same drag as a force per speed."""
     samples: int
     residual_rms_mps2: float
 

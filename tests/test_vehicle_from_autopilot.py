@@ -192,3 +192,13 @@ def test_missing_parameter_with_fallback_uses_it_and_says_why() -> None:
 def test_from_autopilot_needs_the_mass() -> None:
     with pytest.raises(ConfigError, match="autopilot_vehicle.mass_kg"):
         load_service_config(None, {"vehicle": "from_autopilot"})
+
+
+def test_a_flight_controller_reboot_reads_the_parameters_again() -> None:
+    service, link = _service()
+    _feed(service, link, GOOD)
+    assert service.vehicle.frame == "hexa-x"
+    service._on_fc_reboot()  # what the ingest's reboot detection calls
+    assert not service.vehicle_fetch.done and service.vehicle_fetch.params == {}
+    _feed(service, link, {**GOOD, "FRAME_CLASS": 3})  # the new firmware flies an octa
+    assert service.vehicle.frame == "octa-x" and service.session.vehicle.n_motors == 8

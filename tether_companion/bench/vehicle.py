@@ -7,7 +7,7 @@ vehicle); the 4-state EKF runs on its sensors three times per seed, given:
 * the true profile (the simulated vehicle's);
 * the profile built from the ArduPilot parameters the emulator answers for that vehicle
   (``FRAME_CLASS``, ``FRAME_TYPE``, ``MOT_*``; :mod:`tether_companion.vehicle_params`) and
-  the mass alone;
+  the mass alone (every other key from the default profile);
 * the same with ``MOT_THST_HOVER`` 5 % high (a hover throttle learned while the tether pulled
   down, or not yet converged): the sensitivity of the result to the one learned parameter.
 
@@ -55,8 +55,8 @@ def profiles(true: VehicleProfile) -> dict[str, VehicleProfile]:
     learned = {**params, "MOT_THST_HOVER": params["MOT_THST_HOVER"] * HOVER_ERROR}
     return {
         "true profile": true,
-        "from_autopilot": profile_from_parameters(params, true.mass_kg, true),
-        "from_autopilot, hover +5 %": profile_from_parameters(learned, true.mass_kg, true),
+        "from_autopilot": profile_from_parameters(params, true.mass_kg),
+        "from_autopilot, hover +5 %": profile_from_parameters(learned, true.mass_kg),
     }
 
 

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+from test_service_emulator import _fly as fly_service
 
 from tether_companion.config import ConfigError
 from tether_companion.mavlink.framing import FrameEncoder, dialect
@@ -72,32 +73,14 @@ def test_emulator_answers_ardupilot_vehicle_parameters_over_udp(tmp_path) -> Non
 
 @pytest.mark.integration
 def test_service_reads_the_vehicle_from_the_emulator_and_estimates(tmp_path) -> None:
-    async def fly() -> CompanionService:
-        async with EmulatorProcess(
-            "hover", duration_s=25.0, score_path=tmp_path / "s.json", speed=4.0
-        ) as emulator:
-            config = load_service_config(
-                None,
-                {
-                    "vehicle": "from_autopilot",
-                    "autopilot_vehicle": {"mass_kg": MASS_KG},
-                    "recording": {"enabled": False},
-                    "link": {"connect": f"udpout:127.0.0.1:{emulator.port}"},
-                },
-            )
-            service = CompanionService(
-                config, load_vehicle_for(config), notifier=SystemdNotifier({})
-            )
-            stop = asyncio.Event()
-            task = asyncio.create_task(service.run(stop), name="service")
-            try:
-                assert await asyncio.wait_for(emulator.wait(), timeout=120.0) == 0
-            finally:
-                stop.set()
-                await asyncio.wait_for(task, timeout=10.0)
-            return service, emulator.score()
-
-    service, score = asyncio.run(fly())
+    emulator = EmulatorProcess("hover", duration_s=25.0, score_path=tmp_path / "s.json", speed=4.0)
+    overrides = {
+        "vehicle": "from_autopilot",
+        "autopilot_vehicle": {"mass_kg": MASS_KG},
+        "recording": {"enabled": False},
+    }
+    service = asyncio.run(fly_service(emulator, overrides))
+    score = emulator.score()
     truth = load_vehicle("default-quad").thrust_curve
     assert service.vehicle.frame == "quad-x"
     assert service.vehicle.thrust_curve.thrust_n(1668.0) == pytest.approx(

@@ -15,7 +15,6 @@ any mode change nobody commanded.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import re
 import time
@@ -43,13 +42,23 @@ GPS_LESS_PARAMS = {
     "EK3_SRC1_POSZ": 1,
     "EK3_SRC1_VELZ": 0,
     "EK3_SRC1_YAW": 1,
+    "WPNAV_SPEED": 50,
+    "COMPASS_AUTODEC": 0,
+    "COMPASS_DEC": 0.22336,
 }
-"""Source set 1 = external navigation and no GPS (the note in extnav.parm)."""
+"""Source set 1 = external navigation and no GPS (the note in extnav.parm), and GUIDED's
+position moves at 0.5 m/s (WPNAV_SPEED [cm/s]; default 10 m/s): our estimate lags about 1 s
+in motion, and flying out at the default speed on it the loop oscillated until the line went
+slack (two runs of three, docs/ardupilot.md). The magnetic declination is set by hand
+(COMPASS_DEC [rad], 12.80 deg: what ArduPilot's own tables give at SITL's home, read back from
+a GPS run): without a GPS fix ArduPilot never looks it up, EKF3's heading is then off by the
+declination, and our position, which takes its heading from the autopilot's attitude, turns
+about the anchor by as much (measured: 13-17 deg, 2.5 m at 7 m)."""
 FAILSAFE_WORDS = re.compile(r"failsafe|variance|stopped aiding|lost|emergency|crash", re.I)
 """STATUSTEXT words that mean the autopilot gave up on something (checked case-insensitively)."""
 TRACE_COLUMNS = (
     "fc_s", "truth_n", "truth_e", "truth_d", "ekf3_n", "ekf3_e", "ekf3_d",
-    "ours_n", "ours_e", "ours_d", "test_ratio", "mode",
+    "ours_n", "ours_e", "ours_d", "test_ratio", "mode", "yaw_error_rad",
 )  # fmt: skip
 SETTLE_BAND_M = 0.3
 """Horizontal distance from the target inside which the hold counts as settled [m]."""
@@ -75,7 +84,8 @@ class FlightOptions:
     6 m from the anchor, where the pull no longer tells the position) or 2 (ours)."""
     land_by_tether: bool = False
     """GPS-less flight: land by reeling SITL's tether in (SIM_TETH_LINELEN shortened at
-    ``reel_in_mps``) with the service's tension-following mode on, instead of LAND."""
+    ``reel_in_mps``) with the service's tension-following mode switched on from the ground
+    station after the hold (MAV_CMD_USER_2), instead of LAND."""
     reel_in_mps: float = 0.3
     companion_overrides: dict = field(default_factory=dict)
     workdir: Path | None = None
@@ -100,6 +110,8 @@ class PhaseScore:
     test_ratio_max: float
     position_lost_samples: int
     """Samples whose EKF_STATUS_REPORT lacked 'horizontal absolute position OK'."""
+    yaw_error_max_deg: float = math.nan
+    """Largest |ATTITUDE yaw - SIM_STATE yaw| [deg]: the heading our estimate is rotated by."""
 
 
 @dataclass
@@ -117,9 +129,9 @@ class FlightResult:
     stopped_at: str = ""
     """Why the flight stopped early ('' when it completed)."""
     companion_exit: int | None = None
-    trace: np.ndarray = field(default_factory=lambda: np.empty((0, 12)))
+    trace: np.ndarray = field(default_factory=lambda: np.empty((0, len(TRACE_COLUMNS))))
     """Every SIM_STATE sample: autopilot time [s], truth NED, EKF3 NED, ours NED [m], EKF3's
-    horizontal position test ratio, mode (TRACE_COLUMNS)."""
+    horizontal position test ratio, mode, EKF3's yaw error [rad] (TRACE_COLUMNS)."""
 
     def phase(self, name: str) -> PhaseScore:
         """The phase called ``name``."""
@@ -165,7 +177,14 @@ def score_phase(
         test_ratio_mean=float(np.nanmean(ratio)) if np.isfinite(ratio).any() else math.nan,
         test_ratio_max=float(np.nanmax(ratio)) if np.isfinite(ratio).any() else math.nan,
         position_lost_samples=sum(not (s.ekf_flags & EKF_FLAG_POS_HORIZ_ABS) for s in samples),
+        yaw_error_max_deg=_max_abs_deg([s.yaw_error_rad for s in samples]),
     )
+
+
+def _max_abs_deg(values: list[float]) -> float:
+    finite = np.abs(np.array(values, dtype=float))
+    finite = finite[np.isfinite(finite)]
+    return float(np.degrees(finite.max())) if finite.size else math.nan
 
 
 def _fixed(point: np.ndarray) -> Callable[[float, np.ndarray], np.ndarray]:
@@ -175,7 +194,15 @@ def _fixed(point: np.ndarray) -> Callable[[float, np.ndarray], np.ndarray]:
 def trace_of(samples: list[Sample]) -> np.ndarray:
     """The samples as an array with TRACE_COLUMNS."""
     rows = [
-        [s.fc_s, *s.truth_ned_m, *s.fc_ned_m, *s.vision_ned_m, s.ekf_pos_ratio, s.mode]
+        [
+            s.fc_s,
+            *s.truth_ned_m,
+            *s.fc_ned_m,
+            *s.vision_ned_m,
+            s.ekf_pos_ratio,
+            s.mode,
+            s.yaw_error_rad,
+        ]
         for s in samples
     ]
     return np.array(rows, dtype=float).reshape(-1, len(TRACE_COLUMNS))
@@ -281,11 +308,6 @@ def gps_less(options: FlightOptions, log: Callable[[str], None] = print) -> Flig
     def ready(snap: dict, gcs: GroundStation) -> bool:
         return any("initial yaw alignment complete" in t for t in gcs.texts_since())
 
-    if options.land_by_tether:
-        options = dataclasses.replace(
-            options,
-            companion_overrides={"tension_mode": {"enabled": True}, **options.companion_overrides},
-        )
     name = "gps-less-tether-landing" if options.land_by_tether else "gps-less"
     return _run(name, GPS_LESS_PARAMS, ready, _fly_gps_less, options, log)
 
@@ -440,6 +462,8 @@ def _fly_gps_less(flight: _Flight, result: FlightResult) -> None:
         log("landed")
 
 
+MAV_CMD_USER_2 = 31011
+"""The service's tension-mode command (docs/landing.md): param1 1 enable, param2 1 land."""
 TETHER_LINE_LENGTH_M = 6.0
 """SIM_TETH_LINELEN in the shipped tether.parm [m]."""
 REEL_STEP_S = 0.25
@@ -455,7 +479,14 @@ def _reel_in(flight: _Flight, result: FlightResult, target: np.ndarray) -> None:
     start = flight.fc_now()
     length = TETHER_LINE_LENGTH_M
     deadline_fc = start + 120.0
-    log(f"reeling the tether in at {opts.reel_in_mps:g} m/s")
+    # enabled now, not at start: armed in GUIDED on the ground the service has no position
+    # (motors idle), and the mode's "estimate lost -> LAND" rule would land it at once
+    result_code = gcs.command_companion(MAV_CMD_USER_2, 1.0, 0.0, wait_s=5.0)
+    if result_code != 0:
+        raise FlightError(
+            f"the service refused to enable the tension mode (MAV_RESULT {result_code})"
+        )
+    log(f"tension mode on; reeling the tether in at {opts.reel_in_mps:g} m/s")
     while gcs.snapshot()["armed"]:
         if flight.fc_now() > deadline_fc:
             raise FlightError("tether landing: still armed 120 s after the reel-in began")

@@ -34,6 +34,7 @@ MESSAGE_RATES_HZ = {
     "LOCAL_POSITION_NED": 25.0,
     "GLOBAL_POSITION_INT": 5.0,
     "SYS_STATUS": 2.0,
+    "ATTITUDE": 25.0,
 }
 """What the ground station asks for on its own link (SET_MESSAGE_INTERVAL)."""
 
@@ -58,6 +59,8 @@ class Sample:
     ekf_flags: int
     mode: int
     armed: bool
+    yaw_error_rad: float = math.nan
+    """The autopilot's ATTITUDE yaw minus SIM_STATE's yaw, wrapped to [-pi, pi)."""
 
 
 @dataclass
@@ -69,6 +72,7 @@ class Telemetry:
     heartbeat: object | None = None
     truth_ned_m: np.ndarray | None = None
     fc_ned_m: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    fc_yaw_rad: float = math.nan
     ekf: object | None = None
     texts: list[tuple[float, str]] = field(default_factory=list)
     acks: list[object] = field(default_factory=list)
@@ -80,6 +84,8 @@ class Telemetry:
     companion_texts: list[tuple[float, str]] = field(default_factory=list)
     origin: object | None = None
     """The autopilot's GPS_GLOBAL_ORIGIN, once received."""
+    params: dict[str, float] = field(default_factory=dict)
+    """PARAM_VALUEs received."""
 
 
 class GroundStation:
@@ -124,6 +130,8 @@ class GroundStation:
                         tel.vision_ned_m = np.array([msg.x, msg.y, msg.z])
                     elif kind == "STATUSTEXT":
                         tel.companion_texts.append((tel.fc_s, msg.text))
+                    elif kind == "COMMAND_ACK":
+                        tel.acks.append(msg)
                 continue
             if src != (FC_SYSTEM, FC_COMPONENT):
                 continue  # SITL's tether simulator (system 2) and anyone else
@@ -140,10 +148,14 @@ class GroundStation:
             tel.texts.append((tel.fc_s, msg.text))
         elif kind == "COMMAND_ACK":
             tel.acks.append(msg)
+        elif kind == "PARAM_VALUE":
+            tel.params[msg.param_id] = float(msg.param_value)
         elif kind == "GPS_GLOBAL_ORIGIN":
             tel.origin = msg
         elif kind == "EKF_STATUS_REPORT":
             tel.ekf = msg
+        elif kind == "ATTITUDE":
+            tel.fc_yaw_rad = msg.yaw
         elif kind == "LOCAL_POSITION_NED":
             tel.fc_ned_m = np.array([msg.x, msg.y, msg.z])
         elif kind == "SIM_STATE":
@@ -165,6 +177,7 @@ class GroundStation:
                     armed=bool(hb.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
                     if hb
                     else False,
+                    yaw_error_rad=(tel.fc_yaw_rad - msg.yaw + math.pi) % (2 * math.pi) - math.pi,
                 )
             )
 
@@ -236,12 +249,19 @@ class GroundStation:
             msg_id = getattr(mavutil.mavlink, f"MAVLINK_MSG_ID_{name}")
             self.command(mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / rate)
 
-    def command(self, command: int, *params: float, wait_s: float | None = None) -> int | None:
-        """COMMAND_LONG to the autopilot; with ``wait_s`` wait for its COMMAND_ACK result."""
+    def command(
+        self,
+        command: int,
+        *params: float,
+        wait_s: float | None = None,
+        component: int = FC_COMPONENT,
+    ) -> int | None:
+        """COMMAND_LONG to the autopilot (or another ``component`` of the vehicle, routed by
+        it); with ``wait_s`` wait for the COMMAND_ACK result."""
         p = [*params, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0][:7]
         with self.telemetry.lock:
             n_acks = len(self.telemetry.acks)
-        self.master.mav.command_long_send(FC_SYSTEM, FC_COMPONENT, command, 0, *p)
+        self.master.mav.command_long_send(FC_SYSTEM, component, command, 0, *p)
         if wait_s is None:
             return None
         deadline = time.monotonic() + wait_s
@@ -252,6 +272,10 @@ class GroundStation:
                         return int(ack.result)
             time.sleep(0.02)
         raise FlightError(f"command {command}: no COMMAND_ACK within {wait_s:g} s")
+
+    def command_companion(self, command: int, *params: float, wait_s: float) -> int | None:
+        """COMMAND_LONG to the companion (component 191), routed by the autopilot."""
+        return self.command(command, *params, wait_s=wait_s, component=COMPANION_COMPONENT)
 
     def set_mode(self, name: str, timeout_s: float = 10.0) -> None:
         """Switch flight mode and wait until the HEARTBEAT shows it."""
@@ -296,6 +320,18 @@ class GroundStation:
     def set_ekf_source_set(self, source_set: int) -> int | None:
         """MAV_CMD_SET_EKF_SOURCE_SET (1 = GPS, 2 = external navigation in our parameters)."""
         return self.command(MAV_CMD_SET_EKF_SOURCE_SET, float(source_set), wait_s=5.0)
+
+    def get_param(self, name: str, timeout_s: float = 5.0) -> float:
+        """PARAM_REQUEST_READ and wait (bounded) for the answer."""
+        with self.telemetry.lock:
+            self.telemetry.params.pop(name, None)
+        self.master.mav.param_request_read_send(FC_SYSTEM, FC_COMPONENT, name.encode(), -1)
+        snap = self.wait_for(
+            f"parameter {name}", lambda _s: name in self.telemetry.params, timeout_s
+        )
+        del snap
+        with self.telemetry.lock:
+            return self.telemetry.params[name]
 
     def set_param(self, name: str, value: float) -> None:
         """PARAM_SET (not waited for)."""

@@ -100,6 +100,7 @@ def _print(result, speedup: float) -> None:  # noqa: ANN001 - FlightResult (lazy
     for column in (
         "phase", "s", "truth-target rms/max [m]", "EKF3-truth rms/max [m]",
         "ours-truth rms/max [m]", "ours 3-D rms [m]", "test ratio mean/max", "pos lost",
+        "yaw err max [deg]",
     ):  # fmt: skip
         table.add_column(column, justify="right" if column != "phase" else "left")
     for p in result.phases:
@@ -112,8 +113,9 @@ def _print(result, speedup: float) -> None:  # noqa: ANN001 - FlightResult (lazy
             f"{p.ours_error_3d_rms_m:.3f}",
             f"{p.test_ratio_mean:.3f} / {p.test_ratio_max:.3f}",
             str(p.position_lost_samples),
+            f"{p.yaw_error_max_deg:.1f}",
         )
-    out = Console()
+    out = Console(width=max(Console().width, 150))
     out.print(table)
     if result.name == "gps-to-external-nav":
         out.print(

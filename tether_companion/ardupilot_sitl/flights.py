@@ -82,6 +82,9 @@ class FlightOptions:
     land_source_set: int = 1
     """EKF3 source set while landing: 1 (GPS: SITL's tether is a fixed 6 m line, slack below
     6 m from the anchor, where the pull no longer tells the position) or 2 (ours)."""
+    gps_less_fly_out: bool = False
+    """GPS-less flight: after the hold above the anchor, fly out to ``target_ned_m`` on our
+    estimate alone and hold there (not reliable yet: docs/ardupilot.md)."""
     land_by_tether: bool = False
     """GPS-less flight: land by reeling SITL's tether in (SIM_TETH_LINELEN shortened at
     ``reel_in_mps``) with the service's tension-following mode switched on from the ground
@@ -418,6 +421,9 @@ def _fly_gps_to_external_nav(flight: _Flight, result: FlightResult) -> None:
 
 
 def _fly_gps_less(flight: _Flight, result: FlightResult) -> None:
+    """Take off above the anchor until the line is taut, hold there (and, with
+    ``gps_less_fly_out``, fly out to the target and hold there), then land by LAND or by the
+    tether."""
     gcs, opts, log = flight.gcs, flight.options, flight.log
     target = np.array(opts.target_ned_m, dtype=float)
     radius = float(np.linalg.norm(target))
@@ -430,24 +436,28 @@ def _fly_gps_less(flight: _Flight, result: FlightResult) -> None:
     log("taut above the anchor")
     flight.wait(10.0)
     start = flight.fc_now()
-    flight.wait(10.0)
-    result.phases.append(
-        score_phase("taut-above", gcs.samples_between(start, flight.fc_now()), _fixed(above))
-    )
-    # out to the target along the sphere of the taut line (never closer than its length)
-    for fraction in (0.25, 0.5, 0.75, 1.0):
-        elevation = math.pi / 2 + fraction * (math.asin(-target[2] / radius) - math.pi / 2)
-        point = radius * np.array([math.cos(elevation), 0.0, -math.sin(elevation)])
-        flight.fly_to(point, within_m=0.7, fc_s=30.0)
-    flight.wait(10.0)
-    start = flight.fc_now()
     flight.wait(opts.hold_s)
     result.phases.append(
-        score_phase("hold", gcs.samples_between(start, flight.fc_now()), _fixed(target))
+        score_phase("hold-above", gcs.samples_between(start, flight.fc_now()), _fixed(above))
     )
-    log(f"held {opts.hold_s:g} s")
+    log(f"held {opts.hold_s:g} s above the anchor")
+    hold_point = above
+    if opts.gps_less_fly_out:
+        # out to the target along the sphere of the taut line (never closer than its length)
+        for fraction in (0.25, 0.5, 0.75, 1.0):
+            elevation = math.pi / 2 + fraction * (math.asin(-target[2] / radius) - math.pi / 2)
+            point = radius * np.array([math.cos(elevation), 0.0, -math.sin(elevation)])
+            flight.fly_to(point, within_m=0.7, fc_s=30.0)
+        flight.wait(10.0)
+        start = flight.fc_now()
+        flight.wait(opts.hold_s)
+        result.phases.append(
+            score_phase("hold-out", gcs.samples_between(start, flight.fc_now()), _fixed(target))
+        )
+        log(f"held {opts.hold_s:g} s at the target")
+        hold_point = target
     if opts.land_by_tether:
-        _reel_in(flight, result, target)
+        _reel_in(flight, result)
     elif opts.land:
         start = flight.fc_now()
         flight.mode("LAND")
@@ -456,7 +466,7 @@ def _fly_gps_less(flight: _Flight, result: FlightResult) -> None:
             score_phase(
                 "land",
                 gcs.samples_between(start, flight.fc_now()),
-                _fixed(np.array([target[0], target[1], 0.0])),
+                _fixed(np.array([hold_point[0], hold_point[1], 0.0])),
             )
         )
         log("landed")
@@ -466,11 +476,16 @@ MAV_CMD_USER_2 = 31011
 """The service's tension-mode command (docs/landing.md): param1 1 enable, param2 1 land."""
 TETHER_LINE_LENGTH_M = 6.0
 """SIM_TETH_LINELEN in the shipped tether.parm [m]."""
+REEL_END_M = -2.0
+"""Where the reel-in stops [m]. SITL's line is a spring from the anchor: at rest length 0 it
+still holds ~9 N at 1.1 m of stretch, and the tension mode, which follows only a pull beyond
+the one it has learned, then holds the drone there (measured: 1.58 m up). A negative rest
+length keeps the pull growing as a winch still reeling in would."""
 REEL_STEP_S = 0.25
 """Autopilot seconds between two SIM_TETH_LINELEN steps while reeling in."""
 
 
-def _reel_in(flight: _Flight, result: FlightResult, target: np.ndarray) -> None:
+def _reel_in(flight: _Flight, result: FlightResult) -> None:
     """Shorten SITL's line like a winch (SIM_TETH_LINELEN) until the drone disarms; the
     service's tension-following mode should feel the pull, follow it down and hand over to
     LAND near the ground."""
@@ -490,7 +505,7 @@ def _reel_in(flight: _Flight, result: FlightResult, target: np.ndarray) -> None:
     while gcs.snapshot()["armed"]:
         if flight.fc_now() > deadline_fc:
             raise FlightError("tether landing: still armed 120 s after the reel-in began")
-        length = max(0.5, length - opts.reel_in_mps * REEL_STEP_S)
+        length = max(REEL_END_M, length - opts.reel_in_mps * REEL_STEP_S)
         gcs.set_param("SIM_TETH_LINELEN", length)
         flight.wait(REEL_STEP_S)
     result.phases.append(

@@ -49,7 +49,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=("gps-switch", "gps-less", "both"),
         default="both",
         help="gps-switch: take off on GPS, switch to ours at a taut hover, hold, circle, land "
-        "on GPS; gps-less: GPS1_TYPE 0, take off, hold and land on ours alone (default both)",
+        "on GPS; gps-less: GPS1_TYPE 0, take off, hold above the anchor and land on ours alone "
+        "(default both)",
+    )
+    parser.add_argument(
+        "--fly-out",
+        action="store_true",
+        help="gps-less: after the hold above the anchor fly out to 6 m north, 4 m up and hold",
+    )
+    parser.add_argument(
+        "--tether-landing",
+        action="store_true",
+        help="gps-less: land by reeling SITL's tether in with the service's tension mode",
     )
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
 
@@ -69,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
         circle_speed_mps=args.circle_speed,
         circle_laps=args.laps,
         workdir=Path(args.keep) if args.keep else None,
+        gps_less_fly_out=args.fly_out,
+        land_by_tether=args.tether_landing,
     )
     console = Console(stderr=True)
     flights = {"gps-switch": gps_to_external_nav, "gps-less": gps_less}

@@ -164,3 +164,26 @@ def test_gps_less_flight_from_the_ground_up(sitl_available, tmp_path) -> None:
     for phase in result.phases:
         assert phase.position_lost_samples == 0, phase
     assert result.companion_exit == 0
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_gps_less_landing_by_reeling_the_tether_in(sitl_available, tmp_path) -> None:
+    """GPS1_TYPE 0, taut above the anchor, then the ground station switches the service's
+    tension mode on (MAV_CMD_USER_2) and SITL's line is reeled in at 0.3 m/s: the mode feels
+    the pull, follows it down and hands over to LAND near the ground; the drone disarms
+    within 0.5 m of the anchor, with no failsafe and EKF3 never without a position."""
+    from tether_companion.ardupilot_sitl.flights import TRACE_COLUMNS, FlightOptions, gps_less
+    from tether_companion.ardupilot_sitl.ground_station import COPTER_MODES
+
+    options = FlightOptions(workdir=tmp_path, hold_s=20.0, land_by_tether=True)
+    result = gps_less(options, log=print)
+    for phase in result.phases:
+        print(phase)
+    assert result.completed, result.stopped_at
+    assert result.failsafes == [], result.failsafes
+    landing = result.phase("tether-landing")
+    assert landing.truth_to_target_max_m < 0.5  # horizontal distance from the anchor
+    assert landing.position_lost_samples == 0
+    modes = result.trace[:, TRACE_COLUMNS.index("mode")]
+    assert COPTER_MODES["LAND"] in modes  # the service's hand-over: nobody else sent LAND

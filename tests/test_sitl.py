@@ -12,6 +12,7 @@ import time
 import pytest
 
 from tether_companion.ardupilot_sitl.companion import CompanionProcess, companion_config
+from tether_companion.ardupilot_sitl.flights import GPS_LESS_PARAMS
 from tether_companion.ardupilot_sitl.ground_station import EKF_FLAG_POS_HORIZ_ABS, GroundStation
 from tether_companion.ardupilot_sitl.process import (
     SitlFailed,
@@ -25,16 +26,6 @@ from tether_companion.mavlink.geo import Geodetic
 
 pytestmark = [pytest.mark.integration, pytest.mark.sitl]
 
-GPS_LESS = {
-    "GPS1_TYPE": 0,
-    "EK3_SRC1_POSXY": 6,
-    "EK3_SRC1_VELXY": 0,
-    "EK3_SRC1_POSZ": 1,
-    "EK3_SRC1_VELZ": 0,
-    "EK3_SRC1_YAW": 1,
-}
-"""Source set 1 = external navigation, no GPS at all (extnav.parm's note)."""
-
 
 @pytest.fixture
 def sitl_available() -> None:
@@ -47,7 +38,7 @@ def sitl_available() -> None:
 def test_companion_gives_a_gps_less_ekf3_its_origin_and_position(sitl_available, tmp_path) -> None:
     """Start SITL without GPS, run the service as a user would: EKF3 takes our origin and
     fuses our VISION_POSITION_ESTIMATE (its own words), and the service stops cleanly."""
-    options = SitlOptions(speedup=1.0, extra_params=GPS_LESS)
+    options = SitlOptions(speedup=1.0, extra_params=GPS_LESS_PARAMS)
     with SitlProcess(options) as sitl:
         home = Geodetic(*options.home[:3])
         with GroundStation(sitl.ports["serial0"], home) as gcs:

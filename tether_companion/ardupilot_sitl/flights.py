@@ -264,6 +264,14 @@ class _Flight:
             fc_s,
         )
 
+    def hold(self, name: str, point: np.ndarray, seconds: float, result: FlightResult) -> None:
+        """Hold at ``point`` (already commanded): 10 s to settle, then ``seconds`` scored."""
+        self.wait(10.0)
+        start = self.fc_now()
+        self.wait(seconds)
+        samples = self.gcs.samples_between(start, self.fc_now())
+        result.phases.append(score_phase(name, samples, _fixed(point)))
+
     def circle(self, centre: np.ndarray, radius_m: float, height_d_m: float) -> tuple[float, float]:
         """One or more laps at circle_speed_mps by GUIDED targets at 10 Hz autopilot time;
         returns (start, end) autopilot time."""
@@ -434,12 +442,7 @@ def _fly_gps_less(flight: _Flight, result: FlightResult) -> None:
     gcs.takeoff(radius)
     flight.wait_truth("take-off above the anchor", lambda p: p[2] < above[2] + 0.5, fc_s=40.0)
     log("taut above the anchor")
-    flight.wait(10.0)
-    start = flight.fc_now()
-    flight.wait(opts.hold_s)
-    result.phases.append(
-        score_phase("hold-above", gcs.samples_between(start, flight.fc_now()), _fixed(above))
-    )
+    flight.hold("hold-above", above, opts.hold_s, result)
     log(f"held {opts.hold_s:g} s above the anchor")
     hold_point = above
     if opts.gps_less_fly_out:
@@ -448,12 +451,7 @@ def _fly_gps_less(flight: _Flight, result: FlightResult) -> None:
             elevation = math.pi / 2 + fraction * (math.asin(-target[2] / radius) - math.pi / 2)
             point = radius * np.array([math.cos(elevation), 0.0, -math.sin(elevation)])
             flight.fly_to(point, within_m=0.7, fc_s=30.0)
-        flight.wait(10.0)
-        start = flight.fc_now()
-        flight.wait(opts.hold_s)
-        result.phases.append(
-            score_phase("hold-out", gcs.samples_between(start, flight.fc_now()), _fixed(target))
-        )
+        flight.hold("hold-out", target, opts.hold_s, result)
         log(f"held {opts.hold_s:g} s at the target")
         hold_point = target
     if opts.land_by_tether:

@@ -8,12 +8,12 @@ and a one-line message, never a traceback.
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
 from tether_companion import __version__
+from tether_companion.commands.lazy import add_lazy_subcommands
 from tether_companion.config import ConfigError
 from tether_companion.errors import InputError
 
@@ -35,8 +35,9 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The full argument parser with one sub-parser per command."""
+def build_parser(argv: Sequence[str] = ()) -> argparse.ArgumentParser:
+    """The argument parser with one sub-parser per command; only the command named in
+    ``argv`` is imported and given its options (``--help`` alone imports none)."""
     parser = OneLineParser(
         prog="tether-companion",
         description="Localise a tethered drone from its tether's pull and feed the position "
@@ -44,17 +45,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in COMMANDS:
-        module = importlib.import_module(f"tether_companion.commands.{name}")
-        command_parser = sub.add_parser(name, help=module.HELP, description=module.HELP)
-        module.add_arguments(command_parser)
-        command_parser.set_defaults(run=module.run)
+    add_lazy_subcommands(sub, "tether_companion.commands", COMMANDS, argv, "run")
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the process exit code."""
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     try:
         return int(args.run(args) or 0)

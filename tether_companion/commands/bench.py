@@ -7,7 +7,8 @@ Each benchmark is ``tether_companion.bench.<name>`` with ``HELP: str``,
 from __future__ import annotations
 
 import argparse
-import importlib
+
+from tether_companion.commands.lazy import add_lazy_subcommands
 
 HELP = "Run a benchmark (accuracy against the paper, speed, ...) and print its numbers."
 
@@ -28,13 +29,10 @@ BENCHMARKS: tuple[str, ...] = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """One sub-parser per benchmark module."""
+    """One sub-parser per benchmark module; only the one named is imported."""
     sub = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK", required=True)
-    for name in BENCHMARKS:
-        module = importlib.import_module(f"tether_companion.bench.{name}")
-        bench_parser = sub.add_parser(name, help=module.HELP, description=module.HELP)
-        module.add_arguments(bench_parser)
-        bench_parser.set_defaults(run_benchmark=module.run)
+    argv = parser.get_default("command_argv") or ()
+    add_lazy_subcommands(sub, "tether_companion.bench", BENCHMARKS, argv, "run_benchmark")
 
 
 def run(args: argparse.Namespace) -> int:

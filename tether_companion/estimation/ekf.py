@@ -33,7 +33,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg.lapack import dpotrf, dpotrs
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 FloatArray = NDArray[np.float64]
 
@@ -119,7 +119,9 @@ def chi2_threshold(probability: float, dof: int) -> float:
     """Chi-square gate threshold: NIS values above it are rejected (``inf`` disables the gate)."""
     if probability >= 1.0:
         return math.inf
-    return float(chi2.ppf(probability, dof))
+    # the chi-square quantile as scipy.stats.chi2.ppf computes it, without importing
+    # scipy.stats (a second of start-up on a small board)
+    return float(2.0 * gammaincinv(dof / 2.0, probability))
 
 
 class ExtendedKalmanFilter:

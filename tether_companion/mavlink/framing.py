@@ -8,7 +8,9 @@ it counts everything it throws away in :class:`FramingCounters`.
 
 Why not pymavlink's own ``MAVLink.parse_char``: on a bad checksum it raises and discards the
 whole claimed frame (up to 280 bytes), and it keeps no per-cause counts. Here pymavlink still
-decodes the payload (``MAVLink.decode``) once the frame is known to be intact.
+decodes the payload (``MAVLink.decode``) once the frame is known to be intact, except for the
+estimators' input streams, which :class:`~tether_companion.mavlink.fastdecode.FastDecoder`
+turns into the same message objects from precompiled layouts (``fast=False`` turns that off).
 
 Example
 -------
@@ -27,6 +29,8 @@ from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import ardupilotmega as dialect
+
+from tether_companion.mavlink.fastdecode import FastDecoder
 
 if TYPE_CHECKING:
     from tether_companion.mavlink.signing import Signer
@@ -54,6 +58,8 @@ _CRC = struct.Struct("<H")
 _MESSAGE_TYPES = dialect.mavlink_map
 _MAX_PAYLOAD = {msg_id: cls.unpacker.size for msg_id, cls in _MESSAGE_TYPES.items()}
 """Largest payload of each message (all fields incl. extensions) [bytes]."""
+_CRC_EXTRA = {msg_id: bytes((cls.crc_extra,)) for msg_id, cls in _MESSAGE_TYPES.items()}
+"""The byte each message's checksum ends with (its ``crc_extra``)."""
 _MAX_BUFFER_BYTES = 1 << 16
 """A stream parser never holds more than this many unparsed bytes (a frame is <= 280)."""
 
@@ -106,13 +112,21 @@ class FrameParser:
     offered to ``gate.admit(frame, source)`` before it is decoded, and dropped (counted as
     ``untrusted``) when refused: signatures and sender addresses are checked there. Without
     one, signed frames are decoded without checking the signature.
+
+    With ``fast`` (the default) the hot input messages of admitted frames are decoded by a
+    :class:`~tether_companion.mavlink.fastdecode.FastDecoder` (same objects, same counts).
     """
 
     def __init__(
-        self, counters: FramingCounters | None = None, gate: FrameGate | None = None
+        self,
+        counters: FramingCounters | None = None,
+        gate: FrameGate | None = None,
+        *,
+        fast: bool = True,
     ) -> None:
         self._buf = bytearray()
         self._decoder = dialect.MAVLink(None)
+        self._fast = FastDecoder() if fast else None
         self.counters = FramingCounters() if counters is None else counters
         """Counts of what was accepted and dropped; pass one object to several parsers (one
         per TCP client of a server, say) to total them."""
@@ -135,6 +149,7 @@ class FrameParser:
         buf = self._buf
         pos = 0
         counters = self.counters
+        fast = self._fast
         n = len(buf)
         while pos < n:
             stx = buf[pos]
@@ -188,9 +203,10 @@ class FrameParser:
                     counters.garbage_bytes += 1
                     pos += 1
                 continue
-            crc_end = pos + frame_len - (_SIGNATURE_LEN if incompat & _IFLAG_SIGNED else 0)
+            signature_len = _SIGNATURE_LEN if incompat & _IFLAG_SIGNED else 0
+            crc_end = pos + frame_len - signature_len
             crc = dialect.x25crc(buf[pos + 1 : crc_end - _CRC_LEN])
-            crc.accumulate(bytes((msg_type.crc_extra,)))
+            crc.accumulate(_CRC_EXTRA[msg_id])
             if crc.crc != _CRC.unpack_from(buf, crc_end - _CRC_LEN)[0]:
                 counters.bad_crc += 1
                 counters.garbage_bytes += 1
@@ -201,12 +217,15 @@ class FrameParser:
                 counters.untrusted += 1
                 pos += frame_len
                 continue
-            try:
-                msg = self._decoder.decode(frame)
-            except Exception:  # noqa: BLE001 - pymavlink raises assorted errors on odd payloads
-                counters.bad_payload += 1
-                pos += frame_len
-                continue
+            if fast is not None and msg_id in fast.layouts:
+                msg = fast.decode(frame, signature_len)
+            else:
+                try:
+                    msg = self._decoder.decode(frame)
+                except Exception:  # noqa: BLE001 - pymavlink raises assorted errors on odd payloads
+                    counters.bad_payload += 1
+                    pos += frame_len
+                    continue
             counters.frames_ok += 1
             out.append(msg)
             pos += frame_len

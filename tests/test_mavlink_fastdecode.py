@@ -220,3 +220,25 @@ def test_layouts_come_from_the_dialect() -> None:
     assert servo.crc_extra == dialect.MAVLink_servo_output_raw_message.crc_extra
     with pytest.raises(ValueError, match="char fields"):
         MessageLayout(dialect.MAVLink_statustext_message)
+
+
+class _RefuseAttitude:
+    """A link-trust gate that refuses every ATTITUDE frame (and remembers what it saw)."""
+
+    def __init__(self) -> None:
+        self.seen: list[int] = []
+
+    def admit(self, frame, source) -> bool:
+        msg_id = frame[5] if frame[0] == dialect.PROTOCOL_MARKER_V1 else frame[7]
+        self.seen.append(msg_id)
+        return msg_id != dialect.MAVLINK_MSG_ID_ATTITUDE
+
+
+def test_the_trust_gate_sees_every_frame_before_the_fast_decoder() -> None:
+    frames = _flight_frames(0.5, 2)
+    gate = _RefuseAttitude()
+    parser = FrameParser(gate=gate, fast=True)
+    messages = [m for f in frames for m in parser.feed(f) + parser.end_datagram()]
+    assert len(gate.seen) == len(frames)
+    assert "ATTITUDE" not in {m.get_type() for m in messages}
+    assert parser.counters.untrusted == gate.seen.count(dialect.MAVLINK_MSG_ID_ATTITUDE) > 0

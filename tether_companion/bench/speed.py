@@ -101,20 +101,39 @@ def _record(scenario: Scenario, ticks: int) -> list[tuple]:
 
 
 def _ours(
-    rows: list[tuple], config: EstimatorConfig, model: FourStateModel
+    rows: list[tuple], config: EstimatorConfig, model: FourStateModel, *, scalar: bool = True
 ) -> tuple[float, np.ndarray]:
+    """Our filter on the recorded inputs: the service's scalar update (``update_rows``), or
+    with ``scalar=False`` the numpy reference path (``update`` with a measurement function)."""
     ekf = ExtendedKalmanFilter(config.x0(), config.p0(), config.q_density())
-    r_acc = np.eye(3) * config.accel_noise.variance_mps2_sq
-    r_alt = np.array([[config.altimeter_noise_variance_m2]])
+    r_acc = config.accel_noise.variance_mps2_sq
+    r_alt = config.altimeter_noise_variance_m2
+    alt_rows = altimeter(ekf.x)[1].tolist()
+    inputs = [
+        (dt, rotation.tolist(), thrust, accel.tolist(), height, rotation, accel)
+        for dt, rotation, thrust, accel, height in rows
+    ]
     out = np.empty((len(rows), 4))
-    started = time.perf_counter()
-    for i, (dt, rotation, thrust, accel, height) in enumerate(rows):
+    started = time.process_time()
+    for i, (dt, rot_rows, thrust, acc, height, rotation, accel) in enumerate(inputs):
         ekf.predict(dt)
-        ekf.update("accel", accel, lambda x, r=rotation, t=thrust: model.accel(x, r, t), r_acc)
-        if height is not None:
-            ekf.update("altimeter", np.array((height,)), altimeter, r_alt)
+        if scalar:
+            predicted, h_rows = model.accel_rows(ekf.x.tolist(), rot_rows, thrust)
+            innovation = [acc[0] - predicted[0], acc[1] - predicted[1], acc[2] - predicted[2]]
+            ekf.update_rows("accel", innovation, h_rows, r_acc)
+            if height is not None:
+                ekf.update_rows("altimeter", [height + float(ekf.x[2])], alt_rows, r_alt)
+        else:
+            ekf.update(
+                "accel",
+                accel,
+                lambda x, r=rotation, t=thrust: model.accel(x, r, t),
+                np.eye(3) * r_acc,
+            )
+            if height is not None:
+                ekf.update("altimeter", np.array((height,)), altimeter, np.array([[r_alt]]))
         out[i] = ekf.x
-    return time.perf_counter() - started, out
+    return time.process_time() - started, out
 
 
 def _filterpy(
@@ -143,7 +162,7 @@ def _filterpy(
         return altimeter(x.ravel())[1]
 
     out = np.empty((len(rows), 4))
-    started = time.perf_counter()
+    started = time.process_time()
     for i, (dt, rotation, thrust, accel, height) in enumerate(rows):
         ekf.Q = q_density * dt
         ekf.predict()
@@ -152,7 +171,42 @@ def _filterpy(
         if height is not None:
             ekf.update(np.array([[height]]), jac_alt, h_alt, R=r_alt)
         out[i] = ekf.x.ravel()
-    return time.perf_counter() - started, out
+    return time.process_time() - started, out
+
+
+def _replay_cpu(repeat: int, seconds: float = 20.0) -> tuple[float, float]:
+    """Least CPU time [s] of replaying a synthetic hover .tlog (RAW_IMU, ATTITUDE,
+    SERVO_OUTPUT_RAW at 200 Hz, DISTANCE_SENSOR at 20 Hz) through the service pipeline, and
+    the flight time it spans [s]."""
+    import io
+    import tempfile
+    from pathlib import Path
+
+    from tether_companion.mavlink.framing import FrameEncoder
+    from tether_companion.service.config import load_service_config, load_vehicle_for
+    from tether_companion.service.recording import RecordingLimits, TlogWriter
+    from tether_companion.service.replay import replay_log
+    from tether_companion.service.synthetic import HoverStreams
+
+    config = load_service_config(None, {"recording": {"enabled": False}})
+    vehicle = load_vehicle_for(config)
+    streams = HoverStreams(vehicle, np.array([2.0, 1.0, -3.0]), 4.0, rng=np.random.default_rng(5))
+    encoder = FrameEncoder(1, 1)
+    limits = RecordingLimits(max_file_bytes=1 << 30, max_total_bytes=1 << 31, flush_interval_s=1.0)
+    with tempfile.TemporaryDirectory() as directory:
+        writer = TlogWriter(Path(directory), limits)
+        for k in range(int(seconds * 200)):
+            for msg in streams.messages(20.0 + k * 0.005, k):
+                writer.write(encoder.encode(msg))
+        writer.close()
+        path = writer.current_path
+        assert path is not None
+        best = math.inf
+        for _ in range(repeat):
+            started = time.process_time()
+            replay_log(path, config, vehicle, io.StringIO())
+            best = min(best, time.process_time() - started)
+    return best, seconds
 
 
 def run(args: argparse.Namespace) -> int:
@@ -172,10 +226,12 @@ def run(args: argparse.Namespace) -> int:
     ticks = int(min(scenario.duration_s, 20.0) * scenario.sensors.imu_rate_hz)
     rows = _record(scenario, ticks)
     model = FourStateModel(Simulator(scenario).vehicle.mass_kg)
-    ours_s, theirs_s = math.inf, math.inf
-    for _ in range(args.repeat):  # interleaved, so both see the same machine load
+    ours_s, numpy_s, theirs_s = math.inf, math.inf, math.inf
+    for _ in range(args.repeat):  # interleaved, so all see the same machine load
         elapsed, ours_x = _ours(rows, ungated, model)
         ours_s = min(ours_s, elapsed)
+        elapsed, numpy_x = _ours(rows, ungated, model, scalar=False)
+        numpy_s = min(numpy_s, elapsed)
         try:
             elapsed, theirs_x = _filterpy(rows, ungated, model)
         except ImportError:
@@ -183,6 +239,7 @@ def run(args: argparse.Namespace) -> int:
             console.print("filterpy is not installed (pip install -e '.[bench]'): no comparison")
             break
         theirs_s = min(theirs_s, elapsed)
+    replay_cpu_s, replay_flight_s = _replay_cpu(args.repeat)
     results = {
         "scenario": args.scenario,
         "simulated_s": scenario.duration_s,
@@ -196,9 +253,14 @@ def run(args: argparse.Namespace) -> int:
         "sim_and_both_ekfs_real_time_factor_cpu": scenario.duration_s / full_cpu_s,
         "ekf_steps": len(rows),
         "ours_us_per_step": ours_s / len(rows) * 1e6,
+        "ours_numpy_us_per_step": numpy_s / len(rows) * 1e6,
         "filterpy_us_per_step": theirs_s / len(rows) * 1e6,
         "filterpy_over_ours": theirs_s / ours_s,
         "max_state_difference": float(np.max(np.abs(ours_x - theirs_x))),
+        "max_state_difference_scalar_vs_numpy": float(np.max(np.abs(ours_x - numpy_x))),
+        "replay_flight_s": replay_flight_s,
+        "replay_cpu_s": replay_cpu_s,
+        "replay_real_time_factor_cpu": replay_flight_s / replay_cpu_s,
     }
     if args.json:
         print(json.dumps(results, indent=2))
@@ -213,9 +275,17 @@ def run(args: argparse.Namespace) -> int:
     ):
         table.add_row(f"{label}, wall", f"{wall:.2f} s = {duration / wall:.1f}x real time")
         table.add_row(f"{label}, CPU", f"{cpu:.2f} s = {duration / cpu:.1f}x real time")
-    table.add_row("EKF step, ours", f"{results['ours_us_per_step']:.1f} us")
-    table.add_row("EKF step, filterpy", f"{results['filterpy_us_per_step']:.1f} us")
+    table.add_row("EKF step, ours (scalar, as run), CPU", f"{results['ours_us_per_step']:.1f} us")
+    table.add_row("EKF step, ours (numpy reference), CPU", f"{numpy_s / len(rows) * 1e6:.1f} us")
+    table.add_row("EKF step, filterpy (peer), CPU", f"{results['filterpy_us_per_step']:.1f} us")
     table.add_row("filterpy / ours", f"{results['filterpy_over_ours']:.2f}")
     table.add_row("max |x ours - x filterpy|", f"{results['max_state_difference']:.1e}")
+    table.add_row(
+        "max |x scalar - x numpy|", f"{results['max_state_difference_scalar_vs_numpy']:.1e}"
+    )
+    table.add_row(
+        f"replay of a {replay_flight_s:.0f} s .tlog, CPU",
+        f"{replay_cpu_s:.2f} s = {replay_flight_s / replay_cpu_s:.1f}x real time",
+    )
     console.print(table)
     return 0

@@ -35,6 +35,8 @@ from numpy.typing import NDArray
 from scipy.linalg.lapack import dpotrf, dpotrs
 from scipy.special import gammaincinv
 
+from tether_companion.estimation import scalar_update
+
 FloatArray = NDArray[np.float64]
 
 MeasurementFunction = Callable[[FloatArray], tuple[FloatArray, FloatArray]]
@@ -287,6 +289,59 @@ class ExtendedKalmanFilter:
         status.fused += 1
         status.consecutive_rejections = 0
         if dpotrf(self.P, lower=1, clean=0)[1] != 0:  # Cholesky failed: not PD
+            self._repair_covariance()
+        return UpdateResult(FUSED, nis)
+
+    def update_rows(
+        self,
+        sensor: str,
+        innovation: list[float],
+        h_rows: list[list[float]],
+        r_variance: float,
+    ) -> UpdateResult:
+        """:meth:`update` for a small filter, in scalar Python (same checks, counts, gate).
+
+        ``innovation`` is ``z - h(x)`` (m values), ``h_rows`` the Jacobian's m rows of n, and
+        the noise is ``r_variance`` on each axis (``R = r I``). See
+        :mod:`~tether_companion.estimation.scalar_update` for the arithmetic; the result
+        equals :meth:`update`'s to rounding.
+        """
+        status = self.sensors.get(sensor)
+        if status is None:
+            status = self.sensors[sensor] = SensorStatus()
+        p = self.P.ravel().tolist()
+        h = [v for row in h_rows for v in row]
+        m = len(innovation)
+        innovated = scalar_update.innovate(p, h, innovation, r_variance)
+        if innovated is None:  # S not positive definite: NaN/inf somewhere, or singular
+            if not math.isfinite(sum(p) + sum(h) + sum(innovation) + r_variance):
+                status.nonfinite += 1
+                return UpdateResult(NONFINITE, math.nan)
+            status.singular += 1
+            return UpdateResult(SINGULAR, math.nan)
+        nis, pht, factor = innovated
+        status.last_nis = nis
+        status.last_innovation = np.array(innovation)
+        threshold = self._thresholds.get(m)
+        if threshold is None:
+            threshold = self._thresholds[m] = chi2_threshold(self.gate_probability, m)
+        if nis > threshold:
+            limit = self.max_consecutive_rejections
+            if limit <= 0 or status.consecutive_rejections < limit:
+                status.consecutive_rejections += 1
+                status.gated += 1
+                return UpdateResult(GATED, nis)
+            status.forced += 1
+        n = self.x.size
+        x, p_new = scalar_update.fuse(self.x.tolist(), p, h, innovation, r_variance, pht, factor)
+        if not math.isfinite(sum(x) + sum(p_new)):
+            status.nonfinite += 1
+            return UpdateResult(NONFINITE, math.nan)
+        self.x = np.array(x)
+        self.P = np.array(p_new).reshape(n, n)
+        status.fused += 1
+        status.consecutive_rejections = 0
+        if not scalar_update.is_positive_definite(p_new, n):
             self._repair_covariance()
         return UpdateResult(FUSED, nis)
 

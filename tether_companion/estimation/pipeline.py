@@ -44,6 +44,7 @@ from tether_companion.estimation.ekf import FUSED, GATED, NONFINITE, ExtendedKal
 from tether_companion.estimation.observability import RANGEFINDER, RangeWatch, grow_for_imu_gap
 from tether_companion.estimation.tether_models import (
     F_C,
+    P_D,
     POSITION,
     FourStateModel,
     ThreeStateModel,
@@ -243,8 +244,11 @@ class TetherEstimator:
             max_consecutive_rejections=config.gate.max_consecutive_rejections,
         )
         self.health = EstimatorHealth()
-        self._r_accel = np.eye(3) * config.accel_noise.variance_mps2_sq
-        self._r_alt = np.array([[config.altimeter_noise_variance_m2]])
+        self._r_accel_variance = config.accel_noise.variance_mps2_sq
+        """Accelerometer noise variance per axis [(m/s^2)^2] (``R = r I``)."""
+        self._r_alt = config.altimeter_noise_variance_m2
+        self._altimeter_rows = altimeter(self.filter.x)[1].tolist()
+        """The altimeter's Jacobian (constant: ``h_alt = -p_d``)."""
         self._stale = config.staleness
         self._time_s = math.nan
         self._early_range: RangeSample | None = None
@@ -345,17 +349,17 @@ class TetherEstimator:
         if cos_tilt < math.cos(cfg.max_tilt_rad):
             health.range_out_of_range += 1
             return
-        height_m = np.array(
-            (
-                height_above_anchor_m(
-                    sample.distance_m,
-                    aligner.rotation_ned_to_body,
-                    cfg.offset_frd_m,
-                    self.config.ground_station.anchor_height_m,
-                ),
+        height_m = float(
+            height_above_anchor_m(
+                sample.distance_m,
+                aligner.rotation_ned_to_body,
+                cfg.offset_frd_m,
+                self.config.ground_station.anchor_height_m,
             )
         )
-        result = self.filter.update(ALTIMETER, height_m, altimeter, self._r_alt)
+        result = self.filter.update_rows(
+            ALTIMETER, [height_m + float(self.filter.x[P_D])], self._altimeter_rows, self._r_alt
+        )
         health.last_range_nis = result.nis
         if result.status == FUSED:
             health.range_fused += 1
@@ -409,11 +413,10 @@ class TetherEstimator:
         if x[0] * x[0] + x[1] * x[1] + x[2] * x[2] < model.min_cable_length_m**2:
             health.near_anchor += 1
             return False
-
-        def measure(state: FloatArray) -> tuple[FloatArray, FloatArray]:
-            return model.accel(state, rotation, thrust_n, tension_n)
-
-        result = self.filter.update(ACCEL, accel, measure, self._r_accel)
+        predicted, h_rows = model.accel_rows(x.tolist(), rotation.tolist(), thrust_n, tension_n)
+        ax, ay, az = accel.tolist()
+        innovation = [ax - predicted[0], ay - predicted[1], az - predicted[2]]
+        result = self.filter.update_rows(ACCEL, innovation, h_rows, self._r_accel_variance)
         health.last_accel_nis = result.nis
         status = self.filter.sensors[ACCEL]
         health.accel_forced = status.forced

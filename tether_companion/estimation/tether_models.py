@@ -37,23 +37,23 @@ POSITION = slice(P_N, P_D + 1)
 """Slice of the position block of either state vector."""
 
 
-def _accel_and_jacobian(
+def accel_rows(
     position_ned_m: list[float],
     tension_n: float,
-    rotation_ned_to_body: FloatArray,
+    rotation_rows: list[list[float]],
     thrust_n: float,
     mass_kg: float,
     tension_column: bool,
-) -> tuple[FloatArray, FloatArray]:
-    """``h_acc`` [m/s^2] shape (3,) and its Jacobian, shape (3, 4) with the ``d/d f_c`` column
-    or (3, 3) without.
+) -> tuple[list[float], list[list[float]]]:
+    """``h_acc`` [m/s^2] (3 values) and its Jacobian's 3 rows (4 values with the ``d/d f_c``
+    column, else 3), as Python floats; ``rotation_rows`` is ``R_v^b`` row by row.
 
-    Written in scalars (the EKF evaluates it twice per IMU tick and numpy's per-call overhead
+    Written in scalars (the EKF evaluates it at every IMU tick and numpy's per-call overhead
     would dominate 3x3 arithmetic): with ``a = R u``,
     ``h = -(f_c/m) a - (0, 0, T/m)``, ``dh/dp = -(f_c/(m |p|)) (R - a u^T)``, ``dh/df_c = -a/m``.
     """
     pn, pe, pd = position_ned_m
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_ned_to_body.tolist()
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_rows
     inv_length = 1.0 / math.sqrt(pn * pn + pe * pe + pd * pd)
     un, ue, ud = pn * inv_length, pe * inv_length, pd * inv_length
     a0 = r00 * un + r01 * ue + r02 * ud
@@ -61,18 +61,18 @@ def _accel_and_jacobian(
     a2 = r20 * un + r21 * ue + r22 * ud
     k = -tension_n / mass_kg
     kl = k * inv_length
-    accel = np.array((k * a0, k * a1, k * a2 - thrust_n / mass_kg))
-    rows = (
+    accel = [k * a0, k * a1, k * a2 - thrust_n / mass_kg]
+    rows = [
         [kl * (r00 - a0 * un), kl * (r01 - a0 * ue), kl * (r02 - a0 * ud)],
         [kl * (r10 - a1 * un), kl * (r11 - a1 * ue), kl * (r12 - a1 * ud)],
         [kl * (r20 - a2 * un), kl * (r21 - a2 * ue), kl * (r22 - a2 * ud)],
-    )
+    ]
     if tension_column:
         inv_m = -1.0 / mass_kg
         rows[0].append(inv_m * a0)
         rows[1].append(inv_m * a1)
         rows[2].append(inv_m * a2)
-    return accel, np.array(rows)
+    return accel, rows
 
 
 class _StraightTetherModel:
@@ -108,13 +108,26 @@ class _StraightTetherModel:
         ``tension_n`` [N] is the known tension of the 3-state model; the 4-state model ignores
         it (the tension is the state's fourth component).
         """
-        values = x.tolist()
+        accel, rows = self.accel_rows(
+            x.tolist(), rotation_ned_to_body.tolist(), thrust_n, tension_n
+        )
+        return np.array(accel), np.array(rows)
+
+    def accel_rows(
+        self,
+        state: list[float],
+        rotation_rows: list[list[float]],
+        thrust_n: float,
+        tension_n: float = math.nan,
+    ) -> tuple[list[float], list[list[float]]]:
+        """:meth:`accel` on Python lists: ``h_acc`` (3 values) and the Jacobian's 3 rows of n
+        (``state`` the n state values, ``rotation_rows`` ``R_v^b`` row by row)."""
         if self.has_tension_state:
-            tension_n = values[F_C]
-        return _accel_and_jacobian(
-            values[P_N : P_D + 1],
+            tension_n = state[F_C]
+        return accel_rows(
+            state[P_N : P_D + 1],
             tension_n,
-            rotation_ned_to_body,
+            rotation_rows,
             thrust_n,
             self.mass_kg,
             self.has_tension_state,

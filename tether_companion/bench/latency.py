@@ -8,6 +8,16 @@ so each one is matched to the moment that RAW_IMU left here; the latency is its 
 here minus that send time (both loopback hops, the service's decode + EKF + encode, and this
 process's own wake-up: an upper bound on the service's share). CPU is the service process's
 user + system time over the measurement window from ``/proc/PID/stat``, as a share of one core.
+
+Floors, measured in the same run with the same datagrams (absolute figures on a shared machine
+swing 3x from run to run; the ratios are what to read):
+
+* bare receiver (CPU and latency floor): a process that only receives the datagrams with a
+  plain asyncio ``DatagramProtocol`` and answers every 6th RAW_IMU with a pre-built
+  VISION_POSITION_ESTIMATE carrying its ``time_usec`` (read from the frame bytes: no framing,
+  no decoding, no estimator);
+* link echo: the same answer through this project's link stack (framing, pymavlink decode
+  of every message), no estimator.
 """
 
 from __future__ import annotations
@@ -92,6 +102,15 @@ async def _measure(args: argparse.Namespace) -> dict:
         [sys.executable, "-m", "tether_companion.bench.latency"], vehicle, FLOOR_S, args.seed
     )
     result["floor_ms"] = floor["latency_ms"]
+    result["floor_cpu_share"] = floor["cpu_share"]
+    bare = await _round_trip(
+        [sys.executable, "-m", "tether_companion.bench.latency", "--bare"],
+        vehicle,
+        FLOOR_S,
+        args.seed,
+    )
+    result["bare_ms"] = bare["latency_ms"]
+    result["bare_cpu_share"] = bare["cpu_share"]
     return result
 
 
@@ -159,6 +178,47 @@ async def _echo(endpoint: str) -> None:
                 )
 
 
+class _BareEcho(asyncio.DatagramProtocol):
+    """The floor: receive datagrams, answer every 6th RAW_IMU with a pre-built estimate."""
+
+    def __init__(self) -> None:
+        self.transport: asyncio.DatagramTransport | None = None
+        self.count = 0
+        self.encoder = dialect.MAVLink(None, srcSystem=1, srcComponent=191)
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = transport  # type: ignore[assignment]
+        heartbeat = dialect.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3)
+        self.transport.sendto(heartbeat.pack(self.encoder))
+        start_streams = dialect.MAVLink_command_long_message(
+            1, 1, dialect.MAV_CMD_SET_MESSAGE_INTERVAL, 0, 27.0, 5000.0, 0, 0, 0, 0, 0
+        )  # the flight controller streams once asked, as for the service
+        self.transport.sendto(start_streams.pack(self.encoder))
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        # a MAVLink 2 RAW_IMU (id 27) starts its payload with time_usec (uint64) at byte 10
+        if len(data) >= 18 and data[0] == 0xFD and data[7] == 27 and data[8] == 0:
+            self.count += 1
+            if self.count % 6 == 0:
+                time_usec = int.from_bytes(data[10:18], "little")
+                reply = dialect.MAVLink_vision_position_estimate_message(
+                    time_usec, 0, 0, 0, 0, 0, 0, _ZEROS, 0
+                )
+                assert self.transport is not None
+                self.transport.sendto(reply.pack(self.encoder))
+
+
+_ZEROS = [0.0] * 21
+
+
+async def _bare(endpoint: str) -> None:
+    """Run :class:`_BareEcho` against ``udp:HOST:PORT`` until killed."""
+    host, port = endpoint.split(":")[1:]
+    loop = asyncio.get_running_loop()
+    await loop.create_datagram_endpoint(_BareEcho, remote_addr=(host, int(port)))
+    await asyncio.Event().wait()
+
+
 def _print(result: dict, args: argparse.Namespace) -> None:
     console = Console()
     lat = result["latency_ms"]
@@ -175,12 +235,26 @@ def _print(result: dict, args: argparse.Namespace) -> None:
         table.add_row("latency p90", f"{p90:.3f} ms", "")
         table.add_row("latency p99", f"{p99:.3f} ms", "< 2 ms")
         table.add_row("latency max", f"{lat.max():.3f} ms", "")
-    floor = result["floor_ms"]
+    bare, floor = result["bare_ms"], result["floor_ms"]
+    if bare.size:
+        b50, b99 = np.percentile(bare, [50, 99])
+        table.add_row("floor: bare asyncio UDP echo p50 / p99", f"{b50:.3f} / {b99:.3f} ms", "")
+        if lat.size:
+            extra = np.percentile(lat, 99) - b99
+            table.add_row("service p99 - bare echo p99", f"{extra:.3f} ms", "<= 0.3 ms")
     if floor.size:
         f50, f99 = np.percentile(floor, [50, 99])
-        table.add_row("floor: bare UDP echo process p50 / p99", f"{f50:.3f} / {f99:.3f} ms", "")
+        table.add_row("peer: link-stack echo p50 / p99", f"{f50:.3f} / {f99:.3f} ms", "")
+    cpu, bare_cpu = result["cpu_share"], result["bare_cpu_share"]
+    table.add_row("service CPU (user + system)", f"{100 * cpu:.1f} % of one core", "<= 5 %")
+    table.add_row("floor: bare receiver CPU", f"{100 * bare_cpu:.1f} % of one core", "")
     table.add_row(
-        "service CPU (user + system)", f"{100 * result['cpu_share']:.1f} % of one core", "< 10 %"
+        "peer: link-stack echo CPU", f"{100 * result['floor_cpu_share']:.1f} % of one core", ""
+    )
+    table.add_row(
+        "service CPU / bare receiver CPU",
+        f"{cpu / bare_cpu:.1f}x" if bare_cpu > 0 else "n/a",
+        "<= 3x",
     )
     table.add_row("measured window", f"{result['wall_s']:.1f} s after {WARMUP_S:g} s warm-up", "")
     load = os.getloadavg()[0]
@@ -191,6 +265,8 @@ def _print(result: dict, args: argparse.Namespace) -> None:
 
 
 if __name__ == "__main__":
-    asyncio.run(
-        _echo(sys.argv[1])
-    )  # the floor's peer: python -m tether_companion.bench.latency ENDPOINT
+    # the floors' peers: python -m tether_companion.bench.latency [--bare] ENDPOINT
+    if sys.argv[1] == "--bare":
+        asyncio.run(_bare(sys.argv[2]))
+    else:
+        asyncio.run(_echo(sys.argv[1]))

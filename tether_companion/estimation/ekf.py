@@ -260,16 +260,8 @@ class ExtendedKalmanFilter:
             nis = float(innovation @ dpotrs(s_chol, innovation, lower=1)[0])
         status.last_nis = nis
         status.last_innovation = innovation
-        threshold = self._thresholds.get(m)
-        if threshold is None:
-            threshold = self._thresholds[m] = chi2_threshold(self.gate_probability, m)
-        if nis > threshold:
-            limit = self.max_consecutive_rejections
-            if limit <= 0 or status.consecutive_rejections < limit:
-                status.consecutive_rejections += 1
-                status.gated += 1
-                return UpdateResult(GATED, nis)
-            status.forced += 1
+        if self._gated(status, nis, m):
+            return UpdateResult(GATED, nis)
         # K = P H^T S^-1, i.e. K^T = S^-1 (P H^T)^T (S symmetric)
         gain = pht / s_value if m == 1 else dpotrs(s_chol, pht.T, lower=1)[0].T
         x = self.x + gain @ innovation
@@ -322,16 +314,8 @@ class ExtendedKalmanFilter:
         nis, pht, factor = innovated
         status.last_nis = nis
         status.last_innovation = np.array(innovation)
-        threshold = self._thresholds.get(m)
-        if threshold is None:
-            threshold = self._thresholds[m] = chi2_threshold(self.gate_probability, m)
-        if nis > threshold:
-            limit = self.max_consecutive_rejections
-            if limit <= 0 or status.consecutive_rejections < limit:
-                status.consecutive_rejections += 1
-                status.gated += 1
-                return UpdateResult(GATED, nis)
-            status.forced += 1
+        if self._gated(status, nis, m):
+            return UpdateResult(GATED, nis)
         n = self.x.size
         x, p_new = scalar_update.fuse(self.x.tolist(), p, h, innovation, r_variance, pht, factor)
         if not math.isfinite(sum(x) + sum(p_new)):
@@ -344,6 +328,23 @@ class ExtendedKalmanFilter:
         if not scalar_update.is_positive_definite(p_new, n):
             self._repair_covariance()
         return UpdateResult(FUSED, nis)
+
+    def _gated(self, status: SensorStatus, nis: float, m: int) -> bool:
+        """Whether the chi-square gate rejects ``nis`` of an m-dimensional measurement
+        (counted in ``status``); a sample let through after too many rejections is counted as
+        forced."""
+        threshold = self._thresholds.get(m)
+        if threshold is None:
+            threshold = self._thresholds[m] = chi2_threshold(self.gate_probability, m)
+        if not nis > threshold:  # NaN passes, as before: the update's finite check drops it
+            return False
+        limit = self.max_consecutive_rejections
+        if limit <= 0 or status.consecutive_rejections < limit:
+            status.consecutive_rejections += 1
+            status.gated += 1
+            return True
+        status.forced += 1
+        return False
 
     # ------------------------------------------------------------------ diagnostics
     def nees(self, x_true: FloatArray) -> float:

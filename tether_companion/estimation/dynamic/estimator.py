@@ -114,13 +114,13 @@ _HEALTH_VALUES = operator.attrgetter(*(f.name for f in dataclasses.fields(Dynami
 
 
 def drag_per_s(dynamic: DynamicFilterConfig, vehicle: VehicleProfile) -> float:
-    """Rotor drag coefficient ``mu`` [1/s]: the config's, else the profile's linear drag
-    coefficient over the mass (the profile's ``rotor_drag_per_s`` when it has one)."""
+    """Rotor drag coefficient ``mu`` [1/s]: the config's, else the profile's
+    ``rotor_drag_per_s`` when set (> 0), else its legacy isotropic linear drag coefficient over
+    the mass."""
     if dynamic.drag_per_s is not None:
         return dynamic.drag_per_s
-    rotor = getattr(vehicle, "rotor_drag_per_s", None)
-    if rotor is not None:
-        return float(rotor)
+    if vehicle.rotor_drag_per_s > 0.0:
+        return vehicle.rotor_drag_per_s
     return vehicle.drag_coefficient_n_s_per_m / vehicle.mass_kg
 
 

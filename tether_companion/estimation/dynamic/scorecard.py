@@ -2,7 +2,8 @@
 
 * ``dynamic``: :class:`~tether_companion.estimation.dynamic.estimator.DynamicTetherEstimator`
   with the IMU, attitude, PWM and rangefinder only (the paper 4-state filter's inputs), the
-  scenario's cable weight per length, default :class:`DynamicFilterConfig` otherwise;
+  scenario's cable weight per length and anchor height above the ground (ground-station
+  facts), default :class:`DynamicFilterConfig` otherwise;
 * ``dynamic-winch``: the same, also given the winch's paid-out length each tick (the ground
   station's report; the cable model then uses that length and the length is fused).
 
@@ -40,9 +41,11 @@ class DynamicKind:
 
     def __init__(self, context: FlightContext, use_winch: bool) -> None:
         cable = context.scenario.cable
+        ground = getattr(context.scenario, "ground", None)  # the anchor stand's height
         dynamic = dataclasses.replace(
             DynamicFilterConfig(),
             cable_weight_n_per_m=cable.linear_density_kg_per_m * context.gravity_mps2,
+            anchor_height_m=float(getattr(ground, "anchor_height_m", 0.0)),
         )
         self._estimator = DynamicTetherEstimator(EstimatorConfig(), context.vehicle, dynamic)
         self._use_winch = use_winch

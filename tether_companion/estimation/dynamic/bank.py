@@ -9,9 +9,9 @@ members run side by side on the same measurements, and each accumulates the log-
 ``-NIS/2`` of its innovations (tempered: :data:`LIKELIHOOD_TEMPERING`). The published state
 is the mixture's mean and covariance (weights from the log-likelihoods; the covariance
 includes the spread between members, so it stays honest while they disagree). When one
-member's weight passes ``SELECT_WEIGHT`` after ``MIN_BANK_S`` the others are dropped; after ``MAX_BANK_S`` without a decision (a steady hover
-gives the thrust scale no information) the bank collapses into one filter holding the
-mixture's moments.
+member's weight passes ``SELECT_WEIGHT`` after ``MIN_BANK_S`` the others are dropped; after
+``MAX_BANK_S`` without a decision (a steady hover gives the thrust scale no information) the
+bank collapses into one filter holding the mixture's moments.
 
 Pure and synchronous.
 """

@@ -222,3 +222,19 @@ def test_scheduler_gives_the_local_numbers(local_card, tmp_path, capsys):
                     process.kill()
     assert remote["scheduler"] == address and remote["workers"] == 1
     assert remote["scenarios"] == local_card["scenarios"]
+
+
+def test_plot_writes_one_png_per_scenario(tmp_path):
+    pytest.importorskip("matplotlib", reason="matplotlib is not installed (the plot extra)")
+    import dataclasses
+
+    from tether_companion.bench.estimators.report import write_plots
+    from tether_companion.bench.estimators.tasks import FlightTask, score_flight
+    from tether_companion.sim.scenario import load_scenario
+
+    selected = [kinds()["ekf-4s"], kinds()["catenary"]]
+    scenario = dataclasses.replace(load_scenario("hover"), duration_s=3.0, seed=1)
+    score = score_flight(FlightTask("hover", scenario, ("ekf-4s", "catenary"), 1.0, 0.5))
+    written = write_plots(tmp_path / "plots", [score], selected, ["hover"])
+    assert written == [tmp_path / "plots" / "estimators-hover.png"]
+    assert written[0].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

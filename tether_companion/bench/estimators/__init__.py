@@ -18,6 +18,10 @@ HELP = "Score every estimator on the realistic scenarios (RMSE, NEES, CRLB) by M
 
 DEFAULT_SCENARIOS: tuple[str, ...] = ("paper-circle", "hover", "waypoints", "catenary-hover")
 """Scored when no ``--scenario`` is given (the realistic set once it lands)."""
+SIMULATORS: tuple[str, ...] = ("ours", "rotorpy")
+"""``ours``: :class:`~tether_companion.sim.simulator.Simulator`; ``rotorpy``: rotorpy's airframe
+with our controller, cable and sensors (:mod:`tether_companion.crosscheck.rotorpy_sim`, the
+``crosscheck`` extra)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -56,6 +60,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=float_at_least(0.0, exclusive=True),
         default=0.5,
         help="converged once the 3-D error stays below this [m] (default 0.5)",
+    )
+    parser.add_argument(
+        "--simulator",
+        choices=SIMULATORS,
+        default="ours",
+        help="physics of the flights: ours, or rotorpy's airframe (the crosscheck extra)",
     )
     parser.add_argument("--json", action="store_true", help="print the scorecard as JSON only")
     parser.add_argument(

@@ -56,6 +56,10 @@ def _scenarios(names: list[str], duration_s: float | None, settle_s: float) -> d
 def run_scorecard(args: argparse.Namespace) -> int:
     """Fly, score and report (see the package docstring)."""
     require_distributed()
+    if args.simulator == "rotorpy":
+        from tether_companion.crosscheck.rotorpy_sim import require_rotorpy
+
+        require_rotorpy()
     selected = _selected_kinds(args.estimator)
     scenarios = _scenarios(args.scenario or list(DEFAULT_SCENARIOS), args.duration_s, args.settle_s)
     names = list(scenarios)
@@ -67,6 +71,7 @@ def run_scorecard(args: argparse.Namespace) -> int:
             tuple(k.name for k in selected),
             args.settle_s,
             args.converged_m,
+            args.simulator,
         )
         for name, scenario in scenarios.items()
         for seed in seeds
@@ -106,11 +111,15 @@ def run_scorecard(args: argparse.Namespace) -> int:
             "flights": len(tasks),
             "workers": workers,
             "scheduler": args.scheduler or "local",
+            "simulator": args.simulator,
             "wall_time_s": elapsed,
         }
         print(json.dumps(json_safe(document), indent=2))
         return 0
     print_tables(console, card, selected, len(seeds), args.settle_s, args.converged_m)
     where = args.scheduler or "a local cluster"
-    console.print(f"{len(tasks)} flights in {elapsed:.1f} s on {workers} worker(s) of {where}")
+    console.print(
+        f"{len(tasks)} flights on the {args.simulator} simulator in {elapsed:.1f} s on "
+        f"{workers} worker(s) of {where}"
+    )
     return 0

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from tether_companion.bench.estimators import SIMULATORS
 from tether_companion.bench.estimators.registry import (
     EstimatorKind,
     FlightContext,
@@ -79,9 +80,20 @@ class FlightRecord:
     traces: dict[str, KindTrace]
 
 
-def fly(scenario: Scenario, kinds: list[EstimatorKind]) -> FlightRecord:
-    """Fly ``scenario`` (seeded by ``scenario.seed``) with every kind in ``kinds``."""
-    sim = Simulator(scenario)
+def make_simulator(scenario: Scenario, simulator: str = "ours") -> Simulator:
+    """The simulator named ``simulator`` (one of :data:`SIMULATORS`) flying ``scenario``."""
+    if simulator == "rotorpy":
+        from tether_companion.crosscheck.rotorpy_sim import RotorpySimulator
+
+        return RotorpySimulator(scenario)  # type: ignore[return-value]
+    if simulator != "ours":
+        raise ValueError(f"simulator must be one of {SIMULATORS}, got {simulator!r}")
+    return Simulator(scenario)
+
+
+def fly(scenario: Scenario, kinds: list[EstimatorKind], simulator: str = "ours") -> FlightRecord:
+    """Fly ``scenario`` (seeded by ``scenario.seed``) on ``simulator`` with every kind."""
+    sim = make_simulator(scenario, simulator)
     context = FlightContext(scenario, load_vehicle(scenario.vehicle), sim.gravity_mps2)
     estimators = [kind.build(context) for kind in kinds]
     schedule = _schedule(scenario)

@@ -32,6 +32,8 @@ class FlightTask:
         Registered kinds to ride along.
     settle_s, converged_m
         Start of the scored window [s]; convergence threshold [m].
+    simulator
+        ``ours`` or ``rotorpy`` (:data:`~tether_companion.bench.estimators.SIMULATORS`).
     """
 
     scenario_name: str
@@ -39,6 +41,7 @@ class FlightTask:
     kind_names: tuple[str, ...]
     settle_s: float
     converged_m: float
+    simulator: str = "ours"
 
     @property
     def seed(self) -> int:
@@ -82,7 +85,7 @@ def score_flight(task: FlightTask) -> FlightScore:
     """Fly ``task`` and score every kind (runs on a worker)."""
     registry = kinds()
     selected = [registry[name] for name in task.kind_names]
-    record = fly(task.scenario, selected)
+    record = fly(task.scenario, selected, task.simulator)
     bounds = {
         model: crlb_for(record, task.scenario, model)
         for model in {kind.crlb_model for kind in selected}

@@ -1,0 +1,1 @@
+"""Second opinions on our physics from code we did not write (optional extras)."""

@@ -1,59 +1,57 @@
-"""Our scenarios flown by rotorpy's multirotor (PyPI ``rotorpy``) instead of our rigid body.
+"""Our scenarios flown with rotorpy's airframe physics (PyPI ``rotorpy``) in place of ours.
 
 rotorpy (University of Pennsylvania, MIT licence) integrates its own quadrotor dynamics
 (``Multirotor._s_dot_fn``: rotor thrust ``k_eta w^2`` with first-order rotor-speed lag, rotor
 drag "H force" ``-w k_d v_local`` at each hub, induced inflow ``-w k_z v_z``, translational
 lift ``k_h v_xy^2``, blade-flapping moment, parasitic drag ``-|v| c_D v``; scipy's RK45 via
-``Multirotor.step``). We keep *our* controller, cable, winch events, wind and sensors, and
-swap the physics of the airframe: the tether's force enters rotorpy's equations of motion as
-an external force evaluated inside its integrator, and rotorpy's states become our samples.
+``Multirotor.step``). :class:`RotorpySimulator` is our
+:class:`~tether_companion.sim.simulator.Simulator` with its :class:`RigidBody` swapped for
+:class:`RotorpyBody`: everything else is ours (controller, cable and its wind drag, winch
+events, wind and Dryden gusts, thrust-map error and battery sag, terrain, sensors, failure
+checks). The tether's force enters rotorpy's equations of motion as an external force
+evaluated inside its integrator.
 
 Frames: rotorpy's world is x north, y west, z up and its body is FLU; ours are NED and FRD.
 Both maps are ``S = diag(1, -1, -1)``: ``p_ned = S x``, ``R_ned_frd = S R S``,
-``omega_frd = S omega_flu``. rotorpy's gravity is 9.81 m/s^2 (ours 9.80665).
+``omega_frd = S omega_flu``. rotorpy's gravity (9.81 m/s^2) is set to ours (9.80665).
 
 Vehicle mapping (:func:`rotorpy_params`): mass, inertia, rotor positions and spin from our
-profile (a ``ccw`` rotor's reaction torque is ``-k f`` about z-up); ``k_eta`` from a nominal
-top rotor speed; the rotor drag ``k_d`` (and ``k_z``) chosen so that the four hubs at the
-hover rotor speed give our vehicle's linear drag coefficient: ``n w_hover k_d = c_d``. The
-rest is rotorpy's own aerodynamics, scaled from its AscTec Hummingbird parameters by the
-ratio of hover thrust per rotor (translational lift) and of mass (parasitic drag): see
-docs/simulator.md, "rotorpy cross-check", for what this makes differ and by how much.
-
-Implements the part of :class:`~tether_companion.sim.simulator.Simulator` that the
-scorecard's flight loop uses (``advance_to``, ``read_*``, ``truth``, ``cable``,
-``physics_dt_s``, ``gravity_mps2``), so ``bench estimators --simulator rotorpy`` runs on it.
+profile (its allocation matrix); ``k_eta`` from a nominal top rotor speed; rotor drag ``k_d``
+so that the hubs at the hover rotor speed give our body-horizontal linear drag
+(``n w_hover k_d = c_d + m mu``), ``k_z`` our vertical linear drag (``c_d``); parasitic drag
+``c_D = rho m / (2 B)`` from our ballistic coefficient horizontally, none vertically;
+translational lift scaled from rotorpy's AscTec Hummingbird by the hover thrust per rotor (we
+have none); no flapping moment (the Hummingbird has none either). docs/simulator.md, "rotorpy
+cross-check", says what differs and by how much.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.errors import InputError
+from tether_companion.frames import rotation_ned_to_body
+from tether_companion.physics.aerodynamics import AIR_DENSITY_KG_M3
+from tether_companion.physics.rigid_body import N_RIGID_STATES
 from tether_companion.physics.vehicle import VehicleProfile
-from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.sim.scenario import Scenario
-from tether_companion.sim.simulator import Simulator, TruthState
+from tether_companion.sim.simulator import Simulator
 
 FloatArray = NDArray[np.float64]
 
 FLIP = np.diag((1.0, -1.0, -1.0))
 """NED <-> rotorpy world (x north, y west, z up), FRD <-> FLU: the same diagonal map."""
-ROTORPY_GRAVITY_MPS2 = 9.81
 NOMINAL_TOP_ROTOR_SPEED_RAD_S = 1000.0
 """Rotor speed at full thrust (sets k_eta; only the product k_eta w^2 matters)."""
-HUMMINGBIRD = {
-    "mass_kg": 0.5,
-    "hover_thrust_per_rotor_n": 0.5 * 9.81 / 4.0,
-    "k_h": 3.39e-3,
-    "c_dx": 0.5e-2,
-    "c_dz": 1e-2,
-}
-"""rotorpy's ``vehicles/hummingbird_params.py`` values our profile's aerodynamics scale from."""
+HUMMINGBIRD_K_H = 3.39e-3
+"""rotorpy ``vehicles/hummingbird_params.py``: translational lift per rotor [N/(m/s)^2] ..."""
+HUMMINGBIRD_HOVER_THRUST_PER_ROTOR_N = 0.5 * 9.81 / 4.0
+"""... at this hover thrust per rotor (0.5 kg, 4 rotors)."""
 INSTALL_HINT = "pip install 'tether-companion[crosscheck]' (or: pip install rotorpy)"
 
 
@@ -71,30 +69,19 @@ def hover_thrust_per_rotor_n(vehicle: VehicleProfile, gravity_mps2: float) -> fl
     return vehicle.mass_kg * gravity_mps2 / vehicle.n_motors
 
 
-def rotorpy_params(vehicle: VehicleProfile, drag_n_s_per_m: float, max_thrust_n: float) -> dict:
-    """rotorpy ``quad_params`` for our ``vehicle`` (see the module docstring).
-
-    Parameters
-    ----------
-    vehicle
-        Our profile.
-    drag_n_s_per_m
-        Linear drag coefficient to reproduce at the hover rotor speed [N s/m].
-    max_thrust_n
-        Thrust of one rotor at full command [N].
-    """
+def rotorpy_params(vehicle: VehicleProfile, gravity_mps2: float) -> dict:
+    """rotorpy ``quad_params`` for our ``vehicle`` (see the module docstring)."""
     n = vehicle.n_motors
-    k_eta = max_thrust_n / NOMINAL_TOP_ROTOR_SPEED_RAD_S**2
-    hover_n = hover_thrust_per_rotor_n(vehicle, ROTORPY_GRAVITY_MPS2)
+    k_eta = vehicle.thrust_curve.max_thrust_n / NOMINAL_TOP_ROTOR_SPEED_RAD_S**2
+    hover_n = hover_thrust_per_rotor_n(vehicle, gravity_mps2)
     hover_speed = math.sqrt(hover_n / k_eta)
-    k_d = drag_n_s_per_m / (n * hover_speed)
-    lift_scale = hover_n / HUMMINGBIRD["hover_thrust_per_rotor_n"]
-    mass_scale = vehicle.mass_kg / HUMMINGBIRD["mass_kg"]
-    positions = {}
-    for i, motor in enumerate(vehicle.motors):
-        angle = math.radians(motor.angle_deg)
-        arm = vehicle.arm_length_m
-        positions[f"r{i + 1}"] = np.array((arm * math.cos(angle), -arm * math.sin(angle), 0.0))
+    linear = vehicle.drag_coefficient_n_s_per_m
+    horizontal = linear + vehicle.mass_kg * vehicle.rotor_drag_per_s
+    ballistic = vehicle.ballistic_coefficient_kg_per_m2
+    parasitic = 0.5 * AIR_DENSITY_KG_M3 * vehicle.mass_kg / ballistic if ballistic > 0 else 0.0
+    # allocation columns (1, -y, x, yaw) in FRD: rotor at FLU (x, -y_frd); a positive FRD yaw
+    # torque (ccw rotor) is negative about z-up
+    allocation = vehicle.allocation_matrix()
     ixx, iyy, izz = vehicle.inertia_kg_m2
     return {
         "mass": vehicle.mass_kg,
@@ -105,16 +92,19 @@ def rotorpy_params(vehicle: VehicleProfile, drag_n_s_per_m: float, max_thrust_n:
         "Ixz": 0.0,
         "Iyz": 0.0,
         "num_rotors": n,
-        "rotor_pos": positions,
-        "rotor_directions": np.array([-1 if m.spin == "ccw" else 1 for m in vehicle.motors]),
-        "c_Dx": HUMMINGBIRD["c_dx"] * mass_scale,
-        "c_Dy": HUMMINGBIRD["c_dx"] * mass_scale,
-        "c_Dz": HUMMINGBIRD["c_dz"] * mass_scale,
+        "rotor_pos": {
+            f"r{i + 1}": np.array((column[2], column[1], 0.0))
+            for i, column in enumerate(allocation.T)
+        },
+        "rotor_directions": -np.sign(allocation[3]),
+        "c_Dx": parasitic,
+        "c_Dy": parasitic,
+        "c_Dz": 0.0,
         "k_eta": k_eta,
         "k_m": vehicle.yaw_moment_per_thrust_m * k_eta,
-        "k_d": k_d,
-        "k_z": k_d,
-        "k_h": HUMMINGBIRD["k_h"] * lift_scale,
+        "k_d": horizontal / (n * hover_speed),
+        "k_z": linear / (n * hover_speed),
+        "k_h": HUMMINGBIRD_K_H * hover_n / HUMMINGBIRD_HOVER_THRUST_PER_ROTOR_N,
         "k_flap": 0.0,
         "tau_m": vehicle.motor_time_constant_s,
         "rotor_speed_min": 0.0,
@@ -133,15 +123,150 @@ def euler_from_rotation(rotation_body_to_ned: FloatArray) -> tuple[float, float,
     )
 
 
-class RotorpySimulator:
-    """A scenario flown by rotorpy's airframe with our controller, cable, wind and sensors.
+def _no_force(*_: float) -> tuple[float, float, float]:
+    return (0.0, 0.0, 0.0)
+
+
+class RotorpyBody:
+    """rotorpy's multirotor behind the part of :class:`RigidBody`'s interface the simulator
+    uses (airborne only: it never lands).
 
     Parameters
     ----------
-    scenario
-        The set-up; airborne starts only (rotorpy's ground model is not ours).
-    rng
-        Generator of the sensor noise (default ``default_rng(scenario.seed)``).
+    vehicle
+        Our profile (mapped by :func:`rotorpy_params`).
+    gravity_mps2
+        Gravity [m/s^2] (rotorpy's own 9.81 is replaced by it).
+    """
+
+    def __init__(self, vehicle: VehicleProfile, gravity_mps2: float) -> None:
+        multirotor_cls = require_rotorpy()
+        from scipy.spatial.transform import Rotation
+
+        self._rotation = Rotation
+        self.vehicle = vehicle
+        self.mass_kg = vehicle.mass_kg
+        self.gravity_mps2 = gravity_mps2
+        self.params = rotorpy_params(vehicle, gravity_mps2)
+        self._k_eta = self.params["k_eta"]
+        self.external_force: Callable[..., tuple[float, float, float]] = _no_force
+        self.ground_down_m: Callable[[float, float], float] = lambda north, east: 0.0
+        self.landed = False
+        self._tug_ned_n = (0.0, 0.0, 0.0)
+        self._wind_ned_m_s = (0.0, 0.0, 0.0)
+        self._command = np.zeros(vehicle.n_motors)
+        body = self
+
+        class TetheredMultirotor(multirotor_cls):  # type: ignore[misc, valid-type]
+            """rotorpy's multirotor with the tether's force in its equations of motion."""
+
+            def _s_dot_fn(self, t: float, s: FloatArray, cmd: FloatArray) -> FloatArray:
+                s_dot = super()._s_dot_fn(t, s, cmd)
+                s_dot[3:6] += body._external_world_n(s) / self.mass
+                return s_dot
+
+        self.multirotor = TetheredMultirotor(
+            self.params, control_abstraction="cmd_motor_speeds", aero=True, enable_ground=False
+        )
+        self.multirotor.g = gravity_mps2
+        self.multirotor.weight = np.array((0.0, 0.0, -self.mass_kg * gravity_mps2))
+        self._state: dict[str, FloatArray] = {}
+        self.x: list[float] = [0.0] * N_RIGID_STATES
+
+    def _external_world_n(self, s: FloatArray) -> FloatArray:
+        fn, fe, fd = self.external_force(s[0], -s[1], -s[2], s[3], -s[4], -s[5])
+        tn, te, td = self._tug_ned_n
+        return np.array((fn + tn, -(fe + te), -(fd + td)))
+
+    # ------------------------------------------------------------------ forces
+    @property
+    def tug_force_ned_n(self) -> tuple[float, float, float]:
+        """Extra NED force on the drone [N]."""
+        return self._tug_ned_n
+
+    @tug_force_ned_n.setter
+    def tug_force_ned_n(self, force_ned_n: Sequence[float]) -> None:
+        self._tug_ned_n = tuple(float(f) for f in force_ned_n)  # type: ignore[assignment]
+
+    @property
+    def wind_ned_m_s(self) -> tuple[float, float, float]:
+        """Wind velocity, NED [m/s] (rotorpy's ``wind`` state)."""
+        return self._wind_ned_m_s
+
+    @wind_ned_m_s.setter
+    def wind_ned_m_s(self, wind_ned_m_s: Sequence[float]) -> None:
+        self._wind_ned_m_s = tuple(float(w) for w in wind_ned_m_s)  # type: ignore[assignment]
+        if self._state:
+            self._state["wind"] = FLIP @ np.asarray(self._wind_ned_m_s)
+
+    # ------------------------------------------------------------------ state
+    def set_state(self, state: Sequence[float], *, landed: bool = False) -> None:
+        """Our layout (position NED, body velocity FRD, Euler, rates FRD, motor thrusts)."""
+        if landed:
+            raise InputError(
+                "the rotorpy cross-check flies airborne starts only "
+                "(this scenario starts on the ground: initial.airborne false)"
+            )
+        values = np.asarray(state, dtype=float)
+        to_body = rotation_ned_to_body(*values[6:9])
+        rotation_flu = FLIP @ to_body.T @ FLIP
+        self._state = {
+            "x": FLIP @ values[0:3],
+            "v": FLIP @ (to_body.T @ values[3:6]),
+            "q": self._rotation.from_matrix(rotation_flu).as_quat(),
+            "w": FLIP @ values[9:12],
+            "wind": FLIP @ np.asarray(self._wind_ned_m_s),
+            "rotor_speeds": np.sqrt(np.maximum(values[N_RIGID_STATES:], 0.0) / self._k_eta),
+        }
+        self._command = self._state["rotor_speeds"].copy()
+        self._refresh()
+
+    def _refresh(self) -> None:
+        s = self._state
+        rotation = self._rotation.from_quat(s["q"]).as_matrix()
+        self._body_to_ned = FLIP @ rotation @ FLIP
+        velocity = FLIP @ s["v"]
+        body_velocity = self._body_to_ned.T @ velocity
+        self.x = [
+            *(FLIP @ s["x"]).tolist(),
+            *body_velocity.tolist(),
+            *euler_from_rotation(self._body_to_ned),
+            *(FLIP @ s["w"]).tolist(),
+        ]
+        self._velocity_ned = tuple(velocity.tolist())
+
+    @property
+    def state(self) -> FloatArray:
+        """Our layout, shape (12 + n_motors,)."""
+        return np.array(self.x + self.motor_thrusts_n)
+
+    @property
+    def motor_thrusts_n(self) -> list[float]:
+        """Rotor thrusts ``k_eta w^2`` [N]."""
+        return (self._k_eta * self._state["rotor_speeds"] ** 2).tolist()
+
+    def step(self, dt_s: float, steady_state_thrusts_n: Sequence[float]) -> None:
+        """rotorpy's own step with rotor speeds commanded to give these steady thrusts."""
+        thrusts = np.maximum(np.asarray(steady_state_thrusts_n, dtype=float), 0.0)
+        self._command = np.sqrt(thrusts / self._k_eta)
+        self._state = self.multirotor.step(self._state, {"cmd_motor_speeds": self._command}, dt_s)
+        self._refresh()
+
+    def velocity_ned_m_s(self) -> tuple[float, float, float]:
+        """NED velocity [m/s]."""
+        return self._velocity_ned
+
+    def specific_force_body_mps2(self) -> tuple[float, float, float]:
+        """Non-gravitational force per unit mass, FRD [m/s^2], from rotorpy's state
+        derivative (thrust, lift, drag, the tether): ``R^T (v_dot - g)``."""
+        packed = self.multirotor._pack_state(self._state)
+        s_dot = self.multirotor._s_dot_fn(0.0, packed, self._command)
+        world = FLIP @ s_dot[3:6] - np.array((0.0, 0.0, self.gravity_mps2))
+        return tuple((self._body_to_ned.T @ world).tolist())  # type: ignore[return-value]
+
+
+class RotorpySimulator(Simulator):
+    """:class:`Simulator` with rotorpy's airframe (:class:`RotorpyBody`); the same arguments.
 
     Raises
     ------
@@ -149,175 +274,13 @@ class RotorpySimulator:
         rotorpy is not installed, or the scenario starts on the ground.
     """
 
-    def __init__(self, scenario: Scenario, rng: np.random.Generator | None = None) -> None:
-        multirotor_cls = require_rotorpy()
-        if not scenario.initial.airborne:
-            raise InputError(
-                "the rotorpy cross-check flies airborne starts only "
-                "(scenario starts on the ground: initial.airborne false)"
-            )
-        from scipy.spatial.transform import Rotation
-
-        self._rotation_cls = Rotation
-        # Our simulator, never stepped: it builds the trimmed start, the controller (its
-        # integrators preloaded against the cable), the cable, the trajectory and the sensors.
-        self._ours = Simulator(scenario, rng=rng)
-        self.scenario = scenario
-        self.vehicle = self._ours.vehicle
-        self.cable = self._ours.cable
-        self.sensors = self._ours.sensors
-        self.controller = self._ours.controller
-        self.gravity_mps2 = ROTORPY_GRAVITY_MPS2
-        self.physics_dt_s = 1.0 / scenario.physics_rate_hz
-        self.control_dt_s = 1.0 / scenario.controller.rate_hz
-        self.params = rotorpy_params(
-            self.vehicle,
-            self.vehicle.drag_coefficient_n_s_per_m,
-            self.vehicle.thrust_curve.max_thrust_n,
-        )
-        self._k_eta = self.params["k_eta"]
-        truth = self._ours.truth
-        rotation = FLIP @ _rotation_body_to_ned(truth.euler_rad) @ FLIP
-        state = {
-            "x": FLIP @ truth.position_ned_m,
-            "v": FLIP @ truth.velocity_ned_m_s,
-            "q": Rotation.from_matrix(rotation).as_quat(),
-            "w": FLIP @ truth.body_rates_rad_s,
-            "wind": FLIP @ np.asarray(scenario.wind.velocity_ned_m_s, dtype=float),
-            "rotor_speeds": np.sqrt(np.maximum(truth.motor_thrust_n, 0.0) / self._k_eta),
-        }
-        self._external = _TetheredForce(self)
-        self.multirotor = _tethered_class(multirotor_cls)(
-            self.params,
-            initial_state=state,
-            control_abstraction="cmd_motor_speeds",
-            aero=True,
-            enable_ground=False,
-            external_force=self._external,
-        )
-        self.state = state
-        self._pwm_us = list(self._ours.truth.pwm_us)
-        self._steps = 0
-        self._command = state["rotor_speeds"].copy()
-
-    # ------------------------------------------------------------------ time
-    @property
-    def time_s(self) -> float:
-        """Simulation time [s]."""
-        return self._steps * self.control_dt_s
-
-    def advance_to(self, time_s: float) -> None:
-        """Step rotorpy at the controller rate until ``time_s`` [s] (nearest control step)."""
-        target = round(time_s / self.control_dt_s)
-        while self._steps < target:
-            self._step()
-
-    def _step(self) -> None:
-        t = self.time_s
-        self._ours._apply_due_events(t + 0.5 * self.control_dt_s)  # winch, tension, release
-        position, velocity, euler, rates = self._kinematics()
-        if self._ours.follow_trajectory:
-            self.controller.set_setpoint(self._ours.trajectory.setpoint_at(t))
-        pwm = self.controller.update(
-            self.control_dt_s, tuple(position), tuple(velocity), euler, tuple(rates), landed=False
-        )
-        self._pwm_us = list(pwm)
-        thrusts = np.asarray(self.controller.mixer.thrusts_for_pwm_us(pwm))
-        self._command = np.sqrt(np.maximum(thrusts, 0.0) / self._k_eta)
-        self.state = self.multirotor.step(
-            self.state, {"cmd_motor_speeds": self._command}, self.control_dt_s
-        )
-        self.cable.advance(self.control_dt_s)
-        self._steps += 1
-
-    # ------------------------------------------------------------------ truth
-    def _kinematics(self) -> tuple[FloatArray, FloatArray, tuple[float, float, float], FloatArray]:
-        s = self.state
-        rotation = self._rotation_cls.from_quat(s["q"]).as_matrix()
-        euler = euler_from_rotation(FLIP @ rotation @ FLIP)
-        return FLIP @ s["x"], FLIP @ s["v"], euler, FLIP @ s["w"]
-
-    def specific_force_body_mps2(self) -> FloatArray:
-        """Non-gravitational force per unit mass on the airframe now, FRD [m/s^2], from
-        rotorpy's own state derivative (thrust, drag, lift, the tether)."""
-        packed = self.multirotor._pack_state(self.state)
-        s_dot = self.multirotor._s_dot_fn(0.0, packed, self._command)
-        rotation = self._rotation_cls.from_quat(self.state["q"]).as_matrix()
-        world = s_dot[3:6] - np.array((0.0, 0.0, -ROTORPY_GRAVITY_MPS2))
-        return FLIP @ (rotation.T @ world)
-
-    @property
-    def truth(self) -> TruthState:
-        """The noise-free state now, as our simulator reports it."""
-        position, velocity, euler, rates = self._kinematics()
-        cable = np.array(self.cable.force_components(*position.tolist(), *velocity.tolist()))
-        return TruthState(
-            time_s=self.time_s,
-            position_ned_m=position,
-            velocity_ned_m_s=velocity,
-            euler_rad=np.array(euler),
-            body_rates_rad_s=rates,
-            motor_thrust_n=self._k_eta * self.state["rotor_speeds"] ** 2,
-            pwm_us=np.array(self._pwm_us),
-            cable_force_ned_n=cable,
-            tension_n=self.cable.tension_n,
-            specific_force_body_mps2=self.specific_force_body_mps2(),
-            landed=False,
-        )
-
-    # ------------------------------------------------------------------ sensors
-    def read_imu(self) -> ImuSample:
-        """Accelerometer and gyro through our sensor models."""
-        _, _, _, rates = self._kinematics()
-        force = tuple(self.specific_force_body_mps2().tolist())
-        return self.sensors.imu(self.time_s, force, tuple(rates.tolist()))
-
-    def read_attitude(self) -> AttitudeSample:
-        """Roll, pitch, yaw with our attitude noise."""
-        _, _, (roll, pitch, yaw), _ = self._kinematics()
-        return self.sensors.attitude(self.time_s, roll, pitch, yaw)
-
-    def read_pwm(self) -> PwmSample:
-        """The PWM our controller commanded."""
-        return self.sensors.pwm(self.time_s, np.array(self._pwm_us))
-
-    def read_rangefinder(self) -> RangeSample | None:
-        """Our downward rangefinder model over flat ground at the anchor's level."""
-        position, _, (roll, pitch, _), _ = self._kinematics()
-        return self.sensors.rangefinder(self.time_s, -float(position[2]), roll, pitch)
-
-
-def _rotation_body_to_ned(euler_rad: FloatArray) -> FloatArray:
-    from tether_companion.frames import rotation_ned_to_body
-
-    return rotation_ned_to_body(*(float(a) for a in euler_rad)).T
-
-
-class _TetheredForce:
-    """The cable's (and a ground-station tug's) force in rotorpy's world frame [N]."""
-
-    def __init__(self, simulator: RotorpySimulator) -> None:
-        self._sim = simulator
-
-    def __call__(self, s: FloatArray) -> FloatArray:
-        pn, pe, pd = s[0], -s[1], -s[2]
-        vn, ve, vd = s[3], -s[4], -s[5]
-        fn, fe, fd = self._sim.cable.force_components(pn, pe, pd, vn, ve, vd)
-        tn, te, td = self._sim._ours.body.tug_force_ned_n
-        return np.array((fn + tn, -(fe + te), -(fd + td)))
-
-
-def _tethered_class(multirotor_cls: type) -> type:
-    """rotorpy's ``Multirotor`` with an external world-frame force in its equations of motion."""
-
-    class TetheredMultirotor(multirotor_cls):  # type: ignore[misc, valid-type]
-        def __init__(self, *args: Any, external_force: _TetheredForce, **kwargs: Any) -> None:
-            super().__init__(*args, **kwargs)
-            self._external_force = external_force
-
-        def _s_dot_fn(self, t: float, s: FloatArray, cmd_rotor_speeds: FloatArray) -> FloatArray:
-            s_dot = super()._s_dot_fn(t, s, cmd_rotor_speeds)
-            s_dot[3:6] += self._external_force(s) / self.mass
-            return s_dot
-
-    return TetheredMultirotor
+    def __init__(self, scenario: Scenario, *args: Any, **kwargs: Any) -> None:
+        super().__init__(scenario, *args, **kwargs)
+        ours = self.body
+        body = RotorpyBody(self.vehicle, self.gravity_mps2)
+        body.external_force = ours.external_force
+        body.ground_down_m = ours.ground_down_m
+        body.wind_ned_m_s = ours.wind_ned_m_s
+        body.tug_force_ned_n = ours.tug_force_ned_n
+        body.set_state(ours.state, landed=ours.landed)
+        self.body = body  # type: ignore[assignment]

@@ -13,11 +13,12 @@ import argparse
 from pathlib import Path
 
 from tether_companion.commands import float_at_least, int_at_least
+from tether_companion.sim.scenario import REALISTIC_SCENARIOS
 
 HELP = "Score every estimator on the realistic scenarios (RMSE, NEES, CRLB) by Monte Carlo."
 
-DEFAULT_SCENARIOS: tuple[str, ...] = ("paper-circle", "hover", "waypoints", "catenary-hover")
-"""Scored when no ``--scenario`` is given (the realistic set once it lands)."""
+DEFAULT_SCENARIOS: tuple[str, ...] = REALISTIC_SCENARIOS
+"""Scored when no ``--scenario`` is given: every real-world error source on."""
 SIMULATORS: tuple[str, ...] = ("ours", "rotorpy")
 """``ours``: :class:`~tether_companion.sim.simulator.Simulator`; ``rotorpy``: rotorpy's airframe
 with our controller, cable and sensors (:mod:`tether_companion.crosscheck.rotorpy_sim`, the

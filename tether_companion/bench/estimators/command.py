@@ -38,10 +38,25 @@ def _selected_kinds(names: list[str] | None) -> list[EstimatorKind]:
     return [registry[n] for n in dict.fromkeys(names)]
 
 
-def _scenarios(names: list[str], duration_s: float | None, settle_s: float) -> dict[str, Scenario]:
+def _scenarios(
+    names: list[str],
+    duration_s: float | None,
+    settle_s: float,
+    simulator: str,
+    console: Console,
+) -> dict[str, Scenario]:
+    """The scenarios to fly; on rotorpy, ground starts are refused (named ones) or skipped
+    (the default set, with a note)."""
     loaded = {}
-    for name in dict.fromkeys(names):
+    for name in dict.fromkeys(names or DEFAULT_SCENARIOS):
         scenario = load_scenario(name)
+        if simulator == "rotorpy" and not scenario.initial.airborne:
+            if names:
+                raise InputError(
+                    f"--simulator rotorpy flies airborne starts only; {name!r} starts on the ground"
+                )
+            console.print(f"skipped {name}: rotorpy flies airborne starts only")
+            continue
         if duration_s is not None:
             scenario = dataclasses.replace(scenario, duration_s=duration_s)
         if settle_s >= scenario.duration_s:
@@ -61,7 +76,10 @@ def run_scorecard(args: argparse.Namespace) -> int:
 
         require_rotorpy()
     selected = _selected_kinds(args.estimator)
-    scenarios = _scenarios(args.scenario or list(DEFAULT_SCENARIOS), args.duration_s, args.settle_s)
+    console = Console(stderr=args.json)
+    scenarios = _scenarios(
+        args.scenario or [], args.duration_s, args.settle_s, args.simulator, console
+    )
     names = list(scenarios)
     seeds = list(range(1, args.seeds + 1))
     tasks = [
@@ -78,7 +96,6 @@ def run_scorecard(args: argparse.Namespace) -> int:
     ]
     token = uuid.uuid4().hex[:8]
     keys = [f"bench-estimators-{t.scenario_name}-{t.seed}-{token}" for t in tasks]
-    console = Console(stderr=args.json)
     started = time.perf_counter()
     with dask_client(args.scheduler, args.workers) as client:
         with Progress(

@@ -109,7 +109,8 @@ def published_errors(lockstep: LockstepService, kind: str = "VISION_POSITION_EST
         true = [np.interp(t, times, truth[:, k]) for k in range(3)]
         cov = msg.covariance if kind == "VISION_POSITION_ESTIMATE" else msg.pose_covariance
         position = (msg.x, msg.y, msg.z)
-        rows.append((t, *(p - q for p, q in zip(position, true, strict=True)), cov[0], cov[6], cov[11]))
+        error = (p - q for p, q in zip(position, true, strict=True))
+        rows.append((t, *error, cov[0], cov[6], cov[11]))
     data = np.array(rows).reshape(-1, 7)
     sigma = np.sqrt(data[:, 4:7])
     return {

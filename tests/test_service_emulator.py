@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 import pytest
-from rich.console import Console
 from lockstep_service import LockstepService as _LockstepService
+from rich.console import Console
 from scenario_files import reel_in_scenario
 
 from tether_companion.constants import GRAVITY_MPS2
@@ -20,8 +20,7 @@ from tether_companion.emulator.autopilot import FlightController
 from tether_companion.emulator.config import load_emulator_scenario
 from tether_companion.emulator.lockstep import LockstepPeer, build_controller
 from tether_companion.estimation.runner import run_scenario
-from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
-from tether_companion.resources import CONFIGS_DIR
+from tether_companion.mavlink.framing import FrameParser, dialect
 from tether_companion.service.app import ORIGIN_ATTEMPTS, CompanionService
 from tether_companion.service.config import load_service_config, load_vehicle_for
 from tether_companion.service.emulator_process import EmulatorProcess

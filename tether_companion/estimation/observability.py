@@ -13,9 +13,10 @@ paper's circle at 1 m/s) while their covariance there grows only with the random
 ``range_lost_after_s``, grows the position covariance along the cable so that the standard
 deviation there is at least ``unobserved_speed_mps`` times the time since the last height:
 ``P += v^2 ((t_lost)^2 - (t_lost - dt)^2) u u^T``. The variance then says what the data can
-tell (likewise :func:`grow_for_imu_gap` over an IMU outage); the publisher withholds (or inflates) once it passes ``publish.max_position_variance_m2``
-and names the missing input. A fused height pins the direction again and the Kalman update
-shrinks the grown variance by itself.
+tell (likewise :func:`grow_for_imu_gap` over an IMU outage); the publisher withholds (or
+inflates) once it passes ``publish.max_position_variance_m2`` and names the missing input.
+A fused height pins the direction again and the Kalman update shrinks the grown variance by
+itself.
 
 Pure and synchronous; times are flight-controller seconds, positions NED from the anchor [m].
 """

@@ -27,11 +27,11 @@ from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.alignment import InputAligner
 from tether_companion.estimation.catenary_position import (
     NO_TENSION,
-    STALE_TENSION,
     UNOBSERVABLE,
     CatenaryPosition,
     CatenaryPositionEstimator,
 )
+from tether_companion.estimation.catenary_position import STALE_TENSION as CATENARY_STALE_TENSION
 from tether_companion.estimation.pipeline import (
     Estimate,
     EstimatorHealth,
@@ -71,7 +71,7 @@ MODE_TICK_S = 0.02
 """Period of the tension modes' logic [s of flight-controller time] (50 Hz)."""
 HEIGHT_STALE_S = 0.5
 """A rangefinder height or FC position older than this [s] is not handed to the modes."""
-_CATENARY_UNAVAILABLE = {NO_TENSION: STALE, STALE_TENSION: STALE, UNOBSERVABLE: SLACK}
+_CATENARY_UNAVAILABLE = {NO_TENSION: STALE, CATENARY_STALE_TENSION: STALE, UNOBSERVABLE: SLACK}
 """Publisher health for the catenary estimator's reasons to have no position (the others,
 ``inconsistent`` and ``no_length``, show as ``diverged``)."""
 

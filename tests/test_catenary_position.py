@@ -131,32 +131,116 @@ def test_grounded_cable_without_horizontal_pull_is_unobservable():
     assert est.on_tension(_estimate(force)).status == UNOBSERVABLE
 
 
+def _sensitivity(force, length, weight, h):
+    """Position sensitivities [m per unit input] to the force axes, the length and the weight
+    per length, by central differences of step ``h`` (relative for length and weight)."""
+
+    def pos(f=force, length_m=length, w=weight):
+        return position_from_force_ned_m(f, KNOWN_LENGTH, w, length_m)
+
+    cols = [(pos(f=force + h * e) - pos(f=force - h * e)) / (2 * h) for e in np.eye(3)]
+    cols.append(
+        (pos(length_m=length * (1 + h)) - pos(length_m=length * (1 - h))) / (2 * h * length)
+    )
+    cols.append((pos(w=weight * (1 + h)) - pos(w=weight * (1 - h))) / (2 * h * weight))
+    return np.column_stack(cols)
+
+
 def test_estimator_outputs_position_and_covariance():
+    """P = s_T^2 J_f J_f^T + s_L^2 j_L j_L^T + (s_w w)^2 j_w j_w^T + s_min^2 I, with the
+    Jacobians checked against a coarser independent difference."""
     p = np.array([4.0, 1.0, -3.0])
     length = 5.1
-    est = CatenaryPositionEstimator(
-        CatenaryPositionConfig(case=KNOWN_LENGTH, weight_per_length_n_per_m=W)
-    )
+    cfg = CatenaryPositionConfig(case=KNOWN_LENGTH, weight_per_length_n_per_m=W)
+    est = CatenaryPositionEstimator(cfg)
     assert solve_known_length(math.hypot(4.0, 1.0), 3.0, length).s1_m > 0.0  # free hanging
     est.set_paid_out_length_m(length, 0.5)
-    out = est.on_tension(_estimate(force_on_drone_ned_n(p, length, W)))
+    force = force_on_drone_ned_n(p, length, W)
+    out = est.on_tension(_estimate(force))
     assert out.valid and np.allclose(out.position_ned_m, p, atol=1e-6)
     cov = out.covariance_m2
-    assert np.allclose(cov, cov.T) and np.all(np.linalg.eigvalsh(cov) >= -1e-12)
-    # covariance = variance * J J^T, J checked against a coarser independent difference
-    force = force_on_drone_ned_n(p, length, W)
-    h = 1e-3
-    jac = np.column_stack(
-        [
-            (
-                position_from_force_ned_m(force + h * e, KNOWN_LENGTH, W, length)
-                - position_from_force_ned_m(force - h * e, KNOWN_LENGTH, W, length)
-            )
-            / (2 * h)
-            for e in np.eye(3)
-        ]
+    assert np.array_equal(cov, cov.T)
+    jac = _sensitivity(force, length, W, 1e-3)
+    scale = np.diag([0.1, 0.1, 0.1, cfg.length_std_m, cfg.weight_per_length_rel_std * W])
+    expected = jac @ scale**2 @ jac.T + cfg.min_position_std_m**2 * np.eye(3)
+    np.testing.assert_allclose(cov, expected, rtol=2e-3, atol=1e-8)
+
+
+@pytest.mark.parametrize(
+    ("force", "length", "variance"),
+    [
+        # measured on realistic-low-tension (seed 1): a 3.2 m cable almost all on the ground,
+        # the drone's range pinned at L by the geometry; the force-only covariance had a
+        # smallest eigenvalue 1e-11 of its largest (negative NEES after rounding)
+        ((0.06308302, 0.03633717, 0.00406604), 3.2069294601828564, 0.0103),
+        ((0.5, -0.2, 0.05), 6.0, 1e-4),  # grounded, nearly slack
+        ((0.0, 0.0, 0.4), 3.0, 1e-4),  # hanging straight down: no horizontal pull ...
+    ],
+)
+def test_covariance_is_positive_definite_where_the_force_alone_pins_a_direction(
+    force, length, variance
+):
+    w = 0.163771055
+    est = CatenaryPositionEstimator(
+        CatenaryPositionConfig(case=KNOWN_LENGTH, weight_per_length_n_per_m=w)
     )
-    assert np.allclose(cov, 0.01 * jac @ jac.T, rtol=1e-3, atol=1e-9)
+    est.set_paid_out_length_m(length, 1.0)
+    out = est.on_tension(_estimate(force, variance=variance))
+    if out.status == UNOBSERVABLE:  # ... is refused when the cable lies on the ground
+        assert force[0] == force[1] == 0.0
+        return
+    assert out.valid
+    cov = out.covariance_m2
+    assert np.array_equal(cov, cov.T)
+    np.linalg.cholesky(cov)  # positive definite
+    eig = np.linalg.eigvalsh(cov)
+    assert eig[0] >= est.config.min_position_std_m**2 * (1 - 1e-9)
+    force_only = _sensitivity(np.asarray(force), length, w, 1e-5)[:, :3]
+    force_eig = np.linalg.eigvalsh(variance * force_only @ force_only.T)
+    assert force_eig[0] < 1e-6 * force_eig[2]  # what the old J Sigma J^T was: near singular
+
+
+@pytest.mark.parametrize(
+    ("position", "length"),
+    [((4.0, 1.0, -3.0), 5.1), ((3.0, 3.0, -2.0), 5.5), ((2.0, 1.0, -1.0), 2.5)],
+)
+def test_covariance_is_consistent_with_monte_carlo_of_its_inputs(position, length):
+    """Force, length and weight drawn from the distributions the estimator assumes (small
+    enough for the linearisation): the positions' NEES against its covariance averages 3
+    (4000 draws: sd of the mean 0.04) and the sample covariance matches it."""
+    rng = np.random.default_rng(11)
+    cfg = CatenaryPositionConfig(
+        case=KNOWN_LENGTH,
+        weight_per_length_n_per_m=W,
+        length_std_m=0.01,
+        weight_per_length_rel_std=0.01,
+        min_position_std_m=1e-4,
+    )
+    force = force_on_drone_ned_n(np.array(position), length, W)
+    sigma_f = 0.002
+    est = CatenaryPositionEstimator(cfg)
+    est.set_paid_out_length_m(length, 1.0)
+    out = est.on_tension(_estimate(force, variance=sigma_f**2))
+    assert out.valid
+    draws = 4000
+    samples = np.empty((draws, 3))
+    for i in range(draws):
+        samples[i] = position_from_force_ned_m(
+            force + sigma_f * rng.standard_normal(3),
+            KNOWN_LENGTH,
+            W * (1 + cfg.weight_per_length_rel_std * rng.standard_normal()),
+            length + cfg.length_std_m * rng.standard_normal(),
+        ) + cfg.min_position_std_m * rng.standard_normal(3)
+    err = samples - out.position_ned_m
+    values = np.einsum("ij,ij->i", err, np.linalg.solve(out.covariance_m2, err.T).T)
+    assert float(values.mean()) == pytest.approx(3.0, abs=0.15)
+    sample_cov = np.cov(err.T)
+    scale = np.sqrt(np.diag(out.covariance_m2))
+    np.testing.assert_allclose(
+        sample_cov / np.outer(scale, scale),
+        out.covariance_m2 / np.outer(scale, scale),
+        atol=0.08,
+    )
 
 
 def test_estimator_refuses_bad_inputs():

@@ -23,8 +23,21 @@ it leaves the ground: its pull says nothing about the drone's horizontal positio
 estimator reports ``unobservable`` rather than guess (the thesis' ``a -> 0`` limit would put
 the drone over the anchor).
 
-The position covariance is the tension covariance mapped through the Jacobian of the
-position with respect to the force (central differences): ``J Sigma_T J^T``.
+The position covariance maps every uncertain input through the Jacobian of the position
+(central differences): the force (the tension filter's isotropic variance ``s_T^2``), the
+paid-out length (``length_std_m``, known-length case) and the weight per length
+(``weight_per_length_rel_std``), plus ``min_position_std_m^2 I``::
+
+    P = s_T^2 J_f J_f^T + s_L^2 j_L j_L^T + s_w^2 j_w j_w^T + s_min^2 I
+
+built as ``G G^T`` from ``G = [s_T J_f, s_L j_L, s_w j_w]`` (symmetric by construction). The
+force term alone is singular where the geometry pins a direction: a cable lying on the ground
+over most of its length puts the drone at ``r = L`` whatever the pull (``dr/dF ~ 0``), and its
+azimuth is uncertain while its range is not. ``J_f J_f^T`` is then rank deficient, rounding
+makes it indefinite (negative NEES), and the estimate claims to know the range exactly while
+it is only as good as the winch's length. The length and weight terms put that uncertainty
+back; the floor keeps ``P`` positive definite where even they vanish (a cable hanging straight
+down from a drone above the anchor).
 
 Pure and synchronous. The service can run it beside or instead of the tether EKF.
 """
@@ -94,6 +107,25 @@ class CatenaryPositionConfig:
     )
     jacobian_step_n: float = spec(
         1e-4, exclusive_minimum=0.0, doc="force step of the central-difference Jacobian [N]"
+    )
+    length_std_m: float = spec(
+        0.1,
+        minimum=0.0,
+        doc="known_length: standard deviation of the reported paid-out length (drum layering, "
+        "stretch; about 1-2 % of a 5-10 m tether) [m]",
+    )
+    weight_per_length_rel_std: float = spec(
+        0.05,
+        minimum=0.0,
+        maximum=1.0,
+        doc="relative standard deviation of the weight per length (datasheet tolerance, "
+        "moisture) [-]",
+    )
+    min_position_std_m: float = spec(
+        0.01,
+        exclusive_minimum=0.0,
+        doc="floor of the position standard deviation per axis, keeps the covariance positive "
+        "definite [m]",
     )
 
 
@@ -270,24 +302,46 @@ class CatenaryPositionEstimator:
             return self._invalid(t, UNOBSERVABLE)
         try:
             position = self._position(force, length)
-            jacobian = np.empty((3, 3))
-            step = cfg.jacobian_step_n
-            for j in range(3):
-                delta = np.zeros(3)
-                delta[j] = step
-                jacobian[:, j] = (
-                    self._position(force + delta, length) - self._position(force - delta, length)
-                ) / (2.0 * step)
+            factor = self._covariance_factor(force, length, estimate.variance_n2)
         except ValueError:
             return self._invalid(t, INCONSISTENT)
-        covariance = estimate.variance_n2 * (jacobian @ jacobian.T)
-        return CatenaryPosition(t, position, 0.5 * (covariance + covariance.T), OK)
+        covariance = factor @ factor.T + cfg.min_position_std_m**2 * np.eye(3)
+        return CatenaryPosition(t, position, covariance, OK)
 
-    def _position(self, force: FloatArray, length_m: float) -> FloatArray:
+    def _covariance_factor(
+        self, force: FloatArray, length_m: float, variance_n2: float
+    ) -> FloatArray:
+        """``G`` (3, 5) with ``P = G G^T + s_min^2 I`` (module docstring): the position's
+        sensitivity [m] to one standard deviation of each force axis, the length and the weight
+        per length (central differences; the branches meet continuously at ``s2 = L``)."""
         cfg = self.config
-        return position_from_force_ned_m(
-            force, cfg.case, cfg.weight_per_length_n_per_m, length_m, cfg.anchor_on_ground
-        )
+        w = cfg.weight_per_length_n_per_m
+        factor = np.zeros((3, 5))
+        step = cfg.jacobian_step_n
+        for j in range(3):
+            delta = np.zeros(3)
+            delta[j] = step
+            factor[:, j] = (
+                self._position(force + delta, length_m) - self._position(force - delta, length_m)
+            ) * (math.sqrt(variance_n2) / (2.0 * step))
+        if cfg.case == KNOWN_LENGTH and cfg.length_std_m > 0.0:
+            dl = 1e-4 * length_m
+            factor[:, 3] = (
+                self._position(force, length_m + dl) - self._position(force, length_m - dl)
+            ) * (cfg.length_std_m / (2.0 * dl))
+        if cfg.weight_per_length_rel_std > 0.0:
+            dw = 1e-4 * w
+            factor[:, 4] = (
+                self._position(force, length_m, w + dw) - self._position(force, length_m, w - dw)
+            ) * (cfg.weight_per_length_rel_std * w / (2.0 * dw))
+        return factor
+
+    def _position(
+        self, force: FloatArray, length_m: float, weight_n_per_m: float | None = None
+    ) -> FloatArray:
+        cfg = self.config
+        w = cfg.weight_per_length_n_per_m if weight_n_per_m is None else weight_n_per_m
+        return position_from_force_ned_m(force, cfg.case, w, length_m, cfg.anchor_on_ground)
 
     def _invalid(self, time_s: float, status: str) -> CatenaryPosition:
         self.rejected += 1

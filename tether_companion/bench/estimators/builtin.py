@@ -1,7 +1,8 @@
 """The estimators of today as scorecard kinds: the paper's EKFs and the catenary estimator.
 
 * ``ekf-4s``: :class:`~tether_companion.estimation.pipeline.TetherEstimator`, 4-state
-  (position + unknown tension), ``configs/estimator.yaml``;
+  (position + unknown tension), ``configs/estimator.yaml`` with the scenario's anchor height
+  above the ground and rangefinder mounting offset (:meth:`FlightContext.estimator_config`);
 * ``ekf-3s``: the same with the 3-state model, given the load cell's tension;
 * ``catenary``: the tension filter (derivative model) and the catenary position estimator
   (known length: the winch's paid-out length, anchor on the ground, the scenario's cable
@@ -42,7 +43,7 @@ class PaperEkf:
     """The paper's 3- or 4-state EKF as a :class:`FlightEstimator`."""
 
     def __init__(self, context: FlightContext, kind: str) -> None:
-        config = dataclasses.replace(load_estimator_config(), kind=kind)
+        config = context.estimator_config(dataclasses.replace(load_estimator_config(), kind=kind))
         self._estimator = TetherEstimator(config, context.vehicle)
         self._has_tension_state = kind == "four_state"
         self._publish = PublishConfig()

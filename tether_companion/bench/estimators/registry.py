@@ -19,6 +19,7 @@ and add the module's dotted path to :data:`PROVIDERS` (one line).
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import math
 from collections.abc import Callable
@@ -28,6 +29,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.sim.scenario import Scenario
@@ -125,6 +127,21 @@ class FlightContext:
     scenario: Scenario
     vehicle: VehicleProfile
     gravity_mps2: float
+
+    def estimator_config(self, base: EstimatorConfig) -> EstimatorConfig:
+        """``base`` with what a user measures and writes into ``estimator:`` for this set-up:
+        the anchor's height above the ground (``ground_station.anchor_height_m`` [m], the
+        scenario's mean ground level; the terrain's undulation is not known) and the
+        rangefinder's mounting point (``rangefinder.offset_frd_m``, body FRD [m])."""
+        return dataclasses.replace(
+            base,
+            ground_station=dataclasses.replace(
+                base.ground_station, anchor_height_m=self.scenario.ground.anchor_height_m
+            ),
+            rangefinder=dataclasses.replace(
+                base.rangefinder, offset_frd_m=self.scenario.sensors.range_offset_frd_m
+            ),
+        )
 
 
 @dataclass(frozen=True)

@@ -19,10 +19,13 @@ from tether_companion.mavlink.signing import (
     UNSIGNED,
     SignatureVerifier,
     Signer,
+    is_signed,
     load_key,
     sign_frame,
     timestamp_from_unix_s,
 )
+from tether_companion.service.config import load_service_config
+from tether_companion.service.security import LinkSecurity
 
 KEY = bytes(range(100, 132))
 NOW_UNIX_S = 1.75e9
@@ -153,3 +156,52 @@ def test_key_file_raw_or_hex_readable_by_the_owner_only(tmp_path) -> None:
         load_key(tmp_path / "missing")
     with pytest.raises(ConfigError, match="regular file"):
         load_key(tmp_path)
+
+
+def test_setup_signing_installs_our_key_and_64_bit_timestamp_in_a_pymavlink_autopilot(
+    tmp_path,
+) -> None:
+    """The service's SETUP_SIGNING (``security.install_key``), signed as the link signs, read by
+    a pymavlink flight controller that has no key yet: the uint64 initial_timestamp arrives
+    whole (10 us units since 2015, above 2^32), the autopilot takes the key and that timestamp
+    as ArduPilot does, and from then on each side accepts the other's signed frames."""
+    key_path = _key_file(tmp_path, KEY, 0o600)
+    config = load_service_config(
+        None,
+        {
+            "link": {"connect": "serial:/dev/ttyAMA0:921600"},
+            "security": {"signing": "required", "key_file": str(key_path), "link_id": 4},
+        },
+    )
+    security = LinkSecurity(config.security, config.link, unix_s=lambda: NOW_UNIX_S)
+    ours = FrameEncoder(config.link.system_id, config.link.component_id, security.signer)
+    setup_frame = ours.encode(security.setup_signing_message())
+
+    assert is_signed(setup_frame)
+    autopilot = _pymavlink(None)  # no key yet: a signed frame is read without checking
+    (setup,) = autopilot.parse_buffer(setup_frame)
+    assert setup.get_type() == "SETUP_SIGNING"
+    assert setup.initial_timestamp == timestamp_from_unix_s(NOW_UNIX_S) > 2**32
+    assert (setup.target_system, setup.target_component) == (1, 1)
+    autopilot.signing.secret_key = bytes(setup.secret_key)
+    autopilot.signing.timestamp = max(autopilot.signing.timestamp, setup.initial_timestamp)
+    autopilot.signing.sign_outgoing = True
+    autopilot.signing.link_id = 0  # ArduPilot signs with its channel number
+
+    # the autopilot's signed stream verifies here ...
+    verifier = security.verifier
+    assert verifier is not None
+    for i in range(3):
+        assert verifier.check(bytes(_imu(i).pack(autopilot))) is None
+    assert verifier.stream_timestamp(1, 1, 0) == setup.initial_timestamp + 2  # +1 a frame
+    # ... and ours there (link id 4), a replay refused by both
+    frames = [ours.encode(_imu(10 + i)) for i in range(2)]
+    for frame in frames:
+        (msg,) = autopilot.parse_buffer(frame)
+        assert msg.get_signed() and msg.get_link_id() == 4
+    assert autopilot.signing.badsig_count == 0 and autopilot.signing.goodsig_count == 2
+    with pytest.raises(mav.MAVError, match="Invalid signature"):
+        autopilot.parse_buffer(frames[0])
+    assert verifier.check(bytes(_imu(0).pack(autopilot))) is None  # a new frame: newer stamp
+    replayed = bytes(_imu(1).pack(autopilot))
+    assert verifier.check(replayed) is None and verifier.check(replayed) == REPLAY

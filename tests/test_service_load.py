@@ -1,16 +1,34 @@
 """Estimate age at the flight controller with the machine loaded: the service (its own
 process, the shipped configuration) beside CPU hogs, over real UDP on 127.0.0.1.
 
-The hogs run 10 nice levels below the service, as the shipped systemd unit places it
-(``Nice=-10``) against ordinary processes. Slow (30 s of flight): ``pytest -m slow``.
+Scheduling as deployed. The systemd unit runs the service at ``Nice=-10`` in a cgroup of its
+own with ``CPUWeight=1000``, ten times an ordinary service's or user session's weight (100).
+Here the service starts a session of its own, which on Linux with autogroups
+(``kernel.sched_autogroup_enabled``) is a scheduling group of its own, reniced by -10 (weight
+9548 against an ordinary group's 1024: the unit's ratio), and runs at nice -10 itself. Each hog
+and everything else on the machine is ordinary: its own group, nice 0. The fake flight
+controller (this test's process) gets the same priority for the test: a real one is a
+microcontroller, not a process on the companion, and its own stalls would count against the
+service (each sample leaves the reorder buffer only when a newer one arrives).
+
+On this shared 2-core machine at load 13 (docs/security.md has the runs): a 200 Hz sleeper
+at ordinary priority in a group of its own woke up to 87-317 ms late; the service and the
+fake flight controller at ordinary priority held estimates over 100 ms (p99.9) in 7 of 15
+runs, up to 1.07 s; at the unit's priority, 31-61 ms in 7 runs. Lowering a nice needs
+CAP_SYS_NICE (root): without it the test is skipped, saying so.
+
+Slow (30 s of flight, 10 s for the negative control): ``pytest -m slow``.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import subprocess
 import sys
+from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,11 +41,61 @@ from tether_companion.service.synthetic import FakeFlightController, HoverStream
 
 pytestmark = [pytest.mark.slow, pytest.mark.integration]
 POSITION = np.array([2.0, 1.0, -3.0])
-FLIGHT_S = 30.0
-NICE_BELOW_SERVICE = 10
+UNIT_NICE = -10
+"""The unit's ``Nice=-10``; as an autogroup nice, the unit's ``CPUWeight=1000`` ratio."""
+AUTOGROUP = Path("/proc/self/autogroup")
+AGE_P999_BOUND_S = 0.1
+"""The issue's bound on the estimate age at the autopilot, p99.9 [s]."""
+SERVICE = (sys.executable, "-m", "tether_companion.cli")
+BLOCKING_SERVICE = (sys.executable, str(Path(__file__).with_name("blocking_housekeeping.py")))
 
 
-def _ages(tmp_path, hogs: int) -> np.ndarray:
+def _autogroup_nice() -> int | None:
+    """This process's autogroup nice, None without autogroups."""
+    try:
+        return int(AUTOGROUP.read_text().split()[-1])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def _set_autogroup_nice(nice: int) -> None:
+    with contextlib.suppress(FileNotFoundError):  # no autogroups: process nice ranks alone
+        AUTOGROUP.write_text(f"{nice}\n")
+
+
+@contextlib.contextmanager
+def _at_unit_priority() -> Iterator[None]:
+    """This process (the fake flight controller's thread) and its group at the unit's priority
+    for the test, restored after; skips the test without the privilege to lower a nice."""
+    nice = os.getpriority(os.PRIO_PROCESS, 0)
+    group = _autogroup_nice()
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, nice + UNIT_NICE)
+        if group is not None:
+            _set_autogroup_nice(group + UNIT_NICE)
+    except PermissionError:
+        os.setpriority(os.PRIO_PROCESS, 0, nice)
+        pytest.skip("running the service at the unit's Nice=-10/CPUWeight needs CAP_SYS_NICE")
+    try:
+        yield
+    finally:
+        os.setpriority(os.PRIO_PROCESS, 0, nice)
+        if group is not None:
+            _set_autogroup_nice(group)
+
+
+def _service_at_unit_priority() -> None:
+    """In the new service process (its own session): nice and autogroup lowered by 10."""
+    os.nice(UNIT_NICE)
+    group = _autogroup_nice()
+    if group is not None:
+        _set_autogroup_nice(group + UNIT_NICE)
+
+
+def _ages(tmp_path, hogs: int, flight_s: float, service_cmd: tuple[str, ...]) -> np.ndarray:
+    """Estimate ages [s] at the flight controller: RAW_IMU sent to VISION_POSITION_ESTIMATE
+    with that IMU stamp received, after the first second of publication."""
+
     async def scenario() -> FakeFlightController:
         fc_link = await open_link(
             parse_endpoint("udpin:127.0.0.1:0", "listen"), system_id=1, component_id=1
@@ -43,17 +111,23 @@ def _ages(tmp_path, hogs: int) -> np.ndarray:
             HoverStreams(load_vehicle_for(config), POSITION, 4.0, rng=np.random.default_rng(9)),
         )
         service = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "tether_companion.cli", "run", "--config", str(config_path)
+            *service_cmd,
+            "run",
+            "--config",
+            str(config_path),
+            start_new_session=True,
+            preexec_fn=_service_at_unit_priority,
         )
         hog_procs = [
             subprocess.Popen(
                 [sys.executable, "-c", "while True: pass"],
-                preexec_fn=lambda: os.nice(NICE_BELOW_SERVICE),
+                preexec_fn=lambda: os.setpriority(os.PRIO_PROCESS, 0, 0),
+                start_new_session=True,
             )
             for _ in range(hogs)
         ]
         try:
-            await fc.run(FLIGHT_S)
+            await fc.run(flight_s)
         finally:
             for hog in hog_procs:
                 hog.kill()
@@ -63,22 +137,34 @@ def _ages(tmp_path, hogs: int) -> np.ndarray:
             await fc_link.close()
         return fc
 
-    fc = asyncio.run(scenario())
+    with _at_unit_priority():
+        fc = asyncio.run(scenario())
     log = fc.log
     ages = [
         log.vision_arrival_s[v.usec] - fc.imu_sent_s[v.usec]
         for v in log.vision
         if v.usec in fc.imu_sent_s
     ]
-    return np.array(ages[30:])  # after the first second of publication
+    assert len(ages) > 0.8 * 30.0 * (flight_s - 2.0)  # published at 30 Hz throughout
+    return np.array(ages[30:])
+
+
+def _p999_s(ages: np.ndarray, label: str) -> float:
+    p50, p99, p999 = np.percentile(ages, [50, 99, 99.9])
+    print(
+        f"estimate age {label}: n {len(ages)} p50 {p50 * 1e3:.1f} ms p99 {p99 * 1e3:.1f} ms "
+        f"p99.9 {p999 * 1e3:.1f} ms max {ages.max() * 1e3:.1f} ms"
+    )
+    return float(p999)
 
 
 def test_estimate_age_p999_under_100_ms_beside_cpu_hogs(tmp_path) -> None:
-    ages = _ages(tmp_path, hogs=os.cpu_count() or 2)
-    p50, p99, p999 = np.percentile(ages, [50, 99, 99.9])
-    print(
-        f"estimate age with hogs: n {len(ages)} p50 {p50 * 1e3:.1f} ms p99 {p99 * 1e3:.1f} ms "
-        f"p99.9 {p999 * 1e3:.1f} ms max {ages.max() * 1e3:.1f} ms"
-    )
-    assert len(ages) > 0.8 * 30.0 * (FLIGHT_S - 2.0)
-    assert p999 < 0.1, p999
+    ages = _ages(tmp_path, hogs=os.cpu_count() or 2, flight_s=30.0, service_cmd=SERVICE)
+    assert _p999_s(ages, "beside CPU hogs") < AGE_P999_BOUND_S
+
+
+def test_the_bound_catches_a_hot_path_waiting_behind_housekeeping(tmp_path) -> None:
+    """Negative control: the same measurement fails when a housekeeping turn blocks the event
+    loop for 120 ms once a second (``blocking_housekeeping.py``), no hogs."""
+    ages = _ages(tmp_path, hogs=0, flight_s=10.0, service_cmd=BLOCKING_SERVICE)
+    assert _p999_s(ages, "behind blocking housekeeping") > AGE_P999_BOUND_S

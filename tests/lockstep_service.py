@@ -3,9 +3,13 @@ and the truth to score what it sent (not collected: no ``test_`` prefix)."""
 
 from __future__ import annotations
 
+import heapq
+import itertools
+
 import numpy as np
 
 from tether_companion.emulator.autopilot import FlightController
+from tether_companion.emulator.faults import LinkFaults
 from tether_companion.emulator.lockstep import LockstepPeer
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser
 from tether_companion.resources import CONFIGS_DIR
@@ -42,9 +46,21 @@ class LockstepLink:
 class LockstepService:
     """The service (shipped configuration plus ``overrides``) beside an emulated flight
     controller, on the controller's clock: :meth:`advance` runs the emulator 5 ms, :meth:`serve`
-    hands the service what arrived and runs its housekeeping every 50 ms."""
+    hands the service what arrived and runs its housekeeping every 50 ms.
 
-    def __init__(self, controller: FlightController, overrides: dict, record: bool = False) -> None:
+    With ``link_seed`` set, the emulator's link faults (its configuration's drop, duplicate,
+    corrupt, delay and jitter, as :class:`~tether_companion.emulator.server.EmulatorServer`
+    applies them on UDP) act on every frame to the service: a delayed frame is handed over
+    at the first :meth:`serve` at or after its arrival time, a corrupted one reaches the
+    service's parser (and fails its checksum there)."""
+
+    def __init__(
+        self,
+        controller: FlightController,
+        overrides: dict,
+        record: bool = False,
+        link_seed: int | None = None,
+    ) -> None:
         config = load_service_config(
             CONFIGS_DIR / "companion.yaml",
             {"link": {"connect": "udp:127.0.0.1:14550"}, "recording": {"enabled": False}}
@@ -52,9 +68,7 @@ class LockstepService:
         )
         self.controller = controller
         self.peer = LockstepPeer(controller, config.link.system_id, config.link.component_id)
-        self.link = LockstepLink(
-            self.peer, config.link.system_id, config.link.component_id, record
-        )
+        self.link = LockstepLink(self.peer, config.link.system_id, config.link.component_id, record)
         self.service = CompanionService(
             config,
             controller.sim.vehicle,
@@ -62,6 +76,15 @@ class LockstepService:
             monotonic_s=lambda: controller.time_s,
         )
         self._read = 0
+        self.link_faults = (
+            LinkFaults(controller.link_faults, np.random.default_rng(link_seed))
+            if link_seed is not None
+            else None
+        )
+        self._in_flight: list[tuple[float, int, bytes]] = []
+        self._order = itertools.count()
+        self.parser = FrameParser()
+        """The service's parser of what the link faults let through (its counters)."""
         self._next_housekeeping_s = 0.0
         self._record = record
         self.truth_time_s: list[float] = []
@@ -80,9 +103,19 @@ class LockstepService:
         """The service handles every message received so far; housekeeping when due."""
         t = self.controller.time_s
         received = self.peer.received
+        faults = self.link_faults
         while self._read < len(received):
-            self.service.handle_message(self.link, received[self._read], t)  # type: ignore[arg-type]
+            msg = received[self._read]
             self._read += 1
+            if faults is None:
+                self.service.handle_message(self.link, msg, t)  # type: ignore[arg-type]
+                continue
+            for delay_s, frame in faults.apply(bytes(msg.get_msgbuf())):
+                heapq.heappush(self._in_flight, (t + delay_s, next(self._order), frame))
+        while self._in_flight and self._in_flight[0][0] <= t:
+            _, _, frame = heapq.heappop(self._in_flight)
+            for msg in self.parser.feed(frame) + self.parser.end_datagram():
+                self.service.handle_message(self.link, msg, t)  # type: ignore[arg-type]
         if t >= self._next_housekeeping_s:
             self.service.housekeep(self.link, t)  # type: ignore[arg-type]
             self._next_housekeeping_s += 0.05

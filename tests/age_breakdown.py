@@ -103,7 +103,7 @@ def _instrumented_service(out_path: str, argv: list[str]) -> int:
 
 def _breakdown(hogs: int, flight_s: float, ordinary: bool) -> None:
     sys.path.insert(0, str(Path(__file__).parent))
-    from test_service_load import _at_unit_priority, _service_at_unit_priority
+    from unit_priority import at_unit_priority, in_own_group_at_unit_priority
 
     from tether_companion.mavlink.endpoints import open_link, parse_endpoint
     from tether_companion.resources import CONFIGS_DIR
@@ -141,7 +141,7 @@ def _breakdown(hogs: int, flight_s: float, ordinary: bool) -> None:
             "--config",
             str(config_path),
             start_new_session=True,
-            preexec_fn=None if ordinary else _service_at_unit_priority,
+            preexec_fn=None if ordinary else in_own_group_at_unit_priority,
         )
         hog_procs = [
             subprocess.Popen(
@@ -162,7 +162,7 @@ def _breakdown(hogs: int, flight_s: float, ordinary: bool) -> None:
             await fc_link.close()
         return fc
 
-    with contextlib.nullcontext() if ordinary else _at_unit_priority():
+    with contextlib.nullcontext() if ordinary else at_unit_priority():
         fc = asyncio.run(scenario())
     svc = json.loads(out.read_text())
     read, handled, sent = (

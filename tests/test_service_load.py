@@ -1,20 +1,17 @@
 """Estimate age at the flight controller with the machine loaded: the service (its own
 process, the shipped configuration) beside CPU hogs, over real UDP on 127.0.0.1.
 
-Scheduling as deployed. The systemd unit runs the service at ``Nice=-10`` in a cgroup of its
-own with ``CPUWeight=1000``, ten times an ordinary service's or user session's weight (100).
-Here the service starts a session of its own, which on Linux with autogroups
-(``kernel.sched_autogroup_enabled``) is a scheduling group of its own, reniced by -10 (weight
-9548 against an ordinary group's 1024: the unit's ratio), and runs at nice -10 itself. Each hog
-and everything else on the machine is ordinary: its own group, nice 0. The fake flight
-controller (this test's process) gets the same priority for the test: a real one is a
-microcontroller, not a process on the companion, and its own stalls would count against the
-service (each sample leaves the reorder buffer only when a newer one arrives).
+Scheduling as deployed (``unit_priority.py``): the service in a session, hence a scheduling
+group, of its own at the systemd unit's priority (``Nice=-10``, ``CPUWeight=1000``); each hog
+and everything else on the machine ordinary (own group, nice 0). The fake flight controller
+(this test's process) gets the same priority for the test: a real one is a microcontroller,
+not a process on the companion, and its own stalls would count against the service (each
+sample leaves the reorder buffer only when a newer one arrives).
 
 On this shared 2-core machine at load 13 (docs/security.md has the runs): a 200 Hz sleeper
 at ordinary priority in a group of its own woke up to 87-317 ms late; the service and the
 fake flight controller at ordinary priority held estimates over 100 ms (p99.9) in 7 of 15
-runs, up to 1.07 s; at the unit's priority, 31-61 ms in 7 runs. Lowering a nice needs
+runs, up to 1.07 s; at the unit's priority, 31-61 ms in 8 runs. Lowering a nice needs
 CAP_SYS_NICE (root): without it the test is skipped, saying so.
 
 Slow (30 s of flight, 10 s for the negative control): ``pytest -m slow``.
@@ -23,16 +20,15 @@ Slow (30 s of flight, 10 s for the negative control): ``pytest -m slow``.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import os
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+from unit_priority import at_unit_priority, in_own_group_at_unit_priority
 
 from tether_companion.mavlink.endpoints import open_link, parse_endpoint
 from tether_companion.resources import CONFIGS_DIR
@@ -41,55 +37,10 @@ from tether_companion.service.synthetic import FakeFlightController, HoverStream
 
 pytestmark = [pytest.mark.slow, pytest.mark.integration]
 POSITION = np.array([2.0, 1.0, -3.0])
-UNIT_NICE = -10
-"""The unit's ``Nice=-10``; as an autogroup nice, the unit's ``CPUWeight=1000`` ratio."""
-AUTOGROUP = Path("/proc/self/autogroup")
 AGE_P999_BOUND_S = 0.1
 """The issue's bound on the estimate age at the autopilot, p99.9 [s]."""
 SERVICE = (sys.executable, "-m", "tether_companion.cli")
 BLOCKING_SERVICE = (sys.executable, str(Path(__file__).with_name("blocking_housekeeping.py")))
-
-
-def _autogroup_nice() -> int | None:
-    """This process's autogroup nice, None without autogroups."""
-    try:
-        return int(AUTOGROUP.read_text().split()[-1])
-    except (OSError, ValueError, IndexError):
-        return None
-
-
-def _set_autogroup_nice(nice: int) -> None:
-    with contextlib.suppress(FileNotFoundError):  # no autogroups: process nice ranks alone
-        AUTOGROUP.write_text(f"{nice}\n")
-
-
-@contextlib.contextmanager
-def _at_unit_priority() -> Iterator[None]:
-    """This process (the fake flight controller's thread) and its group at the unit's priority
-    for the test, restored after; skips the test without the privilege to lower a nice."""
-    nice = os.getpriority(os.PRIO_PROCESS, 0)
-    group = _autogroup_nice()
-    try:
-        os.setpriority(os.PRIO_PROCESS, 0, nice + UNIT_NICE)
-        if group is not None:
-            _set_autogroup_nice(group + UNIT_NICE)
-    except PermissionError:
-        os.setpriority(os.PRIO_PROCESS, 0, nice)
-        pytest.skip("running the service at the unit's Nice=-10/CPUWeight needs CAP_SYS_NICE")
-    try:
-        yield
-    finally:
-        os.setpriority(os.PRIO_PROCESS, 0, nice)
-        if group is not None:
-            _set_autogroup_nice(group)
-
-
-def _service_at_unit_priority() -> None:
-    """In the new service process (its own session): nice and autogroup lowered by 10."""
-    os.nice(UNIT_NICE)
-    group = _autogroup_nice()
-    if group is not None:
-        _set_autogroup_nice(group + UNIT_NICE)
 
 
 def _ages(tmp_path, hogs: int, flight_s: float, service_cmd: tuple[str, ...]) -> np.ndarray:
@@ -116,7 +67,7 @@ def _ages(tmp_path, hogs: int, flight_s: float, service_cmd: tuple[str, ...]) ->
             "--config",
             str(config_path),
             start_new_session=True,
-            preexec_fn=_service_at_unit_priority,
+            preexec_fn=in_own_group_at_unit_priority,
         )
         hog_procs = [
             subprocess.Popen(
@@ -137,7 +88,7 @@ def _ages(tmp_path, hogs: int, flight_s: float, service_cmd: tuple[str, ...]) ->
             await fc_link.close()
         return fc
 
-    with _at_unit_priority():
+    with at_unit_priority():
         fc = asyncio.run(scenario())
     log = fc.log
     ages = [

@@ -87,6 +87,7 @@ class EmulatorServer:
         self._stop = asyncio.Event()
         self._wall0 = 0.0
         self._sim0 = 0.0
+        self._anchored = False
 
     async def __aenter__(self) -> EmulatorServer:
         config = self.controller.config
@@ -152,6 +153,7 @@ class EmulatorServer:
         loop = asyncio.get_running_loop()
         links = self.links
         apply = self.faults.apply
+        late_s = self._late_s()
         for link_id, msg in outgoing:
             targets = links.values() if link_id is None else (links[link_id],)
             for link in targets:
@@ -161,16 +163,27 @@ class EmulatorServer:
                     self.counters.encode_errors += 1
                     continue
                 for delay_s, data in apply(frame):
-                    if delay_s > 0.0:
-                        wall_delay = 0.0 if math.isinf(self.speed) else delay_s / self.speed
-                        loop.call_later(wall_delay, link.send_bytes, data)
+                    if delay_s > late_s:
+                        wall_delay_s = (delay_s - late_s) / self.speed  # 0 at infinite speed
+                        loop.call_later(wall_delay_s, link.send_bytes, data)
                     else:
                         link.send_bytes(data)
 
     # ------------------------------------------------------------------ time
+    def _late_s(self) -> float:
+        """How far [s, emulator time] the emulator is behind the wall clock: what it sends now
+        should have gone out this long ago, so a link delay counts from then. A stalled
+        emulator catching up then does not reorder its burst by more than the jitter (each
+        frame would leave at its own time plus its delay; without this, a burst spanning
+        100 ms of stamps, all delayed from the same instant, arrived shuffled)."""
+        if not self._anchored or math.isinf(self.speed):
+            return 0.0
+        return max(0.0, self._target_time_s() - self.controller.time_s)
+
     def _anchor(self) -> None:
         self._wall0 = time.monotonic()
         self._sim0 = self.controller.time_s
+        self._anchored = True
 
     def _target_time_s(self) -> float:
         return self._sim0 + (time.monotonic() - self._wall0) * self.speed

@@ -122,11 +122,16 @@ def test_non_positive_definite_innovation_covariance_is_refused() -> None:
     np.testing.assert_array_equal(ekf.x, np.zeros(1))
 
 
-def test_covariance_that_lost_definiteness_is_repaired() -> None:
+@pytest.mark.parametrize("scalar", [False, True])
+def test_covariance_that_lost_definiteness_is_repaired(scalar: bool) -> None:
     ekf = ExtendedKalmanFilter(np.zeros(2), np.eye(2), np.zeros((2, 2)))
     ekf.P = np.array([[1.0, 0.0], [0.0, -0.5]])  # as if rounding had broken it
     h = np.array([[1.0, 0.0]])
-    assert ekf.update("s", np.array([0.2]), _linear(h), np.array([[1.0]])).status == FUSED
+    if scalar:
+        result = ekf.update_rows("s", [0.2], h.tolist(), 1.0)
+    else:
+        result = ekf.update("s", np.array([0.2]), _linear(h), np.array([[1.0]]))
+    assert result.status == FUSED
     assert ekf.pd_repairs == 1
     np.linalg.cholesky(ekf.P)
     np.testing.assert_allclose(ekf.P, ekf.P.T)

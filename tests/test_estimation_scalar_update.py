@@ -15,7 +15,6 @@ import pytest
 from tether_companion.bench.speed import _ours, _record
 from tether_companion.estimation.config import load_estimator_config
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
-from tether_companion.estimation.scalar_update import is_positive_definite
 from tether_companion.estimation.tether_models import FourStateModel
 from tether_companion.sim.scenario import load_scenario
 from tether_companion.sim.simulator import Simulator
@@ -84,12 +83,6 @@ def test_nonfinite_and_singular_are_refused_like_the_reference(rng) -> None:
     b = fast.update_rows("t", [1.0], zero.tolist(), 0.0)
     assert a.status == b.status == "singular"
     np.testing.assert_array_equal(fast.x, ref.x)
-
-
-def test_positive_definite_check() -> None:
-    assert is_positive_definite([4.0, 1.0, 1.0, 3.0], 2)
-    assert not is_positive_definite([1.0, 2.0, 2.0, 1.0], 2)
-    assert not is_positive_definite([math.nan, 0.0, 0.0, 1.0], 2)
 
 
 def test_paper_filter_on_the_simulator_equals_the_numpy_path() -> None:

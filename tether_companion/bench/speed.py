@@ -94,8 +94,8 @@ def _record(scenario: Scenario, ticks: int) -> list[tuple]:
         rotation = rotation_ned_to_body(att.roll_rad, att.pitch_rad, att.yaw_rad)
         height = None
         if rng is not None:
-            height = rng.distance_m * np.cos(att.roll_rad) * np.cos(att.pitch_rad)
-        thrust = thrust_input.total_thrust_n(pwm.pwm_us, pwm.time_s)
+            height = rng.distance_m * math.cos(att.roll_rad) * math.cos(att.pitch_rad)
+        thrust = float(thrust_input.total_thrust_n(pwm.pwm_us, pwm.time_s))
         rows.append((period, rotation, thrust, imu.specific_force_body_mps2, height))
     return rows
 
@@ -113,16 +113,16 @@ def _ours(
         (dt, rotation.tolist(), thrust, accel.tolist(), height, rotation, accel)
         for dt, rotation, thrust, accel, height in rows
     ]
-    out = np.empty((len(rows), 4))
+    out = []
     started = time.process_time()
-    for i, (dt, rot_rows, thrust, acc, height, rotation, accel) in enumerate(inputs):
+    for dt, rot_rows, thrust, acc, height, rotation, accel in inputs:
         ekf.predict(dt)
         if scalar:
-            predicted, h_rows = model.accel_rows(ekf.x.tolist(), rot_rows, thrust)
+            predicted, h_rows = model.accel_rows(ekf.x_values(), rot_rows, thrust)
             innovation = [acc[0] - predicted[0], acc[1] - predicted[1], acc[2] - predicted[2]]
             ekf.update_rows("accel", innovation, h_rows, r_acc)
             if height is not None:
-                ekf.update_rows("altimeter", [height + float(ekf.x[2])], alt_rows, r_alt)
+                ekf.update_rows("altimeter", [height + ekf.x_values()[2]], alt_rows, r_alt)
         else:
             ekf.update(
                 "accel",
@@ -132,8 +132,8 @@ def _ours(
             )
             if height is not None:
                 ekf.update("altimeter", np.array((height,)), altimeter, np.array([[r_alt]]))
-        out[i] = ekf.x
-    return time.process_time() - started, out
+        out.append(ekf.x_values())
+    return time.process_time() - started, np.array(out)
 
 
 def _filterpy(

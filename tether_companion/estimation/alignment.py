@@ -146,7 +146,9 @@ class InputAligner:
             thrust_n = self.thrust_input.total_thrust_n(sample.pwm_us, sample.time_s)
             if math.isfinite(thrust_n):
                 self.pwm_time_s = sample.time_s
-                self.thrust_n = thrust_n
+                # a Python float: a numpy scalar would make every product of the scalar EKF
+                # update a numpy operation (several times slower)
+                self.thrust_n = float(thrust_n)
                 self._imu_in = None
                 outcome = None
             else:

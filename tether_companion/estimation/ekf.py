@@ -26,8 +26,8 @@ Correction (lines 9-14) is done once per sensor sample with
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
@@ -94,8 +94,9 @@ class SensorStatus:
         Gate rejections since the last fused sample.
     last_nis
         Normalised innovation squared of the last finite sample (dimensionless).
-    last_innovation
-        Innovation ``z - h(x)`` of the last sample that reached the gate, shape (m,).
+    innovation
+        Innovation ``z - h(x)`` of the last sample that reached the gate (m values, as the
+        update had them); read it as the array :attr:`last_innovation`.
     """
 
     fused: int = 0
@@ -105,7 +106,12 @@ class SensorStatus:
     forced: int = 0
     consecutive_rejections: int = 0
     last_nis: float = math.nan
-    last_innovation: FloatArray = field(default_factory=lambda: np.zeros(0))
+    innovation: Sequence[float] = ()
+
+    @property
+    def last_innovation(self) -> FloatArray:
+        """Innovation ``z - h(x)`` of the last sample that reached the gate, shape (m,)."""
+        return np.array(self.innovation, dtype=float)
 
 
 @dataclass(frozen=True, slots=True)
@@ -182,9 +188,19 @@ class ExtendedKalmanFilter:
         self.gate_probability = gate_probability
         self.max_consecutive_rejections = max_consecutive_rejections
         self._thresholds: dict[int, float] = {}
+        self._updaters: dict[int, Callable[..., scalar_update.UpdateOutcome]] = {}
         self._eye = np.eye(n)
-        self.x: FloatArray = x0.copy()
-        self.P: FloatArray = p0.copy()
+        self._n = n
+        # The state and covariance live in one of two forms at a time: numpy arrays (the numpy
+        # paths, and whoever reads ``x`` or ``P``) or flat Python lists (the scalar paths, see
+        # update_rows). Each accessor converts on first use and the other form is dropped, so
+        # a caller may change the arrays it was handed in place, as before.
+        self._xa: FloatArray | None = x0.copy()
+        self._xl: list[float] | None = None
+        self._pa: FloatArray | None = p0.copy()
+        self._pl: list[float] | None = None
+        self._q_entries = [(int(k), float(q_density.flat[k])) for k in np.flatnonzero(q_density)]
+        """``(flat index, Q_c entry)`` of the non-zero process noise (random walk on lists)."""
         self.sensors: dict[str, SensorStatus] = {}
         self.resets = 0
         self.pd_repairs = 0
@@ -193,7 +209,63 @@ class ExtendedKalmanFilter:
     @property
     def n(self) -> int:
         """State dimension."""
-        return self.x.size
+        return self._n
+
+    @property
+    def x(self) -> FloatArray:
+        """State, shape (n,)."""
+        xa = self._xa
+        if xa is None:
+            xa = self._xa = np.array(self._xl)
+            self._xl = None
+        return xa
+
+    @x.setter
+    def x(self, value: FloatArray) -> None:
+        self._xa = np.asarray(value, dtype=float)
+        self._xl = None
+
+    @property
+    def P(self) -> FloatArray:  # noqa: N802 (the covariance's usual name)
+        """State covariance, shape (n, n)."""
+        pa = self._pa
+        if pa is None:
+            pa = self._pa = np.array(self._pl).reshape(self._n, self._n)
+            self._pl = None
+        return pa
+
+    @P.setter
+    def P(self, value: FloatArray) -> None:  # noqa: N802
+        self._pa = np.asarray(value, dtype=float)
+        self._pl = None
+
+    def x_values(self) -> list[float]:
+        """A new list of the n state values (no conversion on the scalar path)."""
+        xl = self._xl
+        return list(xl) if xl is not None else self._xa.tolist()  # type: ignore[union-attr]
+
+    def snapshot(self) -> tuple[FloatArray, FloatArray]:
+        """New arrays of the state, shape (n,), and covariance, shape (n, n)."""
+        xl, pl = self._xl, self._pl
+        x = np.array(xl) if xl is not None else self._xa.copy()  # type: ignore[union-attr]
+        p = (
+            np.array(pl).reshape(self._n, self._n)
+            if pl is not None
+            else self._pa.copy()  # type: ignore[union-attr]
+        )
+        return x, p
+
+    def _lists(self) -> tuple[list[float], list[float]]:
+        """The state (n values) and covariance (n*n, row-major) as the current lists."""
+        xl = self._xl
+        if xl is None:
+            xl = self._xl = self._xa.tolist()  # type: ignore[union-attr]
+            self._xa = None
+        pl = self._pl
+        if pl is None:
+            pl = self._pl = self._pa.ravel().tolist()  # type: ignore[union-attr]
+            self._pa = None
+        return xl, pl
 
     # ------------------------------------------------------------------ prediction
     def predict(self, dt_s: float, u: FloatArray | None = None) -> bool:
@@ -210,7 +282,12 @@ class ExtendedKalmanFilter:
         if dt_s == 0.0:
             return True
         if self._random_walk:
-            self.P += self.q_density * dt_s
+            pl = self._pl
+            if pl is None:
+                self._pa += self.q_density * dt_s  # type: ignore[operator]
+            else:
+                for k, q in self._q_entries:
+                    pl[k] += q * dt_s
             return True
         h = dt_s / self.substeps
         x, p = self.x, self.P
@@ -259,8 +336,9 @@ class ExtendedKalmanFilter:
         else:  # NIS = y^T S^-1 y with S^-1 y solved from the Cholesky factor
             nis = float(innovation @ dpotrs(s_chol, innovation, lower=1)[0])
         status.last_nis = nis
-        status.last_innovation = innovation
-        if self._gated(status, nis, m):
+        status.innovation = innovation
+        threshold, in_force = self._gate(status, m)
+        if self._gated(status, nis, threshold, in_force):
             return UpdateResult(GATED, nis)
         # K = P H^T S^-1, i.e. K^T = S^-1 (P H^T)^T (S symmetric)
         gain = pht / s_value if m == 1 else dpotrs(s_chol, pht.T, lower=1)[0].T
@@ -296,54 +374,63 @@ class ExtendedKalmanFilter:
         ``innovation`` is ``z - h(x)`` (m values), ``h_rows`` the Jacobian's m rows of n, and
         the noise is ``r_variance`` on each axis (``R = r I``). See
         :mod:`~tether_companion.estimation.scalar_update` for the arithmetic; the result
-        equals :meth:`update`'s to rounding.
+        equals :meth:`update`'s to rounding. Give Python floats: numpy scalars give the same
+        result several times slower (every product a numpy operation).
         """
         status = self.sensors.get(sensor)
         if status is None:
             status = self.sensors[sensor] = SensorStatus()
-        p = self.P.ravel().tolist()
-        h = [v for row in h_rows for v in row]
         m = len(innovation)
-        innovated = scalar_update.innovate(p, h, innovation, r_variance)
-        if innovated is None:  # S not positive definite: NaN/inf somewhere, or singular
+        threshold, in_force = self._gate(status, m)
+        update = self._updaters.get(m)
+        if update is None:
+            update = self._updaters[m] = scalar_update.updater(self._n, m)
+        x, p = self._lists()
+        h = [v for row in h_rows for v in row]
+        outcome = update(x, p, h, innovation, float(r_variance), in_force)
+        if outcome is None:  # S not positive definite: NaN/inf somewhere, or singular
             if not math.isfinite(sum(p) + sum(h) + sum(innovation) + r_variance):
                 status.nonfinite += 1
                 return UpdateResult(NONFINITE, math.nan)
             status.singular += 1
             return UpdateResult(SINGULAR, math.nan)
-        nis, pht, factor = innovated
+        nis, x_new, p_new, positive_definite = outcome
         status.last_nis = nis
-        status.last_innovation = np.array(innovation)
-        if self._gated(status, nis, m):
+        status.innovation = innovation
+        if self._gated(status, nis, threshold, in_force):  # x_new is None
             return UpdateResult(GATED, nis)
-        n = self.x.size
-        x, p_new = scalar_update.fuse(self.x.tolist(), p, h, innovation, r_variance, pht, factor)
-        if not math.isfinite(sum(x) + sum(p_new)):
+        if p_new is None:
             status.nonfinite += 1
             return UpdateResult(NONFINITE, math.nan)
-        self.x = np.array(x)
-        self.P = np.array(p_new).reshape(n, n)
+        self._xl = x_new
+        self._pl = p_new
         status.fused += 1
         status.consecutive_rejections = 0
-        if not scalar_update.is_positive_definite(p_new, n):
+        if not positive_definite:
             self._repair_covariance()
         return UpdateResult(FUSED, nis)
 
-    def _gated(self, status: SensorStatus, nis: float, m: int) -> bool:
-        """Whether the chi-square gate rejects ``nis`` of an m-dimensional measurement
-        (counted in ``status``); a sample let through after too many rejections is counted as
-        forced."""
+    def _gate(self, status: SensorStatus, m: int) -> tuple[float, float]:
+        """The chi-square threshold of an m-dimensional NIS, and the threshold in force: the
+        same, or ``inf`` when ``status``'s sensor was rejected ``max_consecutive_rejections``
+        times in a row and its next sample is fused regardless."""
         threshold = self._thresholds.get(m)
         if threshold is None:
             threshold = self._thresholds[m] = chi2_threshold(self.gate_probability, m)
-        if not nis > threshold:  # NaN passes, as before: the update's finite check drops it
-            return False
         limit = self.max_consecutive_rejections
-        if limit <= 0 or status.consecutive_rejections < limit:
+        return threshold, (math.inf if 0 < limit <= status.consecutive_rejections else threshold)
+
+    @staticmethod
+    def _gated(status: SensorStatus, nis: float, threshold: float, in_force: float) -> bool:
+        """Whether the gate rejects ``nis`` (counted in ``status``); a sample let through only
+        because the gate yielded is counted as forced. A NaN NIS passes, as before: the
+        update's finite check drops it."""
+        if nis > in_force:
             status.consecutive_rejections += 1
             status.gated += 1
             return True
-        status.forced += 1
+        if nis > threshold:
+            status.forced += 1
         return False
 
     # ------------------------------------------------------------------ diagnostics

@@ -358,7 +358,7 @@ class TetherEstimator:
             )
         )
         result = self.filter.update_rows(
-            ALTIMETER, [height_m + float(self.filter.x[P_D])], self._altimeter_rows, self._r_alt
+            ALTIMETER, [height_m + self.filter.x_values()[P_D]], self._altimeter_rows, self._r_alt
         )
         health.last_range_nis = result.nis
         if result.status == FUSED:
@@ -384,9 +384,15 @@ class TetherEstimator:
             self.filter.reset()
             self._sync_filter_counters()
         else:
-            self.filter.predict(dt)
-            grow_for_imu_gap(self.filter.P, dt, self.config.observability)
-            self._range_watch.grow(self.filter.P, self.filter.x[POSITION], t, dt)
+            kf = self.filter
+            kf.predict(dt)
+            # both grow P in place, and only now and then: reading kf.P converts the scalar
+            # path's lists, so it is read only when they will
+            observability = self.config.observability
+            if dt > observability.imu_gap_s:
+                grow_for_imu_gap(kf.P, dt, observability)
+            if self._range_watch.lost(t):
+                self._range_watch.grow(kf.P, kf.x[POSITION], t, dt)
         self._time_s = t
         return True
 
@@ -409,11 +415,11 @@ class TetherEstimator:
             return False
         if self._needs_tension_init:
             self._initialise_tension(accel, thrust_n)
-        x = self.filter.x
+        x = self.filter.x_values()
         if x[0] * x[0] + x[1] * x[1] + x[2] * x[2] < model.min_cable_length_m**2:
             health.near_anchor += 1
             return False
-        predicted, h_rows = model.accel_rows(x.tolist(), rotation.tolist(), thrust_n, tension_n)
+        predicted, h_rows = model.accel_rows(x, rotation.tolist(), thrust_n, tension_n)
         ax, ay, az = accel.tolist()
         innovation = [ax - predicted[0], ay - predicted[1], az - predicted[2]]
         result = self.filter.update_rows(ACCEL, innovation, h_rows, self._r_accel_variance)
@@ -451,12 +457,12 @@ class TetherEstimator:
         self.health.pd_repairs = self.filter.pd_repairs
 
     def _estimate(self, accel_fused: bool) -> Estimate:
-        x = self.filter.x
+        x, covariance = self.filter.snapshot()
         return Estimate(
             time_s=self._time_s,
-            position_ned_m=x[POSITION].copy(),
+            position_ned_m=x[POSITION],
             tension_n=self.model.tension_n(x, self._known_tension_n),
-            covariance=self.filter.P.copy(),
+            covariance=covariance,
             reset_counter=self.filter.resets,
             accel_fused=accel_fused,
             health_values=self.health.values(),

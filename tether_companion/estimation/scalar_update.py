@@ -3,21 +3,26 @@
 For the paper's 3- and 4-state filters (3 accelerometer components, 1 altimeter) numpy's
 per-call overhead (~1 us a call, a dozen calls an update) costs more than the arithmetic, and
 Python loops or generator expressions cost more again. So the update for a given state size
-``n`` and measurement size ``m`` is *generated* here as one straight-line Python function per
-stage (every product written out, no loop, no array), compiled once per ``(n, m)`` and cached.
-The algebra is :meth:`~tether_companion.estimation.ekf.ExtendedKalmanFilter.update`'s, step
-for step:
+``n`` and measurement size ``m`` is *generated* here as one straight-line Python function
+(every product written out, no loop, no array), compiled once per ``(n, m)`` and cached. The
+algebra is :meth:`~tether_companion.estimation.ekf.ExtendedKalmanFilter.update`'s, step for
+step, with noise ``R = r I`` (``r`` [measurement units^2] on each axis):
 
-* :func:`innovate`: ``P H^T``, ``S = H P H^T + r I`` (noise ``r`` [measurement units^2] on
-  each axis), its Cholesky factor (a non-positive or NaN pivot means "not positive definite",
-  as LAPACK's dpotrf) and ``NIS = y^T S^-1 y``;
-* :func:`fuse`: ``K = P H^T S^-1``, ``x + K y`` and the Joseph form
-  ``(I - K H) P (I - K H)^T + r K K^T``, symmetrised as ``(P + P^T) / 2``;
-* :func:`is_positive_definite`: the Cholesky test of the updated covariance.
+* ``T = P H^T``, ``S = H T + r I``, its Cholesky factor (a non-positive or NaN pivot means
+  "not positive definite", as LAPACK's dpotrf) and ``NIS = y^T S^-1 y``;
+* the gate: ``NIS > threshold`` rejects (a NaN NIS passes, as in the numpy path, and is then
+  caught by the finite check);
+* ``K = T S^-1``, ``x + K y``;
+* the Joseph form ``(I - K H) P (I - K H)^T + r K K^T``, associated to save products:
+  ``B = (I - K H) P = P - K T^T``, ``B (I - K H)^T = B - (B H^T) K^T``, so the result is
+  ``B - D K^T`` with ``D = B H^T - r K`` (``D`` vanishes for the exact optimal gain: it is the
+  Joseph form's first-order correction of rounding in ``K``). Only the lower triangle is
+  computed and mirrored, so the result is exactly symmetric;
+* a finite check of the new state and covariance, and the Cholesky test of the covariance.
 
 Only the summation order differs from the BLAS path, so states agree to rounding (~1e-15
-relative; the tests hold them to 1e-9). Gating, counting and repairs stay in the filter.
-Matrices travel as flat row-major tuples/lists of floats (``P`` n*n, ``H`` m*n).
+relative; the tests hold them to 1e-9). Counting, forced fusion and repairs stay in the
+filter. Matrices travel as flat row-major lists of floats (``P`` n*n, ``H`` m*n).
 """
 
 from __future__ import annotations
@@ -26,20 +31,27 @@ import functools
 import math
 from collections.abc import Callable
 
+UpdateOutcome = tuple[float, list[float] | None, list[float] | None, bool] | None
+"""What an :func:`updater` function returns (see there)."""
+
 
 def _compile(name: str, source: str) -> Callable:
-    namespace: dict = {"sqrt": math.sqrt}
+    namespace: dict = {"sqrt": math.sqrt, "isfinite": math.isfinite}
     exec(compile(source, f"<scalar_update {name}>", "exec"), namespace)  # noqa: S102
     return namespace[name]
 
 
-def _cholesky_lines(size: int, entry: Callable[[int, int], str], low: str) -> list[str]:
+def _sum(terms: list[str]) -> str:
+    return " + ".join(terms) if terms else "0.0"
+
+
+def _cholesky_lines(size: int, entry: Callable[[int, int], str], low: str, fail: str) -> list[str]:
     """Statements computing the lower Cholesky factor ``{low}{i}_{j}`` of the symmetric matrix
-    whose lower-triangle entries ``entry(i, j)`` name; ``return None`` on a failed pivot."""
+    whose lower-triangle entries ``entry(i, j)`` name; ``fail`` (a statement) on a bad pivot."""
     lines = []
     for j in range(size):
         diag = " - ".join([entry(j, j)] + [f"{low}{j}_{k} * {low}{j}_{k}" for k in range(j)])
-        lines += [f"d = {diag}", "if not d > 0.0:", "    return None", f"{low}{j}_{j} = sqrt(d)"]
+        lines += [f"d = {diag}", "if not d > 0.0:", f"    {fail}", f"{low}{j}_{j} = sqrt(d)"]
         for i in range(j + 1, size):
             terms = " - ".join([entry(i, j)] + [f"{low}{i}_{k} * {low}{j}_{k}" for k in range(j)])
             lines.append(f"{low}{i}_{j} = ({terms}) / {low}{j}_{j}")
@@ -65,104 +77,67 @@ def _unpack(names: list[str], source: str) -> str:
 
 
 @functools.cache
-def _innovate(n: int, m: int) -> Callable:
-    p = [f"p{i}_{j}" for i in range(n) for j in range(n)]
-    h = [f"h{a}_{j}" for a in range(m) for j in range(n)]
-    y = [f"y{a}" for a in range(m)]
-    body = [_unpack(p, "p"), _unpack(h, "h"), _unpack(y, "y")]
-    for i in range(n):  # t = P H^T
-        for a in range(m):
-            body.append(f"t{i}_{a} = " + " + ".join(f"p{i}_{k} * h{a}_{k}" for k in range(n)))
-    for a in range(m):  # S, lower triangle
-        for b in range(a + 1):
-            expr = " + ".join(f"h{a}_{k} * t{k}_{b}" for k in range(n))
-            body.append(f"s{a}_{b} = {expr}" + (" + r" if a == b else ""))
-    t = ", ".join(f"t{i}_{a}" for i in range(n) for a in range(m))
-    if m == 1:
-        body += [
-            "if not s0_0 > 0.0:",
-            "    return None",
-            f"return y0 * y0 / s0_0, ({t},), (s0_0,)",
-        ]
-    else:
-        body += _cholesky_lines(m, lambda i, j: f"s{i}_{j}", "l")
-        body += _solve_lines(m, "l", y, "w")
-        nis = " + ".join(f"y{a} * w{a}" for a in range(m))
-        factor = ", ".join(f"l{i}_{j}" for i in range(m) for j in range(i + 1))
-        body.append(f"return {nis}, ({t},), ({factor},)")
-    source = "def innovate(p, h, y, r):\n" + "".join(f"    {line}\n" for line in body)
-    return _compile("innovate", source)
+def updater(n: int, m: int) -> Callable[..., UpdateOutcome]:
+    """The update of an n-state filter by an m-dimensional measurement, compiled once:
+    ``update(x, p, h, y, r, threshold)`` with the state ``x`` (n values), covariance ``p`` (n*n,
+    row-major), Jacobian ``h`` (m*n, row-major), innovation ``y = z - h(x)`` (m values), noise
+    ``r`` on each axis and the gate's NIS ``threshold``.
 
+    The function returns
 
-def innovate(
-    p: list[float], h: list[float], y: list[float], r: float
-) -> tuple[float, tuple, tuple] | None:
-    """``(NIS, P H^T, factor)`` of one measurement, or None when ``S`` is not positive definite
-    (or not finite). ``factor`` is ``(S,)`` for m = 1, else the Cholesky factor's lower
-    triangle row by row."""
-    return _innovate(len(h) // len(y), len(y))(p, h, y, r)
-
-
-@functools.cache
-def _fuse(n: int, m: int) -> Callable:
+    * ``None`` when ``S`` is not positive definite (singular, or NaN/inf somewhere);
+    * ``(nis, None, None, False)`` when gated (``nis > threshold``; nothing more computed);
+    * ``(nis, x_new, None, False)`` when the updated state or covariance is not finite;
+    * ``(nis, x_new, p_new, positive_definite)`` when fused: the new state (list of n), the
+      new covariance (list of n*n, exactly symmetric) and whether it passed the Cholesky test.
+    """
     x = [f"x{i}" for i in range(n)]
     p = [f"p{i}_{j}" for i in range(n) for j in range(n)]
     h = [f"h{a}_{j}" for a in range(m) for j in range(n)]
     y = [f"y{a}" for a in range(m)]
-    t = [f"t{i}_{a}" for i in range(n) for a in range(m)]
-    body = [_unpack(x, "x"), _unpack(p, "p"), _unpack(h, "h"), _unpack(y, "y"), _unpack(t, "t")]
+    body = [_unpack(p, "p"), _unpack(h, "h"), _unpack(y, "y")]
+    for i in range(n):  # T = P H^T
+        for a in range(m):
+            body.append(f"t{i}_{a} = " + _sum([f"p{i}_{k} * h{a}_{k}" for k in range(n)]))
+    for a in range(m):  # S, lower triangle
+        for b in range(a + 1):
+            expr = _sum([f"h{a}_{k} * t{k}_{b}" for k in range(n)])
+            body.append(f"s{a}_{b} = {expr}" + (" + r" if a == b else ""))
     if m == 1:
-        body.append("(s,) = factor")
-        body += [f"k{i}_0 = t{i}_0 / s" for i in range(n)]
+        body += ["if not s0_0 > 0.0:", "    return None", "nis = y0 * y0 / s0_0"]
     else:
-        low = [f"l{i}_{j}" for i in range(m) for j in range(i + 1)]
-        body.append(_unpack(low, "factor"))
+        body += _cholesky_lines(m, lambda i, j: f"s{i}_{j}", "l", "return None")
+        body += _solve_lines(m, "l", y, "w")
+        body.append("nis = " + _sum([f"y{a} * w{a}" for a in range(m)]))
+    body += ["if nis > threshold:", "    return nis, None, None, False"]
+    if m == 1:
+        body += [f"k{i}_0 = t{i}_0 / s0_0" for i in range(n)]
+    else:
         for i in range(n):
             body += _solve_lines(m, "l", [f"t{i}_{a}" for a in range(m)], f"k{i}_")
+    body.append(_unpack(x, "x"))
     for i in range(n):
-        body.append(f"u{i} = x{i} + " + " + ".join(f"k{i}_{a} * y{a}" for a in range(m)))
-    for i in range(n):  # A = I - K H
+        body.append(f"u{i} = x{i} + " + _sum([f"k{i}_{a} * y{a}" for a in range(m)]))
+    for i in range(n):  # B = (I - K H) P = P - K T^T
         for j in range(n):
-            kh = " + ".join(f"k{i}_{c} * h{c}_{j}" for c in range(m))
-            body.append(f"a{i}_{j} = {'1.0' if i == j else '0.0'} - ({kh})")
-    for i in range(n):  # A P
-        for j in range(n):
-            body.append(f"b{i}_{j} = " + " + ".join(f"a{i}_{k} * p{k}_{j}" for k in range(n)))
-    for i in range(n):  # A P A^T + r K K^T, both triangles (then averaged like (P + P^T)/2)
-        for j in range(n):
-            apa = " + ".join(f"b{i}_{k} * a{j}_{k}" for k in range(n))
-            kk = " + ".join(f"k{i}_{c} * k{j}_{c}" for c in range(m))
-            body.append(f"q{i}_{j} = {apa} + r * ({kk})")
-    entries = [f"(q{i}_{j} + q{j}_{i}) * 0.5" for i in range(n) for j in range(n)]
-    body.append(f"return [{', '.join(f'u{i}' for i in range(n))}], [{', '.join(entries)}]")
-    source = "def fuse(x, p, h, y, r, t, factor):\n" + "".join(f"    {line}\n" for line in body)
-    return _compile("fuse", source)
-
-
-def fuse(
-    x: list[float],
-    p: list[float],
-    h: list[float],
-    y: list[float],
-    r: float,
-    pht: tuple,
-    factor: tuple,
-) -> tuple[list[float], list[float]]:
-    """The updated state (n values) and covariance (n*n values, row-major), from
-    :func:`innovate`'s ``pht`` and ``factor``."""
-    return _fuse(len(x), len(y))(x, p, h, y, r, pht, factor)
-
-
-@functools.cache
-def _positive_definite(n: int) -> Callable:
-    p = [f"p{i}_{j}" for i in range(n) for j in range(n)]
-    body = [_unpack(p, "p")]
-    body += _cholesky_lines(n, lambda i, j: f"p{i}_{j}", "l")
-    body.append("return True")
-    source = "def positive_definite(p):\n" + "".join(f"    {line}\n" for line in body)
-    return _compile("positive_definite", source)
-
-
-def is_positive_definite(p: list[float], n: int) -> bool:
-    """Whether the symmetric n x n matrix ``p`` (flat, row-major) has a Cholesky factor."""
-    return _positive_definite(n)(p) is True
+            kt = _sum([f"k{i}_{c} * t{j}_{c}" for c in range(m)])
+            body.append(f"b{i}_{j} = p{i}_{j} - ({kt})")
+    for i in range(n):  # D = B H^T - r K
+        for a in range(m):
+            bh = _sum([f"b{i}_{k} * h{a}_{k}" for k in range(n)])
+            body.append(f"e{i}_{a} = {bh} - r * k{i}_{a}")
+    for i in range(n):  # B - D K^T, lower triangle
+        for j in range(i + 1):
+            dk = _sum([f"e{i}_{c} * k{j}_{c}" for c in range(m)])
+            body.append(f"q{i}_{j} = b{i}_{j} - ({dk})")
+    lower = [f"q{max(i, j)}_{min(i, j)}" for i in range(n) for j in range(n)]
+    new_x = [f"u{i}" for i in range(n)]
+    body += [
+        f"if not isfinite({_sum(new_x + [f'q{i}_{j}' for i in range(n) for j in range(i + 1)])}):",
+        f"    return nis, [{', '.join(new_x)}], None, False",
+    ]
+    fused = f"nis, [{', '.join(new_x)}], [{', '.join(lower)}]"
+    body += _cholesky_lines(n, lambda i, j: f"q{i}_{j}", "c", f"return {fused}, False")
+    body.append(f"return {fused}, True")
+    source = "def update(x, p, h, y, r, threshold):\n" + "".join(f"    {line}\n" for line in body)
+    return _compile("update", source)

@@ -205,3 +205,65 @@ def test_estimator_restarts_after_gap():
     out = _feed(est, *_hover_samples(2.0, np.array([-4.0, 0.0, 1.0])))
     assert out.health.restarts == 2
     assert np.allclose(out.tension_ned_n, [-4.0, 0.0, 1.0], atol=1e-6)
+
+
+class _NumpyTensionKF:
+    """The filter as it was written in numpy before the generated scalar code (issue 12): the
+    reference the scalar filter must reproduce."""
+
+    def __init__(self, a, q, r, p0):
+        self.A, self.Q, self.R, self.n = a, q, r, a.shape[0]
+        self.x = np.zeros((self.n, 3))
+        self.P = np.eye(self.n) * p0
+
+    def restart(self, y, p0):
+        self.x = np.tile(y, (self.n, 1))
+        self.P = np.eye(self.n) * p0
+
+    def predict(self):
+        self.x = self.A @ self.x
+        p = self.A @ self.P @ self.A.T + self.Q
+        self.P = 0.5 * (p + p.T)
+
+    def update(self, y):
+        innovation = y - self.x[-1]
+        s = self.P[-1, -1] + self.R
+        gain = self.P[:, -1] / s
+        self.x = self.x + np.outer(gain, innovation)
+        i_kc = np.eye(self.n)
+        i_kc[:, -1] -= gain
+        p = i_kc @ self.P @ i_kc.T + self.R * np.outer(gain, gain)
+        self.P = 0.5 * (p + p.T)
+        return innovation
+
+
+@pytest.mark.parametrize(
+    "cfg",
+    [
+        TensionFilterConfig(model="constant", constant_process_noise_n2=0.01),
+        TensionFilterConfig(model="derivative"),
+        TensionFilterConfig(model="derivative", derivative_a=0.5, derivative_b=-0.3),
+    ],
+)
+def test_scalar_filter_equals_the_numpy_filter(cfg, rng):
+    """Outputs of the generated scalar filter equal the former numpy filter's within 1e-9."""
+    r, p0 = 0.37, 25.0
+    fast = TensionKalmanFilter(cfg.transition(), cfg.process_noise(), r, p0)
+    ref = _NumpyTensionKF(cfg.transition(), cfg.process_noise(), r, p0)
+    truth = np.array([-3.0, 1.0, 2.5])
+    for k in range(600):
+        y = truth + 0.5 * np.sin(0.02 * k) + rng.normal(0.0, 0.3, 3)
+        if k % 250 == 0:  # (re)starts
+            fast.restart(y)
+            ref.restart(y, p0)
+            continue
+        fast.predict()
+        ref.predict()
+        np.testing.assert_allclose(fast.P, ref.P, rtol=0, atol=1e-9)
+        innovation = fast.update(y)
+        np.testing.assert_allclose(innovation, ref.update(y), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(fast.x, ref.x, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(fast.P, ref.P, rtol=0, atol=1e-9)
+        assert np.array_equal(fast.P, fast.P.T)
+        assert fast.variance_n2 == pytest.approx(ref.P[-1, -1], abs=1e-9)
+        np.testing.assert_allclose(fast.tension_ned_n, ref.x[-1], rtol=0, atol=1e-9)

@@ -53,12 +53,18 @@ class AlignedInputs(NamedTuple):
         ``R_v^b`` of the latest attitude (paper eq. 2), shape (3, 3): ``v_body = R @ v_ned``.
     thrust_n
         Total rotor thrust of the latest motor outputs, along body -z [N].
+    specific_force_values
+        ``specific_force_body_mps2`` as a list of 3 Python floats (for scalar code).
+    rotation_rows
+        ``rotation_ned_to_body`` row by row, Python floats (for scalar code).
     """
 
     time_s: float
     specific_force_body_mps2: FloatArray
     rotation_ned_to_body: FloatArray
     thrust_n: float
+    specific_force_values: list[float]
+    rotation_rows: list[list[float]]
 
     @property
     def rotation_body_to_ned(self) -> FloatArray:
@@ -85,6 +91,8 @@ class InputAligner:
         Latest finite attitude sample (``None`` before the first).
     rotation_ned_to_body
         ``R_v^b`` of ``attitude``, shape (3, 3) (identity before the first).
+    rotation_rows
+        The same row by row as Python floats (converted once per attitude sample).
     cos_tilt
         ``cos(roll) cos(pitch)`` of ``attitude`` (the rangefinder's tilt correction).
     pwm_time_s, thrust_n
@@ -99,6 +107,7 @@ class InputAligner:
         self.thrust_input = thrust_input
         self.attitude: AttitudeSample | None = None
         self.rotation_ned_to_body: FloatArray = np.eye(3)
+        self.rotation_rows: list[list[float]] = self.rotation_ned_to_body.tolist()
         self.cos_tilt = 1.0
         self.pwm_time_s = math.nan
         self.thrust_n = math.nan
@@ -122,6 +131,7 @@ class InputAligner:
             return NONFINITE_INPUT
         self.attitude = sample
         self.rotation_ned_to_body = rotation_ned_to_body(roll, pitch, yaw)
+        self.rotation_rows = self.rotation_ned_to_body.tolist()
         self.cos_tilt = math.cos(roll) * math.cos(pitch)
         self._attitude_outcome = None
         self._imu_in = None
@@ -172,7 +182,8 @@ class InputAligner:
         t = sample.time_s
         force = sample.specific_force_body_mps2
         outcome: AlignedInputs | str
-        if not (math.isfinite(t) and np.isfinite(force).all()):
+        values = force.tolist()
+        if not math.isfinite(t + values[0] + values[1] + values[2]):  # NaN/inf in any
             outcome = NONFINITE_INPUT
         elif self.attitude is None or not (
             abs(t - self.attitude.time_s) <= self.attitude_staleness_s
@@ -181,7 +192,9 @@ class InputAligner:
         elif not abs(t - self.pwm_time_s) <= self.pwm_staleness_s:  # nan before the first
             outcome = STALE_PWM
         else:
-            outcome = AlignedInputs(t, force, self.rotation_ned_to_body, self.thrust_n)
+            outcome = AlignedInputs(
+                t, force, self.rotation_ned_to_body, self.thrust_n, values, self.rotation_rows
+            )
         self._imu_in, self._imu_outcome = sample, outcome
         return outcome
 

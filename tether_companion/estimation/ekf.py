@@ -246,13 +246,9 @@ class ExtendedKalmanFilter:
 
     def snapshot(self) -> tuple[FloatArray, FloatArray]:
         """New arrays of the state, shape (n,), and covariance, shape (n, n)."""
-        xl, pl = self._xl, self._pl
-        x = np.array(xl) if xl is not None else self._xa.copy()  # type: ignore[union-attr]
-        p = (
-            np.array(pl).reshape(self._n, self._n)
-            if pl is not None
-            else self._pa.copy()  # type: ignore[union-attr]
-        )
+        xl, pl, xa, pa = self._xl, self._pl, self._xa, self._pa
+        x = np.array(xl) if xa is None else xa.copy()
+        p = np.array(pl).reshape(self._n, self._n) if pa is None else pa.copy()
         return x, p
 
     def _lists(self) -> tuple[list[float], list[float]]:

@@ -35,13 +35,17 @@ UpdateOutcome = tuple[float, list[float] | None, list[float] | None, bool] | Non
 """What an :func:`updater` function returns (see there)."""
 
 
-def _compile(name: str, source: str) -> Callable:
+def compile_function(name: str, body: list[str], arguments: str) -> Callable:
+    """Compile the generated statements ``body`` as ``def {name}({arguments})`` (``sqrt`` and
+    ``isfinite`` in scope) and return the function."""
+    source = f"def {name}({arguments}):\n" + "".join(f"    {line}\n" for line in body)
     namespace: dict = {"sqrt": math.sqrt, "isfinite": math.isfinite}
-    exec(compile(source, f"<scalar_update {name}>", "exec"), namespace)  # noqa: S102
+    exec(compile(source, f"<generated {name}>", "exec"), namespace)  # noqa: S102
     return namespace[name]
 
 
-def _sum(terms: list[str]) -> str:
+def sum_of(terms: list[str]) -> str:
+    """The generated expression adding ``terms`` (``0.0`` for none)."""
     return " + ".join(terms) if terms else "0.0"
 
 
@@ -98,17 +102,17 @@ def updater(n: int, m: int) -> Callable[..., UpdateOutcome]:
     body = [_unpack(p, "p"), _unpack(h, "h"), _unpack(y, "y")]
     for i in range(n):  # T = P H^T
         for a in range(m):
-            body.append(f"t{i}_{a} = " + _sum([f"p{i}_{k} * h{a}_{k}" for k in range(n)]))
+            body.append(f"t{i}_{a} = " + sum_of([f"p{i}_{k} * h{a}_{k}" for k in range(n)]))
     for a in range(m):  # S, lower triangle
         for b in range(a + 1):
-            expr = _sum([f"h{a}_{k} * t{k}_{b}" for k in range(n)])
+            expr = sum_of([f"h{a}_{k} * t{k}_{b}" for k in range(n)])
             body.append(f"s{a}_{b} = {expr}" + (" + r" if a == b else ""))
     if m == 1:
         body += ["if not s0_0 > 0.0:", "    return None", "nis = y0 * y0 / s0_0"]
     else:
         body += _cholesky_lines(m, lambda i, j: f"s{i}_{j}", "l", "return None")
         body += _solve_lines(m, "l", y, "w")
-        body.append("nis = " + _sum([f"y{a} * w{a}" for a in range(m)]))
+        body.append("nis = " + sum_of([f"y{a} * w{a}" for a in range(m)]))
     body += ["if nis > threshold:", "    return nis, None, None, False"]
     if m == 1:
         body += [f"k{i}_0 = t{i}_0 / s0_0" for i in range(n)]
@@ -117,27 +121,27 @@ def updater(n: int, m: int) -> Callable[..., UpdateOutcome]:
             body += _solve_lines(m, "l", [f"t{i}_{a}" for a in range(m)], f"k{i}_")
     body.append(_unpack(x, "x"))
     for i in range(n):
-        body.append(f"u{i} = x{i} + " + _sum([f"k{i}_{a} * y{a}" for a in range(m)]))
+        body.append(f"u{i} = x{i} + " + sum_of([f"k{i}_{a} * y{a}" for a in range(m)]))
     for i in range(n):  # B = (I - K H) P = P - K T^T
         for j in range(n):
-            kt = _sum([f"k{i}_{c} * t{j}_{c}" for c in range(m)])
+            kt = sum_of([f"k{i}_{c} * t{j}_{c}" for c in range(m)])
             body.append(f"b{i}_{j} = p{i}_{j} - ({kt})")
     for i in range(n):  # D = B H^T - r K
         for a in range(m):
-            bh = _sum([f"b{i}_{k} * h{a}_{k}" for k in range(n)])
+            bh = sum_of([f"b{i}_{k} * h{a}_{k}" for k in range(n)])
             body.append(f"e{i}_{a} = {bh} - r * k{i}_{a}")
     for i in range(n):  # B - D K^T, lower triangle
         for j in range(i + 1):
-            dk = _sum([f"e{i}_{c} * k{j}_{c}" for c in range(m)])
+            dk = sum_of([f"e{i}_{c} * k{j}_{c}" for c in range(m)])
             body.append(f"q{i}_{j} = b{i}_{j} - ({dk})")
     lower = [f"q{max(i, j)}_{min(i, j)}" for i in range(n) for j in range(n)]
     new_x = [f"u{i}" for i in range(n)]
+    new_lower = [f"q{i}_{j}" for i in range(n) for j in range(i + 1)]
     body += [
-        f"if not isfinite({_sum(new_x + [f'q{i}_{j}' for i in range(n) for j in range(i + 1)])}):",
+        f"if not isfinite({sum_of(new_x + new_lower)}):",
         f"    return nis, [{', '.join(new_x)}], None, False",
     ]
     fused = f"nis, [{', '.join(new_x)}], [{', '.join(lower)}]"
     body += _cholesky_lines(n, lambda i, j: f"q{i}_{j}", "c", f"return {fused}, False")
     body.append(f"return {fused}, True")
-    source = "def update(x, p, h, y, r, threshold):\n" + "".join(f"    {line}\n" for line in body)
-    return _compile("update", source)
+    return compile_function("update", body, "x, p, h, y, r, threshold")

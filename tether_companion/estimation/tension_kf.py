@@ -11,7 +11,8 @@ Airframe drag (``F_ext`` of eq. 50) is not modelled: it is absorbed into the obs
 (small at the speeds where tension matters; the vehicle profiles ship with zero drag).
 
 Two filters smooth the observation, both plain linear Kalman filters (eqs. 43-47) stepped once
-per observation (IMU sample):
+per observation (IMU sample), run by
+:class:`~tether_companion.estimation.tension_filter.TensionKalmanFilter`:
 
 * ``constant`` (eqs. 48-49): ``x = (T_n, T_e, T_d)``, ``A = C = I``;
 * ``derivative`` (eqs. 51-53): per axis ``x = (T_{k-2}, T_{k-1}, T_k)`` with the companion
@@ -21,7 +22,8 @@ With process and measurement noise the same on each axis and uncorrelated betwee
 the thesis' diagonal Q and R are), the three axes share one covariance matrix, so both models
 run as one filter over an ``(n, 3)`` state: the constant model is the ``n = 1`` case with
 ``A = [[1]]``, exactly eqs. 48-49 for the 3-vector. The update uses the Joseph form, which
-keeps P symmetric positive semi-definite in floating point.
+keeps P symmetric positive semi-definite in floating point. The per-tick arithmetic (the
+observation, both filter steps) is scalar Python, as the tether EKF's is.
 
 :class:`TensionEstimator` aligns samples through an
 :class:`~tether_companion.estimation.alignment.InputAligner` (latest attitude and PWM within
@@ -33,6 +35,7 @@ synchronous.
 from __future__ import annotations
 
 import math
+import operator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,6 +45,7 @@ from numpy.typing import NDArray
 from tether_companion.config import ConfigError, load_yaml, spec
 from tether_companion.estimation import alignment
 from tether_companion.estimation.alignment import AlignedInputs, InputAligner
+from tether_companion.estimation.tension_filter import TensionKalmanFilter
 from tether_companion.estimation.thrust_input import StaticThrustInput, ThrustInput
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample
@@ -152,101 +156,46 @@ def load_tension_filter_config(path: str | Path) -> TensionFilterConfig:
 # observation (eq. 50)
 
 
+def observe_tension_ned_values(
+    specific_force: list[float],
+    rotation_rows: list[list[float]],
+    thrust_n: float,
+    mass_kg: float,
+) -> tuple[float, float, float]:
+    """Force of the cable on the drone, NED [N], from one set of readings (eq. 50), in scalars.
+
+    Parameters
+    ----------
+    specific_force
+        Accelerometer specific force, FRD body frame, 3 values [m/s^2].
+    rotation_rows
+        ``R_v^b`` (NED to body) row by row; eq. 50 applies its transpose ``R_b^v``.
+    thrust_n
+        Total rotor thrust along body -z [N].
+    mass_kg
+        Vehicle mass [kg].
+    """
+    f0, f1, f2 = specific_force
+    c0, c1, c2 = mass_kg * f0, mass_kg * f1, mass_kg * f2 + thrust_n  # cable force, body
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation_rows
+    return (
+        r00 * c0 + r10 * c1 + r20 * c2,
+        r01 * c0 + r11 * c1 + r21 * c2,
+        r02 * c0 + r12 * c1 + r22 * c2,
+    )
+
+
 def observe_tension_ned_n(
     specific_force_body_mps2: FloatArray,
     rotation_body_to_ned: FloatArray,
     thrust_n: float,
     mass_kg: float,
 ) -> FloatArray:
-    """Force of the cable on the drone, NED [N], shape (3,), from one set of readings (eq. 50).
-
-    Parameters
-    ----------
-    specific_force_body_mps2
-        Accelerometer specific force, FRD body frame, shape (3,) [m/s^2].
-    rotation_body_to_ned
-        ``R_b^v``, shape (3, 3).
-    thrust_n
-        Total rotor thrust along body -z [N].
-    mass_kg
-        Vehicle mass [kg].
-    """
-    f = specific_force_body_mps2
-    cable_body = np.array((mass_kg * f[0], mass_kg * f[1], mass_kg * f[2] + thrust_n))
-    return rotation_body_to_ned @ cable_body
-
-
-# ---------------------------------------------------------------------------------------------
-# the filter
-
-
-class TensionKalmanFilter:
-    """Linear KF over an ``(n, 3)`` state: ``n`` history taps per NED axis, shared covariance.
-
-    The newest tap (last row) is the tension estimate. Pure: no clocks, no I/O.
-
-    Parameters
-    ----------
-    transition
-        ``A``, shape (n, n).
-    process_noise_n2
-        ``Q`` per step, shape (n, n) [N^2].
-    measurement_variance_n2
-        ``R`` per axis [N^2] (``C`` picks the newest tap).
-    initial_variance_n2
-        ``P0 = initial_variance_n2 I`` at (re)start [N^2].
-    """
-
-    def __init__(
-        self,
-        transition: FloatArray,
-        process_noise_n2: FloatArray,
-        measurement_variance_n2: float,
-        initial_variance_n2: float,
-    ) -> None:
-        self.A = np.asarray(transition, dtype=float)
-        self.Q = np.asarray(process_noise_n2, dtype=float)
-        self.R = float(measurement_variance_n2)
-        self.n = self.A.shape[0]
-        self._p0 = float(initial_variance_n2)
-        self.x: FloatArray = np.zeros((self.n, 3))
-        self.P: FloatArray = np.eye(self.n) * self._p0
-        self.started = False
-
-    @property
-    def tension_ned_n(self) -> FloatArray:
-        """Current tension estimate, NED [N], shape (3,)."""
-        return self.x[-1].copy()
-
-    @property
-    def variance_n2(self) -> float:
-        """Variance of the current estimate on each axis [N^2]."""
-        return float(self.P[-1, -1])
-
-    def restart(self, observation_ned_n: FloatArray) -> None:
-        """Start from one observation: every tap equals it, ``P = P0``."""
-        self.x = np.tile(np.asarray(observation_ned_n, dtype=float), (self.n, 1))
-        self.P = np.eye(self.n) * self._p0
-        self.started = True
-
-    def predict(self) -> None:
-        """One step of the model (eqs. 43-44)."""
-        self.x = self.A @ self.x
-        P = self.A @ self.P @ self.A.T + self.Q
-        self.P = 0.5 * (P + P.T)
-
-    def update(self, observation_ned_n: FloatArray) -> FloatArray:
-        """Correct with one observation (eqs. 45-47, Joseph form); returns the innovation (3,)."""
-        innovation = np.asarray(observation_ned_n, dtype=float) - self.x[-1]
-        P = self.P
-        s = P[-1, -1] + self.R
-        gain = P[:, -1] / s  # K = P C^T / (C P C^T + R), C = e_n
-        self.x = self.x + np.outer(gain, innovation)
-        i_kc = np.eye(self.n)
-        i_kc[:, -1] -= gain
-        P = i_kc @ P @ i_kc.T + self.R * np.outer(gain, gain)
-        self.P = 0.5 * (P + P.T)
-        return innovation
+    """:func:`observe_tension_ned_values` on arrays: the cable force, NED [N], shape (3,), from
+    the specific force (FRD, shape (3,) [m/s^2]) and ``R_b^v`` (shape (3, 3))."""
+    rotation_rows = np.asarray(rotation_body_to_ned, dtype=float).T.tolist()
+    force = np.asarray(specific_force_body_mps2, dtype=float).tolist()
+    return np.array(observe_tension_ned_values(force, rotation_rows, float(thrust_n), mass_kg))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -283,7 +232,10 @@ class TensionHealth:
 
     def copy(self) -> TensionHealth:
         """A snapshot."""
-        return TensionHealth(*(getattr(self, name) for name in self.__slots__))
+        return TensionHealth(*_TENSION_HEALTH_VALUES(self))
+
+
+_TENSION_HEALTH_VALUES = operator.attrgetter(*TensionHealth.__slots__)
 
 
 @dataclass(frozen=True, slots=True)
@@ -451,29 +403,27 @@ class TensionEstimator:
             tension_ned_n=kf.tension_ned_n if kf.started else _NAN3.copy(),
             variance_n2=kf.variance_n2 if kf.started else math.inf,
             last_update_s=self._last_update_s,
-            observation_ned_n=observation if observation is not None else _NAN3.copy(),
+            observation_ned_n=np.array(observation) if observation is not None else _NAN3.copy(),
             updated=updated,
             health=health.copy(),
         )
 
-    def _observe(self, aligned: AlignedInputs | str) -> FloatArray | None:
-        cfg, health = self.config, self.health
+    def _observe(self, aligned: AlignedInputs | str) -> tuple[float, float, float] | None:
+        health = self.health
         if aligned is alignment.STALE_ATTITUDE:
             health.stale_attitude += 1
             return None
         if aligned is alignment.STALE_PWM:
             health.stale_pwm += 1
             return None
-        observation = observe_tension_ned_n(
-            aligned.specific_force_body_mps2,
-            aligned.rotation_body_to_ned,
-            aligned.thrust_n,
-            self.mass_kg,
+        observation = observe_tension_ned_values(
+            aligned.specific_force_values, aligned.rotation_rows, aligned.thrust_n, self.mass_kg
         )
-        if not np.isfinite(observation).all():
+        n, e, d = observation
+        if not math.isfinite(n + e + d):  # NaN/inf in any
             health.nonfinite_rejected += 1
             return None
-        if float(np.linalg.norm(observation)) > cfg.max_observed_tension_n:
+        if math.sqrt(n * n + e * e + d * d) > self.config.max_observed_tension_n:
             health.absurd_rejected += 1
             return None
         return observation

@@ -53,18 +53,15 @@ class AlignedInputs(NamedTuple):
         ``R_v^b`` of the latest attitude (paper eq. 2), shape (3, 3): ``v_body = R @ v_ned``.
     thrust_n
         Total rotor thrust of the latest motor outputs, along body -z [N].
-    specific_force_values
-        ``specific_force_body_mps2`` as a list of 3 Python floats (for scalar code).
-    rotation_rows
-        ``rotation_ned_to_body`` row by row, Python floats (for scalar code).
+
+    The aligner that made it holds the same inputs as Python floats for scalar code
+    (:attr:`InputAligner.specific_force_values`, :attr:`InputAligner.rotation_rows`).
     """
 
     time_s: float
     specific_force_body_mps2: FloatArray
     rotation_ned_to_body: FloatArray
     thrust_n: float
-    specific_force_values: list[float]
-    rotation_rows: list[list[float]]
 
     @property
     def rotation_body_to_ned(self) -> FloatArray:
@@ -93,6 +90,9 @@ class InputAligner:
         ``R_v^b`` of ``attitude``, shape (3, 3) (identity before the first).
     rotation_rows
         The same row by row as Python floats (converted once per attitude sample).
+    specific_force_values
+        The specific force of the last IMU sample handed to :meth:`align`, 3 Python floats
+        [m/s^2] (converted once per sample).
     cos_tilt
         ``cos(roll) cos(pitch)`` of ``attitude`` (the rangefinder's tilt correction).
     pwm_time_s, thrust_n
@@ -108,6 +108,7 @@ class InputAligner:
         self.attitude: AttitudeSample | None = None
         self.rotation_ned_to_body: FloatArray = np.eye(3)
         self.rotation_rows: list[list[float]] = self.rotation_ned_to_body.tolist()
+        self.specific_force_values: list[float] = [math.nan] * 3
         self.cos_tilt = 1.0
         self.pwm_time_s = math.nan
         self.thrust_n = math.nan
@@ -182,7 +183,7 @@ class InputAligner:
         t = sample.time_s
         force = sample.specific_force_body_mps2
         outcome: AlignedInputs | str
-        values = force.tolist()
+        values = self.specific_force_values = force.tolist()
         if not math.isfinite(t + values[0] + values[1] + values[2]):  # NaN/inf in any
             outcome = NONFINITE_INPUT
         elif self.attitude is None or not (
@@ -192,9 +193,7 @@ class InputAligner:
         elif not abs(t - self.pwm_time_s) <= self.pwm_staleness_s:  # nan before the first
             outcome = STALE_PWM
         else:
-            outcome = AlignedInputs(
-                t, force, self.rotation_ned_to_body, self.thrust_n, values, self.rotation_rows
-            )
+            outcome = AlignedInputs(t, force, self.rotation_ned_to_body, self.thrust_n)
         self._imu_in, self._imu_outcome = sample, outcome
         return outcome
 

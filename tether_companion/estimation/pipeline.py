@@ -404,7 +404,7 @@ class TetherEstimator:
         if aligned is STALE_PWM:
             health.stale_pwm += 1
             return False
-        t, accel, _, thrust_n, accel_values, rotation_rows = aligned
+        t, accel, _, thrust_n = aligned
         model = self.model
         tension_n = self._known_tension_n
         if not model.has_tension_state and (
@@ -419,8 +419,9 @@ class TetherEstimator:
         if x[0] * x[0] + x[1] * x[1] + x[2] * x[2] < model.min_cable_length_m**2:
             health.near_anchor += 1
             return False
-        predicted, h_rows = model.accel_rows(x, rotation_rows, thrust_n, tension_n)
-        ax, ay, az = accel_values
+        aligner = self.aligner
+        predicted, h_rows = model.accel_rows(x, aligner.rotation_rows, thrust_n, tension_n)
+        ax, ay, az = aligner.specific_force_values
         innovation = [ax - predicted[0], ay - predicted[1], az - predicted[2]]
         result = self.filter.update_rows(ACCEL, innovation, h_rows, self._r_accel_variance)
         health.last_accel_nis = result.nis

@@ -416,8 +416,9 @@ class TensionEstimator:
         if aligned is alignment.STALE_PWM:
             health.stale_pwm += 1
             return None
+        aligner = self.aligner
         observation = observe_tension_ned_values(
-            aligned.specific_force_values, aligned.rotation_rows, aligned.thrust_n, self.mass_kg
+            aligner.specific_force_values, aligner.rotation_rows, aligned.thrust_n, self.mass_kg
         )
         n, e, d = observation
         if not math.isfinite(n + e + d):  # NaN/inf in any

@@ -15,8 +15,6 @@ Replay runs as fast as the CPU allows and writes one CSV row per published estim
 
 from __future__ import annotations
 
-import contextlib
-import io
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -27,6 +25,7 @@ import numpy as np
 
 from tether_companion.errors import InputError
 from tether_companion.frames import wrap_pi
+from tether_companion.mavlink.dataflash import DataflashReader, RecordFormat
 from tether_companion.mavlink.framing import FrameParser, MAVLinkMessage
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
@@ -195,63 +194,52 @@ class DataflashSource:
         self.counts = dict.fromkeys(_REQUIRED, 0)
 
     def __iter__(self) -> Iterator[Sample]:
-        from pymavlink import DFReader
-
         path = self.path
         try:
-            with (
-                contextlib.redirect_stdout(io.StringIO()),
-                contextlib.redirect_stderr(io.StringIO()),
-            ):
-                reader = DFReader.DFReader_binary(str(path), zero_time_base=False)
-        except Exception as exc:  # noqa: BLE001 - pymavlink raises assorted errors on non-logs
-            raise InputError(f"{path}: not a readable ArduPilot dataflash log ({exc})") from None
+            data = path.read_bytes()
+        except OSError as exc:
+            raise InputError(f"{path}: cannot read log file ({exc.strerror})") from None
+        if not data:
+            raise InputError(f"{path}: not a readable ArduPilot dataflash log (empty file)")
+        reader = DataflashReader(data)
         counts = self.counts
-        channels = [f"C{i + 1}" for i in range(self.n_motors)]
-        while True:
-            with (
-                contextlib.redirect_stdout(io.StringIO()),
-                contextlib.redirect_stderr(io.StringIO()),
-            ):
-                msg = reader.recv_match(type=["IMU", "ATT", "RCOU", "RFND"])
-            if msg is None:
-                break
-            kind = msg.get_type()
-            time_s = msg.TimeUS * 1e-6
+        plans: dict[RecordFormat, tuple] = {}
+        for fmt, values in reader.records({"IMU", "ATT", "RCOU", "RFND"}):
+            plan = plans.get(fmt)
+            if plan is None:
+                plan = plans[fmt] = self._plan(fmt)
+            kind, time_index, indexes, extra = plan
+            time_s = values[time_index] * 1e-6
             if kind == "IMU":
-                if getattr(msg, "I", 0) != 0:
+                if extra is not None and values[extra] != 0:  # not the first IMU
                     continue
+                gx, gy, gz, ax, ay, az = (values[i] for i in indexes)
                 counts[IMU] += 1
                 yield ImuSample(
                     time_s=time_s,
-                    specific_force_body_mps2=np.array([msg.AccX, msg.AccY, msg.AccZ], dtype=float),
-                    angular_rate_body_rad_s=np.array([msg.GyrX, msg.GyrY, msg.GyrZ], dtype=float),
+                    specific_force_body_mps2=np.array((ax, ay, az), dtype=float),
+                    angular_rate_body_rad_s=np.array((gx, gy, gz), dtype=float),
                 )
             elif kind == "ATT":
+                roll, pitch, yaw = (values[i] for i in indexes)
                 counts[ATTITUDE] += 1
                 yield AttitudeSample(
                     time_s=time_s,
-                    roll_rad=math.radians(msg.Roll),
-                    pitch_rad=math.radians(msg.Pitch),
-                    yaw_rad=wrap_pi(math.radians(msg.Yaw)),
+                    roll_rad=math.radians(roll),
+                    pitch_rad=math.radians(pitch),
+                    yaw_rad=wrap_pi(math.radians(yaw)),
                 )
             elif kind == "RCOU":
-                try:
-                    pwm = np.array([getattr(msg, name) for name in channels], dtype=float)
-                except AttributeError:
-                    raise InputError(
-                        f"{path}: RCOU has fewer than {self.n_motors} channels"
-                    ) from None
                 counts[PWM] += 1
-                yield PwmSample(time_s=time_s, pwm_us=pwm)
-            elif (
-                kind == "RFND" and getattr(msg, "Orient", DATAFLASH_DOWNWARD) == DATAFLASH_DOWNWARD
-            ):
-                yield RangeSample(time_s=time_s, distance_m=float(msg.Dist))
+                yield PwmSample(
+                    time_s=time_s, pwm_us=np.array([values[i] for i in indexes], dtype=float)
+                )
+            elif extra is None or values[extra] == DATAFLASH_DOWNWARD:  # RFND
+                yield RangeSample(time_s=time_s, distance_m=float(values[indexes[0]]))
         if sum(counts.values()) == 0 and reader.remaining > 0:
             raise InputError(
                 f"{path}: not an ArduPilot dataflash log (no IMU, ATT or RCOU message "
-                f"could be read from its {reader.data_len} bytes)"
+                f"could be read from its {len(data)} bytes)"
             )
         if reader.remaining > 0 and not self.allow_truncated:
             raise InputError(
@@ -259,3 +247,31 @@ class DataflashSource:
                 "do not hold a complete message "
                 "(use --allow-truncated to replay what is complete)"
             )
+
+    def _plan(self, fmt: RecordFormat) -> tuple[str, int, list[int], int | None]:
+        """(name, index of TimeUS, indexes of the values used, index of the instance or
+        orientation column or None) of a record format.
+
+        Raises
+        ------
+        InputError
+            When a column the replay needs is missing.
+        """
+        wanted = {
+            "IMU": ["GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"],
+            "ATT": ["Roll", "Pitch", "Yaw"],
+            "RCOU": [f"C{i + 1}" for i in range(self.n_motors)],
+            "RFND": ["Dist"],
+        }[fmt.name]
+        missing = [c for c in ["TimeUS", *wanted] if c not in fmt.columns]
+        if missing:
+            if fmt.name == "RCOU":
+                raise InputError(f"{self.path}: RCOU has fewer than {self.n_motors} channels")
+            raise InputError(f"{self.path}: {fmt.name} lacks {', '.join(missing)}")
+        extra = {"IMU": "I", "RFND": "Orient"}.get(fmt.name)
+        return (
+            fmt.name,
+            fmt.columns["TimeUS"],
+            [fmt.columns[c] for c in wanted],
+            fmt.columns.get(extra) if extra is not None else None,
+        )

@@ -8,6 +8,8 @@
    the same model, Q, R and Joseph-form update, and prints the cost per IMU step (predict +
    accelerometer update + altimeter update) of each, their ratio, and the largest difference
    between the two filters' estimates (they compute the same thing; gating is off here).
+3. Replays the same 20 s synthetic hover, written as a .tlog and as an ArduPilot dataflash
+   .bin, through the service pipeline and prints each one's CPU real-time factor.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import dataclasses
 import json
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 from rich.console import Console
@@ -174,39 +177,84 @@ def _filterpy(
     return time.process_time() - started, out
 
 
-def _replay_cpu(repeat: int, seconds: float = 20.0) -> tuple[float, float]:
-    """Least CPU time [s] of replaying a synthetic hover .tlog (RAW_IMU, ATTITUDE,
-    SERVO_OUTPUT_RAW at 200 Hz, DISTANCE_SENSOR at 20 Hz) through the service pipeline, and
-    the flight time it spans [s]."""
-    import io
-    import tempfile
-    from pathlib import Path
-
+def _write_logs(directory: Path, seconds: float) -> tuple[Path, Path]:
+    """The same synthetic hover (RAW_IMU, ATTITUDE, SERVO_OUTPUT_RAW at 200 Hz,
+    DISTANCE_SENSOR at 20 Hz) as a .tlog and as an ArduPilot dataflash .bin (IMU, ATT, RCOU,
+    RFND in the log's own units)."""
     from tether_companion.mavlink.framing import FrameEncoder
+    from tether_companion.mavlink.units import (
+        attitude_from_attitude,
+        imu_from_raw_imu,
+        pwm_from_servo_output_raw,
+        range_from_distance_sensor,
+    )
     from tether_companion.service.config import load_service_config, load_vehicle_for
     from tether_companion.service.recording import RecordingLimits, TlogWriter
-    from tether_companion.service.replay import replay_log
+    from tether_companion.service.replay import DATAFLASH_DOWNWARD
     from tether_companion.service.synthetic import HoverStreams
+    from tether_companion.sysid.logs.dataflash_writer import DataflashWriter
 
-    config = load_service_config(None, {"recording": {"enabled": False}})
-    vehicle = load_vehicle_for(config)
+    vehicle = load_vehicle_for(load_service_config(None, {}))
     streams = HoverStreams(vehicle, np.array([2.0, 1.0, -3.0]), 4.0, rng=np.random.default_rng(5))
     encoder = FrameEncoder(1, 1)
     limits = RecordingLimits(max_file_bytes=1 << 30, max_total_bytes=1 << 31, flush_interval_s=1.0)
-    with tempfile.TemporaryDirectory() as directory:
-        writer = TlogWriter(Path(directory), limits)
+    writer = TlogWriter(directory, limits)
+    bin_path = directory / "hover.bin"
+    channels = tuple(f"C{i + 1}" for i in range(vehicle.n_motors))
+    with bin_path.open("wb") as stream:
+        log = DataflashWriter(stream)
+        log.declare(
+            "IMU", "QBffffff", ("TimeUS", "I", "GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ")
+        )
+        log.declare("ATT", "Qfff", ("TimeUS", "Roll", "Pitch", "Yaw"))
+        log.declare("RCOU", "Q" + "H" * len(channels), ("TimeUS", *channels))
+        log.declare("RFND", "QBfB", ("TimeUS", "Instance", "Dist", "Orient"))
         for k in range(int(seconds * 200)):
             for msg in streams.messages(20.0 + k * 0.005, k):
                 writer.write(encoder.encode(msg))
-        writer.close()
-        path = writer.current_path
-        assert path is not None
-        best = math.inf
-        for _ in range(repeat):
-            started = time.process_time()
-            replay_log(path, config, vehicle, io.StringIO())
-            best = min(best, time.process_time() - started)
-    return best, seconds
+                kind = msg.get_type()
+                if kind == "RAW_IMU":
+                    imu = imu_from_raw_imu(msg)
+                    t_us = round(imu.time_s * 1e6)
+                    log.write(
+                        "IMU", t_us, 0, *imu.angular_rate_body_rad_s, *imu.specific_force_body_mps2
+                    )
+                elif kind == "ATTITUDE":
+                    att = attitude_from_attitude(msg)
+                    angles = (att.roll_rad, att.pitch_rad, att.yaw_rad)
+                    log.write("ATT", round(att.time_s * 1e6), *(math.degrees(a) for a in angles))
+                elif kind == "SERVO_OUTPUT_RAW":
+                    pwm = pwm_from_servo_output_raw(msg, vehicle.n_motors)
+                    log.write("RCOU", round(pwm.time_s * 1e6), *(round(p) for p in pwm.pwm_us))
+                elif kind == "DISTANCE_SENSOR" and (rng := range_from_distance_sensor(msg)):
+                    log.write(
+                        "RFND", round(rng.time_s * 1e6), 0, rng.distance_m, DATAFLASH_DOWNWARD
+                    )
+    writer.close()
+    assert writer.current_path is not None
+    return writer.current_path, bin_path
+
+
+def _replay_cpu(repeat: int, seconds: float = 20.0) -> dict[str, float]:
+    """Least CPU time [s] of replaying ``seconds`` of a synthetic hover through the service
+    pipeline, from a .tlog (``tlog``) and from a dataflash .bin (``bin``)."""
+    import io
+    import tempfile
+
+    from tether_companion.service.config import load_service_config, load_vehicle_for
+    from tether_companion.service.replay import replay_log
+
+    config = load_service_config(None, {"recording": {"enabled": False}})
+    vehicle = load_vehicle_for(config)
+    best = {"tlog": math.inf, "bin": math.inf}
+    with tempfile.TemporaryDirectory() as directory:
+        paths = dict(zip(best, _write_logs(Path(directory), seconds), strict=True))
+        for _ in range(repeat):  # interleaved
+            for kind, path in paths.items():
+                started = time.process_time()
+                replay_log(path, config, vehicle, io.StringIO())
+                best[kind] = min(best[kind], time.process_time() - started)
+    return best
 
 
 def run(args: argparse.Namespace) -> int:
@@ -239,7 +287,8 @@ def run(args: argparse.Namespace) -> int:
             console.print("filterpy is not installed (pip install -e '.[bench]'): no comparison")
             break
         theirs_s = min(theirs_s, elapsed)
-    replay_cpu_s, replay_flight_s = _replay_cpu(args.repeat)
+    replay_flight_s = 20.0
+    replay_cpu_s = _replay_cpu(args.repeat, replay_flight_s)
     results = {
         "scenario": args.scenario,
         "simulated_s": scenario.duration_s,
@@ -259,8 +308,10 @@ def run(args: argparse.Namespace) -> int:
         "max_state_difference": float(np.max(np.abs(ours_x - theirs_x))),
         "max_state_difference_scalar_vs_numpy": float(np.max(np.abs(ours_x - numpy_x))),
         "replay_flight_s": replay_flight_s,
-        "replay_cpu_s": replay_cpu_s,
-        "replay_real_time_factor_cpu": replay_flight_s / replay_cpu_s,
+        "replay_tlog_cpu_s": replay_cpu_s["tlog"],
+        "replay_tlog_real_time_factor_cpu": replay_flight_s / replay_cpu_s["tlog"],
+        "replay_bin_cpu_s": replay_cpu_s["bin"],
+        "replay_bin_real_time_factor_cpu": replay_flight_s / replay_cpu_s["bin"],
     }
     if args.json:
         print(json.dumps(results, indent=2))
@@ -283,9 +334,11 @@ def run(args: argparse.Namespace) -> int:
     table.add_row(
         "max |x scalar - x numpy|", f"{results['max_state_difference_scalar_vs_numpy']:.1e}"
     )
-    table.add_row(
-        f"replay of a {replay_flight_s:.0f} s .tlog, CPU",
-        f"{replay_cpu_s:.2f} s = {replay_flight_s / replay_cpu_s:.1f}x real time",
-    )
+    for kind, name in (("tlog", ".tlog"), ("bin", "dataflash .bin")):
+        cpu = replay_cpu_s[kind]
+        table.add_row(
+            f"replay of a {replay_flight_s:.0f} s {name}, CPU",
+            f"{cpu:.2f} s = {replay_flight_s / cpu:.1f}x real time",
+        )
     console.print(table)
     return 0

@@ -24,7 +24,7 @@ FloatArray = NDArray[np.float64]
 
 def height_above_anchor_m(
     distance_m: float,
-    rotation_ned_to_body: FloatArray,
+    rotation_ned_to_body: FloatArray | list[list[float]],
     offset_frd_m: tuple[float, float, float],
     anchor_height_m: float,
 ) -> float:
@@ -35,14 +35,14 @@ def height_above_anchor_m(
     distance_m
         Rangefinder reading along the sensor axis (body down) [m].
     rotation_ned_to_body
-        ``R_v^b`` of the attitude at the reading, shape (3, 3).
+        ``R_v^b`` of the attitude at the reading, shape (3, 3) (an array or rows of floats).
     offset_frd_m
         Sensor mounting point from the centre of mass, body FRD [m].
     anchor_height_m
         Anchor height above the ground [m].
     """
-    r = rotation_ned_to_body
-    cos_tilt = float(r[2, 2])  # (R_v^b)[2, 2] = cos(phi) cos(theta)
+    (_, _, r02), (_, _, r12), (_, _, r22) = rotation_ned_to_body  # rows of R_v^b
+    cos_tilt = float(r22)  # (R_v^b)[2, 2] = cos(phi) cos(theta)
     x, y, z = offset_frd_m
-    offset_down = float(r[0, 2] * x + r[1, 2] * y + r[2, 2] * z)  # (R_b^v r)_down
+    offset_down = float(r02 * x + r12 * y + r22 * z)  # (R_b^v r)_down
     return distance_m * cos_tilt + offset_down - anchor_height_m

@@ -352,7 +352,7 @@ class TetherEstimator:
         height_m = float(
             height_above_anchor_m(
                 sample.distance_m,
-                aligner.rotation_ned_to_body,
+                aligner.rotation_rows,
                 cfg.offset_frd_m,
                 self.config.ground_station.anchor_height_m,
             )

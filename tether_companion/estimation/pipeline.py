@@ -38,9 +38,9 @@ from tether_companion.estimation.alignment import (
     InputAligner,
     aligner_for,
 )
-from tether_companion.estimation.altimeter_geometry import height_above_anchor_m
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.ekf import FUSED, GATED, NONFINITE, ExtendedKalmanFilter
+from tether_companion.estimation.inputs import InputFeed, range_height_m, range_reading_ok
 from tether_companion.estimation.observability import RANGEFINDER, RangeWatch, grow_for_imu_gap
 from tether_companion.estimation.tether_models import (
     F_C,
@@ -52,7 +52,7 @@ from tether_companion.estimation.tether_models import (
 )
 from tether_companion.estimation.thrust_input import StaticThrustInput, ThrustInput
 from tether_companion.physics.vehicle import VehicleProfile
-from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
+from tether_companion.samples import ImuSample, RangeSample
 
 FloatArray = NDArray[np.float64]
 
@@ -192,7 +192,7 @@ def _finite(value: float) -> bool:
     return math.isfinite(value)
 
 
-class TetherEstimator:
+class TetherEstimator(InputFeed):
     """The tether EKF (3- or 4-state) fed by typed samples, ticking at the IMU rate.
 
     Parameters
@@ -271,21 +271,6 @@ class TetherEstimator:
         """Number of filter restarts so far."""
         return self.filter.resets
 
-    def on_attitude(self, sample: AttitudeSample) -> None:
-        """Store the latest attitude (rejected and counted when not finite)."""
-        if self.aligner.on_attitude(sample) is not None:
-            self.health.nonfinite_rejected += 1
-
-    def on_pwm(self, sample: PwmSample) -> None:
-        """Store the total thrust [N] of the latest motor outputs (rejected when not finite)."""
-        try:
-            rejected = self.aligner.on_pwm(sample) is not None
-        except ValueError:  # wrong number of outputs for this vehicle
-            self.health.pwm_invalid += 1
-            return
-        if rejected:
-            self.health.nonfinite_rejected += 1
-
     def set_known_tension_n(self, tension_n: float, time_s: float) -> None:
         """Known cable tension [N] at ``time_s`` [s] (load cell; used by the 3-state model)."""
         if not (_finite(tension_n) and _finite(time_s)) or tension_n < 0.0:
@@ -324,39 +309,27 @@ class TetherEstimator:
         latest one only; a replaced one counts as stale).
         """
         health = self.health
-        if not (_finite(sample.time_s) and _finite(sample.distance_m)):
-            health.nonfinite_rejected += 1
-            return
         cfg = self.config.rangefinder
-        if not (cfg.min_m <= sample.distance_m <= cfg.max_m):
-            health.range_out_of_range += 1
+        if not range_reading_ok(sample, cfg, health):
             return
         if math.isnan(self._time_s):
             if self._early_range is not None:
                 health.range_stale += 1
             self._early_range = sample
             return
-        aligner = self.aligner
-        att = aligner.attitude
-        if (
-            att is None
-            or abs(sample.time_s - att.time_s) > self._stale.attitude_s
-            or abs(sample.time_s - self._time_s) > self._stale.range_s
-        ):
+        if abs(sample.time_s - self._time_s) > self._stale.range_s:
             health.range_stale += 1
             return
-        cos_tilt = aligner.cos_tilt
-        if cos_tilt < math.cos(cfg.max_tilt_rad):
-            health.range_out_of_range += 1
-            return
-        height_m = float(
-            height_above_anchor_m(
-                sample.distance_m,
-                aligner.rotation_rows,
-                cfg.offset_frd_m,
-                self.config.ground_station.anchor_height_m,
-            )
+        height_m = range_height_m(
+            sample,
+            self.aligner,
+            cfg,
+            self._stale.attitude_s,
+            self.config.ground_station.anchor_height_m,
+            health,
         )
+        if height_m is None:
+            return
         result = self.filter.update_rows(
             ALTIMETER, [height_m + self.filter.x_values()[P_D]], self._altimeter_rows, self._r_alt
         )

@@ -27,7 +27,16 @@ class DynamicNoise:
     acceleration_m2ps3: float = spec(
         1e-4,
         exclusive_minimum=0.0,
-        doc="unmodelled forces per unit mass (gusts, motor lag, model error) [m^2/s^3]",
+        doc="force_balance: unmodelled forces per unit mass (gusts, motor lag, model error)"
+        " driving the velocity [m^2/s^3]",
+    )
+    force_residual_m2ps3: float = spec(
+        0.02,
+        exclusive_minimum=0.0,
+        doc="inertial: what the force-balance measurement does not model (gusts through"
+        " drag, quadratic body drag, vibration, motor lag), time-correlated, as the white"
+        " density of the same information: a force error of std sigma [m/s^2] correlated"
+        " over tau [s] counts 2 sigma^2 tau [m^2/s^3]",
     )
     position_m2ps: float = spec(1e-6, exclusive_minimum=0.0, doc="position [m^2/s]")
     tension_n2ps: float = spec(2.0, exclusive_minimum=0.0, doc="chord tension [N^2/s]")
@@ -35,7 +44,10 @@ class DynamicNoise:
         1e-5, exclusive_minimum=0.0, doc="thrust scale factor (battery sag) [1/s]"
     )
     accel_bias_m2ps5: float = spec(
-        1e-6, exclusive_minimum=0.0, doc="accelerometer bias random walk [(m/s^2)^2/s]"
+        1e-4,
+        exclusive_minimum=0.0,
+        doc="accelerometer bias random walk, also carrying the flight controller's slowly"
+        " wandering attitude error (g times its angle, 2 sigma^2 / tau) [(m/s^2)^2/s]",
     )
     wind_m2ps3: float = spec(0.05, exclusive_minimum=0.0, doc="wind, north and east [m^2/s^3]")
 

@@ -56,10 +56,11 @@ from tether_companion.estimation.dynamic.models import (
 from tether_companion.estimation.dynamic.observability import assess
 from tether_companion.estimation.dynamic.output import NavigationEstimate
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
+from tether_companion.estimation.inputs import InputFeed, range_height_m, range_reading_ok
 from tether_companion.estimation.pipeline import default_thrust_input
 from tether_companion.estimation.thrust_input import ThrustInput
 from tether_companion.physics.vehicle import VehicleProfile
-from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
+from tether_companion.samples import ImuSample, RangeSample
 
 FloatArray = NDArray[np.float64]
 
@@ -124,7 +125,7 @@ def drag_per_s(dynamic: DynamicFilterConfig, vehicle: VehicleProfile) -> float:
     return vehicle.drag_coefficient_n_s_per_m / vehicle.mass_kg
 
 
-class DynamicTetherEstimator:
+class DynamicTetherEstimator(InputFeed):
     """Position, velocity, tension, thrust scale, accelerometer bias and wind from samples.
 
     Parameters
@@ -205,8 +206,9 @@ class DynamicTetherEstimator:
         sensor = self.dynamic.accel_noise_std_mps2
         if not self._inertial:
             return sensor
-        # the force balance as the measurement carries the unmodelled forces as white noise
-        unmodelled_sq = self.dynamic.noise.acceleration_m2ps3 / NOMINAL_IMU_STEP_S
+        # the force balance as the measurement carries the unmodelled forces; they are
+        # correlated over about a second, so their white equivalent per IMU sample is large
+        unmodelled_sq = self.dynamic.noise.force_residual_m2ps3 / NOMINAL_IMU_STEP_S
         return math.sqrt(sensor**2 + unmodelled_sq)
 
     def _new_initialiser(self) -> Initialiser:
@@ -240,21 +242,6 @@ class DynamicTetherEstimator:
         return None if self.bank is None else self.bank.best
 
     # ------------------------------------------------------------------ inputs
-    def on_attitude(self, sample: AttitudeSample) -> None:
-        """Store the latest attitude (rejected and counted when not finite)."""
-        if self.aligner.on_attitude(sample) is not None:
-            self.health.nonfinite_rejected += 1
-
-    def on_pwm(self, sample: PwmSample) -> None:
-        """Store the thrust of the latest motor outputs (rejected when not finite)."""
-        try:
-            rejected = self.aligner.on_pwm(sample) is not None
-        except ValueError:
-            self.health.pwm_invalid += 1
-            return
-        if rejected:
-            self.health.nonfinite_rejected += 1
-
     def set_known_tension_n(self, tension_n: float, time_s: float) -> None:
         """Load-cell tension at the drone [N] at ``time_s`` [s]: fused when initialised."""
         if not (math.isfinite(tension_n) and math.isfinite(time_s)) or tension_n < 0.0:
@@ -287,24 +274,17 @@ class DynamicTetherEstimator:
                 self.health.cable_angle_fused += 1
 
     def on_range(self, sample: RangeSample) -> None:
-        """A downward rangefinder reading along the body z axis [m] (tilt-corrected here)."""
+        """A downward rangefinder reading along the body z axis [m]: the height above the ground
+        (tilt and the sensor's ``config.rangefinder.offset_frd_m`` lever arm corrected)."""
         health = self.health
-        if not (math.isfinite(sample.time_s) and math.isfinite(sample.distance_m)):
-            health.nonfinite_rejected += 1
-            return
         cfg = self.config.rangefinder
-        if not (cfg.min_m <= sample.distance_m <= cfg.max_m):
-            health.range_out_of_range += 1
+        if not range_reading_ok(sample, cfg, health):
             return
-        att = self.aligner.attitude
-        if att is None or abs(sample.time_s - att.time_s) > self.config.staleness.attitude_s:
-            health.range_stale += 1
+        height_m = range_height_m(
+            sample, self.aligner, cfg, self.config.staleness.attitude_s, 0.0, health
+        )
+        if height_m is None:
             return
-        cos_tilt = self.aligner.cos_tilt
-        if cos_tilt < math.cos(cfg.max_tilt_rad):
-            health.range_out_of_range += 1
-            return
-        height_m = sample.distance_m * cos_tilt
         if self.bank is None:
             self._initialiser.add_height(height_m - self.dynamic.anchor_height_m)
             return

@@ -16,12 +16,12 @@ sympy = pytest.importorskip("sympy", reason="sympy (test extra) derives the mode
 from tether_companion.estimation.dynamic.derivation import derive  # noqa: E402
 
 ROTATION_MODELS = {
-    "force_balance_known_length",
-    "force_balance_chord_length",
-    "accel_known_length",
-    "accel_chord_length",
+    "force_balance_straight",
+    "force_balance_catenary",
+    "accel_straight",
+    "accel_catenary",
 }
-PROCESS_MODELS = {"force_balance_known_length", "force_balance_chord_length", "inertial"}
+PROCESS_MODELS = {"force_balance_straight", "force_balance_catenary", "inertial"}
 ALL_MODELS = [name for name, *_ in derive.models()]
 
 
@@ -57,8 +57,8 @@ def _random_case(rng: np.random.Generator, name: str) -> tuple[list, list, list]
         u = [rng.uniform(-1.0, 3.0)]
     else:
         u = []
-    length = float(np.linalg.norm(x[state.POSITION])) * rng.uniform(1.0, 1.2)
-    c = [rng.uniform(0.5, 3.0), rng.uniform(0.0, 0.6), rng.uniform(0.0, 1.0), length]
+    # weight per length: a catenary parameter w |p| / (2 T_ch) up to about 3
+    c = [rng.uniform(0.5, 3.0), rng.uniform(0.0, 0.6), rng.uniform(0.01, 1.0)]
     return list(x), u, c
 
 
@@ -86,10 +86,10 @@ def test_jacobian_matches_central_differences(name: str) -> None:
 def test_straight_cable_accelerometer_is_the_papers_model() -> None:
     rng = np.random.default_rng(7)
     for _ in range(20):
-        x, u, c = _random_case(rng, "accel_known_length")
+        x, u, c = _random_case(rng, "accel_straight")
         x[state.SCALE], x[8:11], c[1], c[2] = 1.0, [0.0, 0.0, 0.0], 0.0, 0.0
         rotation = np.array(u[:9]).reshape(3, 3)
-        ours, _ = generated.accel_known_length(x, u, c)
+        ours, _ = generated.accel_straight(x, u, c)
         paper = FourStateModel(c[0]).accel(np.array([*x[0:3], x[state.TENSION]]), rotation, u[9])[0]
         np.testing.assert_allclose(ours, paper, rtol=1e-12, atol=1e-12)
 
@@ -99,26 +99,67 @@ def test_force_balance_is_the_rotated_specific_force_plus_gravity() -> None:
     equals it when fed that specific force: the two formulations share one physics."""
     rng = np.random.default_rng(3)
     for _ in range(20):
-        x, u, c = _random_case(rng, "force_balance_known_length")
+        x, u, c = _random_case(rng, "force_balance_catenary")
         rotation = np.array(u[:9]).reshape(3, 3)
-        accel, _ = generated.accel_known_length(x, u, c)
+        accel, _ = generated.accel_catenary(x, u, c)
         specific = np.array(accel) - np.array(x[8:11])
         expected = rotation.T @ specific + np.array([0.0, 0.0, 9.80665])
-        xdot, _ = generated.force_balance_known_length(x, u, c)
+        xdot, _ = generated.force_balance_catenary(x, u, c)
         np.testing.assert_allclose(xdot[3:6], expected, rtol=1e-10, atol=1e-10)
         np.testing.assert_allclose(xdot[0:3], x[3:6])
         ins, _ = generated.inertial(x, [*u[:9], *accel], c)
         np.testing.assert_allclose(ins[3:6], expected, rtol=1e-10, atol=1e-10)
 
 
-def test_cable_weight_adds_half_the_hanging_weight_at_the_drone() -> None:
+@pytest.mark.parametrize(
+    ("span_m", "height_m", "length_m", "weight_n_per_m"),
+    [
+        (5.0, 3.0, 7.0, 0.98),  # heavy and deep sag, 5.6 N at the drone
+        (5.0, 3.0, 5.9, 0.98),  # heavy, nearly taut
+        (5.0, 3.0, 7.0, 0.164),  # light, deep sag, 0.9 N
+        (8.0, -1.0, 9.0, 0.5),  # the drone below the anchor
+        (0.3, 6.0, 6.2, 0.3),  # nearly vertical
+    ],
+)
+def test_catenary_models_match_the_simulators_catenary(
+    span_m: float, height_m: float, length_m: float, weight_n_per_m: float
+) -> None:
+    """Force at the drone, its size, the arc length and the angle at the anchor against
+    physics/catenary.py (an independent solver: known length, Newton on the parameter)."""
+    from tether_companion.physics.catenary import end_tensions, solve_known_length
+
+    curve = solve_known_length(span_m, height_m, length_m)
+    ends = end_tensions(curve, weight_n_per_m)
+    bearing = 0.7
+    p = np.array([span_m * math.cos(bearing), span_m * math.sin(bearing), -height_m])
+    x = [*p, 0, 0, 0, ends.horizontal_n * np.linalg.norm(p) / span_m, 1.0, 0, 0, 0, 0, 0]
+    mass = 1.5
+    c = [mass, 0.0, weight_n_per_m]
+    xdot, _ = generated.force_balance_catenary(x, [*np.eye(3).ravel(), 0.0], c)
+    force = mass * (np.array(xdot[3:6]) - np.array([0.0, 0.0, 9.80665]))
+    expected = np.array(
+        [
+            -ends.horizontal_n * math.cos(bearing),
+            -ends.horizontal_n * math.sin(bearing),
+            -ends.on_drone_vertical_n,  # that one is up positive
+        ]
+    )
+    np.testing.assert_allclose(force, expected, rtol=1e-9, atol=1e-9)
+    (tension,), _ = generated.tension_catenary(x, [], c)
+    assert tension == pytest.approx(ends.drone_n, rel=1e-9)
+    (length,), _ = generated.winch_length_catenary(x, [], c)
+    assert length == pytest.approx(length_m, rel=1e-9)
+    (elevation, azimuth), _ = generated.cable_angle_catenary(x, [], c)
+    assert elevation == pytest.approx(math.atan2(ends.on_anchor_vertical_n, ends.horizontal_n))
+    assert azimuth == pytest.approx(bearing)
+
+
+def test_the_straight_line_is_the_catenarys_taut_limit() -> None:
     x = [3.0, 4.0, -12.0, 0, 0, 0, 5.0, 1.0, 0, 0, 0, 0, 0]
-    (tension,), _ = generated.tension_known_length(x, [], [1.5, 0.0, 0.2, 14.0])
-    chord = 5.0 * np.array([3.0, 4.0, -12.0]) / 13.0
-    expected = np.linalg.norm(-chord + np.array([0.0, 0.0, 0.2 * 14.0 / 2]))
-    assert tension == pytest.approx(expected)
-    (length,), _ = generated.winch_length(x, [], [1.5, 0.0, 0.0, 0.0])
+    light = [1.5, 0.0, 1e-7]
+    for name in ("tension", "winch_length", "cable_angle"):
+        straight, _ = getattr(generated, f"{name}_straight")(x, [], light)
+        catenary, _ = getattr(generated, f"{name}_catenary")(x, [], light)
+        np.testing.assert_allclose(catenary, straight, rtol=1e-6, err_msg=name)
+    (length,), _ = generated.winch_length_straight(x, [], light)
     assert length == pytest.approx(13.0)
-    (elevation, azimuth), _ = generated.cable_angle_known_length(x, [], [1.5, 0.0, 0.0, 14.0])
-    assert elevation == pytest.approx(math.atan2(12.0, 5.0))
-    assert azimuth == pytest.approx(math.atan2(4.0, 3.0))

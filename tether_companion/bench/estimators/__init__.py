@@ -42,7 +42,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="estimator kind, repeatable (default: every registered kind)",
     )
     parser.add_argument(
-        "--seeds", type=int_at_least(1), default=10, help="seeds 1..N per scenario (default 10)"
+        "--seeds",
+        type=int_at_least(1),
+        default=10,
+        help="number of seeds per scenario (default 10)",
+    )
+    parser.add_argument(
+        "--first-seed",
+        type=int_at_least(0),
+        default=1,
+        help="seeds run from this one (default 1; e.g. report on seeds a tuning did not use)",
     )
     parser.add_argument(
         "--duration-s",

@@ -81,7 +81,7 @@ def run_scorecard(args: argparse.Namespace) -> int:
         args.scenario or [], args.duration_s, args.settle_s, args.simulator, console
     )
     names = list(scenarios)
-    seeds = list(range(1, args.seeds + 1))
+    seeds = list(range(args.first_seed, args.first_seed + args.seeds))
     tasks = [
         FlightTask(
             name,

@@ -49,6 +49,7 @@ from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterConfig
 from tether_companion.estimation.dynamic.initialise import Initialiser
 from tether_companion.estimation.dynamic.models import (
+    UNDEFINED,
     ForceBalanceProcess,
     InertialProcess,
     ModelConstants,
@@ -171,6 +172,12 @@ class DynamicTetherEstimator(InputFeed):
         self._weight_n = vehicle.mass_kg * GRAVITY_MPS2
         self._inertial = dynamic.formulation == INERTIAL
         self._q = self._process_noise()
+        self._min_pull_n = (
+            dynamic.min_pull_over_wind_drag
+            * vehicle.mass_kg
+            * self.constants.drag_per_s
+            * dynamic.initial.wind_std_mps
+        )
         self.accel = AccelAid(self._accel_measurement_std(), config.min_cable_length_m)
         self.rangefinder = RangefinderAid(
             config.altimeter_noise_variance_m2, dynamic.anchor_height_m
@@ -210,6 +217,13 @@ class DynamicTetherEstimator(InputFeed):
         # correlated over about a second, so their white equivalent per IMU sample is large
         unmodelled_sq = self.dynamic.noise.force_residual_m2ps3 / NOMINAL_IMU_STEP_S
         return math.sqrt(sensor**2 + unmodelled_sq)
+
+    def _horizontal_pull_n(self, x: FloatArray) -> float:
+        """The cable's horizontal pull at the drone, ``T_ch |p_ne| / |p|`` [N]."""
+        distance = math.sqrt(float(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]))
+        if distance == 0.0:
+            return 0.0
+        return float(x[state.TENSION]) * math.hypot(float(x[0]), float(x[1])) / distance
 
     def _new_initialiser(self) -> Initialiser:
         return Initialiser(
@@ -414,8 +428,8 @@ class DynamicTetherEstimator(InputFeed):
         resets_before = [kf.resets for kf in bank.filters]
         try:
             bank.predict(dt_s, np.array(self._inputs))
-        except ZeroDivisionError:  # a state reached the anchor: the cable model is undefined
-            self._restart("position at the anchor")
+        except UNDEFINED:  # at the anchor, or zero tension: the cable model is undefined
+            self._restart("position at the anchor or no tension")
             return
         reset = [kf.resets != r for kf, r in zip(bank.filters, resets_before, strict=True)]
         if all(reset):
@@ -485,7 +499,7 @@ class DynamicTetherEstimator(InputFeed):
                 (tension,), jac = c.models.tension(x.tolist(), (), c.values())
                 jac_row = np.array(jac)
                 tension_var = float(jac_row @ p @ jac_row)
-            except ZeroDivisionError:  # exactly at the anchor: the chord term alone
+            except UNDEFINED:  # at the anchor or no tension: the chord term alone
                 tension, tension_var = float(x[state.TENSION]), float(p[6, 6])
         status, reason = assess(
             initialised_reason=None if bank is not None else self._initialiser.reason,
@@ -496,6 +510,8 @@ class DynamicTetherEstimator(InputFeed):
             slack_tension_n=self.dynamic.slack_tension_n,
             position_covariance_m2=p[state.POSITION, state.POSITION],
             max_horizontal_std_m=self.dynamic.max_horizontal_std_m,
+            horizontal_pull_n=self._horizontal_pull_n(x),
+            min_horizontal_pull_n=self._min_pull_n,
         )
         return NavigationEstimate(
             time_s=self._time_s,

@@ -4,7 +4,7 @@ Regenerate with ``python -m tether_companion.estimation.dynamic.derivation.deriv
 models and their meaning are documented there. sympy 1.14.0.
 
 Every function takes the state ``x`` (13 floats, layout in ``state.py``), the inputs ``u``
-and the constants ``c = (mass_kg, drag_per_s, weight_n_per_m, length_m)`` and returns the
+and the constants ``c = (mass_kg, drag_per_s, weight_n_per_m)`` and returns the
 values and the Jacobian with respect to ``x`` (row-major, 13 columns).
 """
 
@@ -15,11 +15,11 @@ import math
 from collections.abc import Sequence
 
 
-def force_balance_known_length(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+def force_balance_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Formulation (a): ``x' = f(x, u)`` with ``u = (R_v^b row-major, thrust_n)``; returns ``(x' (13,), dv'/dx (3x13 row-major))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
-    mass_kg, drag_per_s, weight_n_per_m, length_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = 1/mass_kg
     t1 = t0*thrust_n
     t2 = r20*t1
@@ -27,321 +27,440 @@ def force_balance_known_length(x: Sequence[float], u: Sequence[float], c: Sequen
     t4 = p_e**2
     t5 = p_n**2
     t6 = t3 + t4 + t5
-    t7 = 1/math.sqrt(t6)
-    t8 = t0*t7
-    t9 = p_n*t8
-    t10 = v_n - wind_n
-    t11 = v_e - wind_e
-    t12 = drag_per_s*(r00*t10 + r01*t11 + r02*v_d)
-    t13 = drag_per_s*(r10*t10 + r11*t11 + r12*v_d)
-    t14 = r21*t1
-    t15 = p_e*t8
-    t16 = r22*t1
-    t17 = p_d*tension
-    t18 = 1/t6
-    t19 = t8*tension
-    t20 = t6**(-3/2)
-    t21 = p_n*t0*t20
-    t22 = p_e*t21*tension
-    t23 = t17*t21
-    t24 = drag_per_s*(r00**2 + r10**2)
-    t25 = drag_per_s*(r00*r01 + r10*r11)
-    t26 = -t25
-    t27 = drag_per_s*(r00*r02 + r10*r12)
-    t28 = -t27
-    t29 = p_e*t0*t17*t20
-    t30 = drag_per_s*(r01**2 + r11**2)
-    t31 = drag_per_s*(r01*r02 + r11*r12)
-    t32 = -t31
-    return (v_n, v_e, v_d, -r00*t12 - r10*t13 - scale*t2 - t9*tension, -r01*t12 - r11*t13 - scale*t14 - t15*tension, -r02*t12 - r12*t13 - scale*t16 + (1/2)*t0*(length_m*weight_n_per_m - 2*t17*t7) + 9.80665, 0, 0, 0, 0, 0, 0, 0,), (t19*(t18*t5 - 1), t22, t23, -t24, t26, t28, -t9, -t2, 0, 0, 0, t24, t25, t22, t19*(t18*t4 - 1), t29, t26, -t30, t32, -t15, -t14, 0, 0, 0, t25, t30, t23, t29, t19*(t18*t3 - 1), t28, t32, -drag_per_s*(r02**2 + r12**2), -p_d*t8, -t16, 0, 0, 0, t27, t31,)
-
-
-def accel_known_length(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Accelerometer force balance ``h = f + b`` [m/s^2], FRD body, with ``u = (R_v^b row-major, thrust_n)``; returns ``(h (3,), H (3x13 row-major))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
-    r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
-    mass_kg, drag_per_s, weight_n_per_m, length_m = c
-    t0 = v_n - wind_n
-    t1 = v_e - wind_e
-    t2 = p_e*r01
-    t3 = p_d**2
-    t4 = p_e**2
-    t5 = p_n**2
-    t6 = t3 + t4 + t5
-    t7 = 1/math.sqrt(t6)
-    t8 = 2*t7*tension
-    t9 = p_n*r00
-    t10 = length_m*weight_n_per_m - p_d*t8
-    t11 = 1/mass_kg
-    t12 = (1/2)*t11
-    t13 = p_e*r11
-    t14 = p_n*r10
-    t15 = t11*thrust_n
-    t16 = p_e*r21
-    t17 = p_n*r20
-    t18 = p_d*r02
-    t19 = 1/t6
-    t20 = p_n*t19
-    t21 = t19*t5
-    t22 = t11*t7
-    t23 = t22*tension
-    t24 = p_e*t19
-    t25 = t19*t4
-    t26 = p_d*t19
-    t27 = t19*t3 - 1
-    t28 = drag_per_s*r00
-    t29 = drag_per_s*r01
-    t30 = p_d*r12
-    t31 = drag_per_s*r10
-    t32 = drag_per_s*r11
-    t33 = p_d*r22
-    return (b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t12*(-r02*t10 + t2*t8 + t8*t9), b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t12*(-r12*t10 + t13*t8 + t14*t8), b_z - scale*t15 - t12*(-r22*t10 + t16*t8 + t17*t8),), (t23*(r00*t21 - r00 + t18*t20 + t2*t20), t23*(r01*t25 - r01 + t18*t24 + t24*t9), t23*(r02*t27 + t2*t26 + t26*t9), -t28, -t29, -drag_per_s*r02, -t22*(t18 + t2 + t9), 0, 1, 0, 0, t28, t29, t23*(r10*t21 - r10 + t13*t20 + t20*t30), t23*(r11*t25 - r11 + t14*t24 + t24*t30), t23*(r12*t27 + t13*t26 + t14*t26), -t31, -t32, -drag_per_s*r12, -t22*(t13 + t14 + t30), 0, 0, 1, 0, t31, t32, t23*(r20*t21 - r20 + t16*t20 + t20*t33), t23*(r21*t25 - r21 + t17*t24 + t24*t33), t23*(r22*t27 + t16*t26 + t17*t26), 0, 0, 0, -t22*(t16 + t17 + t33), -t15, 0, 0, 1, 0, 0,)
-
-
-def tension_known_length(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Load cell at the drone: ``|F_c|`` [N]; returns ``(h (1,), H (1x13))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
-    mass_kg, drag_per_s, weight_n_per_m, length_m = c
-    t0 = p_e**2
-    t1 = p_d**2
-    t2 = p_n**2
-    t3 = t0 + t1 + t2
-    t4 = 1/t3
-    t5 = t4*tension**2
-    t6 = 1/math.sqrt(t3)
-    t7 = p_d*t6
-    t8 = length_m*weight_n_per_m - 2*t7*tension
-    t9 = math.sqrt(t0*t5 + t2*t5 + (1/4)*t8**2)
-    t10 = t4*tension
-    t11 = tension/t3**2
-    t12 = t0*t11
-    t13 = t11*t2
-    t14 = (1/2)*t8
-    t15 = 1/t9
-    t16 = t15*tension
-    t17 = t16*(p_d*t14/t3**(3/2) + t10 - t12 - t13)
-    return (t9,), (p_n*t17, p_e*t17, -t16*(p_d*t12 + p_d*t13 - t14*t6*(t1*t4 - 1)), 0, 0, 0, t15*(t0*t10 + t10*t2 - t14*t7), 0, 0, 0, 0, 0, 0,)
-
-
-def cable_angle_known_length(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Ground-station cable angle: (elevation up, azimuth from north) [rad]; returns ``(h (2,), H (2x13))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
-    mass_kg, drag_per_s, weight_n_per_m, length_m = c
-    t0 = length_m*weight_n_per_m
-    t1 = p_d**2
-    t2 = p_e**2
-    t3 = p_n**2
-    t4 = t2 + t3
-    t5 = t1 + t4
-    t6 = 1/math.sqrt(t5)
-    t7 = t6*tension
-    t8 = p_d*t7
-    t9 = math.sqrt(t4)
-    t10 = abs(tension)
-    t11 = t10*t9
-    t12 = 1/t5
-    t13 = t12*t2
-    t14 = t12*t3
-    t15 = 1/t10
-    t16 = t0 + 2*t8
-    t17 = t15*t16
-    t18 = 4*tension**2
-    t19 = 2/(t13*t18 + t14*t18 + t16**2)
-    t20 = t19*tension*(2*p_d*t11/t5**2 - t17*t7*(t13 + t14 - 1)/t9)
-    t21 = t19*t9
-    t22 = 1/t4
-    return (math.atan2(-1/2*t0 - t8, t11*t6), math.atan2(p_e*t7, p_n*t7),), (p_n*t20, p_e*t20, t21*tension*(-p_d*t17*tension/t5**(3/2) + 2*t10*t12*(t1*t12 - 1)), 0, 0, 0, t21*(-2*p_d*t10*t12 + t15*t16*t6*tension), 0, 0, 0, 0, 0, 0, -p_e*t22, p_n*t22, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
-
-
-def force_balance_chord_length(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Formulation (a): ``x' = f(x, u)`` with ``u = (R_v^b row-major, thrust_n)``; returns ``(x' (13,), dv'/dx (3x13 row-major))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
-    r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
-    mass_kg, drag_per_s, weight_n_per_m, length_m = c
-    t0 = 1/mass_kg
-    t1 = t0*thrust_n
-    t2 = r20*t1
-    t3 = p_d**2
-    t4 = p_e**2
-    t5 = p_n**2
-    t6 = t3 + t4 + t5
-    t7 = math.sqrt(t6)
-    t8 = 1/t7
-    t9 = t0*t8
-    t10 = p_n*t9
-    t11 = v_n - wind_n
-    t12 = v_e - wind_e
-    t13 = drag_per_s*(r00*t11 + r01*t12 + r02*v_d)
-    t14 = drag_per_s*(r10*t11 + r11*t12 + r12*v_d)
-    t15 = r21*t1
-    t16 = p_e*t9
-    t17 = r22*t1
-    t18 = p_d*tension
-    t19 = 1/t6
-    t20 = t9*tension
-    t21 = t6**(-3/2)
-    t22 = p_n*t0*t21
-    t23 = p_e*t22*tension
-    t24 = drag_per_s*(r00**2 + r10**2)
-    t25 = drag_per_s*(r00*r01 + r10*r11)
-    t26 = -t25
-    t27 = drag_per_s*(r00*r02 + r10*r12)
-    t28 = -t27
+    t7 = t0/math.sqrt(t6)
+    t8 = p_n*t7
+    t9 = v_n - wind_n
+    t10 = v_e - wind_e
+    t11 = drag_per_s*(r00*t9 + r01*t10 + r02*v_d)
+    t12 = drag_per_s*(r10*t9 + r11*t10 + r12*v_d)
+    t13 = r21*t1
+    t14 = p_e*t7
+    t15 = r22*t1
+    t16 = p_d*t7
+    t17 = 1/t6
+    t18 = t7*tension
+    t19 = t6**(-3/2)
+    t20 = p_n*t0*t19*tension
+    t21 = p_e*t20
+    t22 = p_d*t20
+    t23 = drag_per_s*(r00**2 + r10**2)
+    t24 = drag_per_s*(r00*r01 + r10*r11)
+    t25 = -t24
+    t26 = drag_per_s*(r00*r02 + r10*r12)
+    t27 = -t26
+    t28 = p_d*p_e*t0*t19*tension
     t29 = drag_per_s*(r01**2 + r11**2)
     t30 = drag_per_s*(r01*r02 + r11*r12)
     t31 = -t30
-    t32 = (1/2)*weight_n_per_m
-    t33 = t19*tension
-    t34 = p_d*t33 + t32
-    return (v_n, v_e, v_d, -r00*t13 - r10*t14 - scale*t2 - t10*tension, -r01*t13 - r11*t14 - scale*t15 - t16*tension, -r02*t13 - r12*t14 - scale*t17 - 1/2*t0*(2*t18*t8 - t7*weight_n_per_m) + 9.80665, 0, 0, 0, 0, 0, 0, 0,), (t20*(t19*t5 - 1), t23, t18*t22, -t24, t26, t28, -t10, -t2, 0, 0, 0, t24, t25, t23, t20*(t19*t4 - 1), p_e*t0*t18*t21, t26, -t29, t31, -t16, -t15, 0, 0, 0, t25, t29, t10*t34, t16*t34, t9*(p_d*t32 + t3*t33 - tension), t28, t31, -drag_per_s*(r02**2 + r12**2), -p_d*t9, -t17, 0, 0, 0, t27, t30,)
+    return (v_n, v_e, v_d, -r00*t11 - r10*t12 - scale*t2 - t8*tension, -r01*t11 - r11*t12 - scale*t13 - t14*tension, -r02*t11 - r12*t12 - scale*t15 - t16*tension + 9.80665, 0, 0, 0, 0, 0, 0, 0,), (t18*(t17*t5 - 1), t21, t22, -t23, t25, t27, -t8, -t2, 0, 0, 0, t23, t24, t21, t18*(t17*t4 - 1), t28, t25, -t29, t31, -t14, -t13, 0, 0, 0, t24, t29, t22, t28, t18*(t17*t3 - 1), t27, t31, -drag_per_s*(r02**2 + r12**2), -t16, -t15, 0, 0, 0, t26, t30,)
 
 
-def accel_chord_length(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+def accel_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Accelerometer force balance ``h = f + b`` [m/s^2], FRD body, with ``u = (R_v^b row-major, thrust_n)``; returns ``(h (3,), H (3x13 row-major))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
-    mass_kg, drag_per_s, weight_n_per_m, length_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = v_n - wind_n
     t1 = v_e - wind_e
-    t2 = p_d**2
-    t3 = p_e**2
-    t4 = p_n**2
-    t5 = t2 + t3 + t4
-    t6 = math.sqrt(t5)
-    t7 = 1/t6
-    t8 = 2*t7
-    t9 = r01*tension
-    t10 = p_e*t9
-    t11 = r00*tension
-    t12 = p_n*t11
-    t13 = 2*tension
-    t14 = p_d*t13
-    t15 = -t14*t7 + t6*weight_n_per_m
-    t16 = 1/mass_kg
-    t17 = (1/2)*t16
-    t18 = p_e*r11
-    t19 = t13*t7
-    t20 = p_n*r10
-    t21 = t16*thrust_n
-    t22 = p_e*r21
-    t23 = p_n*r20
-    t24 = 1/t5
-    t25 = t10*t24
-    t26 = t24*t4
-    t27 = (1/2)*t14*t24 + (1/2)*weight_n_per_m
-    t28 = r02*t27
-    t29 = t16*t7
-    t30 = t12*t24
-    t31 = t24*t3
-    t32 = (1/2)*p_d*weight_n_per_m + (1/2)*t13*t2*t24 - 1/2*t13
-    t33 = drag_per_s*r00
-    t34 = drag_per_s*r01
-    t35 = r10*tension
-    t36 = r11*tension
-    t37 = p_n*t24
-    t38 = p_e*t37
-    t39 = r12*t27
-    t40 = p_d*p_e*t24
-    t41 = p_d*t37
-    t42 = drag_per_s*r10
-    t43 = drag_per_s*r11
-    t44 = r20*tension
-    t45 = r21*tension
-    t46 = r22*t27
-    return (b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t17*(-r02*t15 + t10*t8 + t12*t8), b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t17*(-r12*t15 + t18*t19 + t19*t20), b_z - scale*t21 - t17*(-r22*t15 + t19*t22 + t19*t23),), (t29*(p_n*t25 + p_n*t28 + t11*t26 - t11), t29*(p_e*t28 + p_e*t30 + t31*t9 - t9), t29*(p_d*t25 + p_d*t30 + r02*t32), -t33, -t34, -drag_per_s*r02, -t29*(p_d*r02 + p_e*r01 + p_n*r00), 0, 1, 0, 0, t33, t34, t29*(p_n*t39 + t26*t35 - t35 + t36*t38), t29*(p_e*t39 + t31*t36 + t35*t38 - t36), t29*(r12*t32 + t35*t41 + t36*t40), -t42, -t43, -drag_per_s*r12, -t29*(p_d*r12 + t18 + t20), 0, 0, 1, 0, t42, t43, t29*(p_n*t46 + t26*t44 + t38*t45 - t44), t29*(p_e*t46 + t31*t45 + t38*t44 - t45), t29*(r22*t32 + t40*t45 + t41*t44), 0, 0, 0, -t29*(p_d*r22 + t22 + t23), -t21, 0, 0, 1, 0, 0,)
+    t2 = p_d*r02
+    t3 = p_e*r01
+    t4 = p_n*r00
+    t5 = 1/mass_kg
+    t6 = p_d**2
+    t7 = p_e**2
+    t8 = p_n**2
+    t9 = t6 + t7 + t8
+    t10 = t5/math.sqrt(t9)
+    t11 = t10*(t2 + t3 + t4)
+    t12 = p_d*r12
+    t13 = p_e*r11
+    t14 = p_n*r10
+    t15 = t10*(t12 + t13 + t14)
+    t16 = t5*thrust_n
+    t17 = p_d*r22
+    t18 = p_e*r21
+    t19 = p_n*r20
+    t20 = t10*(t17 + t18 + t19)
+    t21 = 1/t9
+    t22 = p_n*t21
+    t23 = t21*t8
+    t24 = t10*tension
+    t25 = p_e*t21
+    t26 = t21*t7
+    t27 = p_d*t21
+    t28 = t21*t6
+    t29 = drag_per_s*r00
+    t30 = drag_per_s*r01
+    t31 = drag_per_s*r10
+    t32 = drag_per_s*r11
+    return (b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t11*tension, b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t15*tension, b_z - scale*t16 - t20*tension,), (t24*(r00*t23 - r00 + t2*t22 + t22*t3), t24*(r01*t26 - r01 + t2*t25 + t25*t4), t24*(r02*t28 - r02 + t27*t3 + t27*t4), -t29, -t30, -drag_per_s*r02, -t11, 0, 1, 0, 0, t29, t30, t24*(r10*t23 - r10 + t12*t22 + t13*t22), t24*(r11*t26 - r11 + t12*t25 + t14*t25), t24*(r12*t28 - r12 + t13*t27 + t14*t27), -t31, -t32, -drag_per_s*r12, -t15, 0, 0, 1, 0, t31, t32, t24*(r20*t23 - r20 + t17*t22 + t18*t22), t24*(r21*t26 - r21 + t17*t25 + t19*t25), t24*(r22*t28 - r22 + t18*t27 + t19*t27), 0, 0, 0, -t20, -t16, 0, 0, 1, 0, 0,)
 
 
-def tension_chord_length(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+def tension_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Load cell at the drone: ``|F_c|`` [N]; returns ``(h (1,), H (1x13))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
-    mass_kg, drag_per_s, weight_n_per_m, length_m = c
-    t0 = p_e**2
-    t1 = tension**2
-    t2 = p_d**2
+    mass_kg, drag_per_s, weight_n_per_m = c
+    t0 = abs(tension)
+    t1 = p_d**2
+    t2 = p_e**2
     t3 = p_n**2
-    t4 = t0 + t2 + t3
-    t5 = 1/t4
-    t6 = t1*t5
-    t7 = math.sqrt(t4)
-    t8 = 1/t7
-    t9 = 2*tension
-    t10 = p_d*t9
-    t11 = t10*t8 - t7*weight_n_per_m
-    t12 = math.sqrt(t0*t6 + (1/4)*t11**2 + t3*t6)
-    t13 = 1/t12
-    t14 = t1/t4**2
-    t15 = t0*t14
-    t16 = t14*t3
-    t17 = t11*t8
-    t18 = (1/4)*t17
-    t19 = t13*(t15 + t16 + t18*(t10*t5 + weight_n_per_m) - t6)
-    t20 = t5*tension
-    return (t12,), (-p_n*t19, -p_e*t19, -t13*(p_d*t15 + p_d*t16 + t18*(p_d*weight_n_per_m + t2*t5*t9 - t9)), 0, 0, 0, t13*((1/2)*p_d*t17 + t0*t20 + t20*t3), 0, 0, 0, 0, 0, 0,)
+    t4 = 1/(t1 + t2 + t3)
+    t5 = 1/t0
+    t6 = t4*t5*tension**2*(t1*t4 + t2*t4 + t3*t4 - 1)
+    return (t0,), (-p_n*t6, -p_e*t6, -p_d*t6, 0, 0, 0, t5*tension, 0, 0, 0, 0, 0, 0,)
 
 
-def cable_angle_chord_length(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+def cable_angle_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Ground-station cable angle: (elevation up, azimuth from north) [rad]; returns ``(h (2,), H (2x13))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
-    mass_kg, drag_per_s, weight_n_per_m, length_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = p_d**2
     t1 = p_e**2
     t2 = p_n**2
     t3 = t1 + t2
     t4 = t0 + t3
-    t5 = math.sqrt(t4)
-    t6 = t5*weight_n_per_m
-    t7 = 1/t5
-    t8 = t7*tension
-    t9 = math.sqrt(t3)
-    t10 = abs(tension)
-    t11 = 1/t4
-    t12 = 2*tension
-    t13 = p_d*t12
-    t14 = t1*t11
-    t15 = t11*t2
-    t16 = tension**2
-    t17 = 1/t10
-    t18 = t13*t7 + t6
-    t19 = t16*t17*t18
-    t20 = 4*t16
-    t21 = 2/(t14*t20 + t15*t20 + t18**2)
-    t22 = t21*(t10*t11*t9*(t11*t13 - weight_n_per_m) - t19*t7*(t14 + t15 - 1)/t9)
-    t23 = t10*t11
-    t24 = t21*t9
-    t25 = 1/t3
-    return (math.atan2(-p_d*t8 - 1/2*t6, t10*t7*t9), math.atan2(p_e*t8, p_n*t8),), (p_n*t22, p_e*t22, -t24*(p_d*t19/t4**(3/2) + t23*(p_d*weight_n_per_m - t0*t11*t12 + t12)), 0, 0, 0, t24*(-2*p_d*t23 + t17*t18*t7*tension), 0, 0, 0, 0, 0, 0, -p_e*t25, p_n*t25, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
+    t5 = 1/math.sqrt(t4)
+    t6 = t5*tension
+    t7 = abs(tension)
+    t8 = math.sqrt(t3)
+    t9 = 1/t4
+    t10 = 1/tension
+    t11 = 1/t7
+    t12 = t11*tension
+    t13 = p_d*t9*(t10*t7*t8*t9 - t12*(t1*t9 + t2*t9 - 1)/t8)
+    t14 = t0*t9
+    t15 = t8*t9
+    t16 = 1/t3
+    return (math.atan2(-p_d*t6, t5*t7*t8), math.atan2(p_e*t6, p_n*t6),), (p_n*t13, p_e*t13, t15*(t10*t7*(t14 - 1) - t12*t14), 0, 0, 0, p_d*t15*(t11 - t7/tension**2), 0, 0, 0, 0, 0, 0, -p_e*t16, p_n*t16, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
+
+
+def force_balance_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Formulation (a): ``x' = f(x, u)`` with ``u = (R_v^b row-major, thrust_n)``; returns ``(x' (13,), dv'/dx (3x13 row-major))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
+    mass_kg, drag_per_s, weight_n_per_m = c
+    t0 = 1/mass_kg
+    t1 = t0*thrust_n
+    t2 = r20*t1
+    t3 = p_d**2
+    t4 = p_e**2
+    t5 = p_n**2
+    t6 = t4 + t5
+    t7 = t3 + t6
+    t8 = math.sqrt(t7)
+    t9 = 1/t8
+    t10 = t0*t9
+    t11 = p_n*t10
+    t12 = t11*tension
+    t13 = v_n - wind_n
+    t14 = v_e - wind_e
+    t15 = drag_per_s*(r00*t13 + r01*t14 + r02*v_d)
+    t16 = drag_per_s*(r10*t13 + r11*t14 + r12*v_d)
+    t17 = r21*t1
+    t18 = p_e*t10
+    t19 = t18*tension
+    t20 = r22*t1
+    t21 = weight_n_per_m/tension
+    t22 = t21*t8
+    t23 = (1/2)*t22
+    t24 = math.sinh(t23)
+    t25 = 1/t24
+    t26 = math.cosh(t23)
+    t27 = t25*t26
+    t28 = t22*t27
+    t29 = t24**(-2)
+    t30 = weight_n_per_m**2/tension**2
+    t31 = t29*t30
+    t32 = math.sqrt((1/4)*t3*t31*t7 + t6)
+    t33 = t24*t32
+    t34 = p_d*t28 - 2*t33
+    t35 = t10*tension
+    t36 = 1/t7
+    t37 = t7**(3/2)
+    t38 = 1/t37
+    t39 = p_n*t0*t38*tension
+    t40 = p_e*t39
+    t41 = drag_per_s*(r00**2 + r10**2)
+    t42 = drag_per_s*(r00*r01 + r10*r11)
+    t43 = -t42
+    t44 = drag_per_s*(r00*r02 + r10*r12)
+    t45 = -t44
+    t46 = p_d*tension
+    t47 = drag_per_s*(r01**2 + r11**2)
+    t48 = drag_per_s*(r01*r02 + r11*r12)
+    t49 = -t48
+    t50 = 2*p_d
+    t51 = t30*t50
+    t52 = t26**2*t29
+    t53 = 4*t26
+    t54 = t32*t53*t9
+    t55 = 4*t34*t36
+    t56 = 1/t32
+    t57 = 2*t3
+    t58 = -1/8*p_d*t21*t25*t53*t9 + (1/8)*t21*t54 + (1/8)*t24*t56*(t31*t57 + 8 - t26*t3*t8*weight_n_per_m**3/(t24**3*tension**3)) + (1/8)*t51*t52 - 1/8*t51 + (1/8)*t55
+    t59 = t21*t57
+    t60 = t53*t8
+    t61 = t25*t60
+    t62 = 4*t3
+    t63 = 2*t4 + 2*t5
+    t64 = t21*t25*t56
+    t65 = t21*t50*t7
+    return (v_n, v_e, v_d, -r00*t15 - r10*t16 - scale*t2 - t12, -r01*t15 - r11*t16 - scale*t17 - t19, -r02*t15 - r12*t16 - scale*t20 - 1/2*t34*t35 + 9.80665, 0, 0, 0, 0, 0, 0, 0,), (t35*(t36*t5 - 1), t40, p_d*t39, -t41, t43, t45, -t11, -t2, 0, 0, 0, t41, t42, t40, t35*(t36*t4 - 1), p_e*t0*t38*t46, t43, -t47, t49, -t18, -t17, 0, 0, 0, t42, t47, t12*t58, t19*t58, (1/8)*t10*(t46*t55 - weight_n_per_m*(-p_d*t54 - p_d*t64*(-t28*t3 + t62 + t63) + t27*t62*t9 - t52*t59 + t59 + t61)), t45, t49, -drag_per_s*(r02**2 + r12**2), -t10*(p_d*t23*t27 + (1/8)*t21*(-p_d*t61 + t3*t64*(-t21*t27*t37 + t57 + t63) + t32*t60 + t52*t65 - t65) - t33), -t20, 0, 0, 0, t44, t48,)
+
+
+def accel_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Accelerometer force balance ``h = f + b`` [m/s^2], FRD body, with ``u = (R_v^b row-major, thrust_n)``; returns ``(h (3,), H (3x13 row-major))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
+    mass_kg, drag_per_s, weight_n_per_m = c
+    t0 = v_n - wind_n
+    t1 = v_e - wind_e
+    t2 = p_e*r01
+    t3 = p_n*r00
+    t4 = p_d**2
+    t5 = p_e**2
+    t6 = p_n**2
+    t7 = t5 + t6
+    t8 = t4 + t7
+    t9 = math.sqrt(t8)
+    t10 = 1/tension
+    t11 = t10*weight_n_per_m
+    t12 = t11*t9
+    t13 = (1/2)*t12
+    t14 = math.sinh(t13)
+    t15 = 1/t14
+    t16 = math.cosh(t13)
+    t17 = t15*t16
+    t18 = t12*t17
+    t19 = t14**(-2)
+    t20 = weight_n_per_m**2/tension**2
+    t21 = t19*t20
+    t22 = math.sqrt((1/4)*t21*t4*t8 + t7)
+    t23 = p_d*t18 - 2*t14*t22
+    t24 = -t23
+    t25 = 1/mass_kg
+    t26 = 1/t9
+    t27 = t25*t26
+    t28 = t27*tension
+    t29 = (1/2)*t28
+    t30 = p_e*r11
+    t31 = p_n*r10
+    t32 = t25*thrust_n
+    t33 = p_e*r21
+    t34 = p_n*r20
+    t35 = 1/t8
+    t36 = p_n*t35
+    t37 = t35*t6
+    t38 = (1/2)*t23
+    t39 = r02*t38
+    t40 = 2*p_d
+    t41 = t20*t40
+    t42 = t16**2*t19
+    t43 = 4*t16
+    t44 = t22*t26*t43
+    t45 = 1/t22
+    t46 = 2*t4
+    t47 = -p_d*t11*t15*t26*t43 + t11*t44 + t14*t45*(t21*t46 + 8 - t16*t4*t9*weight_n_per_m**3/(t14**3*tension**3)) + t41*t42 - t41
+    t48 = (1/8)*r02
+    t49 = t47*t48
+    t50 = p_e*t35
+    t51 = t35*t5
+    t52 = p_d*t35*tension
+    t53 = t11*t46
+    t54 = t43*t9
+    t55 = 4*t4
+    t56 = 2*t5 + 2*t6
+    t57 = t11*t15*t45
+    t58 = weight_n_per_m*(-p_d*t44 - p_d*t57*(-t18*t4 + t55 + t56) + t15*t54 + t17*t26*t55 - t42*t53 + t53)
+    t59 = drag_per_s*r00
+    t60 = drag_per_s*r01
+    t61 = t11*(2*p_d*t10*t8*weight_n_per_m + 4*p_d*t15*t16*t9 - t11*t40*t42*t8 - t22*t54 - t4*t57*(-t11*t17*t8**(3/2) + t46 + t56))
+    t62 = r12*t38
+    t63 = (1/8)*r12
+    t64 = t47*t63
+    t65 = drag_per_s*r10
+    t66 = drag_per_s*r11
+    t67 = r22*t38
+    t68 = (1/8)*r22
+    t69 = t47*t68
+    return (b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t29*(-r02*t24 + 2*t2 + 2*t3), b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t29*(-r12*t24 + 2*t30 + 2*t31), b_z - scale*t32 - t29*(-r22*t24 + 2*t33 + 2*t34),), (t28*(p_n*t49 + r00*t37 - r00 + t2*t36 + t36*t39), t28*(p_e*t49 + r01*t51 - r01 + t3*t50 + t39*t50), t27*(t2*t52 + t3*t52 + t39*t52 - t48*t58), -t59, -t60, -drag_per_s*r02, -t27*(t2 + t3 + t39 - t48*t61), 0, 1, 0, 0, t59, t60, t28*(p_n*t64 + r10*t37 - r10 + t30*t36 + t36*t62), t28*(p_e*t64 + r11*t51 - r11 + t31*t50 + t50*t62), t27*(t30*t52 + t31*t52 + t52*t62 - t58*t63), -t65, -t66, -drag_per_s*r12, -t27*(t30 + t31 - t61*t63 + t62), 0, 0, 1, 0, t65, t66, t28*(p_n*t69 + r20*t37 - r20 + t33*t36 + t36*t67), t28*(p_e*t69 + r21*t51 - r21 + t34*t50 + t50*t67), t27*(t33*t52 + t34*t52 + t52*t67 - t58*t68), 0, 0, 0, -t27*(t33 + t34 - t61*t68 + t67), -t32, 0, 0, 1, 0, 0,)
+
+
+def tension_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Load cell at the drone: ``|F_c|`` [N]; returns ``(h (1,), H (1x13))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    mass_kg, drag_per_s, weight_n_per_m = c
+    t0 = abs(tension)
+    t1 = p_d**2
+    t2 = p_e**2
+    t3 = p_n**2
+    t4 = t2 + t3
+    t5 = t1 + t4
+    t6 = 1/t5
+    t7 = math.sqrt(t5)
+    t8 = weight_n_per_m/tension
+    t9 = t7*t8
+    t10 = (1/2)*t9
+    t11 = math.sinh(t10)
+    t12 = 1/t11
+    t13 = math.cosh(t10)
+    t14 = t12*t13
+    t15 = t14*t9
+    t16 = t11**(-2)
+    t17 = tension**2
+    t18 = weight_n_per_m**2/t17
+    t19 = t16*t18
+    t20 = math.sqrt((1/4)*t1*t19*t5 + t4)
+    t21 = p_d*t15 - 2*t11*t20
+    t22 = (1/4)*t21**2
+    t23 = math.sqrt(t6*(t22 + t4))
+    t24 = t2*t6
+    t25 = t3*t6
+    t26 = t22*t6
+    t27 = 2*p_d
+    t28 = t18*t27
+    t29 = t13**2*t16
+    t30 = 1/t7
+    t31 = 4*t13
+    t32 = t20*t30*t31
+    t33 = 1/t20
+    t34 = 2*t1
+    t35 = (1/16)*t21
+    t36 = t6/(t0*t23)
+    t37 = t17*t36*(t24 + t25 + t26 + t35*(-p_d*t12*t30*t31*t8 + t11*t33*(-t1*t13*t7*weight_n_per_m**3/(t11**3*tension**3) + t19*t34 + 8) + t28*t29 - t28 + t32*t8) - 1)
+    t38 = p_d*tension
+    t39 = t34*t8
+    t40 = t31*t7
+    t41 = t12*t40
+    t42 = 4*t1
+    t43 = 2*t2 + 2*t3
+    t44 = t12*t33*t8
+    t45 = t35*weight_n_per_m
+    t46 = t27*t5*t8
+    return (t0*t23,), (-p_n*t37, -p_e*t37, -t36*tension*(t24*t38 + t25*t38 + t26*t38 - t45*(-p_d*t32 - p_d*t44*(-t1*t15 + t42 + t43) + t14*t30*t42 - t29*t39 + t39 + t41)), 0, 0, 0, t36*(t2*tension + t22*tension + t3*tension + t45*(-p_d*t41 + t1*t44*(-t14*t5**(3/2)*t8 + t34 + t43) + t20*t40 + t29*t46 - t46)), 0, 0, 0, 0, 0, 0,)
+
+
+def cable_angle_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Ground-station cable angle: (elevation up, azimuth from north) [rad]; returns ``(h (2,), H (2x13))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    mass_kg, drag_per_s, weight_n_per_m = c
+    t0 = p_d**2
+    t1 = p_e**2
+    t2 = p_n**2
+    t3 = t1 + t2
+    t4 = t0 + t3
+    t5 = 1/t4
+    t6 = weight_n_per_m**2
+    t7 = math.sqrt(t4)
+    t8 = 1/tension
+    t9 = t8*weight_n_per_m
+    t10 = t7*t9
+    t11 = (1/2)*t10
+    t12 = math.sinh(t11)
+    t13 = t12**2
+    t14 = tension**2
+    t15 = 4*t14
+    t16 = t13*t15*t3/t6
+    t17 = math.sqrt(t0 + t16*t5)
+    t18 = t17*weight_n_per_m
+    t19 = math.cosh(t11)
+    t20 = 1/t12
+    t21 = t19*t20
+    t22 = t10*t21
+    t23 = 1/t13
+    t24 = t6/t14
+    t25 = t23*t24
+    t26 = math.sqrt((1/4)*t0*t25*t4 + t3)
+    t27 = 2*t12
+    t28 = p_d*t22 - t26*t27
+    t29 = 1/t7
+    t30 = t29*tension
+    t31 = t28*t30
+    t32 = math.sqrt(t3)
+    t33 = abs(tension)
+    t34 = t32*t33
+    t35 = p_e*t30
+    t36 = p_n*t30
+    t37 = t1*t5
+    t38 = t2*t5
+    t39 = 2*t18
+    t40 = 1/(t15*t37 + t15*t38 + (t31 + t39)**2)
+    t41 = -t28
+    t42 = (t30*t41 - t39)/t33
+    t43 = 2*t42*tension
+    t44 = t4**(3/2)
+    t45 = 1/t44
+    t46 = 4*t41*t45
+    t47 = t27*tension/weight_n_per_m
+    t48 = t47*t5
+    t49 = t19*t3*t45
+    t50 = t4**(-2)
+    t51 = 1/t17
+    t52 = 16*t12*t51
+    t53 = 2*p_d
+    t54 = t24*t53
+    t55 = t19**2
+    t56 = t23*t55
+    t57 = t19*t29
+    t58 = t20*t57
+    t59 = 1/t26
+    t60 = 2*t0
+    t61 = t40*(-1/2*t34*(-t29*(-4*p_d*t58*t9 + t12*t59*(-t0*t19*t7*weight_n_per_m**3/(t12**3*tension**3) + t25*t60 + 8) + 4*t26*t57*t9 + t54*t56 - t54) + t46 + t52*(-t3*t47*t50 + t48 + t49)) + t43*(t37 + t38 - 1)/t32)
+    t62 = 4*t7
+    t63 = 4*t0
+    t64 = 2*t1 + 2*t2
+    t65 = t29*t32*t40
+    t66 = 1/t3
+    return (math.atan2(-t18 - 1/2*t31, t29*t34), math.atan2(t35, t36),), (t36*t61, t35*t61, t65*(t14*t42*t5*t53 - 1/2*t33*(p_d*t46*tension + 8*p_d*t51*weight_n_per_m*(-t16*t50 + t47*t49 + 1) - t29*weight_n_per_m*(4*p_d*t19*t26*t29 + p_d*t20*t59*t8*weight_n_per_m*(-t0*t22 + t63 + t64) + 2*t0*t23*t55*t8*weight_n_per_m - t21*t62 - t58*t63 - t60*t9))), 0, 0, 0, t65*((1/2)*t33*(-4*t28*t29 + t29*t8*weight_n_per_m*(4*p_d*t19*t20*t7 + 2*p_d*t4*t8*weight_n_per_m - t0*t20*t59*t9*(-t21*t44*t9 + t60 + t64) - t19*t26*t62 - t4*t53*t56*t9) - t3*t52*(t48 - t57)) - t43), 0, 0, 0, 0, 0, 0, -p_e*t66, p_n*t66, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
 
 
 def inertial(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Formulation (b): ``x' = f(x, u)`` with ``u = (R_v^b row-major, f_x, f_y, f_z)`` (accelerometer as the input); returns ``(x' (13,), dv'/dx (3x13))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, f_x, f_y, f_z = u
-    mass_kg, drag_per_s, weight_n_per_m, length_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = b_x - f_x
     t1 = b_y - f_y
     t2 = b_z - f_z
     return (v_n, v_e, v_d, -r00*t0 - r10*t1 - r20*t2, -r01*t0 - r11*t1 - r21*t2, -r02*t0 - r12*t1 - r22*t2 + 9.80665, 0, 0, 0, 0, 0, 0, 0,), (0, 0, 0, 0, 0, 0, 0, 0, -r00, -r10, -r20, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, -r01, -r11, -r21, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, -r02, -r12, -r22, 0, 0,)
 
 
-def winch_length(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Winch paid-out length: the arc length to first order in the sag [m]; returns ``(h (1,), H (1x13))``."""
+def winch_length_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Winch paid-out length: the cable's arc length [m]; returns ``(h (1,), H (1x13))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
-    mass_kg, drag_per_s, weight_n_per_m, length_m = c
-    t0 = p_e**2 + p_n**2
-    t1 = math.sqrt(p_d**2 + t0)
-    t2 = weight_n_per_m**2
-    t3 = t2/tension**2
-    t4 = (1/24)*t0*t3
-    t5 = t4 + 1
-    t6 = 1/t1
-    t7 = (1/12)*t1
-    t8 = t3*t7 + t4*t6 + t6
-    return (t1*t5,), (p_n*t8, p_e*t8, p_d*t5*t6, 0, 0, 0, -t0*t2*t7/tension**3, 0, 0, 0, 0, 0, 0,)
+    mass_kg, drag_per_s, weight_n_per_m = c
+    t0 = math.sqrt(p_d**2 + p_e**2 + p_n**2)
+    t1 = 1/t0
+    return (t0,), (p_n*t1, p_e*t1, p_d*t1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
+
+
+def winch_length_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Winch paid-out length: the cable's arc length [m]; returns ``(h (1,), H (1x13))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    mass_kg, drag_per_s, weight_n_per_m = c
+    t0 = p_d**2
+    t1 = p_e**2 + p_n**2
+    t2 = t0 + t1
+    t3 = 1/t2
+    t4 = math.sqrt(t2)
+    t5 = (1/2)*t4*weight_n_per_m/tension
+    t6 = math.sinh(t5)
+    t7 = 4*t1*t6**2*tension**2/weight_n_per_m**2
+    t8 = math.sqrt(t0 + t3*t7)
+    t9 = 1/t8
+    t10 = 2*t6/weight_n_per_m
+    t11 = t10*tension
+    t12 = t11*t3
+    t13 = math.cosh(t5)
+    t14 = t1*t13/t2**(3/2)
+    t15 = t2**(-2)
+    t16 = t11*t9*(-t1*t11*t15 + t12 + t14)
+    return (t8,), (p_n*t16, p_e*t16, p_d*t9*(t11*t14 - t15*t7 + 1), 0, 0, 0, t1*t10*t9*(t12 - t13/t4), 0, 0, 0, 0, 0, 0,)
 
 
 def height_above_ground(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Rangefinder: height above the ground ``-p_d + anchor_height_m`` [m] with ``u = (anchor_height_m,)``; returns ``(h (1,), H (1x13))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
     anchor_height_m, = u
-    mass_kg, drag_per_s, weight_n_per_m, length_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     return (anchor_height_m - p_d,), (0, 0, -1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)

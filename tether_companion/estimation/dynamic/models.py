@@ -1,5 +1,5 @@
-"""The generated models bound to a cable: which variant (winch length known or the chord),
-the constants tuple, and the process models for
+"""The generated models bound to a cable: which variant (the straight line for a weightless
+cable, the catenary for one with weight), the constants tuple, and the process models for
 :class:`~tether_companion.estimation.ekf.ExtendedKalmanFilter`.
 
 Pure; the process objects cache the generated derivative between the filter's ``jacobian``
@@ -26,36 +26,38 @@ Generated = Callable[
 
 @dataclass(frozen=True, slots=True)
 class CableModels:
-    """The generated functions of one cable-length variant."""
+    """The generated functions of one cable variant."""
 
     force_balance: Generated
     accel: Generated
     tension: Generated
     cable_angle: Generated
+    winch_length: Generated
 
 
-KNOWN_LENGTH = CableModels(
-    generated.force_balance_known_length,
-    generated.accel_known_length,
-    generated.tension_known_length,
-    generated.cable_angle_known_length,
+STRAIGHT = CableModels(
+    generated.force_balance_straight,
+    generated.accel_straight,
+    generated.tension_straight,
+    generated.cable_angle_straight,
+    generated.winch_length_straight,
 )
-"""The cable's length is an input (the winch reports it)."""
-CHORD_LENGTH = CableModels(
-    generated.force_balance_chord_length,
-    generated.accel_chord_length,
-    generated.tension_chord_length,
-    generated.cable_angle_chord_length,
+"""A weightless cable: the straight line (the taut limit)."""
+CATENARY = CableModels(
+    generated.force_balance_catenary,
+    generated.accel_catenary,
+    generated.tension_catenary,
+    generated.cable_angle_catenary,
+    generated.winch_length_catenary,
 )
-"""The cable's length is taken as the anchor-to-drone distance (no winch report)."""
+"""A cable with weight: the exact catenary through anchor and drone."""
 
 
 @dataclass(slots=True)
 class ModelConstants:
-    """Constants of the generated models (the tuple ``c``), SI units.
-
-    ``length_m`` is ``nan`` while no winch length is known: the chord variant is used.
-    """
+    """Constants of the generated models (the tuple ``c``), SI units, and the winch's
+    paid-out length ``length_m`` [m] (``nan`` while none is known; the initialisation uses it,
+    the models do not: the ends, the weight and the tension fix the curve)."""
 
     mass_kg: float
     drag_per_s: float
@@ -64,13 +66,29 @@ class ModelConstants:
 
     @property
     def models(self) -> CableModels:
-        """The variant for the current length knowledge."""
-        return CHORD_LENGTH if math.isnan(self.length_m) else KNOWN_LENGTH
+        """The variant for this cable's weight."""
+        return CATENARY if self.weight_n_per_m > 0.0 else STRAIGHT
 
-    def values(self) -> tuple[float, float, float, float]:
-        """The tuple ``c`` (length 0 when unknown: the chord variant ignores it)."""
-        length = 0.0 if math.isnan(self.length_m) else self.length_m
-        return (self.mass_kg, self.drag_per_s, self.weight_n_per_m, length)
+    def values(self) -> tuple[float, float, float]:
+        """The tuple ``c``."""
+        return (self.mass_kg, self.drag_per_s, self.weight_n_per_m)
+
+
+UNDEFINED = (ZeroDivisionError, OverflowError, ValueError)
+"""What the generated arithmetic raises where a model is undefined (at the anchor, at zero
+tension, a catenary parameter so small that ``sinh`` overflows)."""
+
+
+def evaluate(
+    model: Generated, x: FloatArray, u: Sequence[float], c: Sequence[float], rows: int
+) -> tuple[FloatArray, FloatArray]:
+    """A generated measurement's value (rows,) and Jacobian (rows, 13) at ``x``; ``nan`` where
+    the model is undefined there (the update then counts the sample non-finite)."""
+    try:
+        h, jac = model(x.tolist(), u, c)
+    except UNDEFINED:
+        return np.full(rows, math.nan), np.full((rows, state.N_STATES), math.nan)
+    return np.array(h), np.array(jac).reshape(rows, state.N_STATES)
 
 
 _V_ROWS = slice(3, 6)

@@ -7,10 +7,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
 from tether_companion.estimation.dynamic.bank import FilterBank
-from tether_companion.estimation.dynamic.models import ModelConstants
+from tether_companion.estimation.dynamic.models import ModelConstants, evaluate
 
 FloatArray = NDArray[np.float64]
 
@@ -56,7 +55,6 @@ class AccelAid:
         c = constants.values()
 
         def measure(xs: FloatArray) -> tuple[FloatArray, FloatArray]:
-            h, jac = model(xs.tolist(), inputs, c)
-            return np.array(h), np.array(jac).reshape(3, state.N_STATES)
+            return evaluate(model, xs, inputs, c, 3)
 
         return fuse(bank, NAME, self.status, specific_force_body_mps2, measure, self._r, time_s)

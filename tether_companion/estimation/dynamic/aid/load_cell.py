@@ -6,10 +6,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
 from tether_companion.estimation.dynamic.bank import FilterBank
-from tether_companion.estimation.dynamic.models import ModelConstants
+from tether_companion.estimation.dynamic.models import ModelConstants, evaluate
 
 FloatArray = NDArray[np.float64]
 
@@ -31,7 +30,6 @@ class LoadCellAid:
         c = constants.values()
 
         def measure(xs: FloatArray) -> tuple[FloatArray, FloatArray]:
-            h, jac = model(xs.tolist(), (), c)
-            return np.array(h), np.array(jac).reshape(1, state.N_STATES)
+            return evaluate(model, xs, (), c, 1)
 
         return fuse(bank, NAME, self.status, np.array((tension_n,)), measure, self._r, time_s)

@@ -14,7 +14,7 @@ from tether_companion.estimation.dynamic.bank import FilterBank
 FloatArray = NDArray[np.float64]
 
 NAME = "rangefinder"
-_NO_CONSTANTS = (0.0, 0.0, 0.0, 0.0)
+_NO_CONSTANTS = (0.0, 0.0, 0.0)
 """The height model uses none of the constants ``c``."""
 
 

@@ -1,16 +1,16 @@
-"""Optional winch paid-out length: the cable's arc length, ``|p|`` plus the parabolic sag
-excess (generated ``winch_length``). Skipped while the cable is slack (its length then says
-only that the drone is closer than that)."""
+"""Optional winch paid-out length: the cable's arc length (generated ``winch_length_*``: the
+catenary's, ``|p|`` for a weightless cable). Skipped while the cable is slack (its length then
+says only that the drone is closer than that)."""
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tether_companion.estimation.dynamic import generated, state
+from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
 from tether_companion.estimation.dynamic.bank import FilterBank
-from tether_companion.estimation.dynamic.models import ModelConstants
+from tether_companion.estimation.dynamic.models import ModelConstants, evaluate
 
 FloatArray = NDArray[np.float64]
 
@@ -35,9 +35,9 @@ class WinchAid:
             self.status.skip(SLACK)
             return False
         c = constants.values()
+        model = constants.models.winch_length
 
         def measure(xs: FloatArray) -> tuple[FloatArray, FloatArray]:
-            h, jac = generated.winch_length(xs.tolist(), (), c)
-            return np.array(h), np.array(jac).reshape(1, state.N_STATES)
+            return evaluate(model, xs, (), c, 1)
 
         return fuse(bank, NAME, self.status, np.array((length_m,)), measure, self._r, time_s)

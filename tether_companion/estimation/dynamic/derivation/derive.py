@@ -8,13 +8,18 @@ the filter imports the generated module.
 The model (SI units, NED world, FRD body, ``R = R_v^b`` maps NED to body; state in
 :mod:`..state`):
 
-* Cable force on the drone, NED: ``F_c = -T_ch p/|p| + (w L / 2) e_d``. The chord term
-  ``T_ch`` (state ``tension``) pulls toward the anchor; a cable of weight ``w`` per length and
-  length ``L`` hanging between anchor and drone adds half its weight at the drone (moment
-  balance about the anchor with the cable's centre of mass half-way along the span, exact for
-  the parabola and the small-sag catenary, the straight line at ``w = 0``: the taut limit).
-  ``L`` is the winch's paid-out length when one is reported (``*_known_length`` functions, an
-  input), otherwise the chord ``|p|`` (``*_chord_length``, differentiated through ``p``).
+* Cable force on the drone, NED. Horizontal: ``-T_ch p_ne/|p|`` (toward the anchor; the
+  catenary's horizontal tension is ``H = T_ch a/|p|`` with the span ``a = |p_ne|``, so ``T_ch``,
+  state ``tension``, is the chord tension of the taut limit). Vertical (down), the exact
+  catenary through the anchor and the drone with parameter ``c = H/w`` (``w`` weight per
+  length), written with ``z = a/(2c) = w|p|/(2 T_ch)`` and the drone's height above the anchor
+  ``b = -p_d`` so that nothing divides by the span (the drone may be right above the anchor):
+  ``F_d = (T_ch/|p|) (sinh z sqrt(a^2 + (b z/sinh z)^2) + b z cosh z/sinh z)``; as ``w -> 0`` it
+  tends to the straight line's ``T_ch b/|p|``. From the catenary ``y = c cosh((x - x0)/c)``
+  through both ends: ``sinh((a - 2 x0)/(2c)) = b/(2c sinh z)`` gives ``x0``, and the vertical
+  force at the drone is ``H sinh((a - x0)/c)``. Two variants: ``*_straight`` (``w = 0``,
+  the taut line) and ``*_catenary`` (``w > 0``); neither needs the cable's length: the two
+  ends, the weight and the tension fix the curve.
 * Rotor drag, body horizontal (ArduPilot's EK3_DRAG_MCOEF "momentum drag"):
   ``a_drag = -mu (R (v - w))_{x,y}`` with ``w = (w_n, w_e, 0)`` the wind, ``mu`` [1/s].
 * Thrust ``s T`` along body ``-z`` (``T`` from the PWM through the thrust map, ``s`` state).
@@ -26,11 +31,12 @@ The model (SI units, NED world, FRD body, ``R = R_v^b`` maps NED to body; state 
   the force balance ``f_meas = f + b`` as the measurement (same function as (a)'s).
 * Rangefinder: height above the ground ``-p_d + h_anchor``.
 * Load cell at the drone: ``|F_c|``.
-* Winch paid-out length: the arc length, to first order in the sag,
-  ``|p| + w^2 (p_n^2 + p_e^2) |p| / (24 T_ch^2)`` (parabola; ``|p|`` at ``w = 0``).
+* Winch paid-out length: the catenary's arc length ``sqrt(b^2 + a^2 (sinh z / z)^2)``
+  (``|p|`` for the straight line).
 * Ground-station cable angle: the cable leaves the anchor along
-  ``t_a = T_ch p/|p| + (w L / 2) e_d``: elevation ``atan2(-t_a_d, |t_a_ne|)`` [rad, up
-  positive] and azimuth ``atan2(t_a_e, t_a_n)`` [rad from north].
+  ``t_a = (T_ch p_n/|p|, T_ch p_e/|p|, w L - F_d)`` (NED; ``L`` the arc length, the straight
+  line's ``T_ch p/|p|`` at ``w = 0``): elevation ``atan2(-t_a_d, |t_a_ne|)`` [rad, up positive]
+  and azimuth ``atan2(t_a_e, t_a_n)`` [rad from north].
 
 All other states are random walks (derivative 0).
 """
@@ -58,13 +64,13 @@ WIND = sp.Matrix([X[11], X[12], 0])
 R = sp.Matrix(3, 3, sp.symbols("r00 r01 r02 r10 r11 r12 r20 r21 r22", real=True))
 THRUST = sp.Symbol("thrust_n", real=True)
 F_MEAS = sp.Matrix(sp.symbols("f_x f_y f_z", real=True))
-MASS, DRAG, WPL, LENGTH, ANCHOR_H = sp.symbols(
-    "mass_kg drag_per_s weight_n_per_m length_m anchor_height_m", real=True
+MASS, DRAG, WPL, ANCHOR_H = sp.symbols(
+    "mass_kg drag_per_s weight_n_per_m anchor_height_m", real=True
 )
 G = sp.Float(GRAVITY_MPS2)
 E_D = sp.Matrix([0, 0, 1])
 
-CONSTANT_NAMES = ("mass_kg", "drag_per_s", "weight_n_per_m", "length_m")
+CONSTANT_NAMES = ("mass_kg", "drag_per_s", "weight_n_per_m")
 """Order of the constants tuple ``c`` every generated model takes."""
 
 
@@ -72,9 +78,29 @@ def _norm(v: sp.Matrix) -> sp.Expr:
     return sp.sqrt(sum(e**2 for e in v))
 
 
-def cable_force_ned(length: sp.Expr) -> sp.Matrix:
-    """Force of the cable on the drone, NED [N], for a cable of length ``length``."""
-    return -TCH * P / _norm(P) + (WPL * length / 2) * E_D
+NORM = _norm(P)
+SPAN_SQ = P[0] ** 2 + P[1] ** 2
+HEIGHT = -P[2]
+Z = WPL * NORM / (2 * TCH)
+"""Half the span over the catenary parameter, ``a / (2c)`` [1]."""
+
+
+def _catenary_down_n() -> sp.Expr:
+    """Down component of the catenary's force on the drone [N] (module docstring)."""
+    shape = HEIGHT * Z / sp.sinh(Z)
+    return TCH / NORM * (sp.sinh(Z) * sp.sqrt(SPAN_SQ + shape**2) + shape * sp.cosh(Z))
+
+
+CATENARY_LENGTH = sp.sqrt(HEIGHT**2 + SPAN_SQ * (sp.sinh(Z) / Z) ** 2)
+"""Arc length of the catenary between anchor and drone [m]."""
+
+
+def cable_force_ned(catenary: bool) -> sp.Matrix:
+    """Force of the cable on the drone, NED [N]: the straight line or the catenary."""
+    straight = -TCH * P / NORM
+    if not catenary:
+        return straight
+    return sp.Matrix([straight[0], straight[1], _catenary_down_n()])
 
 
 def rotor_specific_force_body() -> sp.Matrix:
@@ -83,26 +109,29 @@ def rotor_specific_force_body() -> sp.Matrix:
     return sp.Matrix([-DRAG * air[0], -DRAG * air[1], -SCALE * THRUST / MASS])
 
 
-def specific_force_body(length: sp.Expr) -> sp.Matrix:
+def specific_force_body(catenary: bool) -> sp.Matrix:
     """Modelled specific force (no bias), FRD body [m/s^2]."""
-    return rotor_specific_force_body() + R * cable_force_ned(length) / MASS
+    return rotor_specific_force_body() + R * cable_force_ned(catenary) / MASS
 
 
-def anchor_tangent_ned(length: sp.Expr) -> sp.Matrix:
+def anchor_tangent_ned(catenary: bool) -> sp.Matrix:
     """Direction (unnormalised) in which the cable leaves the anchor, NED [N]."""
-    return TCH * P / _norm(P) + (WPL * length / 2) * E_D
+    force = cable_force_ned(catenary)
+    if not catenary:
+        return -force
+    return sp.Matrix([-force[0], -force[1], WPL * CATENARY_LENGTH - force[2]])
 
 
-LENGTHS = {"known_length": LENGTH, "chord_length": _norm(P)}
+CABLES = {"straight": False, "catenary": True}
 
 
 def models() -> list[tuple[str, str, list[sp.Symbol], list[sp.Expr], sp.Matrix | None, str]]:
     """``(name, doc, inputs, values, jacobian_wrt, returns)`` for each generated function."""
     out = []
-    for suffix, length in LENGTHS.items():
-        f_body = specific_force_body(length)
+    for suffix, catenary in CABLES.items():
+        f_body = specific_force_body(catenary)
         # R^T R = I written out: m v' = R^T (thrust + drag) + F_c + m g
-        vdot = R.T * rotor_specific_force_body() + cable_force_ned(length) / MASS + G * E_D
+        vdot = R.T * rotor_specific_force_body() + cable_force_ned(catenary) / MASS + G * E_D
         out.append(
             (
                 f"force_balance_{suffix}",
@@ -126,7 +155,7 @@ def models() -> list[tuple[str, str, list[sp.Symbol], list[sp.Expr], sp.Matrix |
                 "measurement",
             )
         )
-        force = cable_force_ned(length)
+        force = cable_force_ned(catenary)
         tension = _norm(force)
         out.append(
             (
@@ -138,7 +167,7 @@ def models() -> list[tuple[str, str, list[sp.Symbol], list[sp.Expr], sp.Matrix |
                 "measurement",
             )
         )
-        tangent = anchor_tangent_ned(length)
+        tangent = anchor_tangent_ned(catenary)
         angles = sp.Matrix(
             [
                 sp.atan2(-tangent[2], sp.sqrt(tangent[0] ** 2 + tangent[1] ** 2)),
@@ -168,18 +197,18 @@ def models() -> list[tuple[str, str, list[sp.Symbol], list[sp.Expr], sp.Matrix |
             "process",
         )
     )
-    arc = _norm(P) + WPL**2 * (P[0] ** 2 + P[1] ** 2) * _norm(P) / (24 * TCH**2)
-    out.append(
-        (
-            "winch_length",
-            "Winch paid-out length: the arc length to first order in the sag [m];"
-            " returns ``(h (1,), H (1x13))``.",
-            [],
-            [arc],
-            sp.Matrix([arc]),
-            "measurement",
+    for suffix, arc in (("straight", NORM), ("catenary", CATENARY_LENGTH)):
+        out.append(
+            (
+                f"winch_length_{suffix}",
+                "Winch paid-out length: the cable's arc length [m];"
+                " returns ``(h (1,), H (1x13))``.",
+                [],
+                [arc],
+                sp.Matrix([arc]),
+                "measurement",
+            )
         )
-    )
     height = -P[2] + ANCHOR_H
     out.append(
         (
@@ -230,7 +259,7 @@ Regenerate with ``python -m tether_companion.estimation.dynamic.derivation.deriv
 models and their meaning are documented there. sympy {version}.
 
 Every function takes the state ``x`` (13 floats, layout in ``state.py``), the inputs ``u``
-and the constants ``c = (mass_kg, drag_per_s, weight_n_per_m, length_m)`` and returns the
+and the constants ``c = (mass_kg, drag_per_s, weight_n_per_m)`` and returns the
 values and the Jacobian with respect to ``x`` (row-major, 13 columns).
 """
 

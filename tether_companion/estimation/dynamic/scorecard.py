@@ -47,15 +47,7 @@ class DynamicKind:
             cable_weight_n_per_m=cable.linear_density_kg_per_m * context.gravity_mps2,
             anchor_height_m=float(getattr(ground, "anchor_height_m", 0.0)),
         )
-        config = EstimatorConfig()
-        sensors = getattr(context.scenario, "sensors", None)  # the rangefinder's mounting point
-        if sensors is not None:
-            config = dataclasses.replace(
-                config,
-                rangefinder=dataclasses.replace(
-                    config.rangefinder, offset_frd_m=tuple(sensors.range_offset_frd_m)
-                ),
-            )
+        config = context.estimator_config(EstimatorConfig())  # rangefinder mounting
         self._estimator = DynamicTetherEstimator(config, context.vehicle, dynamic)
         self._use_winch = use_winch
 

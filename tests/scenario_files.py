@@ -25,3 +25,22 @@ initial: {{airborne: true}}
         encoding="utf-8",
     )
     return path
+
+
+def gusty_hover_takeoff_scenario(tmp_path: Path, duration_s: float, seed: int) -> Path:
+    """The hover scenario's quad and 4 N winch in realistic-gusty-hover's wind (3 m/s mean,
+    light Dryden turbulence), taking off from the ground under the hover point (4, 0, -2.5) m;
+    the thrust map exact, no sensor biases. Returns the scenario file's path."""
+    path = tmp_path / f"gusty-hover-takeoff-{seed}.yaml"
+    path.write_text(
+        f"""
+base: hover
+duration_s: {duration_s}
+seed: {seed}
+wind: {{velocity_ned_m_s: [-2.0, 2.2, 0.0], turbulence_w20_mps: 7.7}}
+trajectory: {{kind: hover, position_ned_m: [4.0, 0.0, -2.5]}}
+initial: {{airborne: false, armed: true, position_ned_m: [4.0, 0.0, 0.0]}}
+""",
+        encoding="utf-8",
+    )
+    return path

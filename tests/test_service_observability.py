@@ -14,7 +14,7 @@ from lockstep_service import LockstepService, published_errors
 from tether_companion.emulator.autopilot import FlightController
 from tether_companion.emulator.config import FaultConfig, Outage, Window, load_emulator_scenario
 from tether_companion.estimation.observability import ObservabilityConfig, RangeWatch
-from tether_companion.service.publish import NO_RANGE
+from tether_companion.service.health import NO_RANGE
 
 pytestmark = pytest.mark.integration
 

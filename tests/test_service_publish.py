@@ -14,7 +14,7 @@ from tether_companion.mavlink import units
 from tether_companion.mavlink.units import urt_to_covariance
 from tether_companion.samples import AttitudeSample
 from tether_companion.service.config import PublishConfig
-from tether_companion.service.publish import (
+from tether_companion.service.health import (
     CONVERGING,
     DIVERGED,
     NO_RANGE,
@@ -22,8 +22,8 @@ from tether_companion.service.publish import (
     SLACK,
     STALE,
     STALE_PWM,
-    Publisher,
 )
+from tether_companion.service.publish import Publisher
 
 ATTITUDE = AttitudeSample(0.0, 0.05, -0.1, 1.2)
 HEALTH_VALUES = tuple(

@@ -223,14 +223,40 @@ class MessageHandlers:
             )
             return
         self._external_pose(pose, msg.get_type())
+        try:
+            velocity = units.velocity_from_odometry(msg)
+        except ValueError:
+            self.counters.bad_values += 1
+            return
+        if velocity is not None:
+            self._external_velocity(velocity)
+
+    def _on_vision_speed_estimate(self, msg: MAVLinkMessage, link_id: int) -> None:
+        self._external_velocity(units.velocity_from_vision_speed_estimate(msg))
 
     def _external_pose(self, pose: units.PoseEstimate, kind: str) -> None:
         now = self.sim.time_s
+        covariance = None if pose.covariance is None else pose.covariance[:3, :3]
         self.scorer.add(
-            kind, pose.position_ned_m, pose.time_s + self._boot_sim_s, now, self.truth_history
+            kind,
+            pose.position_ned_m,
+            pose.time_s + self._boot_sim_s,
+            now,
+            self.truth_history,
+            covariance,
         )
         if self.vision_navigation:
             self.nav.on_estimate(pose, self.boot_time_s)
+
+    def _external_velocity(self, velocity: units.VelocityEstimate) -> None:
+        """Score a received velocity (scored only: the emulated EKF navigates on position)."""
+        self.scorer.add_velocity(
+            velocity.velocity_ned_m_s,
+            velocity.time_s + self._boot_sim_s,
+            self.sim.time_s,
+            self.truth_history,
+            velocity.covariance,
+        )
 
     def _on_param_request_list(self, msg: MAVLinkMessage, link_id: int) -> None:
         for name in self.params.names:
@@ -312,6 +338,7 @@ MESSAGE_HANDLERS: dict[str, Callable[..., None]] = {
     "SET_GPS_GLOBAL_ORIGIN": MessageHandlers._on_set_gps_global_origin,
     "VISION_POSITION_ESTIMATE": MessageHandlers._on_vision_position_estimate,
     "ODOMETRY": MessageHandlers._on_odometry,
+    "VISION_SPEED_ESTIMATE": MessageHandlers._on_vision_speed_estimate,
     "PARAM_REQUEST_LIST": MessageHandlers._on_param_request_list,
     "PARAM_REQUEST_READ": MessageHandlers._on_param_request_read,
     "PARAM_SET": MessageHandlers._on_param_set,

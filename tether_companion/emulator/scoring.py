@@ -8,7 +8,8 @@ The report gives RMSE per axis (NED), horizontal and 3-D, the count, the rate an
 honesty is scored too: how many were off by more than 3 standard deviations on some axis, and
 the mean NEES (``e^T P^-1 e``, 3 on average for an honest 3-D Gaussian). Velocities (ODOMETRY,
 VISION_SPEED_ESTIMATE) are scored against the true velocity at their stamp (central difference
-of the recorded truth over one physics step) as RMSE per axis and 3-D.
+of the recorded truth over one physics step) as RMSE per axis and 3-D, and, when they carry a
+covariance, as the 3-sigma count and mean NEES of the velocity.
 """
 
 from __future__ import annotations
@@ -130,6 +131,12 @@ class ScoreReport:
     """Velocities scored (ODOMETRY with a velocity, VISION_SPEED_ESTIMATE)."""
     velocity_rmse_m_s: dict[str, float] = field(default_factory=dict)
     """Velocity RMSE per axis (north, east, down) and 3-D [m/s]."""
+    velocity_with_covariance: int = 0
+    """Scored velocities that carried a covariance."""
+    velocity_beyond_3_sigma: int = 0
+    """Of those, velocities with an axis error beyond 3 standard deviations of their own."""
+    velocity_nees_mean: float = math.nan
+    """Mean NEES of those velocities (3 for an honest filter)."""
 
     def to_json(self, path: str | Path) -> None:
         """Write the report as JSON (NaN written as null)."""
@@ -167,6 +174,12 @@ class ScoreReport:
                 f"velocity RMSE north {v['north']:.3f} m/s, east {v['east']:.3f} m/s, "
                 f"down {v['down']:.3f} m/s, 3-D {v['3d']:.3f} m/s ({self.velocity_scored} scored)"
             )
+        if self.velocity_with_covariance:
+            lines.append(
+                f"velocity covariance: {self.velocity_beyond_3_sigma} of "
+                f"{self.velocity_with_covariance} beyond 3 sigma, NEES mean "
+                f"{self.velocity_nees_mean:.2f} (3 if honest)"
+            )
         return "\n".join(lines)
 
 
@@ -194,6 +207,7 @@ class Scorer:
         self._arrivals: list[float] = []
         self._nees: list[float] = []
         self._velocity_errors: list[tuple[float, float, float]] = []
+        self._velocity_nees: list[float] = []
         self._report = ScoreReport()
 
     def add(
@@ -230,17 +244,14 @@ class Scorer:
             self._score_covariance(error, np.asarray(covariance_m2, dtype=float))
 
     def _score_covariance(self, error: FloatArray, covariance: FloatArray) -> None:
-        r = self._report
-        variances = np.diag(covariance)
-        if not (np.all(np.isfinite(covariance)) and np.all(variances > 0.0)):
+        nees = _consistency(error, covariance)
+        if nees is None:
             return
+        r = self._report
         r.with_covariance += 1
-        if np.any(np.abs(error) > 3.0 * np.sqrt(variances)):
-            r.beyond_3_sigma += 1
-        try:
-            self._nees.append(float(error @ np.linalg.solve(covariance, error)))
-        except np.linalg.LinAlgError:
-            pass
+        r.beyond_3_sigma += int(nees[0])
+        if math.isfinite(nees[1]):
+            self._nees.append(nees[1])
 
     def add_velocity(
         self,
@@ -248,8 +259,10 @@ class Scorer:
         stamp_sim_s: float,
         arrival_sim_s: float,
         truth: TruthHistory,
+        covariance_m2ps2: FloatArray | None = None,
     ) -> None:
-        """Score one velocity [m/s] stamped at ``stamp_sim_s`` (after the warm-up only)."""
+        """Score one velocity [m/s] stamped at ``stamp_sim_s`` (after the warm-up only), with
+        its (3, 3) NED covariance [m^2/s^2] when it carried one."""
         v = np.asarray(velocity_ned_m_s, dtype=float)
         if not (np.all(np.isfinite(v)) and math.isfinite(stamp_sim_s)):
             return
@@ -260,6 +273,16 @@ class Scorer:
             return
         error = v - true_velocity
         self._velocity_errors.append((float(error[0]), float(error[1]), float(error[2])))
+        if covariance_m2ps2 is None:
+            return
+        nees = _consistency(error, np.asarray(covariance_m2ps2, dtype=float))
+        if nees is None:
+            return
+        r = self._report
+        r.velocity_with_covariance += 1
+        r.velocity_beyond_3_sigma += int(nees[0])
+        if math.isfinite(nees[1]):
+            self._velocity_nees.append(nees[1])
 
     def report(self) -> ScoreReport:
         """The report so far."""
@@ -267,6 +290,9 @@ class Scorer:
         r.scored = len(self._errors)
         r.nees_mean = float(np.mean(self._nees)) if self._nees else math.nan
         r.velocity_scored = len(self._velocity_errors)
+        r.velocity_nees_mean = (
+            float(np.mean(self._velocity_nees)) if self._velocity_nees else math.nan
+        )
         if self._velocity_errors:
             ms = np.mean(np.array(self._velocity_errors) ** 2, axis=0)
             r.velocity_rmse_m_s = {
@@ -299,3 +325,17 @@ class Scorer:
             "max": float(np.max(ages_ms)),
         }
         return r
+
+
+def _consistency(error: FloatArray, covariance: FloatArray) -> tuple[bool, float] | None:
+    """(some axis beyond 3 sigma, NEES ``e^T P^-1 e``) of one error against its covariance;
+    None when the covariance is not finite or has a non-positive variance (not scored), the
+    NEES ``nan`` when the matrix is singular."""
+    variances = np.diag(covariance)
+    if not (np.all(np.isfinite(covariance)) and np.all(variances > 0.0)):
+        return None
+    beyond = bool(np.any(np.abs(error) > 3.0 * np.sqrt(variances)))
+    try:
+        return beyond, float(error @ np.linalg.solve(covariance, error))
+    except np.linalg.LinAlgError:
+        return beyond, math.nan

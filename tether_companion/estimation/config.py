@@ -165,7 +165,11 @@ class EstimatorConfig:
     """Everything the tether EKF needs beyond the vehicle profile (defaults: the paper's)."""
 
     kind: str = spec(
-        "four_state", choices=("four_state", "three_state"), doc="4-state or 3-state model"
+        "four_state",
+        choices=("four_state", "three_state", "dynamic"),
+        doc="four_state / three_state: the paper's random-walk EKF; dynamic: the 13-state "
+        "filter with velocity, thrust scale, accelerometer bias and wind (the service's "
+        "dynamic_filter section; docs/estimation.md)",
     )
     process_noise: ProcessNoise = spec(default_factory=ProcessNoise, doc="random-walk Q")
     accel_noise: AccelNoise = spec(default_factory=AccelNoise, doc="accelerometer R")

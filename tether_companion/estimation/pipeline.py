@@ -223,6 +223,8 @@ class TetherEstimator(InputFeed):
         *,
         aligner: InputAligner | None = None,
     ) -> None:
+        if config.kind not in ("four_state", "three_state"):
+            raise ValueError(f"TetherEstimator runs the paper's models, not kind {config.kind!r}")
         self.config = config
         self.vehicle = vehicle
         stale = config.staleness

@@ -29,7 +29,6 @@ import sys
 import time
 import traceback
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass, field
 
 from tether_companion.config import ConfigError
 from tether_companion.mavlink.endpoints import Link, LinkClosed, open_link, parse_endpoint
@@ -38,20 +37,17 @@ from tether_companion.mavlink.units import seconds_to_usec
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.service.clock import FcClock
 from tether_companion.service.config import ServiceConfig
+from tether_companion.service.health import NO_IMU, STALE
 from tether_companion.service.ingest import (
-    ATTITUDE,
-    FC_POSITION,
     IMU,
-    INPUT_KINDS,
-    PWM,
-    RANGE,
-    SYSTEM_TIME,
 )
-from tether_companion.service.publish import NO_IMU, STALE, Publication
+from tether_companion.service.publish import Publication
 from tether_companion.service.recording import RecordingLimits, TlogWriter
 from tether_companion.service.recording_thread import RecorderThread
 from tether_companion.service.security import LinkSecurity
 from tether_companion.service.session import EstimationSession
+from tether_companion.service.state import ServiceState
+from tether_companion.service.streams import INPUT_SILENT_S, StreamRequests
 from tether_companion.service.systemd import SystemdNotifier
 from tether_companion.service.vehicle_fetch import FROM_AUTOPILOT, VehicleFetch
 from tether_companion.vehicle_params.profile import profile_from_parameters
@@ -60,64 +56,8 @@ HOUSEKEEPING_PERIOD_S = 0.05
 LINK_OPEN_TIMEOUT_S = 2.0
 """An open (name lookup, TCP connect) taking longer than this [s] counts as failed."""
 RATE_WINDOW_S = 1.0
-INPUT_SILENT_S = 0.5
-"""An input not heard for this long [s] (local time) while the link is up is re-requested."""
-FC_POSITION_RATE_HZ = 20.0
-"""LOCAL_POSITION_NED rate asked for (the tension modes' frame) [Hz]."""
-SYSTEM_TIME_RATE_HZ = 5.0
-"""SYSTEM_TIME rate asked for: the evidence of a flight-controller reboot [Hz]."""
 ORIGIN_RETRY_S = 1.0
 ORIGIN_ATTEMPTS = 5
-INTERVAL_ATTEMPTS_BEFORE_FALLBACK = 2
-_MAV_RESULT_ACCEPTED = dialect.MAV_RESULT_ACCEPTED
-
-_STREAM_GROUPS = {
-    IMU: dialect.MAV_DATA_STREAM_RAW_SENSORS,
-    ATTITUDE: dialect.MAV_DATA_STREAM_EXTRA1,
-    PWM: dialect.MAV_DATA_STREAM_RC_CHANNELS,
-    RANGE: dialect.MAV_DATA_STREAM_EXTRA3,
-    FC_POSITION: dialect.MAV_DATA_STREAM_POSITION,
-    SYSTEM_TIME: dialect.MAV_DATA_STREAM_EXTRA3,
-}
-"""ArduPilot's REQUEST_DATA_STREAM groups (SRx_RAW_SENS, _EXTRA1, _RC_CHAN, _EXTRA3, _POSITION)."""
-
-
-@dataclass
-class StreamRequest:
-    """Bookkeeping of one input stream we ask the flight controller for."""
-
-    message_id: int
-    rate_hz: float
-    attempts: int = 0
-    last_request_s: float = -math.inf
-    last_count: int = 0
-    last_heard_s: float = -math.inf
-    acked: bool | None = None
-    """Result of the last SET_MESSAGE_INTERVAL (None: no COMMAND_ACK yet)."""
-
-
-@dataclass
-class ServiceState:
-    """What the status view and systemd STATUS show (updated by the service)."""
-
-    link_text: str = "starting"
-    link_up: bool = False
-    link_opens: int = 0
-    link_open_failures: int = 0
-    link_losses: int = 0
-    last_error: str = ""
-    fc_autopilot: int | None = None
-    fc_armed: bool = False
-    origin_sent: int = 0
-    origin_confirmed: bool = False
-    rates_hz: dict[str, float] = field(
-        default_factory=lambda: dict.fromkeys((*INPUT_KINDS, "published"), 0.0)
-    )
-    ages_s: dict[str, float] = field(default_factory=dict)
-    """Local seconds since each requested stream was last accepted."""
-    sent_by_type: dict[str, int] = field(default_factory=dict)
-    received: int = 0
-    handler_errors: int = 0
 
 
 class CompanionService:
@@ -177,9 +117,9 @@ class CompanionService:
         self._on_publication = on_publication
         self._endpoint = parse_endpoint(config.link.connect, "connect", key="link.connect")
         self._open_link_fn = open_link_fn or self._open_default_link
-        self._streams = self._stream_table()
+        self.streams = StreamRequests(config.link, config.streams)
+        """The inputs asked for and when to ask again."""
         self._timesync_pending: dict[int, float] = {}
-        self._awaiting_ack: list[StreamRequest] = []
         self._fc_heard_s = -math.inf
         self._next_heartbeat_s = -math.inf
         self._next_timesync_s = -math.inf
@@ -330,8 +270,7 @@ class CompanionService:
     def _reset_link_state(self) -> None:
         self._fc_heard_s = -math.inf
         self._next_heartbeat_s = -math.inf
-        self._streams = self._stream_table()
-        self._awaiting_ack = []
+        self.streams.reset()
         self._origin_attempts = 0
         self.state.origin_confirmed = False
         self._key_installed = False
@@ -389,9 +328,8 @@ class CompanionService:
                 if sent is not None:
                     self.clock.observe_timesync(msg.tc1 * 1e-9, sent, now_s)
         elif kind == "COMMAND_ACK":
-            if msg.command == dialect.MAV_CMD_SET_MESSAGE_INTERVAL and self._awaiting_ack:
-                stream = self._awaiting_ack.pop(0)  # the autopilot answers commands in order
-                stream.acked = msg.result == _MAV_RESULT_ACCEPTED
+            if msg.command == dialect.MAV_CMD_SET_MESSAGE_INTERVAL:
+                self.streams.on_interval_ack(msg.result)
         elif kind == "GPS_GLOBAL_ORIGIN":
             self.state.origin_confirmed = True
 
@@ -440,8 +378,7 @@ class CompanionService:
             self._vehicle_ready = False
         self.clock.reset()
         self._last_latest_fc_s = -math.inf
-        self._streams = self._stream_table()
-        self._awaiting_ack = []
+        self.streams.reset()
         self._origin_attempts = 0
         self.state.origin_confirmed = False
         self._timesync_pending.clear()
@@ -513,10 +450,10 @@ class CompanionService:
         if self.config.security.install_key and not self._key_installed:
             self._key_installed = True
             self._send(link, self.security.setup_signing_message())
-        self._request_streams(link, now_s)
+        for request in self.streams.due(now_s, self.session.ingest.counters.accepted):
+            self._send(link, request)
         self._send_origin(link, now_s)
-        imu = self._streams[IMU]
-        if now_s - imu.last_heard_s > INPUT_SILENT_S:
+        if self.streams.silent_s(IMU, now_s) > INPUT_SILENT_S:
             for msg in self.session.publisher.set_health(NO_IMU):
                 self._send(link, msg)
 
@@ -529,86 +466,6 @@ class CompanionService:
             _log(f"{link.endpoint}: {event}")
         self.state.last_error = trust.events[-1]
         trust.events.clear()
-
-    def _stream_table(self) -> dict[str, StreamRequest]:
-        streams = self.config.streams
-        imu_id = (
-            dialect.MAVLINK_MSG_ID_RAW_IMU
-            if self.config.link.autopilot == "ardupilot"
-            else dialect.MAVLINK_MSG_ID_HIGHRES_IMU
-        )
-        table = {
-            IMU: StreamRequest(imu_id, streams.imu_hz),
-            ATTITUDE: StreamRequest(dialect.MAVLINK_MSG_ID_ATTITUDE, streams.attitude_hz),
-            PWM: StreamRequest(dialect.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW, streams.servo_hz),
-        }
-        if streams.rangefinder_hz > 0:
-            table[RANGE] = StreamRequest(
-                dialect.MAVLINK_MSG_ID_DISTANCE_SENSOR, streams.rangefinder_hz
-            )
-        # the tension modes' targets are in the FC's frame (asked for always: they may be
-        # enabled at run time)
-        table[FC_POSITION] = StreamRequest(
-            dialect.MAVLINK_MSG_ID_LOCAL_POSITION_NED, FC_POSITION_RATE_HZ
-        )
-        # a reboot is believed only on SYSTEM_TIME's word (service/fc_time.py)
-        table[SYSTEM_TIME] = StreamRequest(dialect.MAVLINK_MSG_ID_SYSTEM_TIME, SYSTEM_TIME_RATE_HZ)
-        return table
-
-    def _request_streams(self, link: Link, now_s: float) -> None:
-        """Set every input's rate once per FC boot, and again while it stays silent.
-
-        MAV_CMD_SET_MESSAGE_INTERVAL first; after ``INTERVAL_ATTEMPTS_BEFORE_FALLBACK``
-        silent retries also REQUEST_DATA_STREAM for its group (old firmware, or a ground
-        station that keeps resetting the rates).
-        """
-        cfg = self.config.link
-        accepted = self.session.ingest.counters.accepted
-        for kind, stream in self._streams.items():
-            count = accepted[kind]
-            if count != stream.last_count:
-                stream.last_count = count
-                stream.last_heard_s = now_s
-            silent = now_s - stream.last_heard_s > INPUT_SILENT_S
-            first = stream.attempts == 0  # always set the configured rate once per FC boot
-            if (
-                not (first or silent)
-                or now_s - stream.last_request_s < cfg.stream_request_interval_s
-            ):
-                continue
-            refused = stream.acked is False  # DENIED/UNSUPPORTED/FAILED: no point waiting
-            stream.attempts += 1
-            stream.last_request_s = now_s
-            stream.acked = None
-            self._awaiting_ack = [*self._awaiting_ack[-15:], stream]  # bounded if never acked
-            self._send(
-                link,
-                dialect.MAVLink_command_long_message(
-                    cfg.fc_system_id,
-                    cfg.fc_component_id,
-                    dialect.MAV_CMD_SET_MESSAGE_INTERVAL,
-                    0,
-                    float(stream.message_id),
-                    1e6 / stream.rate_hz,
-                    0.0,
-                    0.0,
-                    0.0,
-                    0.0,
-                    0.0,
-                ),
-            )
-            fallback = refused or stream.attempts > INTERVAL_ATTEMPTS_BEFORE_FALLBACK
-            if fallback and kind in _STREAM_GROUPS:
-                self._send(
-                    link,
-                    dialect.MAVLink_request_data_stream_message(
-                        cfg.fc_system_id,
-                        cfg.fc_component_id,
-                        _STREAM_GROUPS[kind],
-                        max(1, round(stream.rate_hz)),
-                        1,
-                    ),
-                )
 
     def _send_origin(self, link: Link, now_s: float) -> None:
         """SET_GPS_GLOBAL_ORIGIN after each FC boot until GPS_GLOBAL_ORIGIN answers (bounded)."""
@@ -647,8 +504,8 @@ class CompanionService:
                 self.state.rates_hz[key] = (value - self._rate_counts.get(key, value)) / elapsed
         self._rate_counts = counts
         self._rate_time_s = now_s
-        for kind, stream in self._streams.items():
-            self.state.ages_s[kind] = now_s - stream.last_heard_s
+        for kind in self.streams.table:
+            self.state.ages_s[kind] = self.streams.silent_s(kind, now_s)
 
     # ------------------------------------------------------------------ systemd, recording
     async def _watchdog(self, stop: asyncio.Event) -> None:

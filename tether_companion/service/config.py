@@ -15,6 +15,7 @@ from pathlib import Path
 from tether_companion.config import ConfigError, describe, from_mapping, read_yaml, spec
 from tether_companion.estimation.catenary_position import CatenaryPositionConfig
 from tether_companion.estimation.config import EstimatorConfig
+from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.tension_kf import TensionFilterConfig
 from tether_companion.mavlink.endpoints import parse_endpoint
 from tether_companion.modes.config import TensionModeConfig
@@ -249,7 +250,8 @@ class PublishConfig:
     on_unhealthy: str = spec(
         "stop",
         choices=("stop", "inflate"),
-        doc="when stale/diverged/slack: stop sending, or send with inflated_variance_m2",
+        doc="when not healthy (stale, diverged, slack, weak pull, short cable): stop sending, "
+        "or send the last healthy position with inflated_variance_m2",
     )
     inflated_variance_m2: float = spec(
         100.0, exclusive_minimum=0.0, maximum=1e4, doc="position variance sent when unhealthy [m^2]"
@@ -281,6 +283,12 @@ class PublishConfig:
         exclusive_minimum=0.0,
         doc="a move this large between two publications raises reset_counter [m]",
     )
+    short_cable_m: float = spec(
+        1.0,
+        minimum=0.0,
+        doc="dynamic filter: a position withheld for a weak pull or a slack cable closer than "
+        "this to the anchor is reported as short_cable [m]",
+    )
 
     def validate(self) -> None:
         """NAMED_VALUE_FLOAT names are at most 10 characters."""
@@ -295,6 +303,8 @@ class PublishConfig:
 
 EKF = "ekf"
 CATENARY = "catenary"
+DYNAMIC = "dynamic"
+"""``estimator.kind`` of the dynamic filter."""
 
 
 @dataclass(frozen=True)
@@ -409,6 +419,11 @@ class ServiceConfig:
     origin: OriginConfig = spec(default_factory=OriginConfig)
     inputs: InputLimitsConfig = spec(default_factory=InputLimitsConfig)
     estimator: EstimatorConfig = spec(default_factory=EstimatorConfig)
+    dynamic_filter: DynamicFilterConfig = spec(
+        default_factory=DynamicFilterConfig,
+        doc="the dynamic filter's own settings (estimator.kind dynamic; the anchor height is "
+        "estimator.ground_station.anchor_height_m)",
+    )
     thrust_dynamics: str = spec(
         "motor_lag",
         choices=("motor_lag", "static"),
@@ -480,6 +495,22 @@ class ServiceConfig:
                 "tension.source",
                 self.tension.source,
                 "must be 'estimate' with estimator.kind four_state",
+            )
+        if kind == DYNAMIC and self.tension.source == "config":
+            raise ConfigError(
+                "",
+                "tension.source",
+                self.tension.source,
+                "must be 'estimate' or 'message' (a load cell) with estimator.kind dynamic",
+            )
+        anchor = self.estimator.ground_station.anchor_height_m
+        if self.dynamic_filter.anchor_height_m not in (0.0, anchor):
+            raise ConfigError(
+                "",
+                "dynamic_filter.anchor_height_m",
+                self.dynamic_filter.anchor_height_m,
+                f"set estimator.ground_station.anchor_height_m instead (now {anchor}): the "
+                "service uses that one for every estimator",
             )
 
 

@@ -21,13 +21,17 @@ Choices, with the reasons:
   reads ``posErr = cbrt(c0^2 + c6^2 + c11^2)`` and clamps it to [VISO_POS_M_NSE, 100] m; PX4
   (EKF2_EV_NOISE_MD = 0) uses each variance, floored at EKF2_EVP_NOISE^2.
 * Never NaN: an estimate with a non-finite position is never sent. When the estimate is not
-  healthy (diverged, slack tether) the publisher stops or sends a large covariance
-  (``on_unhealthy``). Stale inputs produce no estimate at all, so nothing is sent.
+  healthy (diverged, slack tether, weak pull, short cable) the publisher stops or, with
+  ``on_unhealthy: inflate``, sends the last healthy position (the current one before any was
+  healthy) with ``inflated_variance_m2``: a drifting unobservable position is not passed on.
+  Stale inputs produce no estimate at all, so nothing is sent.
 * ``reset_counter`` (uint8, wraps) goes up on every estimator restart, on a jump larger than
   ``jump_m`` between two publications, on resuming after a pause and after a flight-controller
   reboot, so the autopilot resets its position state instead of fighting a step.
-* The position may come from the tether EKF or from the catenary estimator
-  (``position.source``): anything with the :class:`PositionEstimate` attributes.
+* The position may come from the tether EKF (the paper's or the dynamic filter) or from the
+  catenary estimator (``position.source``): anything with the :class:`PositionEstimate`
+  attributes. An estimate with a velocity (the dynamic filter) also fills ODOMETRY's velocity
+  and its covariance, and VISION_SPEED_ESTIMATE when ``speed_estimate`` is on.
 * For the ground station, NAMED_VALUE_FLOAT at ``filtered_rate_hz`` (FC time):
   the tension filter's force of the cable on the drone (``TETH_TN``, ``TETH_TE``, ``TETH_TD``,
   NED [N]) and its magnitude (``TETH_TMAG`` [N]), and the catenary position when it runs
@@ -40,13 +44,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.catenary_position import CatenaryPosition
-from tether_companion.estimation.observability import RANGEFINDER
 from tether_companion.estimation.tension_kf import TensionEstimate
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.mavlink.units import (
@@ -62,57 +64,22 @@ from tether_companion.mavlink.units import (
 )
 from tether_companion.samples import AttitudeSample
 from tether_companion.service.config import PublishConfig
+from tether_companion.service.health import (
+    CONVERGING,
+    DIVERGED,
+    HEALTH_STATES,
+    MOTORS_IDLE,
+    NO_ATTITUDE,
+    OK,
+    STALE,
+    PositionEstimate,
+    assess_health,
+    health_text,
+)
 
 FloatArray = NDArray[np.float64]
 
-OK = "ok"
-CONVERGING = "converging"
-DIVERGED = "diverged"
-SLACK = "slack"
-STALE = "stale"
-NO_ATTITUDE = "no_attitude"
-MOTORS_IDLE = "motors_idle"
-NO_RANGE = "no_range"
-NO_IMU = "no_imu"
-STALE_ATTITUDE = "stale_attitude"
-STALE_PWM = "stale_pwm"
-STALE_TENSION = "stale_tension"
-HEALTH_STATES = (
-    OK,
-    CONVERGING,
-    DIVERGED,
-    SLACK,
-    STALE,
-    NO_ATTITUDE,
-    MOTORS_IDLE,
-    NO_RANGE,
-    NO_IMU,
-    STALE_ATTITUDE,
-    STALE_PWM,
-    STALE_TENSION,
-)
-"""Health of the published position, worst cases last in the status text."""
-
-_HEALTH_TEXT = {
-    OK: "position OK",
-    CONVERGING: "converging, position withheld",
-    DIVERGED: "estimate diverged",
-    SLACK: "tether slack, position unobservable",
-    STALE: "inputs stale, no estimate",
-    NO_ATTITUDE: "no attitude from FC",
-    MOTORS_IDLE: "motors idle (landed?), position withheld",
-    NO_RANGE: "no rangefinder height, position unknown",
-    NO_IMU: "no IMU data, no estimate",
-    STALE_ATTITUDE: "attitude stale, position withheld",
-    STALE_PWM: "motor outputs stale, position withheld",
-    STALE_TENSION: "tension reading stale, position withheld",
-}
 _STATUSTEXT_PREFIX = "TETHER: "
-
-
-def health_text(health: str) -> str:
-    """What a health state means, in words (the STATUSTEXT after ``TETHER: ``)."""
-    return _HEALTH_TEXT[health]
 
 
 STATUSTEXT_MIN_INTERVAL_S = 1.0
@@ -125,35 +92,6 @@ TENSION_MAGNITUDE_NAME = b"TETH_TMAG"
 """NAMED_VALUE_FLOAT name of the filtered tension magnitude [N]."""
 CATENARY_POSITION_NAMES = (b"TETH_CN", b"TETH_CE", b"TETH_CD")
 """NAMED_VALUE_FLOAT names of the catenary estimator's position, NED from the anchor [m]."""
-
-
-class PositionEstimate(Protocol):
-    """What the publisher reads from an estimate (the EKF's
-    :class:`~tether_companion.estimation.pipeline.Estimate` or a catenary one)."""
-
-    @property
-    def time_s(self) -> float:
-        """Flight-controller time [s]."""
-
-    @property
-    def position_ned_m(self) -> FloatArray:
-        """Position from the anchor, NED, shape (3,) [m]."""
-
-    @property
-    def tension_n(self) -> float:
-        """Tension magnitude [N]."""
-
-    @property
-    def covariance(self) -> FloatArray:
-        """Covariance, shape (n, n): position block [m^2] first, then tension [N^2] if n > 3."""
-
-    @property
-    def position_covariance_m2(self) -> FloatArray:
-        """Position block of the covariance, shape (3, 3) [m^2]."""
-
-    @property
-    def reset_counter(self) -> int:
-        """Restarts of the estimator run so far."""
 
 
 _ODOMETRY_FRAMES = {"local_ned": MAV_FRAME_LOCAL_NED, "local_frd": MAV_FRAME_LOCAL_FRD}
@@ -177,41 +115,6 @@ def velocity_of(
     if not (np.all(np.isfinite(velocity)) and np.all(np.isfinite(covariance))):
         return None
     return VelocityEstimate(time_s, velocity, 0.5 * (covariance + covariance.T), reset_counter)
-
-
-def assess_health(
-    estimate: PositionEstimate, config: PublishConfig, has_tension_state: bool, ever_ok: bool
-) -> str:
-    """Health of one estimate (one of :data:`HEALTH_STATES`, never STALE/NO_ATTITUDE here).
-
-    Parameters
-    ----------
-    estimate
-        The estimator's output.
-    config
-        Publication thresholds (variance bound, slack tension).
-    has_tension_state
-        True for the 4-state model (a near-zero estimated tension then means a slack tether).
-    ever_ok
-        Whether this estimator run was healthy before: a too-large variance before the first
-        healthy estimate is ``converging``, after it ``diverged``.
-    """
-    position = estimate.position_ned_m
-    covariance = estimate.covariance
-    if not (
-        np.all(np.isfinite(position))
-        and np.all(np.isfinite(covariance))
-        and math.isfinite(estimate.tension_n)
-    ):
-        return DIVERGED
-    variances = np.diag(estimate.position_covariance_m2)
-    if np.any(variances <= 0.0) or float(variances.max()) >= config.max_position_variance_m2:
-        if getattr(estimate, "missing_input", None) == RANGEFINDER:
-            return NO_RANGE  # the variance grew because the height is not measured
-        return DIVERGED if ever_ok else CONVERGING
-    if has_tension_state and estimate.tension_n < config.slack_tension_n:
-        return SLACK
-    return OK
 
 
 @dataclass(frozen=True, slots=True)
@@ -290,6 +193,8 @@ class Publisher:
         self._next_filtered_s = -math.inf
         self._last_sent_s = -math.inf
         self._last_sent_position: FloatArray | None = None
+        self._last_ok_position: FloatArray | None = None
+        """The last position published healthy: what ``on_unhealthy: inflate`` sends."""
         self._estimator_resets: int | None = None
         self._ever_ok = False
         self._ok_since_s = math.inf
@@ -302,6 +207,7 @@ class Publisher:
         self._next_filtered_s = -math.inf
         self._last_sent_s = -math.inf
         self._last_sent_position = None
+        self._last_ok_position = None
         self._estimator_resets = None
         self._ever_ok = False
         self._ok_since_s = math.inf
@@ -420,6 +326,8 @@ class Publisher:
             return out, None
         self._next_due_s = _next_due(self._next_due_s, t, self._period_s)
         position = estimate.position_ned_m
+        if health != OK and self._last_ok_position is not None:
+            position = self._last_ok_position  # inflate holds the last healthy position
         finite = bool(np.all(np.isfinite(position)))
         send_inflated = health != OK and self.config.on_unhealthy == "inflate" and finite
         if attitude is None or not finite or (health != OK and not send_inflated):
@@ -434,6 +342,8 @@ class Publisher:
             self._bump_reset()
         self._last_sent_s = t
         self._last_sent_position = position.copy()
+        if health == OK:
+            self._last_ok_position = position.copy()
         pose_cov = self._pose_covariance(estimate, inflated=send_inflated)
         pose = PoseEstimate(
             time_s=t,
@@ -451,7 +361,9 @@ class Publisher:
             out.append(vision_speed_estimate_message(velocity))
         self.counters.published += 1
         self.counters.inflated += int(send_inflated)
-        variances = np.diag(estimate.covariance)
+        variances = np.diag(estimate.covariance).copy()
+        if send_inflated:
+            variances[:3] = self.config.inflated_variance_m2
         publication = Publication(
             time_usec=int(round(t * 1e6)),
             position_ned_m=(float(position[0]), float(position[1]), float(position[2])),
@@ -494,7 +406,7 @@ class Publisher:
         self._announced = health
         self._next_text_s = -math.inf if time_s is None else time_s + STATUSTEXT_MIN_INTERVAL_S
         severity = dialect.MAV_SEVERITY_INFO if health == OK else dialect.MAV_SEVERITY_WARNING
-        text = (_STATUSTEXT_PREFIX + _HEALTH_TEXT[health])[:50].encode("ascii")
+        text = (_STATUSTEXT_PREFIX + health_text(health))[:50].encode("ascii")
         return [dialect.MAVLink_statustext_message(severity, text, 0, 0)]
 
 

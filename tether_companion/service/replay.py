@@ -30,8 +30,9 @@ from tether_companion.mavlink.framing import FrameParser, MAVLinkMessage
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.config import ServiceConfig
+from tether_companion.service.health import OK, health_text
 from tether_companion.service.ingest import ATTITUDE, IMU, PWM, Sample
-from tether_companion.service.publish import OK, Publication, health_text
+from tether_companion.service.publish import Publication
 from tether_companion.service.recording import read_tlog
 from tether_companion.service.session import EstimationSession
 

@@ -6,7 +6,12 @@ for the same input, because nothing here reads a wall clock.
 
 Estimators, all fed the same samples:
 
-* the tether EKF (:class:`~tether_companion.estimation.pipeline.TetherEstimator`), always;
+* the tether EKF, always: the paper's 3- or 4-state filter
+  (:class:`~tether_companion.estimation.pipeline.TetherEstimator`) or, with ``estimator.kind:
+  dynamic``, the dynamic filter
+  (:class:`~tether_companion.estimation.dynamic.estimator.DynamicTetherEstimator`: position,
+  velocity, thrust scale, accelerometer bias, wind), whose own observability status decides
+  the published health (:func:`~tether_companion.service.health.dynamic_health`);
 * the tension Kalman filter, owned by the tension modes (:class:`TensionModeSession`), always:
   its force on the drone is published as NAMED_VALUE_FLOAT (``publish.filtered_rate_hz``);
 * the catenary position estimator
@@ -18,6 +23,7 @@ Estimators, all fed the same samples:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -32,6 +38,8 @@ from tether_companion.estimation.catenary_position import (
     CatenaryPositionEstimator,
 )
 from tether_companion.estimation.catenary_position import STALE_TENSION as CATENARY_STALE_TENSION
+from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
+from tether_companion.estimation.dynamic.output import NavigationEstimate
 from tether_companion.estimation.pipeline import (
     Estimate,
     EstimatorHealth,
@@ -49,17 +57,17 @@ from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.modes.session import TensionModeSession
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
-from tether_companion.service.config import CATENARY, ServiceConfig
-from tether_companion.service.ingest import FcPosition, Ingest, Sample, TensionReading
-from tether_companion.service.publish import (
+from tether_companion.service.config import CATENARY, DYNAMIC, ServiceConfig
+from tether_companion.service.health import (
     SLACK,
     STALE,
     STALE_ATTITUDE,
     STALE_PWM,
     STALE_TENSION,
-    Publication,
-    Publisher,
+    dynamic_health,
 )
+from tether_companion.service.ingest import FcPosition, Ingest, Sample, TensionReading
+from tether_companion.service.publish import Publication, Publisher
 from tether_companion.service.security import command_refusal
 
 TENSION_MODE_COMMAND = dialect.MAV_CMD_USER_2
@@ -127,7 +135,7 @@ class Step:
 
     messages: list[MAVLinkMessage] = field(default_factory=list)
     publication: Publication | None = None
-    estimate: Estimate | None = None
+    estimate: Estimate | NavigationEstimate | None = None
 
 
 class EstimationSession:
@@ -153,9 +161,11 @@ class EstimationSession:
         )
         self.catenary_source = config.position.source == CATENARY
         """The published position is the catenary estimator's (else the EKF's)."""
+        self.dynamic = config.estimator.kind == DYNAMIC
+        """The EKF is the dynamic filter (it says itself when its position is observable)."""
         self.publisher = Publisher(
             config.publish,
-            has_tension_state=self.catenary_source or config.estimator.kind == "four_state",
+            has_tension_state=self.catenary_source or config.estimator.kind != "three_state",
         )
         self.aligner = self._new_aligner()
         """Time alignment shared by the EKF and the tension filter: each attitude and PWM
@@ -165,7 +175,7 @@ class EstimationSession:
         self.last_catenary: CatenaryPosition | None = None
         """The catenary estimator's latest output (None: not running, or nothing yet)."""
         self.attitude: AttitudeSample | None = None
-        self.last_estimate: Estimate | None = None
+        self.last_estimate: Estimate | NavigationEstimate | None = None
         self._static_thrust = StaticThrustInput(vehicle)
         self._static_thrust_n = math.nan
         self._idle_thrust_n = config.publish.idle_thrust_fraction * vehicle.mass_kg * GRAVITY_MPS2
@@ -252,8 +262,15 @@ class EstimationSession:
         """The flight controller's HEARTBEAT (armed flag and flight mode, for the modes)."""
         self.modes.on_heartbeat(base_mode, custom_mode)
 
-    def _new_estimator(self) -> TetherEstimator:
-        return TetherEstimator(self.config.estimator, self.vehicle, aligner=self.aligner)
+    def _new_estimator(self) -> TetherEstimator | DynamicTetherEstimator:
+        estimator = self.config.estimator
+        if self.dynamic:
+            dynamic = dataclasses.replace(
+                self.config.dynamic_filter,
+                anchor_height_m=estimator.ground_station.anchor_height_m,
+            )
+            return DynamicTetherEstimator(estimator, self.vehicle, dynamic, aligner=self.aligner)
+        return TetherEstimator(estimator, self.vehicle, aligner=self.aligner)
 
     def _new_catenary(self) -> CatenaryPositionEstimator | None:
         if not self.config.position.runs_catenary:
@@ -373,6 +390,7 @@ class EstimationSession:
         if self.config.tension.source == "config":
             estimator.set_known_tension_n(self.config.tension.known_tension_n, sample.time_s)
         stale_before = _stale_counts(estimator.health)
+        near_anchor_before = getattr(estimator.health, "near_anchor", 0)
         estimate = estimator.on_imu(sample)
         if estimate is not None:
             self.last_estimate = estimate
@@ -381,8 +399,18 @@ class EstimationSession:
         publication = None
         if not self.catenary_source and estimate is not None:
             stale = _stale_input(stale_before, _stale_counts(estimator.health))
+            unavailable = None
+            if isinstance(estimate, NavigationEstimate):
+                near_anchor = estimator.health.near_anchor > near_anchor_before
+                unavailable = dynamic_health(
+                    estimate, self.config.publish.short_cable_m, near_anchor
+                )
             messages, publication = self.publisher.on_estimate(
-                estimate, self.attitude, inputs_stale=stale, motors_idle=motors_idle
+                estimate,
+                self.attitude,
+                inputs_stale=stale,
+                motors_idle=motors_idle,
+                unavailable=unavailable,
             )
         elif self.catenary_source and tension is not None and self.last_catenary is not None:
             catenary = self.last_catenary

@@ -14,8 +14,8 @@ from rich.table import Table
 from rich.text import Text
 
 from tether_companion.service.app import CompanionService
+from tether_companion.service.health import OK, health_text
 from tether_companion.service.ingest import INPUT_KINDS
-from tether_companion.service.publish import OK, health_text
 
 _HEALTH_STYLE = {
     OK: "bold green",

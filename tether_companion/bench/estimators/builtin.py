@@ -36,7 +36,7 @@ from tether_companion.estimation.pipeline import TetherEstimator
 from tether_companion.estimation.tension_kf import TensionEstimator, TensionFilterConfig
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.config import PublishConfig
-from tether_companion.service.publish import OK, assess_health
+from tether_companion.service.health import OK, assess_health
 
 
 class PaperEkf:

@@ -1,0 +1,186 @@
+"""Health of the published position: the states, their words, and how an estimate gets one.
+
+Pure functions of one estimate and the ``publish`` thresholds; the :class:`Publisher` adds what
+depends on history (settling, stale inputs, idle motors) and announces changes in STATUSTEXT.
+
+The paper's filters are judged by their covariance and estimated tension
+(:func:`assess_health`); the dynamic filter says itself whether its position is observable
+(its ``status`` and ``reason``), which :func:`dynamic_health` maps onto these states:
+
+==============  ==================================================================
+filter status   health
+==============  ==================================================================
+ok              ``ok`` (still subject to the variance bound of :func:`assess_health`)
+initialising    ``converging``
+weak_pull       ``weak_pull``, or ``short_cable`` closer than ``short_cable_m``
+slack           ``slack``, or ``short_cable`` closer than ``short_cable_m``
+on_ground       ``motors_idle``
+stale_inputs    judged as usual: the stale input is named by the session
+reset           ``diverged`` (reset_counter goes up with the filter's restart)
+==============  ==================================================================
+
+and an accelerometer update skipped because the drone is within
+``estimator.min_cable_length_m`` of the anchor is ``short_cable`` too.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.estimation.dynamic import output as dynamic_output
+from tether_companion.estimation.observability import RANGEFINDER
+from tether_companion.service.config import PublishConfig
+
+FloatArray = NDArray[np.float64]
+
+OK = "ok"
+CONVERGING = "converging"
+DIVERGED = "diverged"
+SLACK = "slack"
+STALE = "stale"
+NO_ATTITUDE = "no_attitude"
+MOTORS_IDLE = "motors_idle"
+NO_RANGE = "no_range"
+NO_IMU = "no_imu"
+STALE_ATTITUDE = "stale_attitude"
+STALE_PWM = "stale_pwm"
+STALE_TENSION = "stale_tension"
+WEAK_PULL = "weak_pull"
+SHORT_CABLE = "short_cable"
+HEALTH_STATES = (
+    OK,
+    CONVERGING,
+    DIVERGED,
+    SLACK,
+    STALE,
+    NO_ATTITUDE,
+    MOTORS_IDLE,
+    NO_RANGE,
+    NO_IMU,
+    STALE_ATTITUDE,
+    STALE_PWM,
+    STALE_TENSION,
+    WEAK_PULL,
+    SHORT_CABLE,
+)
+"""Health of the published position, worst cases last in the status text."""
+
+_HEALTH_TEXT = {
+    OK: "position OK",
+    CONVERGING: "converging, position withheld",
+    DIVERGED: "estimate diverged",
+    SLACK: "tether slack, position unobservable",
+    STALE: "inputs stale, no estimate",
+    NO_ATTITUDE: "no attitude from FC",
+    MOTORS_IDLE: "motors idle (landed?), position withheld",
+    NO_RANGE: "no rangefinder height, position unknown",
+    NO_IMU: "no IMU data, no estimate",
+    STALE_ATTITUDE: "attitude stale, position withheld",
+    STALE_PWM: "motor outputs stale, position withheld",
+    STALE_TENSION: "tension reading stale, position withheld",
+    WEAK_PULL: "pull too weak, position unobservable",
+    SHORT_CABLE: "cable short or slack near anchor, no position",
+}
+
+
+def health_text(health: str) -> str:
+    """What a health state means, in words (the STATUSTEXT after ``TETHER: ``)."""
+    return _HEALTH_TEXT[health]
+
+
+class PositionEstimate(Protocol):
+    """What the publisher reads from an estimate (the EKF's
+    :class:`~tether_companion.estimation.pipeline.Estimate` or a catenary one)."""
+
+    @property
+    def time_s(self) -> float:
+        """Flight-controller time [s]."""
+
+    @property
+    def position_ned_m(self) -> FloatArray:
+        """Position from the anchor, NED, shape (3,) [m]."""
+
+    @property
+    def tension_n(self) -> float:
+        """Tension magnitude [N]."""
+
+    @property
+    def covariance(self) -> FloatArray:
+        """Covariance, shape (n, n): position block [m^2] first, then tension [N^2] if n > 3."""
+
+    @property
+    def position_covariance_m2(self) -> FloatArray:
+        """Position block of the covariance, shape (3, 3) [m^2]."""
+
+    @property
+    def reset_counter(self) -> int:
+        """Restarts of the estimator run so far."""
+
+
+def assess_health(
+    estimate: PositionEstimate, config: PublishConfig, has_tension_state: bool, ever_ok: bool
+) -> str:
+    """Health of one estimate (one of :data:`HEALTH_STATES`, never STALE/NO_ATTITUDE here).
+
+    Parameters
+    ----------
+    estimate
+        The estimator's output.
+    config
+        Publication thresholds (variance bound, slack tension).
+    has_tension_state
+        True for the 4-state model (a near-zero estimated tension then means a slack tether).
+    ever_ok
+        Whether this estimator run was healthy before: a too-large variance before the first
+        healthy estimate is ``converging``, after it ``diverged``.
+    """
+    position = estimate.position_ned_m
+    covariance = estimate.covariance
+    if not (
+        np.all(np.isfinite(position))
+        and np.all(np.isfinite(covariance))
+        and math.isfinite(estimate.tension_n)
+    ):
+        return DIVERGED
+    variances = np.diag(estimate.position_covariance_m2)
+    if np.any(variances <= 0.0) or float(variances.max()) >= config.max_position_variance_m2:
+        if getattr(estimate, "missing_input", None) == RANGEFINDER:
+            return NO_RANGE  # the variance grew because the height is not measured
+        return DIVERGED if ever_ok else CONVERGING
+    if has_tension_state and estimate.tension_n < config.slack_tension_n:
+        return SLACK
+    return OK
+
+
+def dynamic_health(estimate, short_cable_m: float, near_anchor: bool) -> str | None:  # noqa: ANN001
+    """The health a dynamic-filter estimate forces (None: judge it by :func:`assess_health`).
+
+    Parameters
+    ----------
+    estimate
+        A :class:`~tether_companion.estimation.dynamic.output.NavigationEstimate`.
+    short_cable_m
+        Below this distance from the anchor [m] a weak pull or slack cable is ``short_cable``.
+    near_anchor
+        This tick's accelerometer update was skipped for the drone being at the anchor.
+    """
+    status = estimate.status
+    if status == dynamic_output.OK or status == dynamic_output.STALE_INPUTS:
+        return SHORT_CABLE if near_anchor else None
+    if status in (dynamic_output.WEAK_PULL, dynamic_output.SLACK):
+        distance = float(np.linalg.norm(estimate.position_ned_m))
+        if near_anchor or distance < short_cable_m:
+            return SHORT_CABLE
+        return WEAK_PULL if status == dynamic_output.WEAK_PULL else SLACK
+    return _DYNAMIC_STATUS_HEALTH[status]
+
+
+_DYNAMIC_STATUS_HEALTH = {
+    dynamic_output.INITIALISING: CONVERGING,
+    dynamic_output.ON_GROUND: MOTORS_IDLE,
+    dynamic_output.RESET: DIVERGED,
+}

@@ -103,6 +103,12 @@ def render(service: CompanionService) -> Group:
         )
         tension_sigma = f"{sigma[3]:.3f}" if sigma.shape[0] > 3 else "known"
         estimate.add_row("EKF 1-sigma", *(f"{s:.3f}" for s in sigma[:3]), tension_sigma)
+        velocity = getattr(last, "velocity_ned_mps", None)  # the dynamic filter has one
+        if velocity is not None:
+            estimate.add_row(escape("velocity [m/s]"), *(f"{v:+.2f}" for v in velocity), "")
+        reason = getattr(last, "reason", "")
+        if reason:  # the dynamic filter's own words for why its position is not observable
+            estimate.add_row("filter says", escape(reason), "", "", "")
         estimate.add_row(escape("FC time [s]"), f"{last.time_s:.3f}", "", "", "")
     else:
         estimate.add_row("no estimate yet", "", "", "", "")

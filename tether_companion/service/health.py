@@ -156,7 +156,9 @@ def assess_health(
     return OK
 
 
-def dynamic_health(estimate, short_cable_m: float, near_anchor: bool) -> str | None:  # noqa: ANN001
+def dynamic_health(
+    estimate: dynamic_output.NavigationEstimate, short_cable_m: float, near_anchor: bool
+) -> str | None:
     """The health a dynamic-filter estimate forces (None: judge it by :func:`assess_health`).
 
     Parameters
@@ -176,7 +178,7 @@ def dynamic_health(estimate, short_cable_m: float, near_anchor: bool) -> str | N
         if near_anchor or distance < short_cable_m:
             return SHORT_CABLE
         return WEAK_PULL if status == dynamic_output.WEAK_PULL else SLACK
-    return _DYNAMIC_STATUS_HEALTH[status]
+    return _DYNAMIC_STATUS_HEALTH.get(status, DIVERGED)  # a status added later: withheld
 
 
 _DYNAMIC_STATUS_HEALTH = {

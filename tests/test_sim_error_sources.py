@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 import subprocess
 import sys
 from dataclasses import replace
@@ -268,15 +269,18 @@ def test_bad_error_source_keys_name_the_key(
         assert len(err) == 1 and message in err[0], (argv, err)
 
 
+IMPOSSIBLE = (
+    "base: realistic-gusty-hover\npropulsion: {thrust_scale: 0.5}\ncable: {tension_n: 10}\n"
+)
+"""A thrust map 50 % weak cannot hold a 1.5 kg quad against 10 N of pull."""
+IMPOSSIBLE_MESSAGE = r"t = \d+\.\d\d s: .*(full command|hit the ground)"
+
+
 def test_an_impossible_flight_names_the_time_and_the_cause(tmp_path) -> None:
-    """A thrust map 50 % weak cannot hold a 1.5 kg quad against 10 N of pull."""
+    """The simulator and ``simulate`` say when and why (one line, exit 2)."""
     path = tmp_path / "weak.yaml"
-    path.write_text(
-        "base: realistic-gusty-hover\npropulsion: {thrust_scale: 0.5}\ncable: {tension_n: 10}\n"
-    )
-    with pytest.raises(
-        FlightImpossibleError, match=r"t = \d+\.\d\d s: .*(full command|hit the ground)"
-    ):
+    path.write_text(IMPOSSIBLE)
+    with pytest.raises(FlightImpossibleError, match=IMPOSSIBLE_MESSAGE):
         sim = Simulator(load_scenario(path))
         sim.advance_to(20.0)
     result = subprocess.run(
@@ -287,4 +291,18 @@ def test_an_impossible_flight_names_the_time_and_the_cause(tmp_path) -> None:
     )
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and "t = " in lines[0] and "Traceback" not in result.stderr
+    assert len(lines) == 1 and re.search(IMPOSSIBLE_MESSAGE, lines[0])
+    assert "Traceback" not in result.stderr
+
+
+@pytest.mark.slow  # starts a local Dask cluster: about 7 s of CPU
+def test_an_impossible_flight_on_a_dask_worker_ends_bench_estimators_with_one_line(
+    tmp_path, capsys
+) -> None:
+    path = tmp_path / "weak.yaml"
+    path.write_text(IMPOSSIBLE)
+    bench = ["bench", "estimators", "--scenario", str(path), "--seeds", "1", "--workers", "1"]
+    assert main([*bench, "--estimator", "ekf-4s", "--json"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("tether-companion bench: error: t = ")
+    assert re.search(IMPOSSIBLE_MESSAGE, err[0]) and "Traceback" not in err[0]

@@ -101,6 +101,34 @@ def test_dryden_turbulence_has_the_dryden_spectrum_and_intensity() -> None:
     assert np.std(samples[:, 2]) == pytest.approx(parameters.sigma_mps[2], rel=0.15)
 
 
+def test_the_simulators_wind_is_the_mean_wind_plus_dryden_gusts() -> None:
+    """Measured back from a flight: the simulator's wind over 120 s of realistic-gusty-hover
+    (seed 3; W20 7.7 m/s at 4 m: sigma_w 0.77 m/s, L_w 4 m, L_u 30 m at 3 m/s mean wind).
+    Vertical: tau = L_w / V = 1.3 s, so 120 s hold ~45 independent stretches: its sd within 20 %
+    of sigma_w, its mean within 0.35 m/s of 0 (3 sd), its spectrum within 0.75-1.33 of the
+    Dryden PSD (median over 0.1-5 Hz). Horizontal: tau_u = 10 s, the 120 s mean has an sd of
+    about 0.6 m/s: within 2 m/s of the configured mean wind. About 2.5 s of CPU."""
+    scenario = replace(load_scenario("realistic-gusty-hover"), duration_s=120.0, seed=3)
+    sim = Simulator(scenario)
+    wind = []
+    for k in range(1, 2400):
+        sim.advance_to(k * 0.05)
+        wind.append(sim.truth.wind_ned_m_s.copy())
+    w = np.array(wind)
+    parameters = DrydenParameters.low_altitude(
+        scenario.wind.turbulence_w20_mps, scenario.wind.turbulence_height_m
+    )
+    mean = np.array(scenario.wind.velocity_ned_m_s)
+    assert np.std(w[:, 2]) == pytest.approx(parameters.sigma_mps[2], rel=0.2)
+    assert abs(float(np.mean(w[:, 2]))) < 0.35
+    assert np.all(np.abs(w[:, :2].mean(axis=0) - mean[:2]) < 2.0)
+    f, psd = welch(w[:, 2], fs=20.0, nperseg=256)
+    band = (f > 0.1) & (f < 5.0)
+    airspeed = math.hypot(mean[0], mean[1])
+    model = dryden_psd(f[band], parameters.sigma_mps[2], parameters.length_m[2], airspeed, 2)
+    assert 0.75 < float(np.median(psd[band] / model)) < 1.33
+
+
 def test_dryden_low_altitude_parameters() -> None:
     """MIL-HDBK-1797 at 20 ft with W20 = 10 m/s: sigma_w = 1, sigma_u = 1/(0.177+0.01646)^0.4."""
     p = DrydenParameters.low_altitude(10.0, 20 * 0.3048)

@@ -23,14 +23,12 @@ import asyncio
 import contextlib
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 SEGMENTS = ("fc->service", "read->handle", "handle->sent", "sent->fc", "total")
 
@@ -103,64 +101,22 @@ def _instrumented_service(out_path: str, argv: list[str]) -> int:
 
 def _breakdown(hogs: int, flight_s: float, ordinary: bool) -> None:
     sys.path.insert(0, str(Path(__file__).parent))
+    from loaded_flight import fly_hover_beside_hogs
     from unit_priority import at_unit_priority, in_own_group_at_unit_priority
 
-    from tether_companion.mavlink.endpoints import open_link, parse_endpoint
-    from tether_companion.resources import CONFIGS_DIR
-    from tether_companion.service.config import load_service_config, load_vehicle_for
-    from tether_companion.service.synthetic import FakeFlightController, HoverStreams
+    from tether_companion.service.synthetic import FakeFlightController
 
     tmp = Path(tempfile.mkdtemp(prefix="age-breakdown-"))
     out = tmp / "service.json"
 
     async def scenario() -> FakeFlightController:
-        fc_link = await open_link(
-            parse_endpoint("udpin:127.0.0.1:0", "listen"), system_id=1, component_id=1
+        return await fly_hover_beside_hogs(
+            tmp,
+            (sys.executable, __file__, "--service", str(out)),
+            hogs,
+            flight_s,
+            None if ordinary else in_own_group_at_unit_priority,
         )
-        data = yaml.safe_load((CONFIGS_DIR / "companion.yaml").read_text())
-        data.setdefault("link", {})["connect"] = f"udpout:127.0.0.1:{fc_link.local_address[1]}"
-        data.setdefault("recording", {})["directory"] = str(tmp / "rec")
-        config_path = tmp / "companion.yaml"
-        config_path.write_text(yaml.safe_dump(data))
-        config = load_service_config(config_path)
-        fc = FakeFlightController(
-            fc_link,
-            HoverStreams(
-                load_vehicle_for(config),
-                np.array([2.0, 1.0, -3.0]),
-                4.0,
-                rng=np.random.default_rng(9),
-            ),
-        )
-        service = await asyncio.create_subprocess_exec(
-            sys.executable,
-            __file__,
-            "--service",
-            str(out),
-            "run",
-            "--config",
-            str(config_path),
-            start_new_session=True,
-            preexec_fn=None if ordinary else in_own_group_at_unit_priority,
-        )
-        hog_procs = [
-            subprocess.Popen(
-                [sys.executable, "-c", "while True: pass"],
-                preexec_fn=lambda: os.setpriority(os.PRIO_PROCESS, 0, 0),
-                start_new_session=True,
-            )
-            for _ in range(hogs)
-        ]
-        try:
-            await fc.run(flight_s)
-        finally:
-            for hog in hog_procs:
-                hog.kill()
-                hog.wait()
-            service.terminate()
-            await asyncio.wait_for(service.wait(), 20.0)
-            await fc_link.close()
-        return fc
 
     with contextlib.nullcontext() if ordinary else at_unit_priority():
         fc = asyncio.run(scenario())

@@ -12,13 +12,13 @@ import pytest
 from lockstep_service import LockstepService
 from rich.console import Console
 from scenario_files import gusty_hover_takeoff_scenario
+from test_service_emulator import _fly
 
 from tether_companion.emulator.lockstep import build_controller
 from tether_companion.estimation.dynamic import output
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.output import NavigationEstimate
 from tether_companion.samples import AttitudeSample
-from tether_companion.service.app import CompanionService
 from tether_companion.service.config import PublishConfig, load_service_config, load_vehicle_for
 from tether_companion.service.emulator_process import EmulatorProcess
 from tether_companion.service.health import (
@@ -34,7 +34,6 @@ from tether_companion.service.health import (
 from tether_companion.service.publish import Publisher
 from tether_companion.service.session import EstimationSession
 from tether_companion.service.status import render
-from tether_companion.service.systemd import SystemdNotifier
 
 FAR = np.array([3.0, 1.0, -2.0])
 NEAR = np.array([0.3, 0.1, -0.4])
@@ -155,21 +154,6 @@ def test_the_session_runs_the_dynamic_filter_with_the_configured_section() -> No
     assert estimator.aligner is session.aligner  # one alignment with the tension filter
     session.restart()
     assert isinstance(session.estimator, DynamicTetherEstimator)
-
-
-async def _fly(emulator: EmulatorProcess, overrides: dict) -> CompanionService:
-    async with emulator:
-        overrides = {**overrides, "link": {"connect": f"udpout:127.0.0.1:{emulator.port}"}}
-        config = load_service_config(None, overrides)
-        service = CompanionService(config, load_vehicle_for(config), notifier=SystemdNotifier({}))
-        stop = asyncio.Event()
-        task = asyncio.create_task(service.run(stop), name="service")
-        try:
-            assert await asyncio.wait_for(emulator.wait(), timeout=120.0) == 0
-        finally:
-            stop.set()
-            await asyncio.wait_for(task, timeout=10.0)
-    return service
 
 
 def _score_line(score: dict) -> str:

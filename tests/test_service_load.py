@@ -21,22 +21,17 @@ from __future__ import annotations
 
 import asyncio
 import os
-import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
+from loaded_flight import fly_hover_beside_hogs
 from unit_priority import at_unit_priority, in_own_group_at_unit_priority
 
-from tether_companion.mavlink.endpoints import open_link, parse_endpoint
-from tether_companion.resources import CONFIGS_DIR
-from tether_companion.service.config import load_service_config, load_vehicle_for
-from tether_companion.service.synthetic import FakeFlightController, HoverStreams
+from tether_companion.service.synthetic import FakeFlightController
 
 pytestmark = [pytest.mark.slow, pytest.mark.integration]
-POSITION = np.array([2.0, 1.0, -3.0])
 AGE_P999_BOUND_S = 0.1
 """The issue's bound on the estimate age at the autopilot, p99.9 [s]."""
 SERVICE = (sys.executable, "-m", "tether_companion.cli")
@@ -48,45 +43,9 @@ def _ages(tmp_path, hogs: int, flight_s: float, service_cmd: tuple[str, ...]) ->
     with that IMU stamp received, after the first second of publication."""
 
     async def scenario() -> FakeFlightController:
-        fc_link = await open_link(
-            parse_endpoint("udpin:127.0.0.1:0", "listen"), system_id=1, component_id=1
+        return await fly_hover_beside_hogs(
+            tmp_path, service_cmd, hogs, flight_s, in_own_group_at_unit_priority
         )
-        data = yaml.safe_load((CONFIGS_DIR / "companion.yaml").read_text())
-        data.setdefault("link", {})["connect"] = f"udpout:127.0.0.1:{fc_link.local_address[1]}"
-        data.setdefault("recording", {})["directory"] = str(tmp_path / "rec")
-        config_path = tmp_path / "companion.yaml"
-        config_path.write_text(yaml.safe_dump(data))
-        config = load_service_config(config_path)
-        fc = FakeFlightController(
-            fc_link,
-            HoverStreams(load_vehicle_for(config), POSITION, 4.0, rng=np.random.default_rng(9)),
-        )
-        service = await asyncio.create_subprocess_exec(
-            *service_cmd,
-            "run",
-            "--config",
-            str(config_path),
-            start_new_session=True,
-            preexec_fn=in_own_group_at_unit_priority,
-        )
-        hog_procs = [
-            subprocess.Popen(
-                [sys.executable, "-c", "while True: pass"],
-                preexec_fn=lambda: os.setpriority(os.PRIO_PROCESS, 0, 0),
-                start_new_session=True,
-            )
-            for _ in range(hogs)
-        ]
-        try:
-            await fc.run(flight_s)
-        finally:
-            for hog in hog_procs:
-                hog.kill()
-                hog.wait()
-            service.terminate()
-            await asyncio.wait_for(service.wait(), 20.0)
-            await fc_link.close()
-        return fc
 
     with at_unit_priority():
         fc = asyncio.run(scenario())

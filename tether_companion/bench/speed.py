@@ -178,9 +178,9 @@ def _filterpy(
 
 
 def _write_logs(directory: Path, seconds: float) -> tuple[Path, Path]:
-    """The same synthetic hover (RAW_IMU, ATTITUDE, SERVO_OUTPUT_RAW at 200 Hz,
-    DISTANCE_SENSOR at 20 Hz) as a .tlog and as an ArduPilot dataflash .bin (IMU, ATT, RCOU,
-    RFND in the log's own units)."""
+    """The same synthetic hover (RAW_IMU at 200 Hz, ATTITUDE and SERVO_OUTPUT_RAW at 100 Hz,
+    DISTANCE_SENSOR at 20 Hz: :meth:`HoverStreams.messages`) as a .tlog and as an ArduPilot
+    dataflash .bin (IMU, ATT, RCOU, RFND in the log's own units)."""
     from tether_companion.mavlink.framing import FrameEncoder
     from tether_companion.mavlink.units import (
         attitude_from_attitude,

@@ -181,7 +181,7 @@ class ExtendedKalmanFilter:
             raise ValueError(f"substeps must be >= 1, got {substeps}")
         self._x0 = x0.copy()
         self._p0 = p0.copy()
-        self.q_density = q_density.copy()
+        self._q_density = q_density.copy()
         self.process: ProcessModel = process if process is not None else RandomWalk()
         self._random_walk = bool(getattr(self.process, "is_random_walk", False))
         self.substeps = substeps
@@ -210,6 +210,12 @@ class ExtendedKalmanFilter:
     def n(self) -> int:
         """State dimension."""
         return self._n
+
+    @property
+    def q_density(self) -> FloatArray:
+        """Process noise spectral density ``Q_c`` (a copy), shape (n, n) [state units^2 / s];
+        fixed at construction (the scalar path keeps its non-zero entries)."""
+        return self._q_density.copy()
 
     @property
     def x(self) -> FloatArray:
@@ -280,7 +286,7 @@ class ExtendedKalmanFilter:
         if self._random_walk:
             pl = self._pl
             if pl is None:
-                self._pa += self.q_density * dt_s  # type: ignore[operator]
+                self._pa += self._q_density * dt_s  # type: ignore[operator]
             else:
                 for k, q in self._q_entries:
                     pl[k] += q * dt_s
@@ -291,7 +297,7 @@ class ExtendedKalmanFilter:
             f_jac = self.process.jacobian(x, u)
             x = x + h * self.process.derivative(x, u)
             fp = f_jac @ p
-            p = p + h * (fp + fp.T + self.q_density)
+            p = p + h * (fp + fp.T + self._q_density)
         self.x, self.P = x, p
         self._check_health()
         return True

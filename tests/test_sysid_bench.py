@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 from sysid_synthetic import id_data
 
-from tether_companion.bench.sysid import naive_linear_curve, run_four_state
+from tether_companion.bench.sysid import (
+    identify_flight,
+    naive_linear_curve,
+    run_four_state,
+    thrust_inputs,
+    true_thrust_input,
+)
 from tether_companion.cli import main
 from tether_companion.estimation.thrust_input import StaticThrustInput
 from tether_companion.physics.vehicle import load_vehicle
@@ -26,7 +32,7 @@ def test_naive_linear_curve_is_least_squares_through_zero():
 
 
 def test_four_state_run_reports_finite_errors_and_exact_thrust_for_the_true_curve():
-    scenario = dataclasses.replace(load_scenario("paper-circle"), duration_s=4.0)
+    scenario = dataclasses.replace(load_scenario("paper-circle"), duration_s=6.0)
     vehicle = load_vehicle(scenario.vehicle)
     true_curve = run_four_state(scenario, StaticThrustInput(vehicle), seed=1)
     assert all(np.isfinite(v) for v in true_curve.values())
@@ -45,3 +51,43 @@ def test_four_state_run_reports_finite_errors_and_exact_thrust_for_the_true_curv
 def test_bench_sysid_bad_arguments_exit_2(capsys):
     assert main(["bench", "sysid", "--seeds", "0"]) == 2
     assert "--seeds" in capsys.readouterr().err
+
+
+def test_true_map_is_the_simulators_thrust_with_sag_and_scale():
+    """On a realistic scenario (thrust 5 % below the curve at 4.0 V per cell, the pack at 4.2 V
+    sagging) the true map fed with the voltage gives the simulator's rotor thrust up to the
+    motor lag; the profile's own curve is tenths of a newton off."""
+    scenario = dataclasses.replace(load_scenario("realistic-circle"), duration_s=6.0)
+    vehicle = load_vehicle(scenario.vehicle)
+    true_map = run_four_state(scenario, true_thrust_input(vehicle, scenario.propulsion), seed=1)
+    profile = run_four_state(scenario, StaticThrustInput(vehicle), seed=1)
+    assert true_map["thrust_n"] < 0.05
+    assert profile["thrust_n"] > 0.3
+
+
+@pytest.mark.slow
+def test_realistic_identification_serves_the_estimator_within_1_2x():
+    """Issue 11: the identification flight with every realistic error source (rotor drag,
+    battery sag, thrust map 5 % weak, accelerometer bias, vibration, attitude error, wind),
+    seed 0; the written model's 4-state EKF position RMSE on a realistic evaluation flight
+    (other seed) within 1.2x of the true map's, where the paper's naive linear map is not."""
+    identified = identify_flight(None, load_scenario("realistic-circle"), seed=0)
+    assert identified.chosen is not None
+    curve = identified.vehicle.thrust_curve
+    inputs = thrust_inputs(
+        identified.results,
+        identified.chosen,
+        identified.estimation,
+        identified.vehicle,
+        (curve.pwm_min_us, curve.pwm_max_us),
+    )
+    scenario = dataclasses.replace(load_scenario("realistic-circle"), duration_s=30.0)
+    rmse = {
+        label: run_four_state(scenario, make(scenario), seed=1)["position_m"]
+        for label, make in inputs.items()
+        if label.startswith(("naive", f"{identified.chosen.structure}:", "true map"))
+    }
+    written = next(v for k, v in rmse.items() if k.startswith(identified.chosen.structure))
+    true_map = rmse["true map (scale, battery)"]
+    assert written <= 1.2 * true_map
+    assert rmse["naive linear (eq. 19)"] > 1.2 * true_map

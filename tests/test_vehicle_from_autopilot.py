@@ -103,10 +103,11 @@ class _Link:
         self.sent.append(frame)
 
 
-def _service(**settings) -> tuple[CompanionService, _Link]:
+def _service(autopilot: str = "ardupilot", **settings) -> tuple[CompanionService, _Link]:
     config = load_service_config(
         None,
         {
+            "link": {"autopilot": autopilot},
             "vehicle": "from_autopilot",
             "autopilot_vehicle": {"mass_kg": 2.0, "attempts": 1, **settings},
             "recording": {"enabled": False},
@@ -185,3 +186,34 @@ def test_a_flight_controller_reboot_reads_the_parameters_again() -> None:
     assert not service.vehicle_fetch.done and service.vehicle_fetch.params == {}
     _feed(service, link, {**GOOD, "FRAME_CLASS": 3})  # the new firmware flies an octa
     assert service.vehicle.frame == "octa-x" and service.session.vehicle.n_motors == 8
+
+
+def test_px4_parameters_as_px4_sends_them_build_the_profile() -> None:
+    """With ``link.autopilot: px4`` the service asks PX4's names and reads integers bytewise
+    (the int32's bytes in the float field): read as floats the rotor count would be 6e-45."""
+    import struct
+
+    from test_vehicle_params import PX4_QUAD_X
+
+    service, link = _service("px4")
+    service.handle_message(link, _fc(dialect.MAVLink_heartbeat_message(2, 12, 0, 0, 4, 3)), 0.0)
+    for now in (0.0, 1.0, 2.0):  # the rotor count first, then the names it implies
+        service.housekeep(link, now)
+        for name, value in PX4_QUAD_X.items():
+            integer = isinstance(value, int)
+            wire = struct.unpack("<f", struct.pack("<i", value))[0] if integer else value
+            msg = dialect.MAVLink_param_value_message(
+                name.encode(), wire, 6 if integer else 9, 1, 0
+            )
+            service.handle_message(link, _fc(msg), now + 0.1)
+    service.housekeep(link, 5.0)
+    service.handle_message(link, _fc(dialect.MAVLink_heartbeat_message(2, 12, 0, 0, 4, 3)), 5.1)
+    service.handle_message(link, _fc(dialect.MAVLink_attitude_message(1, 0, 0, 0, 0, 0, 0)), 5.2)
+    assert service._fatal is None
+    assert service.session.vehicle.n_motors == 4
+    curve = service.vehicle.thrust_curve
+    assert (curve.pwm_min_us, curve.pwm_max_us) == (1100.0, 1900.0)
+    f, t = PX4_QUAD_X["THR_MDL_FAC"], PX4_QUAD_X["MPC_THR_HOVER"]
+    x = (-(1.0 - f) + math.sqrt((1.0 - f) ** 2 + 4.0 * f * t)) / (2.0 * f)  # PX4's output
+    # at the hover setpoint each rotor carries a quarter of the weight (2 kg given)
+    assert float(curve.thrust_n(1100.0 + 800.0 * x)) == pytest.approx(2.0 * 9.80665 / 4)

@@ -24,6 +24,7 @@ BENCHMARKS: tuple[str, ...] = (
     "sitl",
     "dynamic",
     "vehicle",
+    "sensitivity",
 )
 """Benchmark names, one per line, in the order ``bench --help`` lists them."""
 

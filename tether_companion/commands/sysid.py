@@ -11,6 +11,7 @@ from rich.console import Console
 from tether_companion.config import from_mapping
 from tether_companion.errors import InputError
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
+from tether_companion.sim.scenario import load_scenario
 from tether_companion.sysid.drag import DragFit, identify_drag
 from tether_companion.sysid.flight import FlightPlan, record_identification_flight
 from tether_companion.sysid.identify import STRUCTURES, best_result, identify
@@ -31,7 +32,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "logs", nargs="*", metavar="LOG", help="flight logs (.tlog, .bin, .ulg, .csv)"
     )
     parser.add_argument(
-        "--vehicle", default="default-quad", help="vehicle profile (mass, PWM range)"
+        "--vehicle",
+        help="vehicle profile (mass, PWM range; default: the --fly-scenario's vehicle with "
+        "--fly-emulated, else default-quad)",
     )
     parser.add_argument(
         "--structure",
@@ -75,6 +78,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--seed", type=int, default=0, help="noise seed of the emulated flight")
     parser.add_argument(
+        "--fly-scenario",
+        default="hover",
+        help="scenario whose vehicle, sensors, wind and propulsion the emulated flight has "
+        "(e.g. realistic-circle: drag, battery sag, thrust map error, bias, wind)",
+    )
+    parser.add_argument(
         "--from-params",
         action="append",
         type=Path,
@@ -100,7 +109,9 @@ def run(args: argparse.Namespace) -> int:
     console = Console()
     if args.from_params:
         return write_profile_from_parameters(args, console)
-    vehicle = load_vehicle(args.vehicle)
+    flight_base = load_scenario(args.fly_scenario) if args.fly_emulated is not None else None
+    default_vehicle = flight_base.vehicle if flight_base is not None else "default-quad"
+    vehicle = load_vehicle(args.vehicle or default_vehicle)
     if args.k_steps < 1:
         raise InputError(f"--k-steps must be >= 1, got {args.k_steps}")
     options = from_mapping(
@@ -118,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
         plan = from_mapping(
             FlightPlan, {"cable_tension_n": args.fly_tension_n}, source="command line"
         )
-        record_identification_flight(args.fly_emulated, plan, seed=args.seed)
+        record_identification_flight(args.fly_emulated, plan, flight_base, seed=args.seed)
         console.print(
             f"identification flight recorded to {args.fly_emulated} ({plan.duration_s:.0f} s)"
         )
@@ -194,7 +205,7 @@ def write_profile_from_parameters(args: argparse.Namespace, console: Console) ->
     sources = ", ".join(map(str, args.from_params))
     params = merge(*(read_parameters(path) for path in args.from_params))
     profile = profile_from_parameters(
-        params, args.mass_kg, load_vehicle(args.vehicle), source=sources
+        params, args.mass_kg, load_vehicle(args.vehicle or "default-quad"), source=sources
     )
     header = (
         f"Vehicle profile from the autopilot parameters in {sources}\n"

@@ -21,7 +21,7 @@ from tether_companion.bench.estimators.registry import (
     GroundStation,
 )
 from tether_companion.estimation.runner import _ATTITUDE, _IMU, _PWM, _RANGE, _schedule
-from tether_companion.physics.vehicle import load_vehicle
+from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.simulator import Simulator
 
@@ -91,10 +91,20 @@ def make_simulator(scenario: Scenario, simulator: str = "ours") -> Simulator:
     return Simulator(scenario)
 
 
-def fly(scenario: Scenario, kinds: list[EstimatorKind], simulator: str = "ours") -> FlightRecord:
-    """Fly ``scenario`` (seeded by ``scenario.seed``) on ``simulator`` with every kind."""
+def fly(
+    scenario: Scenario,
+    kinds: list[EstimatorKind],
+    simulator: str = "ours",
+    estimator_vehicle: VehicleProfile | None = None,
+) -> FlightRecord:
+    """Fly ``scenario`` (seeded by ``scenario.seed``) on ``simulator`` with every kind.
+
+    The kinds are given ``estimator_vehicle`` as the nominal profile (default: the
+    scenario's), while the simulator flies the scenario's vehicle (``bench sensitivity``).
+    """
     sim = make_simulator(scenario, simulator)
-    context = FlightContext(scenario, load_vehicle(scenario.vehicle), sim.gravity_mps2)
+    nominal = estimator_vehicle or load_vehicle(scenario.vehicle)
+    context = FlightContext(scenario, nominal, sim.gravity_mps2)
     estimators = [kind.build(context) for kind in kinds]
     schedule = _schedule(scenario)
     n = sum(1 for _, what in schedule if what == _IMU)

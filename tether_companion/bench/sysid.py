@@ -30,7 +30,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +49,7 @@ from tether_companion.sim.propulsion import PropulsionConfig
 from tether_companion.sim.scenario import Scenario, load_scenario
 from tether_companion.sim.simulator import Simulator
 from tether_companion.sysid.flight import record_identification_flight
-from tether_companion.sysid.identify import StructureResult, best_result, identify
+from tether_companion.sysid.identify import STRUCTURES, StructureResult, best_result, identify
 from tether_companion.sysid.logs import load_flight_log
 from tether_companion.sysid.processing import IdData, prepare
 from tether_companion.sysid.report import results_table
@@ -284,9 +284,14 @@ class Identified:
     scores: list[SelectionScore]
 
 
-def identify_flight(log: Path | None, base: Scenario, seed: int) -> Identified:
-    """Identify every structure from ``log``, or from the identification flight flown now
-    with ``base``'s vehicle, sensors, wind and propulsion and noise ``seed``."""
+def identify_flight(
+    log: Path | None,
+    base: Scenario,
+    seed: int,
+    structures: Sequence[str] = tuple(STRUCTURES),
+) -> Identified:
+    """Identify ``structures`` (default all) from ``log``, or from the identification flight
+    flown now with ``base``'s vehicle, sensors, wind and propulsion and noise ``seed``."""
     with tempfile.TemporaryDirectory() as folder:
         if log is None:
             log = Path(folder) / "identification.tlog"
@@ -296,7 +301,7 @@ def identify_flight(log: Path | None, base: Scenario, seed: int) -> Identified:
         curve = vehicle.thrust_curve
         pwm_range = (curve.pwm_min_us, curve.pwm_max_us)
         data = prepare(load_flight_log(log), vehicle.mass_kg, pwm_range)
-    results = identify([data.estimation], [data.validation], pwm_range)
+    results = identify([data.estimation], [data.validation], pwm_range, structures)
     chosen, scores = select(results, [data.validation], pwm_range)
     return Identified(vehicle, data.estimation, results, chosen, scores)
 

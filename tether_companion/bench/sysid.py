@@ -281,7 +281,7 @@ class Identified:
     estimation: IdData
     results: list[StructureResult]
     chosen: StructureResult | None
-    scores: list[SelectionScore]
+    scores: dict[str, SelectionScore]
 
 
 def identify_flight(

@@ -38,6 +38,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from tether_companion.bench.estimators.registry import FlightContext
 from tether_companion.errors import InputError
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.pipeline import TetherEstimator
@@ -120,21 +121,6 @@ def true_thrust_input(vehicle: VehicleProfile, propulsion: PropulsionConfig) -> 
     return StaticThrustInput(true_vehicle)
 
 
-def estimator_config(scenario: Scenario) -> EstimatorConfig:
-    """The 4-state EKF with the scenario's anchor height and rangefinder mounting."""
-    base = EstimatorConfig()
-    return dataclasses.replace(
-        base,
-        kind="four_state",
-        ground_station=dataclasses.replace(
-            base.ground_station, anchor_height_m=scenario.ground.anchor_height_m
-        ),
-        rangefinder=dataclasses.replace(
-            base.rangefinder, offset_frd_m=scenario.sensors.range_offset_frd_m
-        ),
-    )
-
-
 def run_four_state(scenario: Scenario, thrust: ThrustInput, seed: int) -> dict[str, float]:
     """Fly ``scenario`` with the 4-state EKF on ``thrust``; RMSE of position, tension, thrust.
 
@@ -145,7 +131,9 @@ def run_four_state(scenario: Scenario, thrust: ThrustInput, seed: int) -> dict[s
     """
     sim = Simulator(scenario, rng=np.random.default_rng(seed))
     recorder = RecordingThrust(thrust)
-    estimator = TetherEstimator(estimator_config(scenario), sim.vehicle, thrust_input=recorder)
+    context = FlightContext(scenario, sim.vehicle, sim.gravity_mps2)
+    config = context.estimator_config(dataclasses.replace(EstimatorConfig(), kind="four_state"))
+    estimator = TetherEstimator(config, sim.vehicle, thrust_input=recorder)
     period = 1.0 / scenario.sensors.imu_rate_hz
     position_err, tension_err, thrust_err = [], [], []
     for k in range(1, int(scenario.duration_s / period) + 1):

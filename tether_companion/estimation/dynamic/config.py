@@ -117,7 +117,7 @@ class DynamicFilterConfig:
         0.5, exclusive_minimum=0.0, doc="horizontal std beyond which the pull is too weak [m]"
     )
     min_pull_over_wind_drag: float = spec(
-        2.0,
+        4.0,
         minimum=0.0,
         doc="publish only while the horizontal pull exceeds this many times the rotor drag of"
         " a wind of initial.wind_std_mps (the bearing is unknown below) [1]",

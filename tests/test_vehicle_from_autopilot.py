@@ -73,7 +73,7 @@ def test_emulator_answers_ardupilot_vehicle_parameters_over_udp(tmp_path) -> Non
 
 @pytest.mark.integration
 def test_service_reads_the_vehicle_from_the_emulator_and_estimates(tmp_path) -> None:
-    emulator = EmulatorProcess("hover", duration_s=25.0, score_path=tmp_path / "s.json", speed=4.0)
+    emulator = EmulatorProcess("hover", duration_s=25.0, score_path=tmp_path / "s.json", speed=2.0)
     overrides = {
         "vehicle": "from_autopilot",
         "autopilot_vehicle": {"mass_kg": MASS_KG},

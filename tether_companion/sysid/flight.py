@@ -98,11 +98,13 @@ def identification_scenario(plan: FlightPlan, base: Scenario | None = None) -> S
     )
 
 
-Tick = tuple[ImuSample, AttitudeSample, np.ndarray, PwmSample, RangeSample | None]
+Tick = tuple[ImuSample, AttitudeSample, np.ndarray, PwmSample, RangeSample | None, float]
+"""IMU, attitude, body rates [rad/s], PWM, rangefinder (None: no reading), battery [V]."""
 
 
 def fly(plan: FlightPlan, simulator: Simulator) -> Iterator[Tick]:
-    """Fly the plan, yielding the sensor samples at the scenario's IMU rate."""
+    """Fly the plan, yielding the sensor samples and the battery voltage at the scenario's
+    IMU rate."""
     period = 1.0 / simulator.scenario.sensors.imu_rate_hz
     schedule = plan.setpoints()
     next_setpoint = 0
@@ -119,6 +121,7 @@ def fly(plan: FlightPlan, simulator: Simulator) -> Iterator[Tick]:
             rates,
             simulator.read_pwm(),
             simulator.read_rangefinder(),
+            simulator.battery_voltage_v,
         )
 
 

@@ -5,10 +5,12 @@ SI samples, so a simulated identification flight can be identified like a real o
 
 - .tlog: each record is the wall-clock stamp [us] as 8 big-endian bytes and one MAVLink 2
   packet (what ground stations record); RAW_IMU in milli-g (ArduPilot), ATTITUDE,
-  SERVO_OUTPUT_RAW, DISTANCE_SENSOR in cm and a 1 Hz HEARTBEAT, encoded by
-  :mod:`tether_companion.mavlink.units`.
-- .bin: IMU, ATT (degrees), RCOU, RFND records (:mod:`...logs.dataflash_writer`).
-- .csv: the columns of :mod:`tether_companion.sysid.logs.csvlog`.
+  SERVO_OUTPUT_RAW, DISTANCE_SENSOR in cm (encoded by :mod:`tether_companion.mavlink.units`),
+  a 1 Hz HEARTBEAT and SYS_STATUS with the battery voltage at 2 Hz (ArduPilot's default
+  extended-status rate).
+- .bin: IMU, ATT (degrees), RCOU, RFND records and BAT at 10 Hz
+  (:mod:`...logs.dataflash_writer`).
+- .csv: the columns of :mod:`tether_companion.sysid.logs.csvlog`, battery voltage included.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from numpy.typing import NDArray
 
 from tether_companion.errors import InputError
 from tether_companion.mavlink import units
+from tether_companion.mavlink.battery import UNKNOWN_MV
 from tether_companion.mavlink.framing import FrameEncoder, MAVLinkMessage, dialect
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.sysid.logs import csvlog
@@ -37,6 +40,10 @@ FloatArray = NDArray[np.float64]
 TLOG_EPOCH_US = 1_700_000_000_000_000
 """Wall-clock stamp [us since 1970] given to flight-controller time 0 in written .tlogs."""
 _RAD_TO_DEG = 180.0 / math.pi
+SYS_STATUS_PERIOD_S = 0.5
+"""SYS_STATUS interval in written .tlogs [s]."""
+BAT_PERIOD_S = 0.1
+"""BAT record interval in written .bin logs [s] (ArduPilot logs BAT at 10 Hz)."""
 
 
 class Recorder(Protocol):
@@ -49,8 +56,9 @@ class Recorder(Protocol):
         body_rates_rad_s: FloatArray,
         pwm: PwmSample,
         rangefinder: RangeSample | None,
+        battery_voltage_v: float = math.nan,
     ) -> None:
-        """Store the samples of one tick."""
+        """Store the samples of one tick (and the battery voltage [V], NaN: unknown)."""
         ...
 
     def close(self) -> None:
@@ -76,6 +84,7 @@ class TlogRecorder(_FileRecorder):
         self._encoder = FrameEncoder(system_id, 1)
         self._range_limits_m = range_limits_m
         self._next_heartbeat_s = 0.0
+        self._next_status_s = 0.0
 
     def _put(self, time_s: float, msg: MAVLinkMessage) -> None:
         stamp = TLOG_EPOCH_US + int(round(time_s * 1e6))
@@ -88,8 +97,13 @@ class TlogRecorder(_FileRecorder):
         body_rates_rad_s: FloatArray,
         pwm: PwmSample,
         rangefinder: RangeSample | None,
+        battery_voltage_v: float = math.nan,
     ) -> None:
-        """Store RAW_IMU, ATTITUDE, SERVO_OUTPUT_RAW, DISTANCE_SENSOR (and a HEARTBEAT at 1 Hz)."""
+        """Store RAW_IMU, ATTITUDE, SERVO_OUTPUT_RAW, DISTANCE_SENSOR (and a HEARTBEAT at 1 Hz,
+        SYS_STATUS at 2 Hz when the voltage is known)."""
+        if math.isfinite(battery_voltage_v) and imu.time_s >= self._next_status_s:
+            self._put(imu.time_s, _sys_status_message(battery_voltage_v))
+            self._next_status_s = imu.time_s + SYS_STATUS_PERIOD_S
         if imu.time_s >= self._next_heartbeat_s:
             heartbeat = dialect.MAVLink_heartbeat_message(
                 dialect.MAV_TYPE_QUADROTOR, dialect.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 0, 3
@@ -114,6 +128,7 @@ class DataflashRecorder(_FileRecorder):
         self._file: BinaryIO = path.open("wb")
         self._writer = DataflashWriter(self._file)
         declare_identification_messages(self._writer)
+        self._next_battery_s = 0.0
 
     def write(
         self,
@@ -122,8 +137,9 @@ class DataflashRecorder(_FileRecorder):
         body_rates_rad_s: FloatArray,
         pwm: PwmSample,
         rangefinder: RangeSample | None,
+        battery_voltage_v: float = math.nan,
     ) -> None:
-        """Store one IMU, ATT, RCOU and (when in range) RFND record."""
+        """Store one IMU, ATT, RCOU, (when in range) RFND and (at 10 Hz, when known) BAT record."""
         gyro, acc = imu.angular_rate_body_rad_s, imu.specific_force_body_mps2
         self._writer.write("IMU", _us(imu.time_s), 0, *gyro.tolist(), *acc.tolist())
         angles = (attitude.roll_rad, attitude.pitch_rad, attitude.yaw_rad)
@@ -131,15 +147,19 @@ class DataflashRecorder(_FileRecorder):
         self._writer.write("RCOU", _us(pwm.time_s), *(int(round(p)) for p in pwm.pwm_us[:4]))
         if rangefinder is not None:
             self._writer.write("RFND", _us(rangefinder.time_s), 0, rangefinder.distance_m)
+        if math.isfinite(battery_voltage_v) and imu.time_s >= self._next_battery_s:
+            self._writer.write("BAT", _us(imu.time_s), 0, battery_voltage_v)
+            self._next_battery_s = imu.time_s + BAT_PERIOD_S
 
 
 class CsvRecorder(_FileRecorder):
-    """CSV with the documented columns; ``height_m`` empty when the rangefinder is out of range."""
+    """CSV with the documented columns; ``height_m`` empty when the rangefinder is out of range,
+    ``battery_voltage_v`` when the voltage is unknown."""
 
     def __init__(self, path: Path) -> None:
         self._file: TextIO = path.open("w", newline="", encoding="utf-8")
         self._csv = csv.writer(self._file)
-        self._csv.writerow([*csvlog.REQUIRED_COLUMNS, csvlog.HEIGHT_COLUMN])
+        self._csv.writerow([*csvlog.REQUIRED_COLUMNS, csvlog.HEIGHT_COLUMN, csvlog.BATTERY_COLUMN])
 
     def write(
         self,
@@ -148,9 +168,11 @@ class CsvRecorder(_FileRecorder):
         body_rates_rad_s: FloatArray,
         pwm: PwmSample,
         rangefinder: RangeSample | None,
+        battery_voltage_v: float = math.nan,
     ) -> None:
         """Store one row, all signals stamped with the IMU time."""
         height = "" if rangefinder is None else f"{rangefinder.distance_m:.4f}"
+        voltage = f"{battery_voltage_v:.3f}" if math.isfinite(battery_voltage_v) else ""
         self._csv.writerow(
             [
                 f"{imu.time_s:.6f}",
@@ -158,8 +180,17 @@ class CsvRecorder(_FileRecorder):
                 *(f"{a:.5f}" for a in imu.specific_force_body_mps2),
                 *(f"{a:.6f}" for a in (attitude.roll_rad, attitude.pitch_rad, attitude.yaw_rad)),
                 height,
+                voltage,
             ]
         )
+
+
+def _sys_status_message(voltage_v: float) -> MAVLinkMessage:
+    """SYS_STATUS carrying only the battery voltage (current, charge, sensors unknown)."""
+    millivolts = min(round(voltage_v * 1000.0), UNKNOWN_MV - 1)
+    return dialect.MAVLink_sys_status_message(
+        0, 0, 0, 0, millivolts, -1, -1, 0, 0, 0, 0, 0, 0, 0, 0, 0
+    )
 
 
 def _us(time_s: float) -> int:

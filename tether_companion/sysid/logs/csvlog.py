@@ -11,13 +11,15 @@ Required columns (any order, extra columns ignored):
 ``yaw_rad``
 =================================  ==========================================================
 
-Optional: ``height_m`` (height above ground [m], rangefinder or barometer) and ``tension_n``
-(measured cable tension [N]). Empty cells in optional columns are missing samples.
+Optional: ``height_m`` (height above ground [m], rangefinder or barometer), ``tension_n``
+(measured cable tension [N]) and ``battery_voltage_v`` (the flight controller's battery
+voltage [V], > 0). Empty cells in optional columns are missing samples.
 """
 
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +33,8 @@ ACCEL_COLUMNS = ("acc_x_mps2", "acc_y_mps2", "acc_z_mps2")
 EULER_COLUMNS = ("roll_rad", "pitch_rad", "yaw_rad")
 HEIGHT_COLUMN = "height_m"
 TENSION_COLUMN = "tension_n"
+BATTERY_COLUMN = "battery_voltage_v"
+OPTIONAL_COLUMNS = (HEIGHT_COLUMN, TENSION_COLUMN, BATTERY_COLUMN)
 REQUIRED_COLUMNS = (TIME_COLUMN, *PWM_COLUMNS, *ACCEL_COLUMNS, *EULER_COLUMNS)
 
 
@@ -41,11 +45,17 @@ def _parse(source: str, row_number: int, column: str, text: str, required: bool)
             raise InputError(f"{source}: line {row_number}: column {column} is empty")
         return float("nan")
     try:
-        return float(text)
+        value = float(text)
     except ValueError:
         raise InputError(
             f"{source}: line {row_number}: column {column} = {text!r} is not a number"
         ) from None
+    if column == BATTERY_COLUMN and not (math.isfinite(value) and value > 0.0):
+        raise InputError(
+            f"{source}: line {row_number}: column {column} = {text!r} is not a positive "
+            "voltage [V] (leave the cell empty when unknown)"
+        )
+    return value
 
 
 def load_csv(path: Path) -> FlightLog:
@@ -55,7 +65,8 @@ def load_csv(path: Path) -> FlightLog:
     ------
     InputError
         When a required column is missing, a cell is not a number, a row is short
-        (truncated file) or a signal has fewer than two samples.
+        (truncated file), a battery voltage is not a positive number or a signal has fewer
+        than two samples.
     """
     source = str(path)
     try:
@@ -74,7 +85,7 @@ def load_csv(path: Path) -> FlightLog:
             f"{source}: missing column(s) {', '.join(missing)}; found {', '.join(header)}"
         )
     index = {name: header.index(name) for name in header}
-    optional = [name for name in (HEIGHT_COLUMN, TENSION_COLUMN) if name in index]
+    optional = [name for name in OPTIONAL_COLUMNS if name in index]
     wanted = list(REQUIRED_COLUMNS) + optional
     table = np.empty((len(rows) - 1, len(wanted)))
     for i, row in enumerate(rows[1:]):
@@ -106,4 +117,5 @@ def load_csv(path: Path) -> FlightLog:
         euler_rad=series("attitude", EULER_COLUMNS),
         height_m=optional_series(HEIGHT_COLUMN),
         tension_n=optional_series(TENSION_COLUMN),
+        battery_voltage_v=optional_series(BATTERY_COLUMN),
     )

@@ -5,7 +5,9 @@ Messages used (fields as ArduPilot writes them):
 - ``IMU`` (``TimeUS``, ``AccX/Y/Z`` [m/s^2], instance ``I`` 0 when present);
 - ``ATT`` (``TimeUS``, ``Roll``, ``Pitch``, ``Yaw`` [deg]);
 - ``RCOU`` (``TimeUS``, ``C1`` .. ``C4`` [us]);
-- height, optional: ``RFND`` (``Dist`` [m], instance 0) or else ``BARO`` (``Alt`` [m]).
+- height, optional: ``RFND`` (``Dist`` [m], instance 0) or else ``BARO`` (``Alt`` [m]);
+- battery voltage, optional: ``BAT`` (``Volt`` [V], instance 0) or else ``CURR`` (older
+  logs' ``Volt`` [V]); readings <= 0 (no monitor) are skipped.
 """
 
 from __future__ import annotations
@@ -21,11 +23,11 @@ from pymavlink import DFReader
 from tether_companion.errors import InputError
 from tether_companion.sysid.logs.flightlog import N_MOTORS, FlightLog, make_series
 
-WANTED = ("IMU", "ATT", "RCOU", "RFND", "BARO")
+WANTED = ("IMU", "ATT", "RCOU", "RFND", "BARO", "BAT", "CURR")
 
 
 def _instance(msg: Any) -> int:
-    for name in ("I", "Instance"):
+    for name in ("I", "Instance", "Inst"):
         value = getattr(msg, name, None)
         if value is not None:
             return int(value)
@@ -91,6 +93,14 @@ def load_dataflash(path: Path) -> FlightLog:
                 1,
             )
             break
+    voltage = None
+    for name in ("BAT", "CURR"):
+        usable = [m for m in messages[name] if (getattr(m, "Volt", None) or 0.0) > 0.0]
+        if len(usable) >= 2:
+            voltage = make_series(
+                source, name, [m.TimeUS * 1e-6 for m in usable], [m.Volt for m in usable], 1
+            )
+            break
     deg = math.pi / 180.0
     return FlightLog(
         source=source,
@@ -116,4 +126,5 @@ def load_dataflash(path: Path) -> FlightLog:
             3,
         ),
         height_m=height,
+        battery_voltage_v=voltage,
     )

@@ -66,10 +66,12 @@ class DataflashWriter:
 
 
 def declare_identification_messages(writer: DataflashWriter) -> None:
-    """Declare IMU, ATT, RCOU and RFND as ArduPilot names them (the fields the loader reads)."""
+    """Declare IMU, ATT, RCOU, RFND and BAT as ArduPilot names them (the fields the loader
+    reads)."""
     writer.declare(
         "IMU", "QBffffff", ("TimeUS", "I", "GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ")
     )
     writer.declare("ATT", "Qfff", ("TimeUS", "Roll", "Pitch", "Yaw"))
     writer.declare("RCOU", "QHHHH", ("TimeUS", "C1", "C2", "C3", "C4"))
     writer.declare("RFND", "QBf", ("TimeUS", "Instance", "Dist"))
+    writer.declare("BAT", "QBf", ("TimeUS", "Inst", "Volt"))

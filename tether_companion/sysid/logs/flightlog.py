@@ -60,6 +60,10 @@ class FlightLog:
     velocity_ned_mps
         Velocity over ground, NED [m/s] (LOCAL_POSITION_NED, GPS), values shape (n, 3), or
         None; used to identify the rotor drag (:mod:`tether_companion.sysid.drag`).
+    battery_voltage_v
+        The flight controller's battery voltage [V] (SYS_STATUS, BATTERY_STATUS, dataflash
+        BAT/CURR), values shape (n, 1), or None; identification scales the motor commands by
+        it as the estimator does (:mod:`tether_companion.sysid.battery`).
     notes
         Non-fatal remarks from loading (e.g. a trailing partial record dropped).
     """
@@ -71,6 +75,7 @@ class FlightLog:
     height_m: Series | None = None
     tension_n: Series | None = None
     velocity_ned_mps: Series | None = None
+    battery_voltage_v: Series | None = None
     notes: tuple[str, ...] = field(default=())
 
 

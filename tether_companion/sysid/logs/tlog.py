@@ -7,7 +7,11 @@ MAVLink packet). Signals come from the flight controller's own time stamps:
   (ArduPilot, milli-g), instance 0;
 - attitude: ``ATTITUDE`` (rad);
 - motors: ``SERVO_OUTPUT_RAW`` port 0, ``servo1_raw`` .. ``servo4_raw`` (us);
-- height: ``DISTANCE_SENSOR`` facing down (cm), optional.
+- height: ``DISTANCE_SENSOR`` facing down (cm), optional;
+- battery voltage, optional: ``SYS_STATUS`` ``voltage_battery`` or else ``BATTERY_STATUS``
+  (:func:`tether_companion.mavlink.battery.battery_voltage_v`; unknown values skipped). These
+  carry no flight-controller time: they are placed on it by the record's wall-clock stamp
+  minus the median offset between the ``ATTITUDE`` stamps and their ``time_boot_ms``.
 
 Only messages from the system that sends ``ATTITUDE`` most are used (other systems, such as
 ArduPilot SITL's tether simulator, share the link).
@@ -24,7 +28,8 @@ from pymavlink import mavutil
 
 from tether_companion.errors import InputError
 from tether_companion.mavlink import units
-from tether_companion.sysid.logs.flightlog import N_MOTORS, FlightLog, make_series
+from tether_companion.mavlink.battery import BATTERY_MESSAGES, battery_voltage_v
+from tether_companion.sysid.logs.flightlog import N_MOTORS, FlightLog, Series, make_series
 
 WANTED = (
     "HIGHRES_IMU",
@@ -34,6 +39,7 @@ WANTED = (
     "SERVO_OUTPUT_RAW",
     "DISTANCE_SENSOR",
     "LOCAL_POSITION_NED",
+    *sorted(BATTERY_MESSAGES),
 )
 _UINT32_SPAN = 2**32
 _STAMP_BYTES = 8
@@ -111,6 +117,20 @@ def _read_messages(path: Path) -> tuple[dict[str, list[Any]], bool]:
     return by_system[main], truncated
 
 
+def _battery_voltage(
+    source: str, messages: dict[str, list[Any]], attitude: list[Any]
+) -> Series | None:
+    """Battery voltage [V] on flight-controller time, or None when fewer than two are known."""
+    offset_s = float(np.median([m.time_boot_ms * 1e-3 - m._timestamp for m in attitude]))
+    for name in ("SYS_STATUS", "BATTERY_STATUS"):
+        stamped = [(m._timestamp + offset_s, battery_voltage_v(m)) for m in messages.get(name, [])]
+        known = [(t, v) for t, v in stamped if np.isfinite(v)]
+        if len(known) >= 2:
+            times, volts = zip(*known, strict=True)
+            return make_series(source, name, times, volts, 1)
+    return None
+
+
 def load_tlog(path: Path) -> FlightLog:
     """Read a MAVLink .tlog into a :class:`FlightLog` (see module docstring).
 
@@ -183,5 +203,6 @@ def load_tlog(path: Path) -> FlightLog:
         ),
         height_m=height,
         velocity_ned_mps=velocity,
+        battery_voltage_v=_battery_voltage(source, messages, att_msgs),
         notes=notes,
     )

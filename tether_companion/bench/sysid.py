@@ -6,7 +6,11 @@
    ``hover`` is exact, ``realistic-circle`` has every error source on (rotor drag, battery
    sag, a thrust map 5 % weak, accelerometer bias, vibration, the flight controller's
    attitude error, wind);
-2. every structure is identified from it (Table 1 printed);
+2. every structure is identified from it (Table 1 printed), on motor commands scaled by the
+   logged battery voltage (:mod:`tether_companion.sysid.battery`) over the range
+   ``--battery-voltage-max-v/min-v`` (default: the flight scenario's pack, full to empty
+   cell voltage, as a user sets ``MOT_BAT_VOLT_MAX/MIN``; the vehicle profile's with
+   ``--log``; ``--battery-voltage-max-v 0`` identifies uncompensated);
 3. each evaluation scenario (``--scenario``, repeatable; default the paper's ``paper-circle``)
    is flown with seeds ``--first-seed`` onwards (never the identification flight's noise) by
    the 4-state EKF, configured with the scenario's anchor height and rangefinder offset, fed
@@ -39,6 +43,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from tether_companion.bench.estimators.registry import FlightContext
+from tether_companion.commands.sysid import add_battery_arguments, battery_range
 from tether_companion.errors import InputError
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.pipeline import TetherEstimator
@@ -49,13 +54,18 @@ from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.sim.propulsion import PropulsionConfig
 from tether_companion.sim.scenario import Scenario, load_scenario
 from tether_companion.sim.simulator import Simulator
+from tether_companion.sysid.battery import compensate_logs
 from tether_companion.sysid.flight import record_identification_flight
 from tether_companion.sysid.identify import STRUCTURES, StructureResult, best_result, identify
 from tether_companion.sysid.logs import load_flight_log
 from tether_companion.sysid.processing import IdData, prepare
 from tether_companion.sysid.report import results_table
 from tether_companion.sysid.selection import SelectionScore, select
-from tether_companion.sysid.thrust_model import StaticModelFile, thrust_input_from_mapping
+from tether_companion.sysid.thrust_model import (
+    StaticModelFile,
+    model_file_mapping,
+    thrust_input_from_mapping,
+)
 
 HELP = "Identify a thrust model from an emulated flight; EKF RMSE with it vs a naive linear map."
 
@@ -183,6 +193,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--duration-s", type=float, help="evaluation flight length [s] (default: the scenario's)"
     )
+    add_battery_arguments(parser, "the flight scenario's pack; the profile's with --log")
 
 
 def thrust_inputs(
@@ -191,8 +202,10 @@ def thrust_inputs(
     data: IdData,
     vehicle: VehicleProfile,
     pwm_range: tuple[float, float],
+    battery: BatteryCompensation | None = None,
 ) -> dict[str, Callable[[Scenario], ThrustInput]]:
-    """Row label -> a fresh thrust input for a scenario (the true map depends on it)."""
+    """Row label -> a fresh thrust input for a scenario (the true map depends on it); the
+    identified ones compensate over ``battery`` (the range they were identified with)."""
     by_prediction = best_result(results, "prediction")
     by_simulation = best_result(results, "simulation")
     naive = naive_linear_curve([data], pwm_range)
@@ -207,11 +220,15 @@ def thrust_inputs(
         roles.setdefault("arx", [])
     inputs: dict[str, Callable[[Scenario], ThrustInput]] = {
         "naive linear (eq. 19)": lambda _: StaticThrustInput(
-            StaticModelFile(n_motors=vehicle.n_motors, thrust_curve=naive)
+            StaticModelFile(
+                n_motors=vehicle.n_motors,
+                thrust_curve=naive,
+                battery=battery or BatteryCompensation(),
+            )
         ),
     }
     for structure, what in roles.items():
-        mapping = models[structure].to_mapping()
+        mapping = model_file_mapping(models[structure].to_mapping(), {}, battery)
         inputs[f"{structure}: {', '.join(what)}" if what else structure] = lambda _, m=mapping: (
             thrust_input_from_mapping(m)
         )
@@ -270,6 +287,20 @@ class Identified:
     results: list[StructureResult]
     chosen: StructureResult | None
     scores: dict[str, SelectionScore]
+    battery: BatteryCompensation | None = None
+    """The range the commands were compensated with (None: uncompensated)."""
+    battery_note: str = ""
+    """One line saying whether and why the commands were compensated."""
+
+
+def pack_range(scenario: Scenario) -> BatteryCompensation:
+    """The compensation range a user sets for ``scenario``'s pack: full and empty cell voltage
+    times the cells (ArduPilot's advice for MOT_BAT_VOLT_MAX/MIN: 4.2 and 3.3 V per cell)."""
+    pack = scenario.propulsion.battery
+    return BatteryCompensation(
+        voltage_max_v=pack.cells * pack.full_cell_voltage_v,
+        voltage_min_v=pack.cells * pack.empty_cell_voltage_v,
+    )
 
 
 def identify_flight(
@@ -277,9 +308,12 @@ def identify_flight(
     base: Scenario,
     seed: int,
     structures: Sequence[str] = tuple(STRUCTURES),
+    battery: BatteryCompensation | None = None,
 ) -> Identified:
     """Identify ``structures`` (default all) from ``log``, or from the identification flight
-    flown now with ``base``'s vehicle, sensors, wind and propulsion and noise ``seed``."""
+    flown now with ``base``'s vehicle, sensors, wind and propulsion and noise ``seed``; the
+    commands compensated over ``battery`` (default: the vehicle profile's range) when the log
+    has a voltage."""
     with tempfile.TemporaryDirectory() as folder:
         if log is None:
             log = Path(folder) / "identification.tlog"
@@ -288,10 +322,13 @@ def identify_flight(
             vehicle = load_vehicle(base.vehicle)
         curve = vehicle.thrust_curve
         pwm_range = (curve.pwm_min_us, curve.pwm_max_us)
-        data = prepare(load_flight_log(log), vehicle.mass_kg, pwm_range)
+        battery = battery or vehicle.battery
+        logs, compensated, note = compensate_logs([load_flight_log(log)], battery, pwm_range)
+        data = prepare(logs[0], vehicle.mass_kg, pwm_range)
     results = identify([data.estimation], [data.validation], pwm_range, structures)
     chosen, scores = select(results, [data.validation], pwm_range)
-    return Identified(vehicle, data.estimation, results, chosen, scores)
+    used = battery if compensated else None
+    return Identified(vehicle, data.estimation, results, chosen, scores, used, note)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -308,7 +345,8 @@ def run(args: argparse.Namespace) -> int:
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
     if args.log is None:
         base = load_scenario(args.flight_scenario)
-        identified = identify_flight(None, base, args.flight_seed)
+        battery = battery_range(args, pack_range(base))
+        identified = identify_flight(None, base, args.flight_seed, battery=battery)
         console.print(
             f"identification flight: simulated on {args.flight_scenario}, seed "
             f"{args.flight_seed}, vehicle {identified.vehicle.name}"
@@ -316,7 +354,10 @@ def run(args: argparse.Namespace) -> int:
         if args.flight_seed in seeds:
             console.print("[yellow]the identification seed is also an evaluation seed[/]")
     else:
-        identified = identify_flight(args.log, load_scenario(names[0]), 0)
+        base = load_scenario(names[0])
+        battery = battery_range(args, load_vehicle(base.vehicle).battery)
+        identified = identify_flight(args.log, base, 0, battery=battery)
+    console.print(identified.battery_note)
     vehicle, data, results = identified.vehicle, identified.estimation, identified.results
     chosen, scores = identified.chosen, identified.scores
     best = best_result(results, "prediction")
@@ -333,7 +374,9 @@ def run(args: argparse.Namespace) -> int:
         console.print("[red]no structure could be identified[/red]")
         return 1
     curve = vehicle.thrust_curve
-    inputs = thrust_inputs(results, chosen, data, vehicle, (curve.pwm_min_us, curve.pwm_max_us))
+    inputs = thrust_inputs(
+        results, chosen, data, vehicle, (curve.pwm_min_us, curve.pwm_max_us), identified.battery
+    )
     for name, scenario in zip(names, scenarios, strict=True):
         if load_vehicle(scenario.vehicle).name != vehicle.name:
             console.print(

@@ -10,8 +10,10 @@ from rich.console import Console
 
 from tether_companion.config import from_mapping
 from tether_companion.errors import InputError
+from tether_companion.physics.battery import BatteryCompensation
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.sim.scenario import load_scenario
+from tether_companion.sysid.battery import compensate_logs
 from tether_companion.sysid.drag import DragFit, identify_drag
 from tether_companion.sysid.flight import FlightPlan, record_identification_flight
 from tether_companion.sysid.identify import STRUCTURES, best_result, identify
@@ -102,6 +104,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--fly-tension-n", type=float, default=0.0, help="cable tension in the emulated flight [N]"
     )
+    add_battery_arguments(parser, "the vehicle profile's battery section")
+
+
+def add_battery_arguments(parser: argparse.ArgumentParser, default: str) -> None:
+    """``--battery-voltage-max-v`` / ``--battery-voltage-min-v``: the compensation range."""
+    parser.add_argument(
+        "--battery-voltage-max-v",
+        type=float,
+        help="voltage the identified map holds at (ArduPilot MOT_BAT_VOLT_MAX) [V]; the motor "
+        f"commands are scaled by the logged voltage's ratio to it; 0: off (default: {default})",
+    )
+    parser.add_argument(
+        "--battery-voltage-min-v",
+        type=float,
+        help=f"lower voltages count as this one (MOT_BAT_VOLT_MIN) [V] (default: {default})",
+    )
+
+
+def battery_range(args: argparse.Namespace, default: BatteryCompensation) -> BatteryCompensation:
+    """The range from the command line, each value not given taken from ``default``.
+
+    Raises
+    ------
+    ConfigError
+        When a value is out of range or min >= max.
+    """
+    given = {
+        "voltage_max_v": args.battery_voltage_max_v,
+        "voltage_min_v": args.battery_voltage_min_v,
+    }
+    values = {k: v if v is not None else getattr(default, k) for k, v in given.items()}
+    return from_mapping(BatteryCompensation, values, source="command line", prefix="battery")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -137,7 +171,10 @@ def run(args: argparse.Namespace) -> int:
     if not logs:
         raise InputError("give at least one LOG, or --fly-emulated OUT to fly one in the simulator")
     pwm_range = (vehicle.thrust_curve.pwm_min_us, vehicle.thrust_curve.pwm_max_us)
+    battery = battery_range(args, vehicle.battery)
     flight_logs = [load_flight_log(path) for path in logs]
+    flight_logs, compensated, note = compensate_logs(flight_logs, battery, pwm_range)
+    console.print(note)
     datasets = [prepare(log, vehicle.mass_kg, pwm_range, options) for log in flight_logs]
     drag = next(
         (fit for log in flight_logs if (fit := identify_drag(log, vehicle.mass_kg)) is not None),
@@ -175,7 +212,9 @@ def run(args: argparse.Namespace) -> int:
         console.print("[red]every structure failed: no model to write[/red]")
         return 1
     if args.out is not None:
-        mapping = model_file_mapping(written.model.to_mapping(), vars(written.metrics))
+        mapping = model_file_mapping(
+            written.model.to_mapping(), vars(written.metrics), battery if compensated else None
+        )
         header = (
             f"Thrust model identified by tether-companion sysid from {', '.join(map(str, logs))}\n"
             f"vehicle {vehicle.name}; structure {written.structure} ({written.model.orders})"

@@ -16,6 +16,12 @@
 ``total_thrust_n(pwm_us, time_s) -> float``: a static file into the estimator's
 :class:`~tether_companion.estimation.thrust_input.StaticThrustInput`, a linear one into
 :class:`LinearThrust`.
+
+A model identified on battery-compensated commands (:mod:`tether_companion.sysid.battery`)
+carries a ``battery`` section with the voltage range; both kinds then scale each motor
+command by the measured voltage's ratio (``set_battery_voltage_v``) exactly as the
+identification did. Without the section (``voltage_max_v: 0``) the commands are used as
+they are.
 """
 
 from __future__ import annotations
@@ -31,7 +37,9 @@ from numpy.typing import NDArray
 
 from tether_companion.config import ConfigError, from_mapping, read_yaml, spec
 from tether_companion.estimation.thrust_input import StaticThrustInput
+from tether_companion.physics.battery import BatteryCompensation
 from tether_companion.physics.thrust import ThrustCurve
+from tether_companion.sysid.battery import compensated_pwm_us
 from tether_companion.sysid.input_map import InputMap
 
 FloatArray = NDArray[np.float64]
@@ -48,6 +56,10 @@ class StaticModelFile:
     structure: str = spec("static", doc="structure the model came from")
     n_motors: int = spec(4, minimum=1, maximum=16, doc="number of motors")
     thrust_curve: ThrustCurve = spec(default_factory=ThrustCurve, doc="per-motor curve")
+    battery: BatteryCompensation = spec(
+        default_factory=BatteryCompensation,
+        doc="voltage range the commands were compensated with at identification (0: none)",
+    )
     metrics: dict[str, float] = spec(default_factory=dict, doc="identification metrics")
 
 
@@ -68,6 +80,10 @@ class LinearModelFile:
         0.01, exclusive_minimum=0.0, maximum=1.0, doc="model sample time [s]"
     )
     input_map: InputMap = spec(default_factory=InputMap, doc="PWM to model input")
+    battery: BatteryCompensation = spec(
+        default_factory=BatteryCompensation,
+        doc="voltage range the commands were compensated with at identification (0: none)",
+    )
     metrics: dict[str, float] = spec(default_factory=dict, doc="identification metrics")
 
     def validate(self) -> None:
@@ -103,6 +119,8 @@ class LinearThrust:
     a jump back in time or a pause longer than ``MAX_GAP_STEPS`` steps restarts the model in
     steady state for the current PWM. The output interpolates the state between the last
     step boundary and the next (predicted from the input so far), plus the direct term.
+    With a ``battery`` range in the file, each PWM's command is first scaled by the voltage
+    ratio (:meth:`set_battery_voltage_v`; 1 until a voltage is measured).
     """
 
     model_file: LinearModelFile
@@ -116,6 +134,7 @@ class LinearThrust:
     _sum: FloatArray | None = field(default=None, init=False, repr=False)
     _last_s: float = field(default=math.nan, init=False, repr=False)
     _boundary_s: float = field(default=math.nan, init=False, repr=False)
+    voltage_ratio: float = field(default=1.0, init=False)
 
     def __post_init__(self) -> None:
         self._a = np.array(self.model_file.a, dtype=float).reshape(len(self.model_file.a), -1)
@@ -128,6 +147,12 @@ class LinearThrust:
     def n_motors(self) -> int:
         """Number of PWM inputs."""
         return int(self._v0.shape[0]) // self.model_file.input_map.inputs_per_motor()
+
+    def set_battery_voltage_v(self, voltage_v: float) -> None:
+        """Measured battery voltage [V]; ignored when the model was identified without
+        compensation, a non-finite value keeps the ratio at 1."""
+        if self.model_file.battery.enabled:
+            self.voltage_ratio = self.model_file.battery.ratio(voltage_v)
 
     def _restart(self, v: FloatArray, time_s: float) -> None:
         n = self._a.shape[0]
@@ -149,6 +174,11 @@ class LinearThrust:
             np.all(np.isfinite(pwm)) and math.isfinite(time_s)
         ):
             raise ValueError(f"expected {self.n_motors} finite pulse widths and a finite time")
+        if self.model_file.battery.enabled:
+            input_map = self.model_file.input_map
+            pwm = compensated_pwm_us(
+                pwm, (input_map.pwm_min_us, input_map.pwm_max_us), self.voltage_ratio
+            )
         v = self.model_file.input_map.map_pwm(pwm)
         dt = self.model_file.sample_time_s
         if self._x is None or time_s < self._last_s or time_s - self._last_s > MAX_GAP_STEPS * dt:
@@ -186,9 +216,20 @@ class LinearThrust:
                 self._boundary_s += dt
 
 
-def model_file_mapping(model_mapping: dict[str, Any], metrics: dict[str, float]) -> dict[str, Any]:
-    """A fitted model's ``to_mapping()`` with its metrics added, ready for YAML."""
-    return {**model_mapping, "metrics": {k: float(v) for k, v in metrics.items()}}
+def model_file_mapping(
+    model_mapping: dict[str, Any],
+    metrics: dict[str, float],
+    battery: BatteryCompensation | None = None,
+) -> dict[str, Any]:
+    """A fitted model's ``to_mapping()`` with the battery range it was identified with (when
+    compensated) and its metrics added, ready for YAML."""
+    mapping = dict(model_mapping)
+    if battery is not None and battery.enabled:
+        mapping["battery"] = {
+            "voltage_max_v": float(battery.voltage_max_v),
+            "voltage_min_v": float(battery.voltage_min_v),
+        }
+    return {**mapping, "metrics": {k: float(v) for k, v in metrics.items()}}
 
 
 def save_thrust_model(path: str | Path, mapping: dict[str, Any], header: str) -> None:

@@ -82,7 +82,7 @@ CONFIG_CASES = [
         "dynamic-anchor-twice",
         "dynamic_filter: {anchor_height_m: 2.0}\n",
         [],
-        ["dynamic_filter.anchor_height_m = 2.0", "ground_station.anchor_height_m"],
+        ["dynamic_filter.anchor_height_m", "unknown key"],
     ),
     ("sysid-256", "link: {fc_system_id: 256}\n", [], ["link.fc_system_id = 256"]),
     ("sysid-text", "link: {fc_system_id: one}\n", [], ["link.fc_system_id", "integer"]),

@@ -150,7 +150,7 @@ def test_the_session_runs_the_dynamic_filter_with_the_configured_section() -> No
     estimator = session.estimator
     assert isinstance(estimator, DynamicTetherEstimator)
     assert estimator.dynamic.accel_noise_std_mps2 == 0.2
-    assert estimator.dynamic.anchor_height_m == 1.0  # the one anchor-height key
+    assert estimator.config.ground_station.anchor_height_m == 1.0  # the one anchor-height key
     assert estimator.aligner is session.aligner  # one alignment with the tension filter
     session.restart()
     assert isinstance(session.estimator, DynamicTetherEstimator)

@@ -503,15 +503,6 @@ class ServiceConfig:
                 self.tension.source,
                 "must be 'estimate' or 'message' (a load cell) with estimator.kind dynamic",
             )
-        anchor = self.estimator.ground_station.anchor_height_m
-        if self.dynamic_filter.anchor_height_m not in (0.0, anchor):
-            raise ConfigError(
-                "",
-                "dynamic_filter.anchor_height_m",
-                self.dynamic_filter.anchor_height_m,
-                f"set estimator.ground_station.anchor_height_m instead (now {anchor}): the "
-                "service uses that one for every estimator",
-            )
 
 
 def load_service_config(path: str | Path | None, overrides: dict | None = None) -> ServiceConfig:

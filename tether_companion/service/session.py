@@ -23,7 +23,6 @@ Estimators, all fed the same samples:
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -265,11 +264,9 @@ class EstimationSession:
     def _new_estimator(self) -> TetherEstimator | DynamicTetherEstimator:
         estimator = self.config.estimator
         if self.dynamic:
-            dynamic = dataclasses.replace(
-                self.config.dynamic_filter,
-                anchor_height_m=estimator.ground_station.anchor_height_m,
+            return DynamicTetherEstimator(
+                estimator, self.vehicle, self.config.dynamic_filter, aligner=self.aligner
             )
-            return DynamicTetherEstimator(estimator, self.vehicle, dynamic, aligner=self.aligner)
         return TetherEstimator(estimator, self.vehicle, aligner=self.aligner)
 
     def _new_catenary(self) -> CatenaryPositionEstimator | None:

@@ -96,9 +96,6 @@ class DynamicFilterConfig:
     cable_weight_n_per_m: float = spec(
         0.0, minimum=0.0, doc="cable weight per length (0: a light, straight cable) [N/m]"
     )
-    anchor_height_m: float = spec(
-        0.0, doc="height of the tether anchor above the ground under the drone [m]"
-    )
     load_cell_noise_std_n: float = spec(0.1, exclusive_minimum=0.0, doc="load cell [N]")
     winch_length_noise_std_m: float = spec(0.05, exclusive_minimum=0.0, doc="winch length [m]")
     cable_angle_noise_std_rad: float = spec(

@@ -180,7 +180,7 @@ class DynamicTetherEstimator(InputFeed):
         )
         self.accel = AccelAid(self._accel_measurement_std(), config.min_cable_length_m)
         self.rangefinder = RangefinderAid(
-            config.altimeter_noise_variance_m2, dynamic.anchor_height_m
+            config.altimeter_noise_variance_m2, config.ground_station.anchor_height_m
         )
         self.load_cell = LoadCellAid(dynamic.load_cell_noise_std_n)
         self.winch = WinchAid(dynamic.winch_length_noise_std_m, dynamic.slack_tension_n)
@@ -300,7 +300,7 @@ class DynamicTetherEstimator(InputFeed):
         if height_m is None:
             return
         if self.bank is None:
-            self._initialiser.add_height(height_m - self.dynamic.anchor_height_m)
+            self._initialiser.add_height(height_m - self.config.ground_station.anchor_height_m)
             return
         if not self._fresh(sample.time_s, self.config.staleness.range_s):
             health.range_stale += 1

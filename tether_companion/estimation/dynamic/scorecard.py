@@ -41,13 +41,11 @@ class DynamicKind:
 
     def __init__(self, context: FlightContext, use_winch: bool) -> None:
         cable = context.scenario.cable
-        ground = getattr(context.scenario, "ground", None)  # the anchor stand's height
         dynamic = dataclasses.replace(
             DynamicFilterConfig(),
             cable_weight_n_per_m=cable.linear_density_kg_per_m * context.gravity_mps2,
-            anchor_height_m=float(getattr(ground, "anchor_height_m", 0.0)),
         )
-        config = context.estimator_config(EstimatorConfig())  # rangefinder mounting
+        config = context.estimator_config(EstimatorConfig())  # anchor height, rangefinder mounting
         self._estimator = DynamicTetherEstimator(config, context.vehicle, dynamic)
         self._use_winch = use_winch
 

@@ -26,7 +26,7 @@ from lockstep_service import LockstepService, published_errors
 
 from tether_companion.emulator.autopilot import FlightController
 from tether_companion.emulator.config import FaultConfig, Outage, Window, load_emulator_scenario
-from tether_companion.service.publish import NO_RANGE, STALE_ATTITUDE, STALE_PWM
+from tether_companion.service.health import NO_RANGE, STALE_ATTITUDE, STALE_PWM
 
 pytestmark = [pytest.mark.slow, pytest.mark.integration]
 FLIGHT_S = 20.0

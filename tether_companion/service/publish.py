@@ -70,51 +70,14 @@ from tether_companion.service.health import (
     HEALTH_STATES,
     MOTORS_IDLE,
     NO_ATTITUDE,
-    NO_IMU,
-    NO_RANGE,
     OK,
-    SHORT_CABLE,
-    SLACK,
     STALE,
-    STALE_ATTITUDE,
-    STALE_PWM,
-    STALE_TENSION,
-    WEAK_PULL,
     PositionEstimate,
     assess_health,
     health_text,
 )
 
 FloatArray = NDArray[np.float64]
-
-__all__ = [  # the health names live in service/health.py; they are also read from here
-    "CONVERGING",
-    "DIVERGED",
-    "HEALTH_STATES",
-    "MOTORS_IDLE",
-    "NO_ATTITUDE",
-    "NO_IMU",
-    "NO_RANGE",
-    "OK",
-    "SHORT_CABLE",
-    "SLACK",
-    "STALE",
-    "STALE_ATTITUDE",
-    "STALE_PWM",
-    "STALE_TENSION",
-    "STATUSTEXT_MIN_INTERVAL_S",
-    "TENSION_MAGNITUDE_NAME",
-    "TENSION_VECTOR_NAMES",
-    "CATENARY_POSITION_NAMES",
-    "WEAK_PULL",
-    "PositionEstimate",
-    "Publication",
-    "Publisher",
-    "PublisherCounters",
-    "assess_health",
-    "health_text",
-    "velocity_of",
-]
 
 _STATUSTEXT_PREFIX = "TETHER: "
 

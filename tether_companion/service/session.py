@@ -387,7 +387,7 @@ class EstimationSession:
         if self.config.tension.source == "config":
             estimator.set_known_tension_n(self.config.tension.known_tension_n, sample.time_s)
         stale_before = _stale_counts(estimator.health)
-        near_anchor_before = getattr(estimator.health, "near_anchor", 0)
+        near_anchor_before = estimator.health.near_anchor
         estimate = estimator.on_imu(sample)
         if estimate is not None:
             self.last_estimate = estimate

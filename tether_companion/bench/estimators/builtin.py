@@ -8,7 +8,7 @@
   (known length: the winch's paid-out length, anchor on the ground, the scenario's cable
   weight per length).
 
-Published: what the service would send (:func:`~tether_companion.service.publish.assess_health`
+Published: what the service would send (:func:`~tether_companion.service.health.assess_health`
 with the default publish settings is ``ok``; for the catenary, a valid position).
 """
 

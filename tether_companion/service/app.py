@@ -450,9 +450,11 @@ class CompanionService:
         if self.config.security.install_key and not self._key_installed:
             self._key_installed = True
             self._send(link, self.security.setup_signing_message())
+        self._send_origin(link, now_s)
+        if fetch is not None and not self._vehicle_ready:
+            return  # inputs are held, not silent: no re-requests, no no_imu until the profile
         for request in self.streams.due(now_s, self.session.ingest.counters.accepted):
             self._send(link, request)
-        self._send_origin(link, now_s)
         if self.streams.silent_s(IMU, now_s) > INPUT_SILENT_S:
             for msg in self.session.publisher.set_health(NO_IMU):
                 self._send(link, msg)

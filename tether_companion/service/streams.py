@@ -155,13 +155,24 @@ class StreamRequests:
             )
             fallback = refused or stream.attempts > INTERVAL_ATTEMPTS_BEFORE_FALLBACK
             if fallback and kind in _STREAM_GROUPS:
+                group = _STREAM_GROUPS[kind]
                 out.append(
                     dialect.MAVLink_request_data_stream_message(
                         cfg.fc_system_id,
                         cfg.fc_component_id,
-                        _STREAM_GROUPS[kind],
-                        max(1, round(stream.rate_hz)),
+                        group,
+                        max(1, round(self.group_rate_hz(group))),
                         1,
                     )
                 )
         return out
+
+    def group_rate_hz(self, group: int) -> float:
+        """The rate to ask for a REQUEST_DATA_STREAM group [Hz]: the fastest of the inputs in
+        it (the group's rate applies to all its messages: the rangefinder's 20 Hz and
+        SYSTEM_TIME's 5 Hz share ArduPilot's EXTRA3, and asking at 5 Hz would slow both)."""
+        return max(
+            stream.rate_hz
+            for kind, stream in self.table.items()
+            if _STREAM_GROUPS.get(kind) == group
+        )

@@ -13,7 +13,7 @@ import pytest
 
 from tether_companion.emulator.lockstep import LockstepPeer, build_controller
 from tether_companion.emulator.modes import CopterMode
-from tether_companion.mavlink import units
+from tether_companion.mavlink import estimates, units
 from tether_companion.mavlink.framing import dialect
 from tether_companion.physics.cable import CABLE_MODELS
 
@@ -45,14 +45,14 @@ def param_set(gcs: LockstepPeer, name: str, value: float):
 
 
 def vision(fc, position, reset_counter=0, stamp_s=None):
-    est = units.PoseEstimate(
+    est = estimates.PoseEstimate(
         fc.boot_time_s if stamp_s is None else stamp_s,
         np.asarray(position, dtype=float),
         tuple(float(a) for a in fc.sim.truth.euler_rad),
         np.eye(6) * 0.01,
         reset_counter,
     )
-    return units.vision_position_estimate_message(est)
+    return estimates.vision_position_estimate_message(est)
 
 
 def set_origin(gcs: LockstepPeer):
@@ -467,8 +467,8 @@ def test_attitude_mismatch_blocks_arming_in_vision_mode() -> None:
     fc = build_controller("hover", landed=True, emulator={"navigation": "vision"})
     gcs = LockstepPeer(fc)
     set_origin(gcs)
-    est = units.PoseEstimate(fc.boot_time_s, truth(fc), (0.0, 0.0, math.radians(30)), None, 0)
-    gcs.send(units.vision_position_estimate_message(est))
+    est = estimates.PoseEstimate(fc.boot_time_s, truth(fc), (0.0, 0.0, math.radians(30)), None, 0)
+    gcs.send(estimates.vision_position_estimate_message(est))
     assert gcs.command(ARM, 1) == FAILED
     assert any(t.startswith("PreArm: VisOdom: attitude differs by 30 deg") for t in gcs.texts())
 

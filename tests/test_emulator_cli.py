@@ -15,8 +15,8 @@ from tether_companion.cli import main
 from tether_companion.config import ConfigError
 from tether_companion.emulator.config import load_emulator_scenario
 from tether_companion.emulator.lockstep import build_controller
+from tether_companion.mavlink.estimates import PoseEstimate, vision_position_estimate_message
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
-from tether_companion.mavlink.units import PoseEstimate, vision_position_estimate_message
 
 
 @pytest.mark.parametrize(

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.frames import rotation_body_to_ned, rotation_ned_to_body, wrap_pi
-from tether_companion.mavlink import geo, units
+from tether_companion.mavlink import estimates, geo, units
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample
 
@@ -172,9 +172,11 @@ def test_quaternion_matches_rotation_matrix(roll, pitch, yaw) -> None:
 def test_vision_position_estimate_round_trip() -> None:
     cov = np.diag([0.01, 0.02, 0.03, 1.0, 1.0, 1.0])
     cov[0, 1] = cov[1, 0] = 0.005
-    est = units.PoseEstimate(12.345678, np.array([1.5, -2.5, -3.0]), (0.1, -0.05, 1.2), cov, 300)
-    msg = over_the_wire(units.vision_position_estimate_message(est))
-    back = units.pose_from_vision_position_estimate(msg)
+    est = estimates.PoseEstimate(
+        12.345678, np.array([1.5, -2.5, -3.0]), (0.1, -0.05, 1.2), cov, 300
+    )
+    msg = over_the_wire(estimates.vision_position_estimate_message(est))
+    back = estimates.pose_from_vision_position_estimate(msg)
     assert msg.usec == 12_345_678 and back.reset_counter == 300 & 0xFF
     np.testing.assert_allclose(back.position_ned_m, est.position_ned_m, rtol=1e-6)
     np.testing.assert_allclose(back.euler_rad, est.euler_rad, rtol=1e-6)
@@ -182,16 +184,16 @@ def test_vision_position_estimate_round_trip() -> None:
 
 
 def test_odometry_round_trip_and_frame_check() -> None:
-    est = units.PoseEstimate(2.0, np.array([1.0, 2.0, -3.0]), (0.2, -0.1, 2.5), None, 4)
-    velocity = units.VelocityEstimate(2.0, np.array([0.5, 0.0, -0.1]), None, 4)
-    msg = over_the_wire(units.odometry_message(est, velocity))
-    back = units.pose_from_odometry(msg)
+    est = estimates.PoseEstimate(2.0, np.array([1.0, 2.0, -3.0]), (0.2, -0.1, 2.5), None, 4)
+    velocity = estimates.VelocityEstimate(2.0, np.array([0.5, 0.0, -0.1]), None, 4)
+    msg = over_the_wire(estimates.odometry_message(est, velocity))
+    back = estimates.pose_from_odometry(msg)
     np.testing.assert_allclose(back.position_ned_m, [1, 2, -3], rtol=1e-6)
     np.testing.assert_allclose(back.euler_rad, est.euler_rad, atol=1e-6)
     assert back.covariance is None and back.reset_counter == 4
     msg.frame_id = units.MAV_FRAME_BODY_FRD
     with pytest.raises(ValueError, match="frame_id"):
-        units.pose_from_odometry(msg)
+        estimates.pose_from_odometry(msg)
     with pytest.raises(ValueError):
         units.euler_from_quaternion([0, 0, 0, 0])
 
@@ -201,46 +203,46 @@ def test_odometry_velocity_in_the_body_frame_as_ardupilot_and_px4_read_it() -> N
     rotates the body velocity to NED with the message's quaternion; PX4 reads the velocity frame
     from child_frame_id. The NED velocity and its covariance survive the round trip."""
     euler = (0.1, -0.2, 2.0)
-    est = units.PoseEstimate(3.0, np.array([1.0, 2.0, -3.0]), euler, None, 7)
+    est = estimates.PoseEstimate(3.0, np.array([1.0, 2.0, -3.0]), euler, None, 7)
     a = np.array([[0.02, 0.005, 0.0], [0.005, 0.03, 0.001], [0.0, 0.001, 0.01]])
-    velocity = units.VelocityEstimate(3.0, np.array([0.8, -0.3, 0.2]), a, 7)
+    velocity = estimates.VelocityEstimate(3.0, np.array([0.8, -0.3, 0.2]), a, 7)
     msg = over_the_wire(
-        units.odometry_message(est, velocity, frame_id=units.MAV_FRAME_LOCAL_FRD)
+        estimates.odometry_message(est, velocity, frame_id=units.MAV_FRAME_LOCAL_FRD)
     )
     assert msg.frame_id == units.MAV_FRAME_LOCAL_FRD
     assert msg.child_frame_id == units.MAV_FRAME_BODY_FRD
     body = rotation_ned_to_body(*euler) @ velocity.velocity_ned_m_s
     np.testing.assert_allclose([msg.vx, msg.vy, msg.vz], body, rtol=1e-6, atol=1e-7)
-    back = units.velocity_from_odometry(msg)
+    back = estimates.velocity_from_odometry(msg)
     assert back is not None and back.reset_counter == 7
     np.testing.assert_allclose(back.velocity_ned_m_s, velocity.velocity_ned_m_s, atol=1e-6)
     np.testing.assert_allclose(back.covariance, a, atol=1e-6)
     assert all(math.isfinite(v) for v in msg.velocity_covariance)  # never NaN beside a value
-    without = over_the_wire(units.odometry_message(est))
-    assert units.velocity_from_odometry(without) is None
+    without = over_the_wire(estimates.odometry_message(est))
+    assert estimates.velocity_from_odometry(without) is None
     assert math.isnan(without.velocity_covariance[0])
 
 
 def test_vision_speed_estimate_round_trip_and_unknown_covariance() -> None:
     cov = np.diag([0.01, 0.02, 0.04])
-    velocity = units.VelocityEstimate(4.5, np.array([1.0, -0.5, 0.25]), cov, 258)
-    msg = over_the_wire(units.vision_speed_estimate_message(velocity))
+    velocity = estimates.VelocityEstimate(4.5, np.array([1.0, -0.5, 0.25]), cov, 258)
+    msg = over_the_wire(estimates.vision_speed_estimate_message(velocity))
     assert msg.usec == 4_500_000 and msg.reset_counter == 2
-    back = units.velocity_from_vision_speed_estimate(msg)
+    back = estimates.velocity_from_vision_speed_estimate(msg)
     np.testing.assert_allclose(back.velocity_ned_m_s, velocity.velocity_ned_m_s, rtol=1e-6)
     np.testing.assert_allclose(back.covariance, cov, rtol=1e-6)
-    unknown = units.VelocityEstimate(4.5, np.zeros(3), None, 0)
-    msg = over_the_wire(units.vision_speed_estimate_message(unknown))
+    unknown = estimates.VelocityEstimate(4.5, np.zeros(3), None, 0)
+    msg = over_the_wire(estimates.vision_speed_estimate_message(unknown))
     assert math.isnan(msg.covariance[0])
-    assert units.velocity_from_vision_speed_estimate(msg).covariance is None
+    assert estimates.velocity_from_vision_speed_estimate(msg).covariance is None
     with pytest.raises(ValueError, match="covariance"):
-        units.vision_speed_estimate_message(
-            units.VelocityEstimate(1.0, np.zeros(3), np.full((3, 3), math.nan), 0)
+        estimates.vision_speed_estimate_message(
+            estimates.VelocityEstimate(1.0, np.zeros(3), np.full((3, 3), math.nan), 0)
         )
 
 
 def test_local_position_ned() -> None:
-    msg = over_the_wire(units.local_position_ned_message(1.25, [1, 2, -3], [0.1, 0.2, 0.3]))
+    msg = over_the_wire(estimates.local_position_ned_message(1.25, [1, 2, -3], [0.1, 0.2, 0.3]))
     assert msg.time_boot_ms == 1250
     assert (msg.x, msg.y, msg.z) == (1.0, 2.0, -3.0)
 

@@ -21,8 +21,8 @@ from tether_companion.estimation.catenary_position import (
 )
 from tether_companion.estimation.tension_kf import TensionEstimate, TensionHealth
 from tether_companion.estimation.thrust_input import MotorLagThrustInput
+from tether_companion.mavlink.estimates import local_position_ned_message
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
-from tether_companion.mavlink.units import local_position_ned_message
 from tether_companion.service.config import PublishConfig, load_service_config, load_vehicle_for
 from tether_companion.service.health import DIVERGED, SLACK
 from tether_companion.service.publish import (

@@ -10,7 +10,7 @@ import pytest
 
 from tether_companion.estimation.observability import RANGEFINDER
 from tether_companion.estimation.pipeline import Estimate, EstimatorHealth
-from tether_companion.mavlink import units
+from tether_companion.mavlink import estimates
 from tether_companion.mavlink.units import urt_to_covariance
 from tether_companion.samples import AttitudeSample
 from tether_companion.service.config import PublishConfig
@@ -261,7 +261,7 @@ def test_velocity_goes_out_in_odometry_and_vision_speed_estimate_never_nan() -> 
     (odometry,) = _of(sent, "ODOMETRY")
     (speed,) = _of(sent, "VISION_SPEED_ESTIMATE")
     assert odometry.frame_id == 20 and odometry.child_frame_id == 12  # LOCAL_FRD, BODY_FRD
-    back = units.velocity_from_odometry(odometry)
+    back = estimates.velocity_from_odometry(odometry)
     assert back is not None
     np.testing.assert_allclose(back.velocity_ned_m_s, [0.6, -0.8, 0.1], atol=1e-6)
     np.testing.assert_allclose(back.covariance, velocity_cov, atol=1e-7)

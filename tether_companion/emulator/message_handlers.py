@@ -21,7 +21,7 @@ from tether_companion.emulator.modes import (
 from tether_companion.emulator.streams import (
     stream_names_in_group,
 )
-from tether_companion.mavlink import geo, units
+from tether_companion.mavlink import estimates, geo, units
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.sim.controller import Setpoint
 
@@ -211,11 +211,11 @@ class MessageHandlers:
         self._send(telemetry.gps_global_origin(self))
 
     def _on_vision_position_estimate(self, msg: MAVLinkMessage, link_id: int) -> None:
-        self._external_pose(units.pose_from_vision_position_estimate(msg), msg.get_type())
+        self._external_pose(estimates.pose_from_vision_position_estimate(msg), msg.get_type())
 
     def _on_odometry(self, msg: MAVLinkMessage, link_id: int) -> None:
         try:
-            pose = units.pose_from_odometry(msg)
+            pose = estimates.pose_from_odometry(msg)
         except ValueError:
             self.counters.bad_values += 1
             self.scorer.add(
@@ -224,7 +224,7 @@ class MessageHandlers:
             return
         self._external_pose(pose, msg.get_type())
         try:
-            velocity = units.velocity_from_odometry(msg)
+            velocity = estimates.velocity_from_odometry(msg)
         except ValueError:
             self.counters.bad_values += 1
             return
@@ -232,9 +232,9 @@ class MessageHandlers:
             self._external_velocity(velocity)
 
     def _on_vision_speed_estimate(self, msg: MAVLinkMessage, link_id: int) -> None:
-        self._external_velocity(units.velocity_from_vision_speed_estimate(msg))
+        self._external_velocity(estimates.velocity_from_vision_speed_estimate(msg))
 
-    def _external_pose(self, pose: units.PoseEstimate, kind: str) -> None:
+    def _external_pose(self, pose: estimates.PoseEstimate, kind: str) -> None:
         now = self.sim.time_s
         covariance = None if pose.covariance is None else pose.covariance[:3, :3]
         self.scorer.add(
@@ -248,7 +248,7 @@ class MessageHandlers:
         if self.vision_navigation:
             self.nav.on_estimate(pose, self.boot_time_s)
 
-    def _external_velocity(self, velocity: units.VelocityEstimate) -> None:
+    def _external_velocity(self, velocity: estimates.VelocityEstimate) -> None:
         """Score a received velocity (scored only: the emulated EKF navigates on position)."""
         self.scorer.add_velocity(
             velocity.velocity_ned_m_s,

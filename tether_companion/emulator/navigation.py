@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from tether_companion.mavlink.units import PoseEstimate
+from tether_companion.mavlink.estimates import PoseEstimate
 
 FloatArray = NDArray[np.float64]
 

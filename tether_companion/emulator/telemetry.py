@@ -11,7 +11,7 @@ import math
 from typing import TYPE_CHECKING
 
 from tether_companion.emulator.modes import GUIDED_FLAG_MODES, CopterMode
-from tether_companion.mavlink import geo, units
+from tether_companion.mavlink import estimates, geo, units
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 
 if TYPE_CHECKING:
@@ -200,7 +200,7 @@ def local_position_ned(fc: FlightController) -> MAVLinkMessage | None:
     position = fc.navigation_position_ned_m()
     if position is None:
         return None
-    return units.local_position_ned_message(fc.boot_time_s, position, fc.sim.velocity_ned_m_s)
+    return estimates.local_position_ned_message(fc.boot_time_s, position, fc.sim.velocity_ned_m_s)
 
 
 def global_position_int(fc: FlightController) -> MAVLinkMessage | None:

@@ -50,17 +50,19 @@ from numpy.typing import NDArray
 
 from tether_companion.estimation.catenary_position import CatenaryPosition
 from tether_companion.estimation.tension_kf import TensionEstimate
+from tether_companion.mavlink.estimates import (
+    PoseEstimate,
+    VelocityEstimate,
+    odometry_message,
+    vision_position_estimate_message,
+    vision_speed_estimate_message,
+)
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.mavlink.units import (
     MAV_FRAME_LOCAL_FRD,
     MAV_FRAME_LOCAL_NED,
     POSE_DIM,
-    PoseEstimate,
-    VelocityEstimate,
-    odometry_message,
     seconds_to_boot_ms,
-    vision_position_estimate_message,
-    vision_speed_estimate_message,
 )
 from tether_companion.samples import AttitudeSample
 from tether_companion.service.config import PublishConfig

@@ -40,7 +40,7 @@ def _instrumented_service(out_path: str, argv: list[str]) -> int:
     import gc
 
     from tether_companion import cli
-    from tether_companion.mavlink import endpoints
+    from tether_companion.mavlink import udp_link
     from tether_companion.service import app
 
     read: dict[int, float] = {}
@@ -56,7 +56,7 @@ def _instrumented_service(out_path: str, argv: list[str]) -> int:
             pauses.append((gc_start[0], time.monotonic() - gc_start[0], info["generation"]))
 
     gc.callbacks.append(on_gc)
-    datagram = endpoints._UdpLink._datagram
+    datagram = udp_link.UdpLink._datagram
     handle = app.CompanionService.handle_message
     send = app.CompanionService._send
 
@@ -77,7 +77,7 @@ def _instrumented_service(out_path: str, argv: list[str]) -> int:
         if msg.get_type() == "VISION_POSITION_ESTIMATE":
             sent[msg.usec] = time.monotonic()
 
-    endpoints._UdpLink._datagram = on_datagram  # type: ignore[method-assign]
+    udp_link.UdpLink._datagram = on_datagram  # type: ignore[method-assign]
     app.CompanionService.handle_message = on_handle  # type: ignore[method-assign]
     app.CompanionService._send = on_send  # type: ignore[method-assign]
 

@@ -8,7 +8,7 @@ import sys
 import time
 
 from tether_companion import cli
-from tether_companion.mavlink.endpoints import Link
+from tether_companion.mavlink.link import Link
 from tether_companion.service.app import CompanionService
 
 BLOCK_S = 0.12

@@ -10,8 +10,9 @@ import pytest
 from pymavlink import mavutil
 
 from tether_companion.config import ConfigError
-from tether_companion.mavlink.endpoints import Endpoint, LinkClosed, open_link, parse_endpoint
+from tether_companion.mavlink.endpoints import Endpoint, open_link, parse_endpoint
 from tether_companion.mavlink.framing import FrameEncoder, dialect
+from tether_companion.mavlink.link import LinkClosed
 
 TIMEOUT_S = 5.0
 

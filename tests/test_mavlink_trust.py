@@ -10,10 +10,11 @@ import socket
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from tether_companion.mavlink.endpoints import MAX_UDP_PEERS, open_link, parse_endpoint
+from tether_companion.mavlink.endpoints import open_link, parse_endpoint
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser
 from tether_companion.mavlink.signing import SignatureVerifier, Signer, timestamp_from_unix_s
 from tether_companion.mavlink.trust import OFF, PREFERRED, REQUIRED, LinkTrust
+from tether_companion.mavlink.udp_link import MAX_UDP_PEERS
 
 KEY = bytes(range(1, 33))
 NOW_UNIX_S = 1.75e9

@@ -25,7 +25,8 @@ import numpy as np
 
 from tether_companion.emulator.autopilot import FlightController
 from tether_companion.emulator.faults import LinkFaults
-from tether_companion.mavlink.endpoints import Endpoint, Link, LinkClosed, open_link
+from tether_companion.mavlink.endpoints import Endpoint, open_link
+from tether_companion.mavlink.link import Link, LinkClosed
 
 MAX_LAG_S = 0.1
 """Emulator time may fall this far behind the wall clock (x speed) before it slips [s]."""

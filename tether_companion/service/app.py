@@ -31,8 +31,9 @@ import traceback
 from collections.abc import Awaitable, Callable
 
 from tether_companion.config import ConfigError
-from tether_companion.mavlink.endpoints import Link, LinkClosed, open_link, parse_endpoint
+from tether_companion.mavlink.endpoints import open_link, parse_endpoint
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
+from tether_companion.mavlink.link import Link, LinkClosed
 from tether_companion.mavlink.units import seconds_to_usec
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.service.clock import FcClock

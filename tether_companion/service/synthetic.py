@@ -23,8 +23,8 @@ from numpy.typing import NDArray
 
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.frames import rotation_ned_to_body
-from tether_companion.mavlink.endpoints import Link, LinkClosed
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
+from tether_companion.mavlink.link import Link, LinkClosed
 from tether_companion.mavlink.units import (
     attitude_message,
     distance_sensor_message,

@@ -138,16 +138,17 @@ def assess_health(
         Whether this estimator run was healthy before: a too-large variance before the first
         healthy estimate is ``converging``, after it ``diverged``.
     """
-    position = estimate.position_ned_m
-    covariance = estimate.covariance
+    # in scalars: this runs at every IMU tick, and numpy's per-call overhead on 3- and
+    # 16-element arrays was most of the publisher's cost
+    isfinite = math.isfinite
     if not (
-        np.all(np.isfinite(position))
-        and np.all(np.isfinite(covariance))
-        and math.isfinite(estimate.tension_n)
+        all(map(isfinite, estimate.position_ned_m.tolist()))
+        and all(map(isfinite, estimate.covariance.ravel().tolist()))
+        and isfinite(estimate.tension_n)
     ):
         return DIVERGED
-    variances = np.diag(estimate.position_covariance_m2)
-    if np.any(variances <= 0.0) or float(variances.max()) >= config.max_position_variance_m2:
+    variances = estimate.position_covariance_m2.diagonal().tolist()
+    if min(variances) <= 0.0 or max(variances) >= config.max_position_variance_m2:
         if getattr(estimate, "missing_input", None) == RANGEFINDER:
             return NO_RANGE  # the variance grew because the height is not measured
         return DIVERGED if ever_ok else CONVERGING

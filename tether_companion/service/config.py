@@ -137,11 +137,11 @@ class InputLimitsConfig:
         40.0, exclusive_minimum=0.0, doc="rangefinder readings above this are dropped [m]"
     )
     reorder_window_s: float = spec(
-        0.02,
+        0.03,
         minimum=0.0,
         maximum=0.2,
-        doc="late samples within this much flight-controller time are put back in order "
-        "instead of dropped (adds as much latency; 0 = drop every late sample) [s]",
+        doc="largest reorder window: 0 until the link reorders, then 1.25x the lateness seen "
+        "(adds as much latency), back to 0 after 5-10 s without; 0 = drop every late sample [s]",
     )
 
     def validate(self) -> None:

@@ -12,9 +12,11 @@ Pure and synchronous (the live service and replay share it). For each message:
    flight controller's clock model is ``implausible``; one more than a second behind is
    ``out_of_order``, unless SYSTEM_TIME said the flight controller rebooted and the stamps
    agree: then :attr:`IngestCounters.reboots` counts it and the caller restarts;
-5. order: samples wait in a small reorder buffer (``inputs.reorder_window_s``) and leave it
-   in stamp order; per message type the stamp must then increase: an equal stamp is a
-   ``duplicate``, an older one (later than the window) ``out_of_order``.
+5. order: samples pass an adaptive reorder buffer (:mod:`~tether_companion.service.reorder`:
+   no delay until the link is seen to reorder, then a window covering what it showed, at most
+   ``inputs.reorder_window_s``) and leave it in stamp order; per message type the stamp must
+   then increase: an equal stamp is a ``duplicate``, an older one (later than the window)
+   ``out_of_order``.
 """
 
 from __future__ import annotations
@@ -85,7 +87,12 @@ class IngestCounters:
     implausible: int = 0
     """Stamps far ahead of the flight controller's clock model (e.g. a spoofed 2^63 us)."""
     reordered: int = 0
-    """Late samples put back in stamp order by the reorder buffer (not dropped)."""
+    """Samples that arrived older than one of their own stream (the link reordered them; put
+    back in order when the reorder window covered them, else dropped as ``out_of_order``)."""
+    reorder_window_s: float = 0.0
+    """The reorder buffer's current window [s] (0 until the link is seen to reorder)."""
+    reorder_widened: int = 0
+    """Times the reorder window grew to cover reordering beyond it."""
     reboots: int = 0
     accepted: dict[str, int] = field(default_factory=lambda: dict.fromkeys(INPUT_KINDS, 0))
 
@@ -334,7 +341,10 @@ class Ingest:
         """Per message type, stamps must increase after the reorder buffer."""
         t = sample.time_s
         counters = self.counters
-        counters.reordered = self.reorder.reordered
+        reorder = self.reorder
+        counters.reordered = reorder.reordered
+        counters.reorder_window_s = reorder.window_s
+        counters.reorder_widened = reorder.widened
         previous = self._latest_by_kind.get(kind, -math.inf)
         if t == previous:
             counters.duplicate += 1

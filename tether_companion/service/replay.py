@@ -106,7 +106,8 @@ def replay_log(
     suffix = path.suffix.lower()
     if suffix == ".tlog":
         # as live: each message at the time it was received (the clock checks), and samples
-        # still in the reorder buffer at the end are not processed
+        # still in the reorder buffer at the end (only if the log shows reordering) are not
+        # processed
         steps = (
             session.on_message(msg, received_s)
             for msg, received_s in _tlog_messages(path, allow_truncated)

@@ -77,6 +77,10 @@ def render(service: CompanionService) -> Group:
         "reboots",
     ):
         drops.add_row(name.replace("_", " "), str(getattr(counters, name)))
+    drops.add_row(
+        f"reordered by the link (window now {1e3 * counters.reorder_window_s:.0f} ms)",
+        str(counters.reordered),
+    )
     for name in ("garbage_bytes", "bad_crc", "unknown_id", "truncated"):
         drops.add_row(name.replace("_", " "), str(framing.get(name, 0)))
     trust = getattr(link, "trust", None)

@@ -94,6 +94,8 @@ class HoverStreams:
         Noise source; None gives noise-free readings.
     accel_noise_mps2
         Accelerometer white-noise standard deviation [m/s^2].
+    imu_hz, attitude_hz, servo_hz, range_hz
+        Stream rates [Hz]; each of the others must divide ``imu_hz`` (one IMU sample a tick).
     """
 
     def __init__(
@@ -103,11 +105,19 @@ class HoverStreams:
         tension_n: float,
         rng: np.random.Generator | None = None,
         accel_noise_mps2: float = 0.1,
+        *,
+        imu_hz: float = 200.0,
+        attitude_hz: float = 100.0,
+        servo_hz: float = 100.0,
+        range_hz: float = 20.0,
     ) -> None:
         self.state = hover_state(vehicle, position_ned_m, tension_n)
         self.position_ned_m = np.asarray(position_ned_m, dtype=float)
         self._rng = rng
         self._accel_noise = accel_noise_mps2
+        self.tick_s = 1.0 / imu_hz
+        """IMU period [s]: one tick of :meth:`messages`."""
+        self._every = tuple(_ticks_per(imu_hz, hz) for hz in (attitude_hz, servo_hz, range_hz))
 
     def imu(self, time_s: float) -> MAVLinkMessage:
         """RAW_IMU (milli-g) at ``time_s``."""
@@ -134,15 +144,26 @@ class HoverStreams:
         return distance_sensor_message(time_s, distance, min_distance_m=0.2, max_distance_m=40.0)
 
     def messages(self, time_s: float, tick: int) -> list[MAVLinkMessage]:
-        """Everything due at IMU tick ``tick`` of a 200 Hz stream (attitude and servo at
+        """Everything due at IMU tick ``tick`` (by default a 200 Hz IMU, attitude and servo at
         100 Hz, rangefinder at 20 Hz), attitude and servo first so the IMU tick uses them."""
+        attitude_every, servo_every, range_every = self._every
         out: list[MAVLinkMessage] = []
-        if tick % 2 == 0:
-            out += [self.attitude(time_s), self.servo(time_s)]
-        if tick % 10 == 0:
+        if tick % attitude_every == 0:
+            out.append(self.attitude(time_s))
+        if tick % servo_every == 0:
+            out.append(self.servo(time_s))
+        if tick % range_every == 0:
             out.append(self.rangefinder(time_s))
         out.append(self.imu(time_s))
         return out
+
+
+def _ticks_per(imu_hz: float, hz: float) -> int:
+    """IMU ticks per sample of a stream at ``hz`` (ValueError unless it divides ``imu_hz``)."""
+    every = round(imu_hz / hz) if hz > 0 else 0
+    if every < 1 or abs(imu_hz / every - hz) > 1e-9 * imu_hz:
+        raise ValueError(f"a {hz:g} Hz stream does not divide the {imu_hz:g} Hz IMU stream")
+    return every
 
 
 @dataclass
@@ -185,9 +206,8 @@ class FakeFlightController:
         REQUEST_DATA_STREAM only.
     """
 
-    TICK_S = 0.005
-    SYSTEM_TIME_TICKS = 40
-    """SYSTEM_TIME every this many ticks (5 Hz): what tells the companion of a reboot."""
+    SYSTEM_TIME_S = 0.2
+    """SYSTEM_TIME period [s] (5 Hz): what tells the companion of a reboot."""
 
     def __init__(
         self,
@@ -201,6 +221,8 @@ class FakeFlightController:
         self.link = link
         self.message_interval_supported = message_interval_supported
         self.streams = streams
+        self.tick_s = streams.tick_s
+        self._system_time_ticks = max(1, round(self.SYSTEM_TIME_S / streams.tick_s))
         self.speed = speed
         self.time_s = boot_time_s
         self.tick = 0
@@ -254,19 +276,19 @@ class FakeFlightController:
                 self.link.send_bytes(frame)
             self.inject.clear()
             for _ in range(ticks_per_wakeup):
-                self.time_s += self.TICK_S
+                self.time_s += self.tick_s
                 if self.streaming:
-                    if self.tick % self.SYSTEM_TIME_TICKS == 0:
+                    if self.tick % self._system_time_ticks == 0:
                         boot_ms = round(self.time_s * 1e3)
                         self.link.send(d.MAVLink_system_time_message(0, boot_ms))
                     for msg in self.streams.messages(self.time_s, self.tick):
                         if msg.get_type() == "RAW_IMU":
                             self.imu_sent_s[msg.time_usec] = time.monotonic()
                         self.link.send(msg)
-                    streamed += self.TICK_S
+                    streamed += self.tick_s
                 self.tick += 1
             wakeups += 1
-            delay = start + wakeups * self.TICK_S * ticks_per_wakeup / self.speed - time.monotonic()
+            delay = start + wakeups * self.tick_s * ticks_per_wakeup / self.speed - time.monotonic()
             await asyncio.sleep(max(0.0, delay))
         await asyncio.sleep(0.05)  # let the last replies arrive
 

@@ -128,13 +128,13 @@ def run_scenario(
                 est3.on_range(reading)
         else:
             imu = sim.read_imu()
-            truth = sim.truth
-            est3.set_known_tension_n(truth.tension_n, imu.time_s)
+            tension_n = sim.tension_n
+            est3.set_known_tension_n(tension_n, imu.time_s)
             e4 = est4.on_imu(imu)
             e3 = est3.on_imu(imu)
             time_s[tick] = imu.time_s
-            truth_p[tick] = truth.position_ned_m
-            truth_f[tick] = truth.tension_n
+            truth_p[tick] = sim.position_ned_m
+            truth_f[tick] = tension_n
             if e4 is None or e3 is None:  # a rejected IMU sample: no estimate this tick
                 p4[tick], f4[tick], var4[tick], p3[tick], var3[tick] = (
                     np.nan,

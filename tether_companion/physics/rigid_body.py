@@ -135,9 +135,12 @@ class RigidBody:
         self._tug_force_ned_n: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._wind_ned_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._constant_force_ned_n = (0.0, 0.0, self.mass_kg * self.gravity_mps2)
+        self._coefficients: tuple[float, ...] = ()
+        """What :meth:`derivative` reads besides the state, as one tuple (one unpack per call)."""
+        self._update_constant_force()
         self.x: list[float] = [0.0] * N_RIGID_STATES
         self._motor_n: list[float] = [0.0] * self.n_motors
-        self._wrench: list[float] = [0.0] * 4
+        self._wrench: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
         self._targets_ref: Sequence[float] | None = None
         self._targets_wrench: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
         self.landed = False
@@ -174,6 +177,14 @@ class RigidBody:
             tug[1] + c * wind[1],
             tug[2] + c * wind[2] + self.mass_kg * self.gravity_mps2,
         )
+        self._coefficients = (
+            *self._constant_force_ned_n,
+            c,
+            self._inv_mass,
+            *wind,
+            *self._gyro,
+            *self._inv_inertia,
+        )
 
     # ------------------------------------------------------------------ state access
     @property
@@ -192,7 +203,7 @@ class RigidBody:
             raise ValueError("state must be finite")
         self.x = values[:N_RIGID_STATES]
         self._motor_n = values[N_RIGID_STATES:]
-        self._wrench = list(self.wrench(self._motor_n))
+        self._wrench = self.wrench(self._motor_n)
         self.landed = landed
         if landed:
             self._pin_to_ground()
@@ -244,6 +255,7 @@ class RigidBody:
             u, v, w = x3 + h * s3, x4 + h * s4, x5 + h * s5
             phi, theta, psi = x6 + h * s6, x7 + h * s7, x8 + h * s8
             p, q, r = x9 + h * s9, x10 + h * s10, x11 + h * s11
+        bn, be, bd, c, im, wn, we, wd, gx, gy, gz, ix, iy, iz = self._coefficients
         cr = math.cos(phi)
         sr = math.sin(phi)
         cp = math.cos(theta)
@@ -251,29 +263,27 @@ class RigidBody:
         cy = math.cos(psi)
         sy = math.sin(psi)
         # rows of R_v^b (eq. 2)
+        srsp = sr * sp
+        crsp = cr * sp
         r00 = cp * cy
         r01 = cp * sy
-        r10 = sr * sp * cy - cr * sy
-        r11 = sr * sp * sy + cr * cy
+        r10 = srsp * cy - cr * sy
+        r11 = srsp * sy + cr * cy
         r12 = sr * cp
-        r20 = cr * sp * cy + sr * sy
-        r21 = cr * sp * sy - sr * cy
+        r20 = crsp * cy + sr * sy
+        r21 = crsp * sy - sr * cy
         r22 = cr * cp
         # eq. 3: NED velocity = R^T (u, v, w)
         vn = r00 * u + r10 * v + r20 * w
         ve = r01 * u + r11 * v + r21 * w
         vd = -sp * u + r12 * v + r22 * w
         fn, fe, fd = self.external_force(pn, pe, pd, vn, ve, vd)
-        bn, be, bd = self._constant_force_ned_n
-        c = self._drag
         fn += bn - c * vn
         fe += be - c * ve
         fd += bd - c * vd
-        im = self._inv_mass
         ax = (r00 * fn + r01 * fe - sp * fd) * im
         ay = (r10 * fn + r11 * fe + r12 * fd) * im
         if self._has_aero_drag:
-            wn, we, wd = self._wind_ned_m_s
             dax, day = drag_accel_body_mps2(
                 u - (r00 * wn + r01 * we - sp * wd),
                 v - (r10 * wn + r11 * we + r12 * wd),
@@ -293,8 +303,6 @@ class RigidBody:
         dtheta = cr * q - sr * r
         dpsi = s / cp
         # eq. 6
-        gx, gy, gz = self._gyro
-        ix, iy, iz = self._inv_inertia
         dp = gx * q * r + tau_l * ix
         dq = gy * p * r + tau_m * iy
         dr = gz * p * q + tau_n * iz
@@ -315,35 +323,44 @@ class RigidBody:
         if fss is not self._targets_ref:
             self._targets_ref = fss
             self._targets_wrench = self.wrench(fss)
-        w_ss = self._targets_wrench
-        w_0 = self._wrench
+        # the wrench at the stage times, in scalars (4 values: a comprehension costs more)
+        st, sl, sm, sn = self._targets_wrench
+        t0, l0, m0, n0 = self._wrench
         dh = self._decay_half
         df = self._decay_full
-        w_half = [s + (z - s) * dh for s, z in zip(w_ss, w_0, strict=True)]
-        w_full = [s + (z - s) * df for s, z in zip(w_ss, w_0, strict=True)]
+        th, lh, mh, nh = (
+            st + (t0 - st) * dh,
+            sl + (l0 - sl) * dh,
+            sm + (m0 - sm) * dh,
+            sn + (n0 - sn) * dh,
+        )
+        w_full = (
+            st + (t0 - st) * df,
+            sl + (l0 - sl) * df,
+            sm + (m0 - sm) * df,
+            sn + (n0 - sn) * df,
+        )
         self._wrench = w_full
         self._motor_n = [s + (z - s) * df for s, z in zip(fss, self._motor_n, strict=True)]
 
         x = self.x
         if self.landed:
-            if not self._lifts_off(w_0[0]):
+            if not self._lifts_off(t0):
                 return
             self.landed = False
         h = dt_s
         hh = 0.5 * h
         deriv = self.derivative
-        t0, l0, m0, n0 = w_0
-        th, lh, mh, nh = w_half
         k1 = deriv(x, t0, l0, m0, n0)
         k2 = deriv(x, th, lh, mh, nh, k1, hh)
         k3 = deriv(x, th, lh, mh, nh, k2, hh)
         k4 = deriv(x, *w_full, k3, h)
         h6 = h / 6.0
-        self.x = [
+        x = self.x = [
             a + h6 * (b1 + b4 + 2.0 * (b2 + b3))
             for a, b1, b2, b3, b4 in zip(x, k1, k2, k3, k4, strict=True)
         ]
-        if self.x[POS_D] >= self.ground_down_m(self.x[POS_N], self.x[POS_E]):
+        if x[POS_D] >= self.ground_down_m(x[POS_N], x[POS_E]):
             self._touch_ground()
 
     # ------------------------------------------------------------------ ground contact
@@ -370,9 +387,9 @@ class RigidBody:
             x[i] = 0.0
 
     # ------------------------------------------------------------------ outputs
-    def velocity_ned_m_s(self) -> tuple[float, float, float]:
-        """NED velocity [m/s] of the current state (eq. 3)."""
-        _, _, _, u, v, w, phi, theta, psi = self.x[:9]
+    def velocity_ned_m_s(self, x: Sequence[float] | None = None) -> tuple[float, float, float]:
+        """NED velocity [m/s] of the current state, or of the rigid-body state ``x`` (eq. 3)."""
+        _, _, _, u, v, w, phi, theta, psi = (self.x if x is None else x)[:9]
         cr, sr = math.cos(phi), math.sin(phi)
         cp, sp = math.cos(theta), math.sin(theta)
         cy, sy = math.cos(psi), math.sin(psi)

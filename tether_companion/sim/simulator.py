@@ -262,13 +262,16 @@ class Simulator:
                 self.body.wind_ned_m_s = [m + g for m, g in zip(mean, gust, strict=True)]
             self._update_controller(t)
             self._check_flyable(t)
-        was_landed = self.body.landed
-        descent_mps = self.body.velocity_ned_m_s()[2] if not was_landed else 0.0
-        self.body.step(dt, self._steady_thrust_n)
+        body = self.body
+        was_landed = body.landed
+        before = body.x  # the step makes a new list: this one keeps the state before it
+        body.step(dt, self._steady_thrust_n)
         self.cable.advance(dt)
         self._steps += 1
-        crashed = self.body.landed and not was_landed and descent_mps > CRASH_SPEED_MPS
-        if crashed and self.armed:
+        if not body.landed or was_landed:
+            return
+        descent_mps = body.velocity_ned_m_s(before)[2]  # touched down in this step: how fast
+        if descent_mps > CRASH_SPEED_MPS and self.armed:
             self._fail(
                 f"t = {t:.2f} s: the drone hit the ground at {descent_mps:.1f} m/s "
                 f"(a landing is slower than {CRASH_SPEED_MPS} m/s)"
@@ -377,7 +380,7 @@ class Simulator:
         state = self.body.state
         specific_force = self._specific_force_now()
         velocity = self.body.velocity_ned_m_s()
-        cable = self.body.external_force(*state[POSITION].tolist(), *velocity)
+        cable = self._cable_force_now(velocity)
         return TruthState(
             time_s=self.time_s,
             position_ned_m=state[POSITION].copy(),
@@ -393,6 +396,18 @@ class Simulator:
             wind_ned_m_s=np.array(self.body.wind_ned_m_s),
             battery_voltage_v=self.battery_voltage_v,
         )
+
+    @property
+    def tension_n(self) -> float:
+        """True cable tension at the drone now [N] (``truth.tension_n`` without the arrays)."""
+        self._cable_force_now(self.body.velocity_ned_m_s())
+        return self.cable.tension_n
+
+    def _cable_force_now(self, velocity_ned_m_s: tuple[float, float, float]) -> tuple:
+        """The tether's force on the drone [N] at the state now moving at ``velocity_ned_m_s``
+        (NED [m/s]); sets the cable's ``tension_n`` to the tension at this state."""
+        x = self.body.x
+        return self.body.external_force(x[0], x[1], x[2], *velocity_ned_m_s)
 
     @property
     def battery_voltage_v(self) -> float:

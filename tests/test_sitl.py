@@ -6,12 +6,18 @@ without it these tests skip and say why. The long flights are ``slow`` (docs/ard
 
 from __future__ import annotations
 
+import asyncio
 import socket
 import time
 
+import numpy as np
 import pytest
 
-from tether_companion.ardupilot_sitl.companion import CompanionProcess, companion_config
+from tether_companion.ardupilot_sitl.companion import (
+    SITL_VEHICLE,
+    CompanionProcess,
+    companion_config,
+)
 from tether_companion.ardupilot_sitl.flights import GPS_LESS_PARAMS
 from tether_companion.ardupilot_sitl.ground_station import EKF_FLAG_POS_HORIZ_ABS, GroundStation
 from tether_companion.ardupilot_sitl.process import (
@@ -23,6 +29,10 @@ from tether_companion.ardupilot_sitl.process import (
     ports_of,
 )
 from tether_companion.mavlink.geo import Geodetic
+from tether_companion.physics.vehicle import load_vehicle
+from tether_companion.service.app import CompanionService
+from tether_companion.service.config import load_service_config, load_vehicle_for
+from tether_companion.service.systemd import SystemdNotifier
 
 pytestmark = [pytest.mark.integration, pytest.mark.sitl]
 
@@ -69,6 +79,71 @@ def test_companion_gives_a_gps_less_ekf3_its_origin_and_position(sitl_available,
     assert exit_code == 0, log
     assert "Traceback" not in log, log
     assert list((tmp_path / "rec").glob("*.tlog")), "the service recorded nothing"
+
+
+SITL_MASS_KG = 3.0
+"""SIM_Frame's default model mass: the one value no ArduPilot parameter holds."""
+
+
+async def _read_vehicle(service: CompanionService, timeout_s: float) -> float:
+    """Run ``service`` until it has built its profile from the flight controller (or
+    ``timeout_s`` [s] pass); returns the wall time it took [s]."""
+    stop = asyncio.Event()
+    start = time.monotonic()
+    task = asyncio.create_task(service.run(stop), name="service")
+    try:
+        while not service.vehicle.name.startswith("from-") and not task.done():
+            if time.monotonic() - start > timeout_s:
+                break
+            await asyncio.sleep(0.05)
+        return time.monotonic() - start
+    finally:
+        stop.set()
+        await asyncio.wait_for(task, timeout=10.0)
+
+
+def test_service_builds_the_vehicle_from_sitls_parameters(sitl_available) -> None:
+    """``vehicle: from_autopilot`` against the real ArduCopter: the service reads SITL's
+    parameters over TCP (PARAM_REQUEST_READ by name on SERIAL1) and builds the '+' quad that
+    SITL's frame model flies, as configs/vehicles/ardupilot-sitl-plus.yaml writes it from
+    SIM_Frame (mass 3 kg, hoverThrOut 0.39, expo 0.65, PWM 1000-2000, spin 0.15-0.95, motors 1
+    right, 2 left, 3 front, 4 back), with ArduPilot's battery compensation of copter.parm."""
+    options = SitlOptions(speedup=1.0)
+    with SitlProcess(options) as sitl:
+        with GroundStation(sitl.ports["serial0"], Geodetic(*options.home[:3])) as gcs:
+            gcs.request_streams()  # ArduPilot routes a broadcast only to links it heard from
+            overrides = {
+                "vehicle": "from_autopilot",
+                "autopilot_vehicle": {"mass_kg": SITL_MASS_KG},
+                "link": {"connect": f"tcp:127.0.0.1:{sitl.ports['serial1']}"},
+                "recording": {"enabled": False},
+            }
+            config = load_service_config(None, overrides)
+            service = CompanionService(
+                config, load_vehicle_for(config), notifier=SystemdNotifier({})
+            )
+            took_s = asyncio.run(_read_vehicle(service, timeout_s=30.0))
+            gcs.wait_for(
+                "the companion's STATUSTEXT",
+                lambda _s: any("from FC params" in t for t in gcs.companion_texts()),
+                timeout_s=5.0,
+            )
+    print(f"profile from SITL's parameters in {took_s:.2f} s")
+    built, frame = service.vehicle, load_vehicle(SITL_VEHICLE)
+    assert built.name == "from-ardupilot-quad-plus", (built.name, service.state.last_error)
+    assert built.motors == frame.motors  # FRAME_CLASS 1, FRAME_TYPE 0: SIM_Frame's '+' order
+    assert service.session.vehicle.n_motors == 4
+    curve, truth = built.thrust_curve, frame.thrust_curve
+    assert (curve.pwm_min_us, curve.pwm_max_us) == pytest.approx((1150.0, 1950.0), abs=1e-3)
+    # the profile's coefficients are rounded to 1 mN; ArduPilot's floats to float32
+    assert curve.coefficients_n == pytest.approx(truth.coefficients_n, abs=1e-3)
+    pwm = np.linspace(1000.0, 2000.0, 41)
+    assert curve.thrust_n(pwm) == pytest.approx(truth.thrust_n(pwm), abs=2e-3)
+    hover_pwm = 1150.0 + 800.0 * 0.551  # the profile's hover point (its comment)
+    assert float(curve.thrust_n(hover_pwm)) == pytest.approx(SITL_MASS_KG * 9.80665 / 4, rel=2e-3)
+    battery = built.battery  # copter.parm: MOT_BAT_VOLT_MAX 12.8, MOT_BAT_VOLT_MIN 9.6
+    assert (battery.voltage_max_v, battery.voltage_min_v) == pytest.approx((12.8, 9.6), rel=1e-6)
+    assert took_s < 10.0
 
 
 def test_a_port_in_use_fails_with_the_reason(sitl_available) -> None:

@@ -174,6 +174,45 @@ def test_recorded_voltage_is_read_back(tmp_path, suffix):
     assert volts[0] - volts[-1] > 0.03  # the sag is seen
 
 
+def _ulog(path, battery):
+    from sysid_synthetic import log_signals
+    from test_sysid_logs import write_ulog
+
+    write_ulog(path, log_signals(), battery)
+    return path
+
+
+def test_ulog_battery_status_voltage_is_read(tmp_path):
+    """PX4 .ulg: battery_status voltage_v on PX4's time; disconnected samples are unknown."""
+    rows = [(1.0 + 0.5 * k, 16.8 - 0.01 * k, True) for k in range(10)] + [(6.2, 0.0, False)]
+    voltage = load_flight_log(_ulog(tmp_path / "batt.ulg", rows)).battery_voltage_v
+    assert voltage is not None
+    np.testing.assert_allclose(voltage.time_s, [r[0] for r in rows[:10]], atol=1e-6)
+    np.testing.assert_allclose(voltage.values[:, 0], [r[1] for r in rows[:10]], atol=1e-6)
+    assert load_flight_log(_ulog(tmp_path / "none.ulg", [])).battery_voltage_v is None
+
+
+def test_sysid_compensates_a_ulog_flight(tmp_path, capsys):
+    """sysid on a .ulg with battery_status scales the commands like on .tlog/.bin/.csv."""
+    rows = [(0.5 + 0.5 * k, 16.8 - 0.005 * k, True) for k in range(80)]  # to 40 s
+    path = _ulog(tmp_path / "flight.ulg", rows)
+    range_args = ["--battery-voltage-max-v", "16.8", "--battery-voltage-min-v", "13.2"]
+    out = tmp_path / "model.yaml"
+    assert main(["sysid", str(path), "--structure", "static", *range_args, "--out", str(out)]) == 0
+    printed = " ".join(capsys.readouterr().out.split())
+    assert "battery: logged 16.41-16.80 V; commands scaled by the voltage ratio" in printed
+    assert "voltage_max_v: 16.8" in out.read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize("bad", [float("nan"), 0.0, -12.1])
+def test_ulog_voltage_that_is_not_a_positive_number_exits_2(tmp_path, capsys, bad):
+    rows = [(1.0, 16.8, True), (1.5, bad, True), (2.0, 16.7, True)]
+    assert main(["sysid", str(_ulog(tmp_path / "bad.ulg", rows))]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert "battery_status at 1.500 s: voltage_v = " in err and "not a positive voltage" in err
+
+
 def _csv(path, voltages):
     header = "time_s,pwm1_us,pwm2_us,pwm3_us,pwm4_us,acc_x_mps2,acc_y_mps2,acc_z_mps2,"
     rows = [header + "roll_rad,pitch_rad,yaw_rad,battery_voltage_v"]

@@ -116,15 +116,17 @@ def write_csv(path, signals, drop_column=None, height=True):
     path.write_text("\n".join(rows) + "\n", encoding="utf-8")
 
 
-def write_ulog(path, signals):
+def write_ulog(path, signals, battery=None):
     """A PX4 ULog built by hand: header, FMT ('F'), add-logged ('A') and data ('D') messages
     for sensor_combined, vehicle_attitude (quaternion w-x-y-z), actuator_outputs and
-    distance_sensor, as pyulog reads them."""
+    distance_sensor, as pyulog reads them; ``battery``: (time_s, voltage_v, connected) rows
+    of a battery_status topic."""
     topics = [
         ("sensor_combined", "uint64_t timestamp;float[3] accelerometer_m_s2;", "<Q3f"),
         ("vehicle_attitude", "uint64_t timestamp;float[4] q;", "<Q4f"),
         ("actuator_outputs", "uint64_t timestamp;float[16] output;", "<Q16f"),
         ("distance_sensor", "uint64_t timestamp;float current_distance;", "<Qf"),
+        ("battery_status", "uint64_t timestamp;float voltage_v;bool connected;", "<Qf?"),
     ]
 
     def message(kind, payload):
@@ -136,6 +138,7 @@ def write_ulog(path, signals):
         out += message("F", f"{name}:{fields}".encode())
     for i, (name, _, _) in enumerate(topics):
         out += message("A", struct.pack("<BH", 0, i) + name.encode())
+    pending = sorted(battery or [])
     for k, t in enumerate(signals["time_s"]):
         us = int(t * 1e6)
         r, p, y = signals["euler_rad"][k] / 2.0
@@ -152,8 +155,12 @@ def write_ulog(path, signals):
             (us, *signals["pwm_us"][k], *([0.0] * 12)),
             (us, signals["height_m"][k]),
         ]
-        for i, ((_, _, fmt), row) in enumerate(zip(topics, rows, strict=True)):
+        for i, ((_, _, fmt), row) in enumerate(zip(topics, rows, strict=False)):
             out += message("D", struct.pack("<H", i) + struct.pack(fmt, *row))
+        while pending and pending[0][0] <= t:
+            bt, volts, connected = pending.pop(0)
+            row = struct.pack(topics[4][2], int(bt * 1e6), volts, connected)
+            out += message("D", struct.pack("<H", 4) + row)
     path.write_bytes(bytes(out))
 
 

@@ -2,8 +2,11 @@
 
 Topics used (instance 0): ``sensor_combined`` (``accelerometer_m_s2[0..2]``, FRD body
 [m/s^2]), ``vehicle_attitude`` (``q[0..3]``, Hamilton w-x-y-z, body FRD to NED),
-``actuator_outputs`` (``output[0..3]`` [us]) and optionally ``distance_sensor``
-(``current_distance`` [m]). Time stamps are PX4's ``timestamp`` [us since boot].
+``actuator_outputs`` (``output[0..3]`` [us]), optionally ``distance_sensor``
+(``current_distance`` [m]) and ``battery_status`` (``voltage_v`` [V], ``voltage_filtered_v``
+in logs older than PX4 1.10; samples with ``connected`` false are unknown and skipped, a
+connected one that is not a positive finite voltage is an error naming its time). Time stamps
+are PX4's ``timestamp`` [us since boot].
 """
 
 from __future__ import annotations
@@ -14,9 +17,17 @@ from typing import Any
 import numpy as np
 
 from tether_companion.errors import InputError
-from tether_companion.sysid.logs.flightlog import N_MOTORS, FlightLog, make_series
+from tether_companion.sysid.logs.flightlog import N_MOTORS, FlightLog, Series, make_series
 
-TOPICS = ("sensor_combined", "vehicle_attitude", "actuator_outputs", "distance_sensor")
+TOPICS = (
+    "sensor_combined",
+    "vehicle_attitude",
+    "actuator_outputs",
+    "distance_sensor",
+    "battery_status",
+)
+BATTERY_FIELDS = ("voltage_v", "voltage_filtered_v")
+"""battery_status's voltage field, newest name first."""
 
 
 def euler_from_quaternion_rad(q_wxyz: np.ndarray) -> np.ndarray:
@@ -37,6 +48,37 @@ def _columns(
     return np.asarray(topic["timestamp"], dtype=float) * 1e-6, np.column_stack(
         [topic[f] for f in fields]
     )
+
+
+def _battery_voltage(source: str, topic: dict[str, Any] | None) -> Series | None:
+    """battery_status's voltage [V] while connected, or None (no topic, under two samples).
+
+    Raises
+    ------
+    InputError
+        When the topic has no voltage field, or a connected sample's voltage is not a positive
+        finite number (named with its time).
+    """
+    if topic is None:
+        return None
+    field = next((f for f in BATTERY_FIELDS if f in topic), None)
+    if field is None:
+        raise InputError(f"{source}: topic battery_status lacks field {BATTERY_FIELDS[0]}")
+    time_s = np.asarray(topic["timestamp"], dtype=float) * 1e-6
+    volts = np.asarray(topic[field], dtype=float)
+    if "connected" in topic:
+        connected = np.asarray(topic["connected"]) != 0
+        time_s, volts = time_s[connected], volts[connected]
+    bad = ~(np.isfinite(volts) & (volts > 0.0))
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        raise InputError(
+            f"{source}: battery_status at {time_s[k]:.3f} s: {field} = {volts[k]:g} is not a "
+            "positive voltage [V]"
+        )
+    if volts.size < 2:
+        return None
+    return make_series(source, "battery_status", time_s, volts, 1)
 
 
 def load_ulog(path: Path) -> FlightLog:
@@ -93,4 +135,5 @@ def load_ulog(path: Path) -> FlightLog:
             source, "vehicle_attitude", att_t, euler_from_quaternion_rad(quat), 3
         ),
         height_m=height,
+        battery_voltage_v=_battery_voltage(source, topics.get("battery_status")),
     )

@@ -41,7 +41,8 @@ async def _fly(emulator: EmulatorProcess, overrides: dict) -> CompanionService:
     """Start ``emulator``, run the service on a UDP link to it (``overrides`` of the default
     configuration besides the link) until the emulator exits, stop the service."""
     async with emulator:
-        overrides = {**overrides, "link": {"connect": f"udpout:127.0.0.1:{emulator.port}"}}
+        link = {**overrides.get("link", {}), "connect": f"udpout:127.0.0.1:{emulator.port}"}
+        overrides = {**overrides, "link": link}
         config = load_service_config(None, overrides)
         service = CompanionService(config, load_vehicle_for(config), notifier=SystemdNotifier({}))
         stop = asyncio.Event()

@@ -163,6 +163,23 @@ def test_bad_parameters_stop_the_service_naming_them(change: dict, key: str) -> 
     assert str(service._fatal).startswith(f"flight controller 1/1 parameters: {key} = ")
 
 
+def test_the_last_request_is_given_time_to_be_answered() -> None:
+    """With one attempt per name, answers arriving after the requests still count: the fetch
+    once declared every name absent as soon as it was asked, and the first stream message
+    (before any answer) built the profile from nothing ('FRAME_CLASS = <missing>', seen over
+    UDP with ``tether-companion run``)."""
+    service, link = _service()
+    attitude = _fc(dialect.MAVLink_attitude_message(1, 0, 0, 0, 0, 0, 0))
+    service.handle_message(link, _heartbeat(), 0.0)
+    service.housekeep(link, 0.0)  # every name asked once
+    service.handle_message(link, attitude, 0.05)
+    assert service._fatal is None and not service.vehicle_fetch.done(0.05)
+    for name, value in GOOD.items():
+        service.handle_message(link, _param(name, value), 0.1)
+    service.handle_message(link, attitude, 1.2)  # the absent ones had their interval
+    assert service._fatal is None and service.vehicle.frame == "hexa-x"
+
+
 def test_missing_parameter_with_fallback_uses_it_and_says_why() -> None:
     service, link = _service(fallback="crazyflie")
     params = {k: v for k, v in GOOD.items() if k != "MOT_THST_HOVER"}
@@ -210,7 +227,7 @@ def test_a_flight_controller_reboot_reads_the_parameters_again() -> None:
     _feed(service, link, GOOD)
     assert service.vehicle.frame == "hexa-x"
     service._on_fc_reboot()  # what the ingest's reboot detection calls
-    assert not service.vehicle_fetch.done and service.vehicle_fetch.params == {}
+    assert not service.vehicle_fetch.done(5.2) and service.vehicle_fetch.params == {}
     _feed(service, link, {**GOOD, "FRAME_CLASS": 3})  # the new firmware flies an octa
     assert service.vehicle.frame == "octa-x" and service.session.vehicle.n_motors == 8
 

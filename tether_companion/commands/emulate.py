@@ -66,6 +66,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--sysid", type=int, help="MAVLink system id (default 1)")
     parser.add_argument(
+        "--autopilot",
+        choices=("ardupilot", "px4"),
+        help="flavour: px4 answers the vehicle as PX4 parameters (integers bytewise), says PX4 "
+        "in its HEARTBEAT and streams HIGHRES_IMU (default ardupilot)",
+    )
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="answer VALUE for parameter NAME, read-only vehicle parameters included (a "
+        "misconfigured autopilot; the simulated vehicle is unchanged); repeatable",
+    )
+    parser.add_argument(
         "--rate",
         action="append",
         default=[],
@@ -130,6 +144,18 @@ def emulator_config_from_args(args: argparse.Namespace, base: EmulatorConfig) ->
         data["navigation"] = args.nav
     if args.sysid is not None:
         data["system_id"] = args.sysid
+    if args.autopilot:
+        data["autopilot"] = args.autopilot
+    for text in args.param:
+        name, sep, value = text.partition("=")
+        try:
+            data["parameters"][name.strip()] = float(value)
+        except ValueError:
+            raise ConfigError(
+                "", "--param", text, "expected NAME=VALUE, e.g. MOT_SPIN_MIN=0.5"
+            ) from None
+        if not sep:
+            raise ConfigError("", "--param", text, "expected NAME=VALUE, e.g. MOT_SPIN_MIN=0.5")
     if args.score_start is not None:
         data["score_start_s"] = args.score_start
     for text in args.rate:

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tether_companion.config import ConfigError
 from tether_companion.emulator import telemetry
 from tether_companion.emulator.command_handlers import CommandHandlers
 from tether_companion.emulator.config import EmulatorConfig
@@ -125,11 +126,12 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions):
             config.faults.delay_ms * 1e-3,
             config.faults.delay_jitter_ms * 1e-3,
         )
-        vehicle_params = vehicle_parameter_definitions(self.sim.vehicle)
+        vehicle_params = vehicle_parameter_definitions(self.sim.vehicle, config.autopilot)
         self.params = ParameterStore(
             [*parameter_definitions(scenario, config), *vehicle_params],
             self._apply_param,
             read_only=frozenset({"SYSID_THISMAV", *(d.name for d in vehicle_params)}),
+            bytewise=config.autopilot == "px4",
         )
         self.truth_history = TruthHistory(self.sim.physics_dt_s)
         self.scorer = Scorer(config.score_start_s)
@@ -154,6 +156,10 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions):
             self.mode = CopterMode.AUTO  # a landed, armed start that flies its waypoints
         else:
             self._hold_here()
+        for name, value in config.parameters.items():
+            why = self.params.override(name, value)
+            if why is not None:
+                raise ConfigError("", f"emulator.parameters.{name}", value, why)
 
     # ------------------------------------------------------------------ time and identity
     @property
@@ -227,7 +233,9 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions):
     def _default_rates(scenario: Scenario, config: EmulatorConfig) -> dict[str, float]:
         rates = {name: spec.default_hz for name, spec in STREAMS.items()}
         sensors = scenario.sensors
-        rates["RAW_IMU"] = sensors.imu_rate_hz
+        imu = "HIGHRES_IMU" if config.autopilot == "px4" else "RAW_IMU"  # each one's own
+        rates["RAW_IMU"] = 0.0
+        rates[imu] = sensors.imu_rate_hz
         rates["ATTITUDE"] = sensors.attitude_rate_hz
         rates["SERVO_OUTPUT_RAW"] = sensors.pwm_rate_hz
         rates["DISTANCE_SENSOR"] = sensors.range_rate_hz

@@ -7,6 +7,7 @@ flags, which override the file. Example::
     emulator:
       navigation: vision
       stream_rates_hz: {RAW_IMU: 400, SIM_STATE: 0}
+      parameters: {MOT_SPIN_MIN: 0.5}
       faults:
         drop_probability: 0.01
         outages: [{stream: ATTITUDE, start_s: 10, duration_s: 0.5}]
@@ -23,6 +24,7 @@ from tether_companion.emulator.streams import STREAMS
 from tether_companion.sim.scenario import Scenario, resolve_scenario_path, scenario_from_mapping
 
 NAVIGATION_SOURCES: tuple[str, ...] = ("truth", "vision")
+AUTOPILOTS: tuple[str, ...] = ("ardupilot", "px4")
 MAX_STREAM_RATE_HZ = 1000.0
 
 
@@ -101,6 +103,17 @@ class EmulatorConfig:
         minimum=0.0,
         maximum=MAX_STREAM_RATE_HZ,
         doc="default rate per message name (0 = off); unnamed streams keep their defaults [Hz]",
+    )
+    autopilot: str = spec(
+        "ardupilot",
+        choices=AUTOPILOTS,
+        doc="flavour: px4 sends HEARTBEAT autopilot PX4, the vehicle as PX4 parameters "
+        "(integers bytewise) and HIGHRES_IMU instead of RAW_IMU; modes stay ArduPilot's",
+    )
+    parameters: dict[str, float] = spec(
+        default_factory=dict,
+        doc="values answered instead of the defaults, the read-only vehicle parameters "
+        "included (a misconfigured autopilot; the simulated vehicle is unchanged)",
     )
     score_start_s: float = spec(
         0.0, minimum=0.0, doc="estimates stamped before this time are not scored (warm-up) [s]"

@@ -279,7 +279,7 @@ class MessageHandlers:
             self.counters.ignored += 1
             self._text(dialect.MAV_SEVERITY_WARNING, f"Unknown parameter {name}")
             return
-        why = self.params.set(name, float(msg.param_value))
+        why = self.params.set(name, self.params.decode(float(msg.param_value), msg.param_type))
         if why is not None:
             self.counters.bad_values += 1
             self._text(dialect.MAV_SEVERITY_WARNING, f"{name}: {why}")

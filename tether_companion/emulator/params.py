@@ -1,14 +1,17 @@
 """The emulator's MAVLink parameters: the simulation's tunables, changeable in flight.
 
 Every parameter is a float on the wire (PARAM_VALUE); whole-number ones are sent with
-MAV_PARAM_TYPE_INT32 and their value cast to float, as ArduPilot does. A PARAM_SET outside a
-parameter's range, non-finite, or fractional for an integer parameter is refused: the reply
-is the unchanged value and a STATUSTEXT says why. docs/emulator.md lists them all.
+MAV_PARAM_TYPE_INT32 and their value cast to float, as ArduPilot does, or, in the PX4 flavour,
+with the int32's bytes in the float field, as PX4 does (and read back so from PARAM_SET). A
+PARAM_SET outside a parameter's range, non-finite, or fractional for an integer parameter is
+refused: the reply is the unchanged value and a STATUSTEXT says why. docs/emulator.md lists
+them all.
 """
 
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -17,7 +20,8 @@ from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.physics.cable import CABLE_MODELS
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.sim.scenario import Scenario
-from tether_companion.vehicle_params.emulated import ardupilot_parameters
+from tether_companion.vehicle_params.emulated import ardupilot_parameters, px4_parameters
+from tether_companion.vehicle_params.sources import param_value
 
 PARAM_ID_LEN = 16
 
@@ -201,18 +205,45 @@ _VEHICLE_PARAM_DOCS = {
 }
 
 
-def vehicle_parameter_definitions(vehicle: VehicleProfile) -> list[ParamDef]:
-    """ArduPilot's frame and motor parameters of the simulated vehicle (read only), so that a
-    companion can build its profile with ``vehicle: from_autopilot``; none when ArduPilot's
-    parameters cannot express the profile (a raw-command or custom-layout vehicle)."""
+def _px4_doc(name: str) -> tuple[str, bool]:
+    """Meaning and integer-ness of a PX4 vehicle parameter (per-rotor names by their suffix)."""
+    fixed = {
+        "CA_AIRFRAME": ("airframe (0 multirotor)", True),
+        "CA_ROTOR_COUNT": ("number of rotors", True),
+        "THR_MDL_FAC": ("thrust model factor (0 linear, 1 quadratic)", False),
+        "MPC_THR_HOVER": ("hover thrust (collective demand, 0-1)", False),
+    }
+    if name in fixed:
+        return fixed[name]
+    for prefix, doc, integer in (
+        ("PWM_MAIN_MIN", "PWM at zero output [us]", True),
+        ("PWM_MAIN_MAX", "PWM at full output [us]", True),
+        ("PWM_MAIN_FUNC", "output function (101 = Motor 1)", True),
+    ):
+        if name.startswith(prefix):
+            return doc, integer
+    suffix = {"_PX": "rotor position, body x [m]", "_PY": "rotor position, body y [m]"}
+    return suffix.get(name[-3:], "rotor moment ratio (> 0 ccw, < 0 cw)"), False
+
+
+def vehicle_parameter_definitions(
+    vehicle: VehicleProfile, autopilot: str = "ardupilot"
+) -> list[ParamDef]:
+    """The frame and motor parameters of the simulated vehicle (read only) as ArduPilot or
+    PX4 names them, so that a companion can build its profile with ``vehicle:
+    from_autopilot``; none when the autopilot's parameters cannot express the profile (a
+    raw-command or custom-layout vehicle)."""
     try:
-        values = ardupilot_parameters(vehicle)
+        values = px4_parameters(vehicle) if autopilot == "px4" else ardupilot_parameters(vehicle)
     except ValueError:
         return []
+    docs = {
+        name: _px4_doc(name) if autopilot == "px4" else _VEHICLE_PARAM_DOCS[name] for name in values
+    }
     return [
         ParamDef(name, value, value, value, doc + " (read only: the simulated vehicle's)", integer)
         for name, value in values.items()
-        for doc, integer in (_VEHICLE_PARAM_DOCS[name],)
+        for doc, integer in (docs[name],)
     ]
 
 
@@ -228,6 +259,9 @@ class ParameterStore:
         ``ValueError`` to refuse it (the old value is restored and the message reported).
     read_only
         Names that cannot be set.
+    bytewise
+        Integer parameters travel as their int32's bytes in the float field (PX4), not as a
+        float value (ArduPilot).
     """
 
     def __init__(
@@ -235,6 +269,8 @@ class ParameterStore:
         definitions: Sequence[ParamDef],
         apply: Callable[[str, float], None],
         read_only: frozenset[str] = frozenset({"SYSID_THISMAV"}),
+        *,
+        bytewise: bool = False,
     ) -> None:
         self.definitions = {d.name: d for d in definitions}
         self._names = [d.name for d in definitions]
@@ -242,6 +278,7 @@ class ParameterStore:
         self._values = {d.name: float(d.default) for d in definitions}
         self._apply = apply
         self._read_only = read_only
+        self.bytewise = bytewise
         for name in self._names:
             if len(name) > PARAM_ID_LEN:
                 raise ValueError(f"parameter name {name!r} is longer than 16 characters")
@@ -281,6 +318,23 @@ class ParameterStore:
             return str(exc)
         return None
 
+    def override(self, name: str, value: float) -> str | None:
+        """Answer ``value`` for ``name`` from now on: a read-only parameter takes any value
+        (a misconfigured autopilot), another one is set as by PARAM_SET. Returns why it was
+        refused (unknown name, a refused value), or None."""
+        if name not in self._values:
+            return "unknown parameter"
+        if self.bytewise and self.definitions[name].integer and not float(value).is_integer():
+            return "must be a whole number (an integer parameter)"
+        if name in self._read_only:
+            self._values[name] = float(value)
+            return None
+        return self.set(name, value)
+
+    def decode(self, value: float, param_type: int) -> float:
+        """A PARAM_SET's value (bytewise integers in the PX4 flavour)."""
+        return param_value(value, param_type, self.bytewise)
+
     def force(self, name: str, value: float) -> None:
         """Record a value changed by the emulator itself (no checks, no apply)."""
         self._values[name] = float(value)
@@ -291,9 +345,12 @@ class ParameterStore:
         param_type = (
             dialect.MAV_PARAM_TYPE_INT32 if definition.integer else dialect.MAV_PARAM_TYPE_REAL32
         )
+        value = self._values[name]
+        if self.bytewise and definition.integer:
+            value = struct.unpack("<f", struct.pack("<i", int(value)))[0]
         return dialect.MAVLink_param_value_message(
             name.encode("ascii"),
-            self._values[name],
+            value,
             param_type,
             len(self._names),
             self._index[name],

@@ -45,7 +45,8 @@ LANDING_MODES = frozenset({CopterMode.LAND})
 
 
 def heartbeat(fc: FlightController) -> MAVLinkMessage:
-    """HEARTBEAT: quadrotor, ArduPilot, base_mode flags and the Copter mode number."""
+    """HEARTBEAT: quadrotor, ArduPilot (or PX4 in that flavour), base_mode flags and the
+    Copter mode number."""
     base = (
         dialect.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
         | dialect.MAV_MODE_FLAG_STABILIZE_ENABLED
@@ -61,7 +62,9 @@ def heartbeat(fc: FlightController) -> MAVLinkMessage:
         state = dialect.MAV_STATE_ACTIVE if fc.armed else dialect.MAV_STATE_STANDBY
     return dialect.MAVLink_heartbeat_message(
         dialect.MAV_TYPE_QUADROTOR,
-        dialect.MAV_AUTOPILOT_ARDUPILOTMEGA,
+        dialect.MAV_AUTOPILOT_PX4
+        if fc.config.autopilot == "px4"
+        else dialect.MAV_AUTOPILOT_ARDUPILOTMEGA,
         base,
         int(fc.mode),
         state,
@@ -274,9 +277,15 @@ def gps_global_origin(fc: FlightController) -> MAVLinkMessage | None:
 
 
 def autopilot_version(fc: FlightController) -> MAVLinkMessage:
-    """AUTOPILOT_VERSION: ArduCopter 4.5.0 (official) with MAVLink 2 capabilities."""
+    """AUTOPILOT_VERSION: ArduCopter 4.5.0 (official) with MAVLink 2 capabilities (parameters
+    encoded bytewise in the PX4 flavour)."""
+    capabilities = _CAPABILITIES
+    if fc.config.autopilot == "px4":
+        capabilities = (
+            capabilities & ~dialect.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+        ) | dialect.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
     return dialect.MAVLink_autopilot_version_message(
-        _CAPABILITIES,
+        capabilities,
         _FLIGHT_SW_VERSION,
         0,
         0,

@@ -300,7 +300,7 @@ class CompanionService:
             if fetch is not None and kind == "PARAM_VALUE":
                 fetch.on_param_value(msg)
                 return
-        if self.vehicle_fetch is not None and not self._vehicle_read(link):
+        if self.vehicle_fetch is not None and not self._vehicle_read(link, now_s):
             return
         step = session.on_message(msg, now_s)
         if session.ingest.rebooted:
@@ -334,13 +334,13 @@ class CompanionService:
         elif kind == "GPS_GLOBAL_ORIGIN":
             self.state.origin_confirmed = True
 
-    def _vehicle_read(self, link: Link) -> bool:
+    def _vehicle_read(self, link: Link, now_s: float) -> bool:
         """Whether the profile from the flight controller is in use (built on the first call
         after the fetch completes; a bad parameter set falls back or stops the service)."""
         fetch = self.vehicle_fetch
         if fetch is None or self._vehicle_ready:
             return True
-        if not fetch.done:
+        if not fetch.done(now_s):
             return False
         settings = self.config.autopilot_vehicle
         ids = f"{self.config.link.fc_system_id}/{self.config.link.fc_component_id}"

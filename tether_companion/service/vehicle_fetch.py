@@ -1,9 +1,9 @@
 """``vehicle: from_autopilot``: read the vehicle's parameters from the flight controller.
 
 The service asks for each parameter it needs by name (PARAM_REQUEST_READ, ``param_index`` -1)
-and collects the PARAM_VALUE answers; a name not answered after ``attempts`` requests
-``interval_s`` apart counts as absent (ArduPilot does not answer unknown names), and
-:func:`tether_companion.vehicle_params.profile.profile_from_parameters` then applies the
+and collects the PARAM_VALUE answers; a name not answered ``interval_s`` after the last of
+``attempts`` requests ``interval_s`` apart counts as absent (ArduPilot does not answer unknown
+names), and :func:`tether_companion.vehicle_params.profile.profile_from_parameters` then applies the
 firmware default or refuses. For PX4 the rotor count comes first; the per-rotor and per-output
 names follow from it. PX4 sends integer parameters bytewise, ArduPilot as a float value.
 The fetch starts again after a flight-controller reboot. No I/O here: the service sends what
@@ -95,13 +95,15 @@ class VehicleFetch:
         self.params.clear()
         self._asked.clear()
 
-    @property
-    def done(self) -> bool:
-        """Every wanted name is answered or has used up its attempts."""
-        return all(
-            name in self.params or self._asked.get(name, (0, 0.0))[0] >= self.config.attempts
-            for name in wanted_names(self.autopilot, self.params)
-        )
+    def done(self, now_s: float) -> bool:
+        """Every wanted name is answered, or has used up its attempts and its last request
+        has had ``request_interval_s`` to be answered by local time ``now_s`` [s]."""
+        attempts, wait_s = self.config.attempts, self.config.request_interval_s
+        for name in wanted_names(self.autopilot, self.params):
+            count, last_s = self._asked.get(name, (0, math.inf))
+            if name not in self.params and (count < attempts or now_s - last_s < wait_s):
+                return False
+        return True
 
     def requests(self, now_s: float) -> list[MAVLinkMessage]:
         """PARAM_REQUEST_READ for every wanted name due at local time ``now_s`` [s]."""

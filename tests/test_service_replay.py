@@ -204,3 +204,53 @@ def test_summary_without_any_imu_tick_says_so() -> None:
     summary = ReplaySummary("x.tlog", {"imu": 0, "attitude": 10}, 0, 0.0, 3)
     assert "no IMU sample reached the estimator" in summary.reasons_text()
     assert ReplaySummary("x.tlog", {"imu": 5}, 5, 1.0, 0, 5, {}).reasons_text() == ""
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        {},
+        {"publish": {"on_unhealthy": "inflate", "odometry": True}, "tension_mode": {}},
+        {"estimator": {"kind": "three_state"}, "tension": {"source": "config"}},
+        {
+            "position": {"source": "catenary"},
+            "catenary": {
+                "case": "known_length",
+                "weight_per_length_n_per_m": 0.05,
+                "default_length_m": 4.0,
+            },
+        },
+    ],
+    ids=["default", "inflate-odometry", "three-state", "catenary"],
+)
+def test_a_session_without_messages_publishes_the_same(tmp_path: Path, overrides) -> None:
+    """Replay's session builds no messages (nobody reads them) and skips the tension modes;
+    its publication records, counters and reset counter equal the live session's, message for
+    message, on a flight with a 1 s attitude outage (unhealthy, then a resumed publication)."""
+    from tether_companion.service.replay import _tlog_messages
+    from tether_companion.service.session import EstimationSession
+
+    config = load_service_config(None, {"recording": {"enabled": False}, **overrides})
+    vehicle = load_vehicle_for(config)
+    streams = HoverStreams(vehicle, POSITION, 4.0, rng=np.random.default_rng(12))
+    fc = FrameEncoder(1, 1)
+    writer = TlogWriter(tmp_path, LIMITS)
+    for k in range(8 * 200):
+        for msg in streams.messages(20.0 + k * 0.005, k):
+            if not (4.0 <= k * 0.005 < 5.0 and msg.get_type() == "ATTITUDE"):
+                writer.write(fc.encode(msg))
+    writer.close()
+    assert writer.current_path is not None
+    live = EstimationSession(config, vehicle)
+    quiet = EstimationSession(config, vehicle, messages=False)
+    sent = 0
+    for msg, received_s in _tlog_messages(writer.current_path, False):
+        a, b = live.on_message(msg, received_s), quiet.on_message(msg, received_s)
+        assert a.publication == b.publication
+        assert b.messages == []
+        sent += len(a.messages)
+    assert sent > 0 and live.publisher.counters.published > 100
+    assert live.publisher.counters == quiet.publisher.counters
+    assert live.publisher.reset_counter == quiet.publisher.reset_counter
+    counters = live.publisher.counters
+    assert counters.resets + counters.inflated > 0  # the outage: a pause and reset, or inflated

@@ -172,11 +172,17 @@ class Publisher:
         The ``publish`` section.
     has_tension_state
         True for the 4-state estimator (slack detection on the estimated tension).
+    messages
+        False when nobody reads the messages (replay): none are built, the publication records,
+        counters, health and reset counter are the same.
     """
 
-    def __init__(self, config: PublishConfig, has_tension_state: bool) -> None:
+    def __init__(
+        self, config: PublishConfig, has_tension_state: bool, *, messages: bool = True
+    ) -> None:
         self.config = config
         self.has_tension_state = has_tension_state
+        self.messages = messages
         self.counters = PublisherCounters()
         self.reset_counter = 0
         self.health = CONVERGING
@@ -234,7 +240,11 @@ class Publisher:
         ``filtered_max_age_s`` or an invalid catenary position.
         """
         t = tension.time_s
-        if self._filtered_period_s == math.inf or not t >= self._next_filtered_s:
+        if (
+            not self.messages
+            or self._filtered_period_s == math.inf
+            or not t >= self._next_filtered_s
+        ):
             return []
         fresh = tension.valid and tension.age_s(t) <= self.config.filtered_max_age_s
         position_ok = catenary is not None and catenary.valid
@@ -313,7 +323,8 @@ class Publisher:
         out += self._health_transition(health, t)
         self.counters.by_health[health] += 1
         if (
-            t >= self._next_tension_s
+            self.messages
+            and t >= self._next_tension_s
             and math.isfinite(estimate.tension_n)
             and self._tension_period_s < math.inf
         ):
@@ -346,21 +357,8 @@ class Publisher:
         self._last_sent_position = position.copy()
         if health == OK:
             self._last_ok_position = position.copy()
-        pose_cov = self._pose_covariance(estimate, inflated=send_inflated)
-        pose = PoseEstimate(
-            time_s=t,
-            position_ned_m=position,
-            euler_rad=(attitude.roll_rad, attitude.pitch_rad, attitude.yaw_rad),
-            covariance=pose_cov,
-            reset_counter=self.reset_counter,
-        )
-        out.append(vision_position_estimate_message(pose))
-        velocity = None if send_inflated else velocity_of(estimate, t, self.reset_counter)
-        if self.config.odometry:
-            frame = _ODOMETRY_FRAMES[self.config.odometry_frame]
-            out.append(odometry_message(pose, velocity, frame_id=frame))
-        if self.config.speed_estimate and velocity is not None:
-            out.append(vision_speed_estimate_message(velocity))
+        if self.messages:
+            out += self._position_messages(estimate, position, attitude, send_inflated)
         self.counters.published += 1
         self.counters.inflated += int(send_inflated)
         variances = np.diag(estimate.covariance).copy()
@@ -377,6 +375,32 @@ class Publisher:
         )
         self.last = publication
         return out, publication
+
+    def _position_messages(
+        self,
+        estimate: PositionEstimate,
+        position: FloatArray,
+        attitude: AttitudeSample,
+        inflated: bool,
+    ) -> list[MAVLinkMessage]:
+        """VISION_POSITION_ESTIMATE (and ODOMETRY, VISION_SPEED_ESTIMATE when configured) for
+        ``position`` (NED [m]) at the estimate's time."""
+        t = estimate.time_s
+        pose = PoseEstimate(
+            time_s=t,
+            position_ned_m=position,
+            euler_rad=(attitude.roll_rad, attitude.pitch_rad, attitude.yaw_rad),
+            covariance=self._pose_covariance(estimate, inflated=inflated),
+            reset_counter=self.reset_counter,
+        )
+        out = [vision_position_estimate_message(pose)]
+        velocity = None if inflated else velocity_of(estimate, t, self.reset_counter)
+        if self.config.odometry:
+            frame = _ODOMETRY_FRAMES[self.config.odometry_frame]
+            out.append(odometry_message(pose, velocity, frame_id=frame))
+        if self.config.speed_estimate and velocity is not None:
+            out.append(vision_speed_estimate_message(velocity))
+        return out
 
     def _pose_covariance(self, estimate: PositionEstimate, *, inflated: bool) -> FloatArray | None:
         if self.config.covariance == "unknown":
@@ -401,7 +425,7 @@ class Publisher:
         if health != self.health:
             self.health = health
             self.counters.health_changes += 1
-        if not self.config.statustext or health == self._announced:
+        if not (self.messages and self.config.statustext) or health == self._announced:
             return []
         if time_s is not None and time_s < self._next_text_s:
             return []

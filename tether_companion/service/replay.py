@@ -101,7 +101,7 @@ def replay_log(
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: no such log file")
-    session = EstimationSession(config, vehicle)
+    session = EstimationSession(config, vehicle, messages=False)  # only the CSV is read
     out.write(Publication.CSV_HEADER + "\n")
     suffix = path.suffix.lower()
     if suffix == ".tlog":

@@ -146,11 +146,18 @@ class EstimationSession:
         The service configuration (estimator kind, tension source, limits, publication).
     vehicle
         The vehicle profile (mass, thrust curve, motor count).
+    messages
+        False when nobody reads the messages to send (replay): the publisher builds none, the
+        tension modes do not run, and their tension filter runs only when the catenary
+        estimator needs it. The publication records are the same.
     """
 
-    def __init__(self, config: ServiceConfig, vehicle: VehicleProfile) -> None:
+    def __init__(
+        self, config: ServiceConfig, vehicle: VehicleProfile, *, messages: bool = True
+    ) -> None:
         self.config = config
         self.vehicle = vehicle
+        self.messages = messages
         self.ingest = Ingest(
             config.link,
             config.inputs,
@@ -165,6 +172,7 @@ class EstimationSession:
         self.publisher = Publisher(
             config.publish,
             has_tension_state=self.catenary_source or config.estimator.kind != "three_state",
+            messages=messages,
         )
         self.aligner = self._new_aligner()
         """Time alignment shared by the EKF and the tension filter: each attitude and PWM
@@ -313,6 +321,9 @@ class EstimationSession:
         Every sample goes to the estimators as it arrives: the pipeline aligns the streams (its
         clock moves only with the IMU; a rangefinder sample is fused at the filter's time).
         """
+        if not self.messages:
+            tension = self._feed_tension_filter(sample) if self.catenary is not None else None
+            return self._estimate(sample, tension)
         tension = self._feed_tension_filter(sample)
         step = self._estimate(sample, tension)
         if tension is not None:

@@ -192,12 +192,13 @@ def raw_imu_message(sample: ImuSample, *, imu_id: int = 0) -> MAVLinkMessage:
 
 def imu_from_raw_imu(msg: MAVLinkMessage) -> ImuSample:
     """RAW_IMU (ArduPilot units: milli-g, milli-rad/s, ``time_usec`` since boot) to SI."""
+    # scaled in scalars, one array each: the same doubles as scaling arrays, at every IMU
+    # message without four array allocations
+    g, rad = MILLI_G_TO_MPS2, MILLI_RAD_TO_RAD
     return ImuSample(
         time_s=msg.time_usec * 1e-6,
-        specific_force_body_mps2=np.array([msg.xacc, msg.yacc, msg.zacc], dtype=float)
-        * MILLI_G_TO_MPS2,
-        angular_rate_body_rad_s=np.array([msg.xgyro, msg.ygyro, msg.zgyro], dtype=float)
-        * MILLI_RAD_TO_RAD,
+        specific_force_body_mps2=np.array((msg.xacc * g, msg.yacc * g, msg.zacc * g)),
+        angular_rate_body_rad_s=np.array((msg.xgyro * rad, msg.ygyro * rad, msg.zgyro * rad)),
     )
 
 
@@ -290,6 +291,10 @@ def servo_output_raw_message(sample: PwmSample, *, port: int = 0) -> MAVLinkMess
     return dialect.MAVLink_servo_output_raw_message(time_usec, port, *pwm)
 
 
+_SERVO_FIELDS = tuple(f"servo{i + 1}_raw" for i in range(SERVO_CHANNELS))
+"""SERVO_OUTPUT_RAW's channel fields in channel order."""
+
+
 def pwm_from_servo_output_raw(
     msg: MAVLinkMessage, n_motors: int, *, time_s: float | None = None
 ) -> PwmSample:
@@ -307,7 +312,7 @@ def pwm_from_servo_output_raw(
     """
     if not 1 <= n_motors <= SERVO_CHANNELS:
         raise ValueError(f"n_motors must be 1..16, got {n_motors}")
-    pwm = np.array([getattr(msg, f"servo{i + 1}_raw") for i in range(n_motors)], dtype=float)
+    pwm = np.array([getattr(msg, name) for name in _SERVO_FIELDS[:n_motors]], dtype=float)
     return PwmSample(time_s=msg.time_usec * 1e-6 if time_s is None else time_s, pwm_us=pwm)
 
 

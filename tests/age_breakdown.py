@@ -62,10 +62,11 @@ def _instrumented_service(out_path: str, argv: list[str]) -> int:
 
     def on_datagram(self, data, addr):  # type: ignore[no-untyped-def]
         now = time.monotonic()
-        datagram(self, data, addr)
-        for msg in list(self._queue._queue)[-8:]:
-            if getattr(msg, "get_type", None) and msg.get_type() == "RAW_IMU":
+        messages = datagram(self, data, addr)
+        for msg in messages:
+            if msg.get_type() == "RAW_IMU":
                 read.setdefault(msg.time_usec, now)
+        return messages
 
     def on_handle(self, link, msg, now_s):  # type: ignore[no-untyped-def]
         if msg.get_type() == "RAW_IMU":

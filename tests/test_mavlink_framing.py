@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import random
 import struct
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tether_companion.mavlink import framing
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
 
 INT16 = st.integers(-32768, 32767)
@@ -190,3 +192,20 @@ def test_end_of_datagram_recovers_frames_behind_a_stray_marker() -> None:
     assert parser.feed(stray + good) == []  # waiting for the rest of the claimed frame
     assert [m.get_type() for m in parser.end_datagram()] == ["RAW_IMU"]
     assert parser.counters.truncated == 1 and parser.pending_bytes == 0
+
+
+def _crc_mcrf4xx(data: bytes) -> int:
+    """CRC-16/MCRF4XX bit by bit (poly 0x1021 reflected, init 0xFFFF): the test's reference."""
+    crc = 0xFFFF
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0x8408 if crc & 1 else crc >> 1
+    return crc
+
+
+def test_checksum_matches_a_bitwise_crc_16_mcrf4xx() -> None:
+    rng = random.Random(3)
+    for n in range(300):
+        covered, extra = bytes(rng.randrange(256) for _ in range(n)), bytes((n % 256,))
+        assert framing._checksum(covered, extra) == _crc_mcrf4xx(covered + extra)

@@ -28,6 +28,7 @@ from collections.abc import Hashable
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING
 
+from fastcrc.crc16 import mcrf4xx
 from pymavlink.dialects.v20 import ardupilotmega as dialect
 
 from tether_companion.mavlink.fastdecode import FastDecoder
@@ -62,6 +63,13 @@ _CRC_EXTRA = {msg_id: bytes((cls.crc_extra,)) for msg_id, cls in _MESSAGE_TYPES.
 """The byte each message's checksum ends with (its ``crc_extra``)."""
 _MAX_BUFFER_BYTES = 1 << 16
 """A stream parser never holds more than this many unparsed bytes (a frame is <= 280)."""
+
+
+def _checksum(covered: bytes, extra: bytes) -> int:
+    """MAVLink's CRC-16/MCRF4XX of ``covered`` (header after the marker, payload) then the
+    message's ``crc_extra`` byte: fastcrc's C function (pymavlink's own dependency), called
+    directly instead of through a pymavlink ``x25crc`` object per frame."""
+    return mcrf4xx(extra, mcrf4xx(covered, 0xFFFF))
 
 
 @dataclass
@@ -205,9 +213,8 @@ class FrameParser:
                 continue
             signature_len = _SIGNATURE_LEN if incompat & _IFLAG_SIGNED else 0
             crc_end = pos + frame_len - signature_len
-            crc = dialect.x25crc(buf[pos + 1 : crc_end - _CRC_LEN])
-            crc.accumulate(_CRC_EXTRA[msg_id])
-            if crc.crc != _CRC.unpack_from(buf, crc_end - _CRC_LEN)[0]:
+            crc = _checksum(bytes(buf[pos + 1 : crc_end - _CRC_LEN]), _CRC_EXTRA[msg_id])
+            if crc != _CRC.unpack_from(buf, crc_end - _CRC_LEN)[0]:
                 counters.bad_crc += 1
                 counters.garbage_bytes += 1
                 pos += 1

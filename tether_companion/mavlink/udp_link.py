@@ -9,7 +9,7 @@ import socket
 from collections import OrderedDict
 from typing import TYPE_CHECKING
 
-from tether_companion.mavlink.framing import FrameEncoder, FrameParser
+from tether_companion.mavlink.framing import FrameEncoder, FrameParser, MAVLinkMessage
 from tether_companion.mavlink.link import Link
 from tether_companion.mavlink.trust import LinkTrust
 
@@ -82,22 +82,30 @@ class UdpLink(Link):
         return link
 
     def _read_ready(self) -> None:
+        """Drain the socket, then deliver everything read as one batch: parsing every datagram
+        first and handling the messages after keeps each stage's code warm in the CPU's
+        caches (on a loaded machine a cold pass costs several times a warm one)."""
         sock = self._sock
         if sock is None:
             return
+        messages: list[MAVLinkMessage] = []
         for _ in range(MAX_DATAGRAMS_PER_READ):
             try:
                 data, addr = sock.recvfrom(UDP_MAX_DATAGRAM)
             except (BlockingIOError, InterruptedError):
-                return
+                break
             except OSError:  # e.g. ICMP port unreachable reported on a connected socket
                 self.counters.send_errors += 1
                 continue
-            self._datagram(data, addr)
+            messages += self._datagram(data, addr)
+        self._deliver(messages)
 
-    def _datagram(self, data: bytes, addr: tuple[str, int]) -> None:
-        messages = self._parser.feed(data, addr)
-        messages += self._parser.end_datagram()
+    def _datagram(self, data: bytes, addr: tuple[str, int]) -> list[MAVLinkMessage]:
+        """The messages of one datagram (its sender becomes a peer of a listening link)."""
+        parser = self._parser
+        messages = parser.feed(data, addr)
+        if parser.pending_bytes:
+            messages += parser.end_datagram()
         if messages and self.endpoint.role == "listen":
             if addr in self._peers:
                 self._peers.move_to_end(addr)
@@ -106,7 +114,7 @@ class UdpLink(Link):
                 self._peers[addr] = None
                 if len(self._peers) > MAX_UDP_PEERS:
                     self._evict_peer()
-        self._deliver(messages)
+        return messages
 
     def _evict_peer(self) -> None:
         """Forget the least recently heard peer that is not protected by the trust gate."""

@@ -14,11 +14,14 @@ import numpy as np
 import pytest
 
 from tether_companion.bench.estimators import cluster
+from tether_companion.bench.estimators.flight import FlightRecord, KindTrace
 from tether_companion.bench.estimators.registry import kinds
 from tether_companion.bench.estimators.scores import (
     converge_time_s,
     nees,
     nees_band,
+    pool,
+    score_kind,
     share_in_band,
 )
 from tether_companion.cli import main
@@ -81,6 +84,52 @@ def test_consistent_errors_lie_in_the_band_95_percent_of_the_time():
     values[:5, :100] = np.nan  # fewer runs on some ticks: their band widens, share stays
     assert share_in_band(values) == pytest.approx(0.95, abs=0.015)
     assert math.isnan(share_in_band(np.full((2, 3), np.nan)))
+
+
+def test_beyond_3_sigma_is_0_8_percent_for_consistent_errors_and_counts_published_apart():
+    """Errors drawn from the stated (diagonal) covariance: some axis beyond 3 sigma on
+    1 - 0.9973^3 = 0.81 % of ticks (binomial sd over 40000 ticks: 0.045 %); errors twice as
+    large about 13.2 %. Of the published ticks only those count: publishing just the ticks
+    beyond gives 100 %."""
+    rng = np.random.default_rng(11)
+    n = 40_000
+    sigma = rng.uniform(0.05, 2.0, (n, 3))
+    covariance = np.zeros((n, 3, 3))
+    covariance[:, [0, 1, 2], [0, 1, 2]] = sigma**2
+    error = sigma * rng.standard_normal((n, 3))
+    zeros = np.zeros((n, 3))
+    record = FlightRecord(
+        time_s=np.arange(n) * 0.005,
+        position_ned_m=zeros,
+        velocity_ned_mps=zeros,
+        euler_rad=zeros,
+        tension_n=np.zeros(n),
+        thrust_n=np.zeros(n),
+        range_seen=np.zeros(n, dtype=bool),
+        traces={},
+    )
+
+    def cell(scale: float, published: np.ndarray) -> dict:
+        trace = KindTrace(
+            position_ned_m=scale * error,
+            position_covariance_m2=covariance,
+            velocity_ned_mps=np.full((n, 3), np.nan),
+            tension_n=np.full(n, np.nan),
+            tension_variance_n2=np.full(n, np.nan),
+            published=published,
+        )
+        return pool([score_kind(record, trace, zeros, 0.0, 0.5)], False, False)
+
+    everywhere = cell(1.0, np.ones(n, dtype=bool))
+    assert everywhere["beyond_3_sigma"] == pytest.approx(1.0 - 0.9973**3, abs=0.0015)
+    assert everywhere["published_beyond_3_sigma"] == everywhere["beyond_3_sigma"]
+    assert cell(2.0, np.ones(n, dtype=bool))["beyond_3_sigma"] == pytest.approx(
+        1.0 - 0.8664**3, abs=0.01
+    )
+    only_beyond = np.any(np.abs(error) > 3.0 * sigma, axis=1)
+    picked = cell(1.0, only_beyond)
+    assert picked["published_beyond_3_sigma"] == 1.0
+    assert math.isnan(cell(1.0, np.zeros(n, dtype=bool))["published_beyond_3_sigma"])
 
 
 def test_converge_time():

@@ -54,8 +54,8 @@ def _f(value: float | None, digits: int = 3) -> str:
     return f"{value:.{digits}f}"
 
 
-def _pct(value: float) -> str:
-    return "n/a" if math.isnan(value) else f"{100.0 * value:.0f} %"
+def _pct(value: float, digits: int = 0) -> str:
+    return "n/a" if math.isnan(value) else f"{100.0 * value:.{digits}f} %"
 
 
 ROWS = (
@@ -68,6 +68,8 @@ ROWS = (
     ("NEES in 95 % band", lambda c: _pct(c["nees_in_band"])),
     ("time to converge [s]", lambda c: _converge(c)),
     ("share published", lambda c: _pct(c["share_published"])),
+    ("beyond 3 sigma (consistent: 0.8 %)", lambda c: _pct(c["beyond_3_sigma"], 1)),
+    ("published beyond 3 sigma", lambda c: _pct(c["published_beyond_3_sigma"], 1)),
     ("CRLB horizontal [m]", lambda c: _f(c["crlb_horizontal_m"])),
     ("CRLB vertical [m]", lambda c: _f(c["crlb_vertical_m"])),
     ("RMSE / CRLB horizontal", lambda c: _f(c["horizontal_rmse_over_crlb"], 2)),

@@ -13,6 +13,10 @@ kind has an estimate (a finite position). Definitions:
 * time to converge: the first time after which the 3-D error stays below ``converged_m``
   until the end of the flight (``inf`` when it ends above);
 * share published: ticks the service would send / ticks in the window;
+* beyond 3 sigma: share of the estimated ticks with some axis's error beyond 3 standard
+  deviations of the kind's own covariance (``|e_i| > 3 sqrt(P_ii)``; a consistent Gaussian
+  3-D error does so 0.8 % of the time), and the same share of the published ticks (what the
+  autopilot is told);
 * CRLB: ``sqrt(mean(bound variance))`` over the same ticks (see ``estimation/crlb.py``).
 """
 
@@ -101,6 +105,10 @@ class KindRunScore:
     ticks: int
     estimated: int
     published: int
+    beyond_3_sigma: int
+    """Estimated ticks with some axis beyond 3 sigma of the kind's covariance."""
+    published_beyond_3_sigma: int
+    """Published ticks with some axis beyond 3 sigma."""
     sq_horizontal_m2: float
     sq_vertical_m2: float
     max_error_m: float
@@ -139,6 +147,8 @@ def score_kind(
     crlb = crlb_diagonal[estimated]
     step = max(1, int(round(1.0 / (SERIES_RATE_HZ * np.median(np.diff(record.time_s))))))
     var = np.diagonal(trace.position_covariance_m2, axis1=1, axis2=2)
+    with np.errstate(invalid="ignore"):
+        beyond = estimated & np.any(np.abs(error) > 3.0 * np.sqrt(var), axis=1)
     series = {
         "time_s": record.time_s,
         "horizontal_error_m": np.hypot(error[:, 0], error[:, 1]),
@@ -152,6 +162,8 @@ def score_kind(
         ticks=int(window.sum()),
         estimated=int(estimated.sum()),
         published=int((trace.published & window).sum()),
+        beyond_3_sigma=int(beyond.sum()),
+        published_beyond_3_sigma=int((beyond & trace.published).sum()),
         sq_horizontal_m2=float(np.sum(e[:, 0] ** 2 + e[:, 1] ** 2)),
         sq_vertical_m2=float(np.sum(e[:, 2] ** 2)),
         max_error_m=float(error_norm[estimated].max()) if e.size else math.nan,
@@ -165,6 +177,10 @@ def score_kind(
         nees=nees_all[window].astype(np.float32),
         series={k: v[::step].astype(np.float32) for k, v in series.items()},
     )
+
+
+def _share(part: int, whole: int) -> float:
+    return part / whole if whole > 0 else math.nan
 
 
 def _root_mean(total: float, count: int) -> float:
@@ -213,6 +229,10 @@ def pool(runs: list[KindRunScore], has_tension: bool, has_velocity: bool) -> dic
         "never_converged": sum(1 for c in converge if not math.isfinite(c)),
         "share_estimated": estimated / ticks if ticks else math.nan,
         "share_published": sum(r.published for r in runs) / ticks if ticks else math.nan,
+        "beyond_3_sigma": _share(sum(r.beyond_3_sigma for r in runs), estimated),
+        "published_beyond_3_sigma": _share(
+            sum(r.published_beyond_3_sigma for r in runs), sum(r.published for r in runs)
+        ),
         "crlb_horizontal_m": crlb_h,
         "crlb_vertical_m": crlb_v,
         "horizontal_rmse_over_crlb": horizontal / crlb_h if crlb_h > 0 else math.nan,

@@ -14,13 +14,17 @@ from tether_companion.estimation.catenary_position import (
     LOWEST_POINT_AT_ANCHOR,
     NO_LENGTH,
     NO_TENSION,
+    OK,
     STALE_TENSION,
     UNOBSERVABLE,
+    WEAK_PULL,
     CatenaryPositionConfig,
     CatenaryPositionEstimator,
     force_from_position_ned_n,
     position_from_force_ned_m,
+    position_jacobian,
 )
+from tether_companion.estimation.tension_budget import BUDGET_COLUMNS
 from tether_companion.estimation.tension_kf import TensionEstimate, TensionHealth
 from tether_companion.physics.cable import CatenaryCable, ElasticCable
 from tether_companion.physics.catenary import (
@@ -33,7 +37,8 @@ from tether_companion.physics.catenary import (
 W = 0.05 * 9.80665  # N/m
 
 
-def _estimate(force, time_s=1.0, last_update_s=1.0, variance=0.01):
+def _estimate(force, time_s=1.0, last_update_s=1.0, variance=0.01, factor=None):
+    extra = {} if factor is None else {"consider_factor_n": np.asarray(factor, dtype=float)}
     return TensionEstimate(
         time_s=time_s,
         tension_ned_n=np.asarray(force, dtype=float),
@@ -42,6 +47,7 @@ def _estimate(force, time_s=1.0, last_update_s=1.0, variance=0.01):
         observation_ned_n=np.asarray(force, dtype=float),
         updated=True,
         health=TensionHealth(),
+        **extra,
     )
 
 
@@ -146,6 +152,83 @@ def _sensitivity(force, length, weight, h):
     return np.column_stack(cols)
 
 
+@pytest.mark.parametrize(
+    ("force", "case", "length", "on_ground"),
+    [
+        ((-3.0, 1.0, 2.0), KNOWN_LENGTH, 5.0, True),  # free, lowest point behind the anchor
+        ((-0.3, 0.1, 0.5), KNOWN_LENGTH, 7.0, True),  # grounded: lies on the ground, rises
+        ((-0.3, 0.1, 0.5), KNOWN_LENGTH, 7.0, False),  # the same force, free case 2
+        ((-2.0, -1.0, -0.5), KNOWN_LENGTH, 4.0, False),  # drone below the anchor
+        ((0.4, -0.2, 3.0), KNOWN_LENGTH, 6.0, True),  # steep and heavy
+        ((-1.0, 0.5, 0.7), LOWEST_POINT_AT_ANCHOR, math.nan, True),
+    ],
+)
+def test_position_jacobian_is_the_finite_difference_of_the_geometry(force, case, length, on_ground):
+    """The closed-form Jacobian (force, length, weight) against central differences of
+    position_from_force_ned_m (step 1e-6 relative: truncation and rounding ~1e-8)."""
+    f = np.array(force)
+
+    def pos(f=f, length_m=length, w=W):
+        return position_from_force_ned_m(f, case, w, length_m, on_ground)
+
+    h = 1e-6
+    step = h * np.linalg.norm(f)
+    cols = [(pos(f=f + step * e) - pos(f=f - step * e)) / (2 * step) for e in np.eye(3)]
+    if case == KNOWN_LENGTH:
+        cols.append(
+            (pos(length_m=length * (1 + h)) - pos(length_m=length * (1 - h))) / (2 * h * length)
+        )
+    else:
+        cols.append(np.zeros(3))
+    cols.append((pos(w=W * (1 + h)) - pos(w=W * (1 - h))) / (2 * h * W))
+    numeric = np.column_stack(cols)
+    analytic = position_jacobian(f, case, W, length, on_ground)
+    np.testing.assert_allclose(analytic, numeric, rtol=1e-6, atol=1e-7 * np.abs(numeric).max())
+
+
+def test_position_jacobian_is_continuous_where_the_cable_leaves_the_ground():
+    """At s2 = L the grounded and the free branch meet with equal first derivatives."""
+    length = 6.0
+    on_branch = np.array([-0.5, 0.3, W * length])
+    below = position_jacobian(on_branch * [1, 1, 1 - 1e-9], KNOWN_LENGTH, W, length)
+    above = position_jacobian(on_branch * [1, 1, 1 + 1e-9], KNOWN_LENGTH, W, length)
+    np.testing.assert_allclose(below, above, rtol=1e-6, atol=1e-6)
+
+
+def test_position_jacobian_needs_a_horizontal_pull():
+    with pytest.raises(ValueError, match="horizontal pull"):
+        position_jacobian(np.array([0.0, 0.0, 2.0]), KNOWN_LENGTH, W, 5.0)
+
+
+def test_weak_pull_against_its_uncertainty_is_withheld_with_its_position():
+    """The same geometry published with a small force error, weak_pull with an error across
+    the pull as large as 0.4 of the pull (max_azimuth_std_rad 0.35); still a position, with
+    its covariance inflated by r^2 horizontally (for scoring). No horizontal pull at all:
+    weak_pull without a position."""
+    p = np.array([4.0, 1.0, -3.0])
+    length = 5.1
+    est = CatenaryPositionEstimator(
+        CatenaryPositionConfig(case=KNOWN_LENGTH, weight_per_length_n_per_m=W)
+    )
+    est.set_paid_out_length_m(length, 0.5)
+    force = force_on_drone_ned_n(p, length, W)
+    horizontal = math.hypot(force[0], force[1])
+    across = np.array([-force[1], force[0], 0.0]) / horizontal
+    factor = np.zeros((3, BUDGET_COLUMNS))
+    factor[:, 1] = 0.1 * horizontal * across
+    ok = est.on_tension(_estimate(force, variance=1e-6, factor=factor))
+    assert ok.status == OK and ok.azimuth_std_rad == pytest.approx(0.1, rel=1e-3)
+    factor[:, 1] *= 4.0
+    weak = est.on_tension(_estimate(force, variance=1e-6, factor=factor))
+    assert weak.status == WEAK_PULL and not weak.valid
+    assert np.allclose(weak.position_ned_m, p, atol=1e-6)
+    lateral = across @ weak.covariance_m2 @ across  # r s_psi, plus r on each horizontal axis
+    r = math.hypot(4.0, 1.0)
+    assert lateral == pytest.approx((r * 0.4) ** 2 + r**2, rel=0.02)
+    none = est.on_tension(_estimate([0.0, 0.0, 3.0]))  # hangs straight down: w L = 2.5 N
+    assert none.status == WEAK_PULL and not np.isfinite(none.position_ned_m).any()
+
+
 def test_estimator_outputs_position_and_covariance():
     """P = s_T^2 J_f J_f^T + s_L^2 j_L j_L^T + (s_w w)^2 j_w j_w^T + s_min^2 I, with the
     Jacobians checked against a coarser independent difference."""
@@ -189,7 +272,9 @@ def test_covariance_is_positive_definite_where_the_force_alone_pins_a_direction(
     if out.status == UNOBSERVABLE:  # ... is refused when the cable lies on the ground
         assert force[0] == force[1] == 0.0
         return
-    assert out.valid
+    # the measured case's pull (0.073 N) is as weak as its error (0.1 N): weak_pull, its
+    # position and covariance given all the same
+    assert out.status == (WEAK_PULL if variance > 1e-3 else OK)
     cov = out.covariance_m2
     assert np.array_equal(cov, cov.T)
     np.linalg.cholesky(cov)  # positive definite
@@ -205,9 +290,10 @@ def test_covariance_is_positive_definite_where_the_force_alone_pins_a_direction(
     [((4.0, 1.0, -3.0), 5.1), ((3.0, 3.0, -2.0), 5.5), ((2.0, 1.0, -1.0), 2.5)],
 )
 def test_covariance_is_consistent_with_monte_carlo_of_its_inputs(position, length):
-    """Force, length and weight drawn from the distributions the estimator assumes (small
-    enough for the linearisation): the positions' NEES against its covariance averages 3
-    (4000 draws: sd of the mean 0.04) and the sample covariance matches it."""
+    """Force (white part and consider budget), length and weight drawn from the distributions
+    the estimator assumes (small enough for the linearisation): the positions' NEES against
+    its covariance averages 3 (4000 draws: sd of the mean 0.04) and the sample covariance
+    matches it."""
     rng = np.random.default_rng(11)
     cfg = CatenaryPositionConfig(
         case=KNOWN_LENGTH,
@@ -217,16 +303,17 @@ def test_covariance_is_consistent_with_monte_carlo_of_its_inputs(position, lengt
         min_position_std_m=1e-4,
     )
     force = force_on_drone_ned_n(np.array(position), length, W)
-    sigma_f = 0.002
+    sigma_f = 0.001
+    factor = 0.002 * rng.standard_normal((3, BUDGET_COLUMNS))  # the tension's consider budget
     est = CatenaryPositionEstimator(cfg)
     est.set_paid_out_length_m(length, 1.0)
-    out = est.on_tension(_estimate(force, variance=sigma_f**2))
+    out = est.on_tension(_estimate(force, variance=sigma_f**2, factor=factor))
     assert out.valid
     draws = 4000
     samples = np.empty((draws, 3))
     for i in range(draws):
         samples[i] = position_from_force_ned_m(
-            force + sigma_f * rng.standard_normal(3),
+            force + sigma_f * rng.standard_normal(3) + factor @ rng.standard_normal(BUDGET_COLUMNS),
             KNOWN_LENGTH,
             W * (1 + cfg.weight_per_length_rel_std * rng.standard_normal()),
             length + cfg.length_std_m * rng.standard_normal(),

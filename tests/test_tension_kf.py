@@ -122,9 +122,9 @@ def test_config_refuses_divergent_derivative_model():
 # ------------------------------------------------------------------------------ estimator
 
 
-def _hover_samples(t, cable_ned, rng=None, noise=0.0):
+def _hover_samples(t, cable_ned, rng=None, noise=0.0, vehicle=VEHICLE):
     """IMU, attitude and PWM samples of a drone in force balance against ``cable_ned``."""
-    mass = VEHICLE.mass_kg
+    mass = vehicle.mass_kg
     needed = -(np.array([0.0, 0.0, mass * GRAVITY_MPS2]) + cable_ned)  # thrust vector, NED
     thrust = float(np.linalg.norm(needed))
     z_body_ned = -needed / thrust  # body z (down) in NED = (cr sp, -sr, cr cp) at yaw 0
@@ -135,7 +135,7 @@ def _hover_samples(t, cable_ned, rng=None, noise=0.0):
     f_body = _readings(cable_ned, roll, pitch, 0.0, thrust, mass)
     if rng is not None:
         f_body = f_body + rng.normal(0.0, noise, 3)
-    pwm = VEHICLE.thrust_curve.pwm_for_thrust(np.full(4, thrust / 4.0))
+    pwm = vehicle.thrust_curve.pwm_for_thrust(np.full(4, thrust / 4.0))
     return (
         ImuSample(t, f_body, np.zeros(3)),
         AttitudeSample(t, roll, pitch, 0.0),

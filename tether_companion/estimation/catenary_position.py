@@ -24,20 +24,42 @@ estimator reports ``unobservable`` rather than guess (the thesis' ``a -> 0`` lim
 the drone over the anchor).
 
 The position covariance maps every uncertain input through the Jacobian of the position
-(central differences): the force (the tension filter's isotropic variance ``s_T^2``), the
-paid-out length (``length_std_m``, known-length case) and the weight per length
+(:func:`position_jacobian`, the closed form of the geometry below, checked against finite
+differences in the tests): the force (the tension filter's covariance ``Sigma_F``: its white
+noise plus the consider budget of the terms eq. 50 leaves out, thrust map, drag, accelerometer
+bias and attitude, :mod:`~tether_companion.estimation.tension_budget`), the paid-out length
+(``length_std_m``, known-length case) and the weight per length
 (``weight_per_length_rel_std``), plus ``min_position_std_m^2 I``::
 
-    P = s_T^2 J_f J_f^T + s_L^2 j_L j_L^T + s_w^2 j_w j_w^T + s_min^2 I
+    P = J_f Sigma_F J_f^T + s_L^2 j_L j_L^T + s_w^2 j_w j_w^T + s_min^2 I
 
-built as ``G G^T`` from ``G = [s_T J_f, s_L j_L, s_w j_w]`` (symmetric by construction). The
-force term alone is singular where the geometry pins a direction: a cable lying on the ground
-over most of its length puts the drone at ``r = L`` whatever the pull (``dr/dF ~ 0``), and its
-azimuth is uncertain while its range is not. ``J_f J_f^T`` is then rank deficient, rounding
-makes it indefinite (negative NEES), and the estimate claims to know the range exactly while
-it is only as good as the winch's length. The length and weight terms put that uncertainty
-back; the floor keeps ``P`` positive definite where even they vanish (a cable hanging straight
-down from a drone above the anchor).
+built as ``G G^T`` from ``G = [J_f s_F I, J_f G_F, s_L j_L, s_w j_w]`` (``Sigma_F = s_F^2 I +
+G_F G_F^T``; symmetric by construction). The force term alone is singular where the geometry
+pins a direction: a cable lying on the ground over most of its length puts the drone at
+``r = L`` whatever the pull (``dr/dF ~ 0``), and its azimuth is uncertain while its range is
+not. ``J_f J_f^T`` is then rank deficient, rounding makes it indefinite (negative NEES), and
+the estimate claims to know the range exactly while it is only as good as the winch's length.
+The length and weight terms put that uncertainty back; the floor keeps ``P`` positive definite
+where even they vanish (a cable hanging straight down from a drone above the anchor).
+
+**Geometry.** With ``a = H / w`` (``H`` the horizontal pull), ``s2 = F_d / w`` and
+``s1 = s2 - L``, ``g(s) = a asinh(s / a)``, ``h(s) = sqrt(a^2 + s^2)``, the drone is at
+``r = g(s2) - g(s1)``, ``z = h(s2) - h(s1)`` (free cable; ``lowest_point_at_anchor`` has
+``s1 = 0``), or ``r = (L - s2) + g(s2)``, ``z = h(s2) - a`` (grounded, ``s2 <= L``), and at
+``(-r u, -z)`` in NED with ``u`` the horizontal pull's direction. The partials are
+``dg/ds = a / h``, ``dg/da = asinh(s / a) - s / h``, ``dh/ds = s / h``, ``dh/da = a / h``; the two
+known-length branches meet with equal first derivatives at ``s2 = L``. Across the pull the
+position turns with the azimuth: ``dp/dF`` has ``-(r / H) (I - u u^T)`` horizontally, so the
+position's lateral standard deviation is ``r`` times the azimuth's ``s_psi = s_perp / H``.
+
+**Ill-conditioned geometry.** The Jacobian is a linearisation in the azimuth; once ``s_psi``
+is not small the azimuth's error is not Gaussian (a pull as weak as its error can point
+anywhere, and the drone's estimate flips to the other side of the anchor) and no covariance
+from a Jacobian describes it. Above ``max_azimuth_std_rad`` the estimator says ``weak_pull``
+(the service withholds, or inflates by ``publish.on_unhealthy``); the position is still
+returned for inspection and scoring, with its covariance inflated by ``r^2`` on each
+horizontal axis: the azimuth is given up, the drone is somewhere on the circle of radius ``r``
+about the anchor (an error up to ``2 r``).
 
 Pure and synchronous. The service can run it beside or instead of the tether EKF.
 """
@@ -73,6 +95,10 @@ STALE_TENSION = "stale_tension"
 NO_LENGTH = "no_length"
 INCONSISTENT = "inconsistent"
 UNOBSERVABLE = "unobservable"
+WEAK_PULL = "weak_pull"
+
+JACOBIAN_COLUMNS = ("force_n", "force_e", "force_d", "length", "weight_per_length")
+"""Columns of :func:`position_jacobian`."""
 
 
 @dataclass(frozen=True)
@@ -105,8 +131,11 @@ class CatenaryPositionConfig:
         doc="known_length on the ground: a weaker horizontal pull leaves the drone's horizontal "
         "position unobservable [N]",
     )
-    jacobian_step_n: float = spec(
-        1e-4, exclusive_minimum=0.0, doc="force step of the central-difference Jacobian [N]"
+    max_azimuth_std_rad: float = spec(
+        0.35,
+        exclusive_minimum=0.0,
+        doc="a pull whose direction's standard deviation (its error across the pull over its "
+        "horizontal size) exceeds this is weak_pull: the geometry is ill-conditioned [rad]",
     )
     length_std_m: float = spec(
         0.1,
@@ -144,17 +173,23 @@ class CatenaryPosition:
     status
         ``ok`` or why no position was produced (``no_tension``, ``stale_tension``,
         ``no_length``, ``inconsistent``: the geometry cannot explain the force,
-        ``unobservable``: a slack cable lying on the ground with no horizontal pull).
+        ``unobservable``: a slack cable lying on the ground with no horizontal pull), or
+        ``weak_pull``: the pull's direction is too uncertain for the linearised covariance
+        (module docstring); position and (inflated) covariance are given but not to be
+        published.
+    azimuth_std_rad
+        Standard deviation of the pull's horizontal direction [rad] (``nan`` when none).
     """
 
     time_s: float
     position_ned_m: FloatArray
     covariance_m2: FloatArray
     status: str
+    azimuth_std_rad: float = math.nan
 
     @property
     def valid(self) -> bool:
-        """Whether a position was produced."""
+        """Whether the position is fit to publish."""
         return self.status == OK
 
 
@@ -203,6 +238,63 @@ def position_from_force_ned_m(
     if horizontal_n > 0.0:
         return np.array((-r * fn / horizontal_n, -r * fe / horizontal_n, -z))
     return np.array((0.0, 0.0, -z))
+
+
+def _grounded(case: str, anchor_on_ground: bool, s2: float, length_m: float) -> bool:
+    return case == KNOWN_LENGTH and anchor_on_ground and s2 <= length_m
+
+
+def position_jacobian(
+    force_on_drone_ned_n: FloatArray,
+    case: str,
+    weight_per_length_n_per_m: float,
+    length_m: float = math.nan,
+    anchor_on_ground: bool = True,
+) -> FloatArray:
+    """Jacobian of :func:`position_from_force_ned_m`, shape (3, 5): NED position [m] by the
+    force (three columns, [m/N]), the paid-out length ([m/m], zero for
+    ``lowest_point_at_anchor``) and the weight per length ([m per N/m]); see
+    :data:`JACOBIAN_COLUMNS` and the module docstring for the closed form.
+
+    Raises
+    ------
+    ValueError
+        No horizontal pull (the direction, and so the derivative across it, is undefined), or
+        a non-positive weight per length.
+    """
+    fn, fe, fd = (float(v) for v in force_on_drone_ned_n)
+    w = float(weight_per_length_n_per_m)
+    horizontal = math.hypot(fn, fe)
+    if not (horizontal > 0.0 and w > 0.0):
+        raise ValueError("the Jacobian needs a horizontal pull and a weight per length > 0")
+    a, s2 = horizontal / w, fd / w
+    h2 = math.hypot(a, s2)
+    g_a2 = math.asinh(s2 / a) - s2 / h2  # dg/da at s2
+    if case == LOWEST_POINT_AT_ANCHOR or _grounded(case, anchor_on_ground, s2, length_m):
+        grounded = case == KNOWN_LENGTH
+        r = (length_m - s2 if grounded else 0.0) + a * math.asinh(s2 / a)
+        r_a, r_s, r_l = g_a2, a / h2 - (1.0 if grounded else 0.0), (1.0 if grounded else 0.0)
+        z_a, z_s, z_l = a / h2 - 1.0, s2 / h2, 0.0
+    else:
+        s1 = s2 - length_m
+        h1 = math.hypot(a, s1)
+        r = a * (math.asinh(s2 / a) - math.asinh(s1 / a))
+        r_a, r_s, r_l = g_a2 - (math.asinh(s1 / a) - s1 / h1), a / h2 - a / h1, a / h1
+        z_a, z_s, z_l = a / h2 - a / h1, s2 / h2 - s1 / h1, s1 / h1
+    un, ue = fn / horizontal, fe / horizontal
+    # d/dH = (1/w) d/da, d/dF_d = (1/w) d/ds2, d/dw = -(a d/da + s2 d/ds2) / w at fixed L
+    r_h, r_d, r_w = r_a / w, r_s / w, -(a * r_a + s2 * r_s) / w
+    z_h, z_d, z_w = z_a / w, z_s / w, -(a * z_a + s2 * z_s) / w
+    across = r / horizontal  # the azimuth's lever: p_ne turns with the pull
+    return np.array(
+        (
+            (-r_h * un * un - across * ue * ue, -(r_h - across) * un * ue, -r_d * un,
+             -r_l * un, -r_w * un),
+            (-(r_h - across) * un * ue, -r_h * ue * ue - across * un * un, -r_d * ue,
+             -r_l * ue, -r_w * ue),
+            (-z_h * un, -z_h * ue, -z_d, -z_l, -z_w),
+        )
+    )  # fmt: skip
 
 
 def force_from_position_ned_n(
@@ -300,49 +392,58 @@ class CatenaryPositionEstimator:
             and force[2] < cfg.weight_per_length_n_per_m * length
         ):
             return self._invalid(t, UNOBSERVABLE)
+        azimuth_std = _azimuth_std_rad(force, estimate)
+        if not math.isfinite(azimuth_std):  # no horizontal pull: no direction at all
+            return self._invalid(t, WEAK_PULL)
         try:
             position = self._position(force, length)
-            factor = self._covariance_factor(force, length, estimate.variance_n2)
+            jacobian = position_jacobian(
+                force, cfg.case, cfg.weight_per_length_n_per_m, length, cfg.anchor_on_ground
+            )
         except ValueError:
             return self._invalid(t, INCONSISTENT)
+        factor = self._covariance_factor(jacobian, estimate)
         covariance = factor @ factor.T + cfg.min_position_std_m**2 * np.eye(3)
-        return CatenaryPosition(t, position, covariance, OK)
+        if azimuth_std <= cfg.max_azimuth_std_rad:
+            return CatenaryPosition(t, position, covariance, OK, azimuth_std)
+        self.rejected += 1
+        covariance[:2, :2] += float(position[0] ** 2 + position[1] ** 2) * np.eye(2)
+        return CatenaryPosition(t, position, covariance, WEAK_PULL, azimuth_std)
 
-    def _covariance_factor(
-        self, force: FloatArray, length_m: float, variance_n2: float
-    ) -> FloatArray:
-        """``G`` (3, 5) with ``P = G G^T + s_min^2 I`` (module docstring): the position's
-        sensitivity [m] to one standard deviation of each force axis, the length and the weight
-        per length (central differences; the branches meet continuously at ``s2 = L``)."""
+    def _covariance_factor(self, jacobian: FloatArray, estimate: TensionEstimate) -> FloatArray:
+        """``G`` with ``P = G G^T + s_min^2 I`` (module docstring): the position's sensitivity
+        [m] to one standard deviation of each of the force's error terms (isotropic, then the
+        consider budget's columns), the length and the weight per length."""
         cfg = self.config
-        w = cfg.weight_per_length_n_per_m
-        factor = np.zeros((3, 5))
-        step = cfg.jacobian_step_n
-        for j in range(3):
-            delta = np.zeros(3)
-            delta[j] = step
-            factor[:, j] = (
-                self._position(force + delta, length_m) - self._position(force - delta, length_m)
-            ) * (math.sqrt(variance_n2) / (2.0 * step))
-        if cfg.case == KNOWN_LENGTH and cfg.length_std_m > 0.0:
-            dl = 1e-4 * length_m
-            factor[:, 3] = (
-                self._position(force, length_m + dl) - self._position(force, length_m - dl)
-            ) * (cfg.length_std_m / (2.0 * dl))
-        if cfg.weight_per_length_rel_std > 0.0:
-            dw = 1e-4 * w
-            factor[:, 4] = (
-                self._position(force, length_m, w + dw) - self._position(force, length_m, w - dw)
-            ) * (cfg.weight_per_length_rel_std * w / (2.0 * dw))
-        return factor
+        force_part = jacobian[:, :3]
+        columns = [
+            force_part * math.sqrt(estimate.isotropic_variance_n2),
+            force_part @ estimate.consider_factor_n,
+        ]
+        if cfg.case == KNOWN_LENGTH:
+            columns.append(jacobian[:, 3:4] * cfg.length_std_m)
+        columns.append(
+            jacobian[:, 4:5] * (cfg.weight_per_length_rel_std * cfg.weight_per_length_n_per_m)
+        )
+        return np.hstack(columns)
 
-    def _position(
-        self, force: FloatArray, length_m: float, weight_n_per_m: float | None = None
-    ) -> FloatArray:
+    def _position(self, force: FloatArray, length_m: float) -> FloatArray:
         cfg = self.config
-        w = cfg.weight_per_length_n_per_m if weight_n_per_m is None else weight_n_per_m
-        return position_from_force_ned_m(force, cfg.case, w, length_m, cfg.anchor_on_ground)
+        return position_from_force_ned_m(
+            force, cfg.case, cfg.weight_per_length_n_per_m, length_m, cfg.anchor_on_ground
+        )
 
     def _invalid(self, time_s: float, status: str) -> CatenaryPosition:
         self.rejected += 1
         return CatenaryPosition(time_s, np.full(3, math.nan), np.full((3, 3), math.nan), status)
+
+
+def _azimuth_std_rad(force: FloatArray, estimate: TensionEstimate) -> float:
+    """Standard deviation of the horizontal pull's direction [rad]: the force's error across
+    the pull, horizontally, over the pull's size (``inf`` without a horizontal pull)."""
+    horizontal = math.hypot(force[0], force[1])
+    if not horizontal > 0.0:
+        return math.inf
+    across = np.array((-force[1], force[0], 0.0)) / horizontal
+    spread = estimate.consider_factor_n.T @ across
+    return math.sqrt(estimate.isotropic_variance_n2 + float(spread @ spread)) / horizontal

@@ -7,8 +7,11 @@ the cable ON the drone, in NED::
 
     F_cable_ned = R_b^v (m f_sf - [0, 0, -T])                                (eq. 50)
 
-Airframe drag (``F_ext`` of eq. 50) is not modelled: it is absorbed into the observation
-(small at the speeds where tension matters; the vehicle profiles ship with zero drag).
+Airframe drag (``F_ext`` of eq. 50) is not modelled: it is absorbed into the observation.
+Neither are the thrust map's error, the accelerometer's bias and the attitude's error; the
+estimate carries them as a consider covariance
+(:mod:`~tether_companion.estimation.tension_budget`): :attr:`TensionEstimate.covariance_ned_n2`
+is the filter's white-noise variance plus that budget.
 
 Two filters smooth the observation, both plain linear Kalman filters (eqs. 43-47) stepped once
 per observation (IMU sample), run by
@@ -45,6 +48,7 @@ from numpy.typing import NDArray
 from tether_companion.config import ConfigError, load_yaml, spec
 from tether_companion.estimation import alignment
 from tether_companion.estimation.alignment import AlignedInputs, InputAligner
+from tether_companion.estimation.tension_budget import BUDGET_COLUMNS, TensionErrorBudget
 from tether_companion.estimation.tension_filter import TensionKalmanFilter
 from tether_companion.estimation.thrust_input import StaticThrustInput, ThrustInput
 from tether_companion.physics.vehicle import VehicleProfile
@@ -96,6 +100,32 @@ class TensionFilterConfig:
     initial_variance_n2: float = spec(
         25.0, exclusive_minimum=0.0, doc="P0 diagonal at (re)start from an observation [N^2]"
     )
+    thrust_scale_std: float = spec(
+        0.05,
+        minimum=0.0,
+        maximum=1.0,
+        doc="error budget: relative error of the thrust map (scale error, uncompensated "
+        "battery sag; a uniform +-10 percent is 0.058) [-]",
+    )
+    air_speed_std_mps: float = spec(
+        1.5,
+        minimum=0.0,
+        maximum=30.0,
+        doc="error budget: air velocity per body-horizontal axis, wind plus flight speed, "
+        "times the profile's drag coefficients [m/s]",
+    )
+    accel_bias_std_mps2: float = spec(
+        0.1,
+        minimum=0.0,
+        maximum=2.0,
+        doc="error budget: accelerometer bias per axis after calibration [m/s^2]",
+    )
+    attitude_error_std_rad: float = spec(
+        0.005,
+        minimum=0.0,
+        maximum=0.5,
+        doc="error budget: the flight controller's attitude error per axis [rad]",
+    )
     max_observed_tension_n: float = spec(
         200.0,
         exclusive_minimum=0.0,
@@ -145,6 +175,16 @@ class TensionFilterConfig:
     def measurement_variance_n2(self, mass_kg: float) -> float:
         """``R`` per axis [N^2]: accelerometer noise times mass, plus thrust error."""
         return (mass_kg * self.accel_noise_std_mps2) ** 2 + self.thrust_noise_std_n**2
+
+    def error_budget(self, vehicle: VehicleProfile) -> TensionErrorBudget:
+        """The consider terms of eq. 50 for ``vehicle`` (mass, drag coefficients)."""
+        return TensionErrorBudget.of(
+            vehicle,
+            self.thrust_scale_std,
+            self.air_speed_std_mps,
+            self.accel_bias_std_mps2,
+            self.attitude_error_std_rad,
+        )
 
 
 def load_tension_filter_config(path: str | Path) -> TensionFilterConfig:
@@ -250,7 +290,7 @@ class TensionEstimate:
         Force of the cable ON the drone, NED, shape (3,) [N]; ``nan`` before the first fused
         observation.
     variance_n2
-        Variance of each component [N^2].
+        The filter's variance of each component [N^2] (white noise only).
     last_update_s
         Time of the last fused observation [s] (``nan`` if none): ``time_s - last_update_s``
         is the estimate's age.
@@ -260,6 +300,12 @@ class TensionEstimate:
         Whether this tick fused an observation.
     health
         Snapshot of the counters.
+    consider_factor_n
+        ``G``, shape (3, :data:`~tether_companion.estimation.tension_budget.BUDGET_COLUMNS`)
+        [N]: the unmodelled terms of eq. 50 (thrust map, drag, attitude), one standard
+        deviation per column, NED (:mod:`~tether_companion.estimation.tension_budget`).
+    consider_variance_n2
+        The isotropic unmodelled term (accelerometer bias times mass, squared) [N^2].
     """
 
     time_s: float
@@ -269,6 +315,33 @@ class TensionEstimate:
     observation_ned_n: FloatArray
     updated: bool
     health: TensionHealth = field(repr=False)
+    consider_factor_n: FloatArray = field(
+        default_factory=lambda: np.zeros((3, BUDGET_COLUMNS)), repr=False
+    )
+    consider_variance_n2: float = 0.0
+
+    @property
+    def isotropic_variance_n2(self) -> float:
+        """The filter's variance plus the accelerometer bias's, per axis [N^2]."""
+        return self.variance_n2 + self.consider_variance_n2
+
+    @property
+    def covariance_ned_n2(self) -> FloatArray:
+        """Covariance of :attr:`tension_ned_n`, shape (3, 3) [N^2]: ``(s_kf^2 + (m s_b)^2) I +
+        G G^T`` (white noise and the consider budget)."""
+        g = self.consider_factor_n
+        return self.isotropic_variance_n2 * np.eye(3) + g @ g.T
+
+    @property
+    def magnitude_variance_n2(self) -> float:
+        """Variance of :attr:`magnitude_n` [N^2] (along the force; the isotropic variance when
+        there is no force)."""
+        magnitude = self.magnitude_n
+        if not magnitude > 0.0:
+            return self.isotropic_variance_n2
+        u = self.tension_ned_n / magnitude
+        along = self.consider_factor_n.T @ u
+        return self.isotropic_variance_n2 + float(along @ along)
 
     @property
     def magnitude_n(self) -> float:
@@ -349,6 +422,9 @@ class TensionEstimator:
             config.measurement_variance_n2(vehicle.mass_kg),
             config.initial_variance_n2,
         )
+        self.budget = config.error_budget(vehicle)
+        self._consider_variance_n2 = self.budget.bias_force_std_n**2
+        self._consider_factor = np.zeros((3, BUDGET_COLUMNS))
         self.health = TensionHealth()
         self._time_s = math.nan
         self._last_update_s = math.nan
@@ -398,14 +474,22 @@ class TensionEstimator:
             self._last_update_s = t
             health.updates += 1
             updated = True
+            tension = kf.tension_ned_n
+            self._consider_factor = np.array(
+                self.budget.factor(self.aligner.rotation_rows, aligned.thrust_n, tension.tolist())
+            ).reshape(3, BUDGET_COLUMNS)
+        else:
+            tension = kf.tension_ned_n if kf.started else _NAN3.copy()
         return TensionEstimate(
             time_s=t,
-            tension_ned_n=kf.tension_ned_n if kf.started else _NAN3.copy(),
+            tension_ned_n=tension,
             variance_n2=kf.variance_n2 if kf.started else math.inf,
             last_update_s=self._last_update_s,
             observation_ned_n=np.array(observation) if observation is not None else _NAN3.copy(),
             updated=updated,
             health=health.copy(),
+            consider_factor_n=self._consider_factor,
+            consider_variance_n2=self._consider_variance_n2,
         )
 
     def _observe(self, aligned: AlignedInputs | str) -> tuple[float, float, float] | None:

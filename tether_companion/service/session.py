@@ -37,6 +37,7 @@ from tether_companion.estimation.catenary_position import (
     CatenaryPositionEstimator,
 )
 from tether_companion.estimation.catenary_position import STALE_TENSION as CATENARY_STALE_TENSION
+from tether_companion.estimation.catenary_position import WEAK_PULL as CATENARY_WEAK_PULL
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.output import NavigationEstimate
 from tether_companion.estimation.pipeline import (
@@ -63,6 +64,7 @@ from tether_companion.service.health import (
     STALE_ATTITUDE,
     STALE_PWM,
     STALE_TENSION,
+    WEAK_PULL,
     dynamic_health,
 )
 from tether_companion.service.ingest import FcPosition, Ingest, Sample, TensionReading
@@ -78,7 +80,12 @@ MODE_TICK_S = 0.02
 """Period of the tension modes' logic [s of flight-controller time] (50 Hz)."""
 HEIGHT_STALE_S = 0.5
 """A rangefinder height or FC position older than this [s] is not handed to the modes."""
-_CATENARY_UNAVAILABLE = {NO_TENSION: STALE, CATENARY_STALE_TENSION: STALE, UNOBSERVABLE: SLACK}
+_CATENARY_UNAVAILABLE = {
+    NO_TENSION: STALE,
+    CATENARY_STALE_TENSION: STALE,
+    UNOBSERVABLE: SLACK,
+    CATENARY_WEAK_PULL: WEAK_PULL,
+}
 """Publisher health for the catenary estimator's reasons to have no position (the others,
 ``inconsistent`` and ``no_length``, show as ``diverged``)."""
 
@@ -96,8 +103,8 @@ class CatenaryEstimate:
     tension_n
         Filtered tension magnitude [N].
     covariance
-        Shape (4, 4): the catenary position covariance [m^2], then the filtered tension's
-        per-axis variance [N^2].
+        Shape (4, 4): the catenary position covariance [m^2], then the variance of the
+        filtered tension's magnitude, its error budget included [N^2].
     reset_counter
         Restarts of the tension filter (each one can step the position).
     """
@@ -118,7 +125,7 @@ class CatenaryEstimate:
         """The estimate for ``position``, computed from ``tension``."""
         covariance = np.zeros((4, 4))
         covariance[:3, :3] = position.covariance_m2
-        covariance[3, 3] = tension.variance_n2
+        covariance[3, 3] = tension.magnitude_variance_n2
         return cls(
             position.time_s,
             position.position_ned_m,

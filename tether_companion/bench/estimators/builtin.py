@@ -9,7 +9,8 @@
   weight per length).
 
 Published: what the service would send (:func:`~tether_companion.service.health.assess_health`
-with the default publish settings is ``ok``; for the catenary, a valid position).
+with the default publish settings is ``ok``; for the catenary, a valid position, i.e. not
+``weak_pull``, that ``assess_health`` passes, as the service's session judges it).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from tether_companion.estimation.tension_kf import TensionEstimator, TensionFilt
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.config import PublishConfig
 from tether_companion.service.health import OK, assess_health
+from tether_companion.service.session import CatenaryEstimate
 
 
 class PaperEkf:
@@ -86,6 +88,8 @@ class TensionCatenary:
         weight = cable.linear_density_kg_per_m * context.gravity_mps2
         defaults = CatenaryPositionConfig()
         self._tension = TensionEstimator(TensionFilterConfig(), context.vehicle)
+        self._publish = PublishConfig()
+        self._ever_ok = False
         self._catenary = CatenaryPositionEstimator(
             CatenaryPositionConfig(
                 case=KNOWN_LENGTH,
@@ -113,12 +117,17 @@ class TensionCatenary:
         if tension is None:
             return None
         position = self._catenary.on_tension(tension)
+        published = False
+        if position.valid:
+            estimate = CatenaryEstimate.of(position, tension)
+            published = assess_health(estimate, self._publish, True, self._ever_ok) == OK
+            self._ever_ok |= published
         return TickOutput(
             position_ned_m=position.position_ned_m,
             position_covariance_m2=position.covariance_m2,
-            published=position.valid,
+            published=published,
             tension_n=tension.magnitude_n if tension.valid else math.nan,
-            tension_variance_n2=tension.variance_n2,
+            tension_variance_n2=tension.magnitude_variance_n2,
         )
 
 

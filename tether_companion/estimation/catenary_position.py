@@ -31,7 +31,7 @@ bias and attitude, :mod:`~tether_companion.estimation.tension_budget`), the paid
 (``length_std_m``, known-length case) and the weight per length
 (``weight_per_length_rel_std``), plus ``min_position_std_m^2 I``::
 
-    P = J_f Sigma_F J_f^T + s_L^2 j_L j_L^T + s_w^2 j_w j_w^T + s_min^2 I
+    P = J_f Sigma_F J_f^T + s_L^2 j_L j_L^T + s_w^2 j_w j_w^T + D + s_min^2 I
 
 built as ``G G^T`` from ``G = [J_f s_F I, J_f G_F, s_L j_L, s_w j_w]`` (``Sigma_F = s_F^2 I +
 G_F G_F^T``; symmetric by construction). The force term alone is singular where the geometry
@@ -52,10 +52,18 @@ known-length branches meet with equal first derivatives at ``s2 = L``. Across th
 position turns with the azimuth: ``dp/dF`` has ``-(r / H) (I - u u^T)`` horizontally, so the
 position's lateral standard deviation is ``r`` times the azimuth's ``s_psi = s_perp / H``.
 
-**Ill-conditioned geometry.** The Jacobian is a linearisation in the azimuth; once ``s_psi``
-is not small the azimuth's error is not Gaussian (a pull as weak as its error can point
-anywhere, and the drone's estimate flips to the other side of the anchor) and no covariance
-from a Jacobian describes it. Above ``max_azimuth_std_rad`` the estimator says ``weak_pull``
+**Ill-conditioned geometry.** The Jacobian is a linearisation. Where the geometry curves
+over the force's uncertainty it under-states the spread: a cable lying mostly on the ground
+has ``dz/dF_d ~ 0`` at the estimate, yet half a newton more pull lifts metres of it. The
+covariance therefore adds the linearisation's residual ``D``: the second moment of
+``p(F + d_i) - p(F) - J_f d_i`` over the unscented transform's six points
+``d_i = +-sqrt(3) S e_i`` (``Sigma_F = S S^T``), measured about the estimate, so that it
+counts the curvature's bias as well as its spread (small where the geometry is straight over
+the force's error; six position solutions a tick). A point the geometry cannot explain (a
+force the catenary of this length cannot produce) makes the tick ``weak_pull``. The azimuth's
+error is the other non-linearity: once ``s_psi`` is not small it is not Gaussian (a pull as
+weak as its error can point anywhere, and the drone's estimate flips to the other side of the
+anchor). Above ``max_azimuth_std_rad`` the estimator says ``weak_pull``
 (the service withholds, or inflates by ``publish.on_unhealthy``); the position is still
 returned for inspection and scoring, with its covariance inflated by ``r^2`` on each
 horizontal axis: the azimuth is given up, the drone is somewhere on the circle of radius ``r``
@@ -403,8 +411,9 @@ class CatenaryPositionEstimator:
         except ValueError:
             return self._invalid(t, INCONSISTENT)
         factor = self._covariance_factor(jacobian, estimate)
-        covariance = factor @ factor.T + cfg.min_position_std_m**2 * np.eye(3)
-        if azimuth_std <= cfg.max_azimuth_std_rad:
+        curvature, explained = self._curvature(force, length, position, jacobian, estimate)
+        covariance = factor @ factor.T + curvature + cfg.min_position_std_m**2 * np.eye(3)
+        if explained and azimuth_std <= cfg.max_azimuth_std_rad:
             return CatenaryPosition(t, position, covariance, OK, azimuth_std)
         self.rejected += 1
         covariance[:2, :2] += float(position[0] ** 2 + position[1] ** 2) * np.eye(2)
@@ -426,6 +435,33 @@ class CatenaryPositionEstimator:
             jacobian[:, 4:5] * (cfg.weight_per_length_rel_std * cfg.weight_per_length_n_per_m)
         )
         return np.hstack(columns)
+
+    def _curvature(
+        self,
+        force: FloatArray,
+        length_m: float,
+        position: FloatArray,
+        jacobian: FloatArray,
+        estimate: TensionEstimate,
+    ) -> tuple[FloatArray, bool]:
+        """What the linearisation misses over the force's uncertainty, and whether the geometry
+        explains all of it (module docstring): the second moment ``D`` [m^2], shape (3, 3), of
+        ``p(F + d_i) - p(F) - J_f d_i`` over the six points ``d_i = +-sqrt(3) S e_i``
+        (``Sigma_F = S S^T``; the unscented transform's points, weight 1/6 each), and False when
+        a point is a force the catenary cannot explain (then D is over the points that are)."""
+        root = np.linalg.cholesky(estimate.covariance_ned_n2) * math.sqrt(3.0)
+        force_part = jacobian[:, :3]
+        curvature = np.zeros((3, 3))
+        explained = True
+        for column in (*root.T, *(-root.T)):
+            try:
+                residual = self._position(force + column, length_m) - position
+            except ValueError:
+                explained = False
+                continue
+            residual -= force_part @ column
+            curvature += np.outer(residual, residual) / 6.0
+        return curvature, explained
 
     def _position(self, force: FloatArray, length_m: float) -> FloatArray:
         cfg = self.config

@@ -17,6 +17,7 @@ from tether_companion.estimation.catenary_position import (
     INCONSISTENT,
     OK,
     UNOBSERVABLE,
+    WEAK_PULL,
     CatenaryPosition,
 )
 from tether_companion.estimation.tension_kf import TensionEstimate, TensionHealth
@@ -25,6 +26,7 @@ from tether_companion.mavlink.estimates import local_position_ned_message
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
 from tether_companion.service.config import PublishConfig, load_service_config, load_vehicle_for
 from tether_companion.service.health import DIVERGED, SLACK
+from tether_companion.service.health import WEAK_PULL as HEALTH_WEAK_PULL
 from tether_companion.service.publish import (
     CATENARY_POSITION_NAMES,
     TENSION_MAGNITUDE_NAME,
@@ -245,6 +247,25 @@ def test_catenary_source_reports_a_slack_cable_as_slack() -> None:
     assert session.publisher.health == SLACK
     texts = [m.text for _, m in sent if m.get_type() == "STATUSTEXT"]
     assert any("slack" in text for text in texts), texts
+
+
+def test_catenary_source_withholds_a_pull_as_weak_as_its_error() -> None:
+    """0.2 N on the nearly straight light cable of the publishing test: the tension's error
+    budget across the pull (accelerometer bias 0.1 m/s^2 times the mass, 0.15 N, and the
+    filter's noise) makes the pull's direction uncertain by ~0.8 rad, above the 0.35 rad
+    bound: ``weak_pull``, nothing sent, the health and its STATUSTEXT say so; the 4 N pull of
+    the publishing test is published with the same budget."""
+    length = float(np.linalg.norm(POSITION)) + 0.01
+    catenary = {"weight_per_length_n_per_m": 0.01, "default_length_m": length}
+    session = _session({"position": {"source": "catenary"}, "catenary": catenary})
+    sent = _fly(session, 3.0, tension_n=0.2)
+    assert not [m for _, m in sent if m.get_type() == "VISION_POSITION_ESTIMATE"]
+    last = session.last_catenary
+    assert last is not None and last.status == WEAK_PULL
+    assert last.azimuth_std_rad > 0.35 and np.all(np.isfinite(last.position_ned_m))
+    assert session.publisher.health == HEALTH_WEAK_PULL
+    texts = [m.text for _, m in sent if m.get_type() == "STATUSTEXT"]
+    assert any("pull too weak" in text for text in texts), texts
 
 
 def test_position_source_is_validated() -> None:

@@ -8,9 +8,12 @@ process, best of ``--repeat``:
 * warm: every datagram parsed first, then every message handed to the session (each stage's
   code stays in the CPU's caches);
 * interleaved: datagram by datagram, parse then session, as the live service does one flight-
-  controller tick at a time (the per-type costs are printed for this pass).
+  controller tick at a time (the per-type costs are printed for this pass); with
+  ``--sleep-ms`` the process sleeps that long after each tick, as the live service waits for
+  the next one (CPU time only is counted: what sleeping costs is the caches it loses).
 
-Run: ``python tests/hot_path_cost.py [--imu-rate 200] [--seconds 20] [--repeat 3]``.
+Run: ``python tests/hot_path_cost.py [--imu-rate 200] [--seconds 20] [--repeat 3]
+[--sleep-ms 0]``.
 """
 
 from __future__ import annotations
@@ -67,11 +70,15 @@ def _warm(datagrams: list[tuple[float, bytes]]) -> tuple[float, float]:
     return t1 - t0, time.process_time() - t1
 
 
-def _interleaved(datagrams: list[tuple[float, bytes]]) -> dict[str, float]:
+def _interleaved(datagrams: list[tuple[float, bytes]], sleep_s: float) -> dict[str, float]:
     parser, session = FrameParser(), _session()
     clock = time.thread_time
     spent: dict[str, float] = defaultdict(float)
+    tick_s = datagrams[0][0]
     for t, data in datagrams:
+        if sleep_s and t != tick_s:
+            tick_s = t
+            time.sleep(sleep_s)
         t0 = clock()
         messages = parser.feed(data, SOURCE)
         t1 = clock()
@@ -89,6 +96,7 @@ def main() -> None:
     parser.add_argument("--imu-rate", type=float, default=200.0)
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--sleep-ms", type=float, default=0.0)
     args = parser.parse_args()
     datagrams = _datagrams(args.imu_rate, args.seconds)
     n = len(datagrams)
@@ -96,7 +104,7 @@ def main() -> None:
     for _, msg in ((t, m) for t, d in datagrams for m in FrameParser().feed(d, SOURCE)):
         counts[msg.get_type()] += 1
     warm = min((_warm(datagrams) for _ in range(args.repeat)), key=sum)
-    passes = [_interleaved(datagrams) for _ in range(args.repeat)]
+    passes = [_interleaved(datagrams, 1e-3 * args.sleep_ms) for _ in range(args.repeat)]
     cold = min(passes, key=lambda spent: sum(spent.values()))
     share = 100.0 / args.seconds
     print(
@@ -109,7 +117,8 @@ def main() -> None:
     )
     interleaved = sum(cold.values())
     print(
-        f"interleaved parse {1e6 * cold['parse'] / n:6.1f} us  session "
+        f"interleaved{f' + {args.sleep_ms:g} ms sleeps' if args.sleep_ms else ''} parse "
+        f"{1e6 * cold['parse'] / n:6.1f} us  session "
         f"{1e6 * (interleaved - cold['parse']) / n:6.1f} us  total {share * interleaved:5.2f} %"
     )
     for kind in sorted(counts, key=lambda k: -cold[k]):

@@ -4,8 +4,8 @@ with the service instrumented, the age of each published estimate split into
 * ``fc->service``: RAW_IMU sent by the fake flight controller to the service reading its
   datagram (the service process waking up: scheduling);
 * ``read->handle``: datagram read to the message handled (the service's event loop);
-* ``handle->sent``: handled to its estimate sent (the 20 ms reorder window, the EKF, and
-  waiting for the newer sample that releases it);
+* ``handle->sent``: handled to its estimate sent (the EKF, and, once the link has been seen to
+  reorder, the adaptive reorder window and waiting for the newer sample that releases it);
 * ``sent->fc``: sent to the fake flight controller reading it (its own scheduling).
 
 Not a test (no ``test_`` prefix). Run from the repository root::

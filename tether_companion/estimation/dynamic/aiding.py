@@ -12,21 +12,26 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tether_companion.estimation.dynamic.bank import FilterBank
+from tether_companion.estimation.dynamic.bank import LIKELIHOOD_TEMPERING, FilterBank
 from tether_companion.estimation.ekf import (
     FUSED,
     GATED,
     NONFINITE,
     MeasurementFunction,
+    UpdateResult,
     chi2_threshold,
 )
 
 FloatArray = NDArray[np.float64]
+
+RowsFunction = Callable[[list[float]], tuple[Sequence[float], Sequence[float]]]
+"""``measure(x) -> (h(x) (m,), H (m*n row-major))`` at the state ``x`` (a list)."""
 
 _threshold = functools.lru_cache(maxsize=32)(chi2_threshold)
 
@@ -63,24 +68,87 @@ class AidStatus:
     last_test_ratio: float = math.nan
     last_fused: bool = False
     last_fused_time_s: float = math.nan
-    _last_jacobian: FloatArray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
-    _last_prior: FloatArray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
+    _last_jacobian: FloatArray | Sequence[float] = field(
+        default_factory=lambda: np.zeros((0, 0)), repr=False
+    )
+    _last_prior: FloatArray | Sequence[float] = field(
+        default_factory=lambda: np.zeros((0, 0)), repr=False
+    )
     _last_noise: FloatArray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
 
     @property
     def last_innovation_variance(self) -> FloatArray:
         """Diagonal of the last innovation covariance ``H P H^T + R``, shape (m,) (computed
-        when asked: the filter does not need it)."""
-        h_jac = self._last_jacobian
+        when asked: the filter does not need it; the scalar path keeps ``H`` and ``P`` as the
+        flat lists it had)."""
+        noise = np.atleast_2d(self._last_noise)
+        m = noise.shape[0]
+        h_jac = np.asarray(self._last_jacobian, dtype=float)
         if h_jac.size == 0:
             return np.zeros(0)
-        return ((h_jac @ self._last_prior) * h_jac).sum(axis=1) + np.diag(self._last_noise)
+        h_jac = h_jac.reshape(m, -1)
+        n = h_jac.shape[1]
+        prior = np.asarray(self._last_prior, dtype=float).reshape(n, n)
+        return ((h_jac @ prior) * h_jac).sum(axis=1) + np.diag(noise)
 
     def skip(self, reason: str) -> None:
         """Count a sample the module did not offer to the filter, with why."""
         self.skipped += 1
         self.skipped_by_reason[reason] = self.skipped_by_reason.get(reason, 0) + 1
         self.last_fused = False
+
+
+def _record(status: AidStatus, result: UpdateResult, time_s: float) -> bool:
+    """Count ``result`` in ``status``; whether it was fused."""
+    status.last_fused = result.status == FUSED
+    if result.status == FUSED:
+        status.fused += 1
+        status.last_fused_time_s = time_s
+    elif result.status == GATED:
+        status.gated += 1
+    elif result.status == NONFINITE:
+        status.nonfinite += 1
+    else:
+        status.singular += 1
+    return status.last_fused
+
+
+def fuse_force_balance(
+    bank: FilterBank,
+    name: str,
+    status: AidStatus,
+    z: Sequence[float],
+    measure: RowsFunction,
+    r_variance: float,
+    time_s: float,
+) -> bool:
+    """:func:`fuse` for a 3-axis measurement with ``R = r_variance I`` through the members'
+    lean update (``MemberFilter.update_force_balance``): ``measure(x)`` gives
+    ``(h(x) (3,), H (39, row-major))`` at the state as a list ``x``."""
+    best = bank.best
+    best_result = None
+    best_jacobian: Sequence[float] = ()
+    best_prior: FloatArray | None = None
+    for i, kf in enumerate(bank.filters):
+        kf.propagate_covariance()
+        value, jacobian = measure(kf.x_values())
+        innovation = [z[0] - value[0], z[1] - value[1], z[2] - value[2]]
+        prior = kf.P
+        result = kf.update_force_balance(name, innovation, jacobian, r_variance)
+        if kf is best:
+            best_result, best_jacobian, best_prior = result, jacobian, prior
+        elif math.isfinite(result.nis):
+            bank.log_likelihood[i] -= 0.5 * result.nis / LIKELIHOOD_TEMPERING
+    assert best_result is not None and best_prior is not None
+    if not bank.decided:
+        bank.add_best_nis(best_result.nis)
+    if math.isfinite(best_result.nis):
+        status.last_innovation = best.sensors[name].last_innovation
+        status._last_jacobian, status._last_prior = best_jacobian, best_prior
+        status._last_noise = r_variance * np.eye(3)
+        threshold = _threshold(best.gate_probability, 3)
+        status.last_test_ratio = best_result.nis / threshold if math.isfinite(threshold) else 0.0
+    return _record(status, best_result, time_s)
 
 
 def fuse(
@@ -100,12 +168,13 @@ def fuse(
     if not bank.decided:
         bank.update_others(name, z, measure, r)
     kf = bank.best
-    p_before = kf.P
     jacobians: list[FloatArray] = []
+    priors: list[FloatArray] = []
 
     def measure_and_keep(x: FloatArray) -> tuple[FloatArray, FloatArray]:
         value, h_jac = measure(x)
         jacobians.append(h_jac)
+        priors.append(kf.P)  # as the update sees it (a member's covariance is brought to x's time)
         return value, h_jac
 
     result = kf.update(name, z, measure_and_keep, r)
@@ -113,17 +182,7 @@ def fuse(
         bank.add_best_nis(result.nis)
     if math.isfinite(result.nis):
         status.last_innovation = kf.sensors[name].last_innovation
-        status._last_jacobian, status._last_prior, status._last_noise = jacobians[0], p_before, r
+        status._last_jacobian, status._last_prior, status._last_noise = jacobians[0], priors[0], r
         threshold = _threshold(kf.gate_probability, z.size)
         status.last_test_ratio = result.nis / threshold if math.isfinite(threshold) else 0.0
-    status.last_fused = result.status == FUSED
-    if result.status == FUSED:
-        status.fused += 1
-        status.last_fused_time_s = time_s
-    elif result.status == GATED:
-        status.gated += 1
-    elif result.status == NONFINITE:
-        status.nonfinite += 1
-    else:
-        status.singular += 1
-    return status.last_fused
+    return _record(status, result, time_s)

@@ -24,7 +24,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
-from tether_companion.estimation.ekf import ExtendedKalmanFilter, MeasurementFunction
+from tether_companion.estimation.dynamic.member import MemberFilter
+from tether_companion.estimation.ekf import MeasurementFunction
 
 FloatArray = NDArray[np.float64]
 
@@ -43,7 +44,7 @@ observable at all (a member 1.6-2 m off published at 3.2 sigma in the service's 
 
 
 class FilterBank:
-    """Members (``ExtendedKalmanFilter``) with log-likelihood weights.
+    """Members (``MemberFilter``) with log-likelihood weights.
 
     Parameters
     ----------
@@ -53,7 +54,7 @@ class FilterBank:
         Time the bank started [s].
     """
 
-    def __init__(self, filters: list[ExtendedKalmanFilter], start_s: float) -> None:
+    def __init__(self, filters: list[MemberFilter], start_s: float) -> None:
         self.filters = filters
         self.log_likelihood = np.zeros(len(filters))
         self.start_s = start_s
@@ -64,7 +65,7 @@ class FilterBank:
         return len(self.filters) == 1
 
     @property
-    def best(self) -> ExtendedKalmanFilter:
+    def best(self) -> MemberFilter:
         """The member with the largest weight."""
         filters = self.filters
         if len(filters) == 1:
@@ -76,10 +77,11 @@ class FilterBank:
         w = np.exp(self.log_likelihood - self.log_likelihood.max())
         return w / w.sum()
 
-    def predict(self, dt_s: float, u: FloatArray) -> None:
-        """Predict every member."""
+    def predict(self, dt_s: float, u: list[float], covariance: bool = True) -> None:
+        """Predict every member (``u`` the inputs as floats; the covariance too when
+        ``covariance``, see :meth:`MemberFilter.predict`)."""
         for kf in self.filters:
-            kf.predict(dt_s, u)
+            kf.predict(dt_s, u, covariance=covariance)
 
     def update_others(
         self, name: str, z: FloatArray, measure: MeasurementFunction, r: FloatArray
@@ -106,9 +108,9 @@ class FilterBank:
         limit = max_distance_m**2
         keep = []
         for i, kf in enumerate(self.filters):
-            pn, pe, pd = kf.x[state.POSITION].tolist()
-            distance_sq = pn * pn + pe * pe + pd * pd
-            if math.isfinite(float(kf.x.sum())) and distance_sq <= limit:
+            x = kf.x_values()
+            distance_sq = x[0] * x[0] + x[1] * x[1] + x[2] * x[2]
+            if math.isfinite(sum(x)) and distance_sq <= limit:
                 keep.append(i)
         if keep and len(keep) < len(self.filters):
             self.filters = [self.filters[i] for i in keep]
@@ -117,15 +119,13 @@ class FilterBank:
     def mixture(self) -> tuple[FloatArray, FloatArray]:
         """Mean (n,) and covariance (n, n) of the weighted mixture."""
         if self.decided:
-            kf = self.filters[0]
-            return kf.x, kf.P
+            return self.filters[0].snapshot()
         w = self.weights()
         xs = np.array([kf.x for kf in self.filters])
         mean = w @ xs
-        cov = np.zeros((state.N_STATES, state.N_STATES))
-        for wi, kf, xi in zip(w, self.filters, xs, strict=True):
-            d = xi - mean
-            cov += wi * (kf.P + np.outer(d, d))
+        spread = xs - mean
+        cov = np.tensordot(w, np.array([kf.P for kf in self.filters]), 1)
+        cov += (spread.T * w) @ spread
         return mean, 0.5 * (cov + cov.T)
 
     def maybe_decide(self, time_s: float) -> None:

@@ -119,6 +119,13 @@ class DynamicFilterConfig:
         doc="publish only while the horizontal pull exceeds this many times the rotor drag of"
         " a wind of initial.wind_std_mps (the bearing is unknown below) [1]",
     )
+    imu_ticks_per_fusion: int = spec(
+        4,
+        minimum=1,
+        maximum=20,
+        doc="inertial: the force balance (and the covariance prediction) every this many IMU"
+        " ticks, its white noise scaled to that interval; the state is predicted every tick [1]",
+    )
     noise: DynamicNoise = spec(default_factory=DynamicNoise, doc="process noise")
     initial: DynamicInitial = spec(default_factory=DynamicInitial, doc="initialisation")
 

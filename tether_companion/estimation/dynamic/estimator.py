@@ -39,7 +39,7 @@ from tether_companion.estimation.alignment import (
     aligner_for,
 )
 from tether_companion.estimation.config import EstimatorConfig
-from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic import generated, state
 from tether_companion.estimation.dynamic.aid.accel import NEAR_ANCHOR, ON_GROUND, AccelAid
 from tether_companion.estimation.dynamic.aid.cable_angle import CableAngleAid
 from tether_companion.estimation.dynamic.aid.load_cell import LoadCellAid
@@ -48,12 +48,8 @@ from tether_companion.estimation.dynamic.aid.winch import WinchAid
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterConfig
 from tether_companion.estimation.dynamic.initialise import Initialiser
-from tether_companion.estimation.dynamic.models import (
-    UNDEFINED,
-    ForceBalanceProcess,
-    InertialProcess,
-    ModelConstants,
-)
+from tether_companion.estimation.dynamic.member import MemberFilter
+from tether_companion.estimation.dynamic.models import UNDEFINED, ModelConstants
 from tether_companion.estimation.dynamic.observability import assess
 from tether_companion.estimation.dynamic.output import NavigationEstimate
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
@@ -171,6 +167,11 @@ class DynamicTetherEstimator(InputFeed):
         self.health = DynamicHealth()
         self._weight_n = vehicle.mass_kg * GRAVITY_MPS2
         self._inertial = dynamic.formulation == INERTIAL
+        self._ticks_per_fusion = dynamic.imu_ticks_per_fusion if self._inertial else 1
+        """IMU ticks per force-balance fusion (the inertial formulation's correlated residual
+        makes every tick's sample mostly redundant; the force balance is the process in the
+        other formulation, fused every tick)."""
+        self._ticks_since_fusion = 0
         self._q = self._process_noise()
         self._min_pull_n = (
             dynamic.min_pull_over_wind_drag
@@ -196,6 +197,7 @@ class DynamicTetherEstimator(InputFeed):
 
     # ------------------------------------------------------------------ setup
     def _process_noise(self) -> FloatArray:
+        """The diagonal of the process noise spectral density (13,)."""
         noise = self.dynamic.noise
         q = np.zeros(state.N_STATES)
         q[state.POSITION] = noise.position_m2ps
@@ -207,15 +209,16 @@ class DynamicTetherEstimator(InputFeed):
         q[state.SCALE] = noise.thrust_scale_per_s
         q[state.BIAS] = noise.accel_bias_m2ps5
         q[state.WIND] = noise.wind_m2ps3
-        return np.diag(q)
+        return q
 
     def _accel_measurement_std(self) -> float:
         sensor = self.dynamic.accel_noise_std_mps2
         if not self._inertial:
             return sensor
         # the force balance as the measurement carries the unmodelled forces; they are
-        # correlated over about a second, so their white equivalent per IMU sample is large
-        unmodelled_sq = self.dynamic.noise.force_residual_m2ps3 / NOMINAL_IMU_STEP_S
+        # correlated over about a second, so their white equivalent per fused sample is large
+        interval_s = NOMINAL_IMU_STEP_S * self._ticks_per_fusion
+        unmodelled_sq = self.dynamic.noise.force_residual_m2ps3 / interval_s
         return math.sqrt(sensor**2 + unmodelled_sq)
 
     def _horizontal_pull_n(self, x: FloatArray) -> float:
@@ -340,7 +343,9 @@ class DynamicTetherEstimator(InputFeed):
             health.stale_pwm += 1
         if self.bank is None:
             return self._initialise_tick(aligned, stale)
-        self._predict(t - self._last_tick_s)
+        self._ticks_since_fusion += 1
+        fusion_tick = self._ticks_since_fusion >= self._ticks_per_fusion
+        self._predict(t - self._last_tick_s, fusion_tick)
         self._last_tick_s = t
         if self.bank is None:  # the prediction diverged and restarted
             return self._estimate(False, stale, False)
@@ -350,13 +355,12 @@ class DynamicTetherEstimator(InputFeed):
             assert isinstance(aligned, AlignedInputs)
             on_ground = aligned.thrust_n < self.dynamic.min_thrust_fraction * self._weight_n
             inputs = [*aligned.rotation_ned_to_body.ravel().tolist(), aligned.thrust_n]
-            accel_fused = self._fuse_accel(inputs, aligned, on_ground, t)
-            self._inputs = (
-                [*inputs[:9], *aligned.specific_force_body_mps2.tolist()]
-                if self._inertial
-                else inputs
-            )
-        self._check_divergence(t)
+            force = aligned.specific_force_body_mps2.tolist()
+            if fusion_tick:
+                accel_fused = self._fuse_accel(inputs, force, on_ground, t)
+                self._ticks_since_fusion = 0
+            self._inputs = [*inputs[:9], *force] if self._inertial else inputs
+        self._check_divergence(t, fusion_tick)
         return self._estimate(accel_fused, stale, on_ground)
 
     @property
@@ -377,17 +381,15 @@ class DynamicTetherEstimator(InputFeed):
         starts = self._hypotheses(t)
         if not starts:
             return self._estimate(False, False, False)
-        process = (
-            InertialProcess(self.constants)
-            if self._inertial
-            else ForceBalanceProcess(self.constants)
-        )
+        c = self.constants
+        process = generated.inertial if self._inertial else c.models.force_balance
         gate = self.config.gate
         members = [
-            ExtendedKalmanFilter(
+            MemberFilter(
                 x0,
                 p0,
                 self._q,
+                c,
                 process,
                 gate_probability=gate.probability,
                 max_consecutive_rejections=gate.max_consecutive_rejections,
@@ -400,6 +402,7 @@ class DynamicTetherEstimator(InputFeed):
         self._inputs = [*inputs[:9], *force.tolist()] if self._inertial else inputs
         self._last_tick_s = t
         self._gated_since_s = math.nan
+        self._ticks_since_fusion = 0
         return self._estimate(False, False, False)
 
     def _hypotheses(self, t: float) -> list[tuple[FloatArray, FloatArray]]:
@@ -422,12 +425,12 @@ class DynamicTetherEstimator(InputFeed):
             initialiser.restart(t, results[len(results) // 2].reason)
         return starts
 
-    def _predict(self, dt_s: float) -> None:
+    def _predict(self, dt_s: float, covariance: bool) -> None:
         bank = self.bank
         assert bank is not None and self._inputs is not None
         resets_before = [kf.resets for kf in bank.filters]
         try:
-            bank.predict(dt_s, np.array(self._inputs))
+            bank.predict(dt_s, self._inputs, covariance)
         except UNDEFINED:  # at the anchor, or zero tension: the cable model is undefined
             self._restart("position at the anchor or no tension")
             return
@@ -442,16 +445,14 @@ class DynamicTetherEstimator(InputFeed):
         self.health.pd_repairs = sum(kf.pd_repairs for kf in bank.filters)
 
     def _fuse_accel(
-        self, inputs: list[float], aligned: AlignedInputs, on_ground: bool, t: float
+        self, inputs: list[float], force: list[float], on_ground: bool, t: float
     ) -> bool:
         health = self.health
         status = self.accel.status
         gated_before = status.gated
         bank = self.bank
         assert bank is not None
-        fused = self.accel.fuse(
-            bank, self.constants, inputs, aligned.specific_force_body_mps2, t, on_ground
-        )
+        fused = self.accel.fuse(bank, self.constants, inputs, force, t, on_ground)
         health.on_ground = status.skipped_by_reason.get(ON_GROUND, 0)
         health.near_anchor = status.skipped_by_reason.get(NEAR_ANCHOR, 0)
         health.accel_gated = status.gated
@@ -465,16 +466,17 @@ class DynamicTetherEstimator(InputFeed):
             self._gated_since_s = t
         return fused
 
-    def _check_divergence(self, t: float) -> None:
+    def _check_divergence(self, t: float, fusion_tick: bool) -> None:
         bank = self.bank
         if bank is None:
             return
         bank.drop_unhealthy(MAX_DISTANCE_M)
-        bank.maybe_decide(t)
-        x = bank.best.x
+        if fusion_tick:  # the members' covariances are current
+            bank.maybe_decide(t)
+        x = bank.best.x_values()
         if not math.isnan(self._gated_since_s) and t - self._gated_since_s >= DIVERGED_AFTER_S:
             self._restart(f"accelerometer innovations gated for {DIVERGED_AFTER_S:g} s")
-        elif float(np.dot(x[state.POSITION], x[state.POSITION])) > MAX_DISTANCE_M**2:
+        elif x[0] * x[0] + x[1] * x[1] + x[2] * x[2] > MAX_DISTANCE_M**2:
             self._restart(f"position beyond {MAX_DISTANCE_M:g} m")
 
     def _restart(self, reason: str) -> None:

@@ -1,9 +1,7 @@
 """The generated models bound to a cable: which variant (the straight line for a weightless
-cable, the catenary for one with weight), the constants tuple, and the process models for
-:class:`~tether_companion.estimation.ekf.ExtendedKalmanFilter`.
-
-Pure; the process objects cache the generated derivative between the filter's ``jacobian``
-and ``derivative`` calls at the same state (one generated call per prediction).
+cable, the catenary for one with weight) and the constants tuple. The bank members
+(:mod:`~tether_companion.estimation.dynamic.member`) call the generated process function
+directly. Pure.
 """
 
 from __future__ import annotations
@@ -89,51 +87,3 @@ def evaluate(
     except UNDEFINED:
         return np.full(rows, math.nan), np.full((rows, state.N_STATES), math.nan)
     return np.array(h), np.array(jac).reshape(rows, state.N_STATES)
-
-
-_V_ROWS = slice(3, 6)
-
-
-class _GeneratedProcess:
-    """``ProcessModel`` over a generated ``(x', dv'/dx)`` function; ``p' = v`` rows fixed."""
-
-    is_random_walk = False
-
-    def __init__(self, constants: ModelConstants) -> None:
-        self.constants = constants
-        self._base = np.zeros((state.N_STATES, state.N_STATES))
-        self._base[state.POSITION, state.VELOCITY] = np.eye(3)
-        self._x: FloatArray | None = None
-        self._xdot: FloatArray = np.zeros(state.N_STATES)
-
-    def _function(self) -> Generated:
-        raise NotImplementedError
-
-    def jacobian(self, x: FloatArray, u: FloatArray | None) -> FloatArray:
-        """``df/dx`` at ``(x, u)``, shape (13, 13) (caches ``f`` for :meth:`derivative`)."""
-        xdot, dv = self._function()(x.tolist(), u.tolist(), self.constants.values())
-        self._x = x
-        self._xdot = np.array(xdot, dtype=float)
-        jac = self._base.copy()
-        jac[_V_ROWS] = np.array(dv, dtype=float).reshape(3, state.N_STATES)
-        return jac
-
-    def derivative(self, x: FloatArray, u: FloatArray | None) -> FloatArray:
-        """``f(x, u)``, shape (13,)."""
-        if x is not self._x:
-            self.jacobian(x, u)
-        return self._xdot
-
-
-class ForceBalanceProcess(_GeneratedProcess):
-    """Formulation (a): ``u = (R_v^b row-major, thrust_n)``; the force balance predicts."""
-
-    def _function(self) -> Generated:
-        return self.constants.models.force_balance
-
-
-class InertialProcess(_GeneratedProcess):
-    """Formulation (b): ``u = (R_v^b row-major, f_x, f_y, f_z)``; the accelerometer predicts."""
-
-    def _function(self) -> Generated:
-        return generated.inertial

@@ -23,7 +23,6 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.ekf import MeasurementFunction
 
@@ -54,10 +53,13 @@ class FilterBank:
         Time the bank started [s].
     """
 
-    def __init__(self, filters: list[MemberFilter], start_s: float) -> None:
+    def __init__(
+        self, filters: list[MemberFilter], start_s: float, max_bank_s: float = MAX_BANK_S
+    ) -> None:
         self.filters = filters
         self.log_likelihood = np.zeros(len(filters))
         self.start_s = start_s
+        self.max_bank_s = max_bank_s
 
     @property
     def decided(self) -> bool:
@@ -141,7 +143,7 @@ class FilterBank:
         if w[best] >= SELECT_WEIGHT:
             self.filters = [self.filters[best]]
             self.log_likelihood = np.zeros(1)
-        elif elapsed >= MAX_BANK_S:
+        elif elapsed >= self.max_bank_s:
             mean, cov = self.mixture()
             kf = self.filters[best]
             resets = kf.resets

@@ -83,3 +83,15 @@ def test_speed_comparison_runs_the_same_filter_as_filterpy() -> None:
     _, theirs = speed._filterpy(rows, config, model)
     np.testing.assert_allclose(ours, theirs, atol=1e-9)
     assert np.abs(ours[-1, :3]).max() < 10.0
+
+
+def test_filter_step_costs_time_both_estimators_on_the_same_samples() -> None:
+    """``bench speed``'s filter rows (``bench dynamic``'s measurement): both estimators ran
+    every IMU tick of the same recorded flight and the ratio is theirs."""
+    from tether_companion.bench.dynamic import step_costs
+
+    result = step_costs("realistic-circle", 2.0, 1)
+    us = result["us_per_tick"]
+    assert result["ticks"]["paper_4s"] == result["ticks"]["dynamic"] == 400
+    assert 0.0 < us["paper_4s"] < 1e5 and 0.0 < us["dynamic"] < 1e5
+    assert result["ratio_dynamic_to_paper"] == pytest.approx(us["dynamic"] / us["paper_4s"])

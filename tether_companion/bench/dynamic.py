@@ -168,20 +168,19 @@ def run_errors(args: argparse.Namespace) -> int:
     return 0
 
 
-def run(args: argparse.Namespace) -> int:
-    """Record, replay alternately, print (or the error matrix with ``--errors``)."""
-    if args.errors:
-        return run_errors(args)
+def step_costs(scenario_name: str, duration_s: float, repeat: int) -> dict:
+    """Wall time per IMU tick of the paper 4-state estimator and of the dynamic one (whole
+    run, and once its bank keeps one member) on the same recorded samples, replayed
+    alternately ``repeat`` times (best of each), and their ratios."""
     from tether_companion.physics.vehicle import load_vehicle
 
-    scenario = load_scenario(args.scenario)
-    vehicle = load_vehicle(scenario.vehicle)
+    vehicle = load_vehicle(load_scenario(scenario_name).vehicle)
     config = EstimatorConfig()
-    samples = record(args.scenario, args.duration)
+    samples = record(scenario_name, duration_s)
     decided = _decided_index(samples, config, vehicle)
     best = {"paper_4s": float("inf"), "dynamic": float("inf"), "dynamic_steady": float("inf")}
     ticks = {}
-    for _ in range(args.repeat):
+    for _ in range(repeat):
         wall, n = replay(TetherEstimator(config, vehicle), samples)
         best["paper_4s"], ticks["paper_4s"] = min(best["paper_4s"], wall / n), n
         wall, n = replay(DynamicTetherEstimator(config, vehicle), samples)
@@ -194,13 +193,22 @@ def run(args: argparse.Namespace) -> int:
                 min(best["dynamic_steady"], wall / n),
                 n,
             )
-    result = {
+    return {
+        "scenario": scenario_name,
+        "duration_s": duration_s,
         "us_per_tick": {k: v * 1e6 for k, v in best.items()},
         "ticks": ticks,
         "ratio_dynamic_to_paper": best["dynamic"] / best["paper_4s"],
         "ratio_steady_to_paper": best["dynamic_steady"] / best["paper_4s"],
         "states": {"paper_4s": 4, "dynamic": 13},
     }
+
+
+def run(args: argparse.Namespace) -> int:
+    """Record, replay alternately, print (or the error matrix with ``--errors``)."""
+    if args.errors:
+        return run_errors(args)
+    result = step_costs(args.scenario, args.duration, args.repeat)
     if args.json:
         print(json.dumps(result, indent=2))
         return 0

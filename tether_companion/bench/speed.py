@@ -10,6 +10,9 @@
    between the two filters' estimates (they compute the same thing; gating is off here).
 3. Replays the same 20 s synthetic hover, written as a .tlog and as an ArduPilot dataflash
    .bin, through the service pipeline and prints each one's CPU real-time factor.
+4. Replays the same 20 s of the realistic circle's samples through the paper 4-state
+   estimator and the dynamic 13-state one (whole pipelines, ``bench dynamic``'s
+   measurement) and prints each one's time per IMU tick and their ratio.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+from tether_companion.bench.dynamic import step_costs
 from tether_companion.estimation.config import EstimatorConfig, load_estimator_config
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
 from tether_companion.estimation.runner import run_scenario
@@ -33,6 +37,9 @@ from tether_companion.estimation.thrust_input import StaticThrustInput
 from tether_companion.frames import rotation_ned_to_body
 from tether_companion.sim.scenario import Scenario, load_scenario
 from tether_companion.sim.simulator import Simulator
+
+FILTER_SCENARIO = "realistic-circle"
+"""The flight the dynamic and the paper 4-state estimators are timed on (every error source)."""
 
 HELP = "Real-time factor of simulator + EKFs, and EKF step cost against filterpy's EKF."
 
@@ -290,6 +297,7 @@ def run(args: argparse.Namespace) -> int:
         theirs_s = min(theirs_s, elapsed)
     replay_flight_s = 20.0
     replay_cpu_s = _replay_cpu(args.repeat, replay_flight_s)
+    filters = step_costs(FILTER_SCENARIO, replay_flight_s, args.repeat)
     results = {
         "scenario": args.scenario,
         "simulated_s": scenario.duration_s,
@@ -313,6 +321,9 @@ def run(args: argparse.Namespace) -> int:
         "replay_tlog_real_time_factor_cpu": replay_flight_s / replay_cpu_s["tlog"],
         "replay_bin_cpu_s": replay_cpu_s["bin"],
         "replay_bin_real_time_factor_cpu": replay_flight_s / replay_cpu_s["bin"],
+        "filter_step_us_paper_4s": filters["us_per_tick"]["paper_4s"],
+        "filter_step_us_dynamic": filters["us_per_tick"]["dynamic"],
+        "filter_step_ratio_dynamic_to_paper": filters["ratio_dynamic_to_paper"],
     }
     if args.json:
         print(json.dumps(results, indent=2))
@@ -341,5 +352,12 @@ def run(args: argparse.Namespace) -> int:
             f"replay of a {replay_flight_s:.0f} s {name}, CPU",
             f"{cpu:.2f} s = {replay_flight_s / cpu:.1f}x real time",
         )
+    us = filters["us_per_tick"]
+    label = f"{FILTER_SCENARIO} {replay_flight_s:.0f} s, per IMU tick"
+    table.add_row(f"paper 4-state estimator, {label}", f"{us['paper_4s']:.1f} us")
+    table.add_row(
+        f"dynamic 13-state estimator (whole run), {label}",
+        f"{us['dynamic']:.1f} us = {filters['ratio_dynamic_to_paper']:.2f}x the 4-state",
+    )
     console.print(table)
     return 0

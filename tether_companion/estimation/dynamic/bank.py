@@ -119,9 +119,11 @@ class FilterBank:
             self.log_likelihood = self.log_likelihood[keep]
 
     def mixture(self) -> tuple[FloatArray, FloatArray]:
-        """Mean (n,) and covariance (n, n) of the weighted mixture."""
-        if self.decided:
-            return self.filters[0].snapshot()
+        """Mean (n,) and covariance (n, n) of the weighted mixture (with one member left,
+        that member's own arrays: the caller copies what it keeps)."""
+        if self.decided:  # the member's own arrays: read them, do not change them
+            kf = self.filters[0]
+            return kf.x, kf.P
         w = self.weights()
         xs = np.array([kf.x for kf in self.filters])
         mean = w @ xs

@@ -223,12 +223,12 @@ class DynamicTetherEstimator(InputFeed):
         unmodelled_sq = self.dynamic.noise.force_residual_m2ps3 / interval_s
         return math.sqrt(sensor**2 + unmodelled_sq)
 
-    def _horizontal_pull_n(self, x: FloatArray) -> float:
+    def _horizontal_pull_n(self, x: list[float]) -> float:
         """The cable's horizontal pull at the drone, ``T_ch |p_ne| / |p|`` [N]."""
-        distance = math.sqrt(float(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]))
+        distance = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
         if distance == 0.0:
             return 0.0
-        return float(x[state.TENSION]) * math.hypot(float(x[0]), float(x[1])) / distance
+        return x[state.TENSION] * math.hypot(x[0], x[1]) / distance
 
     def _new_initialiser(self) -> Initialiser:
         return Initialiser(
@@ -499,8 +499,9 @@ class DynamicTetherEstimator(InputFeed):
         else:
             x, p = bank.mixture()
             c = self.constants
+            values = x.tolist()
             try:
-                (tension,), jac = c.models.tension(x.tolist(), (), c.values())
+                (tension,), jac = c.models.tension(values, (), c.values())
                 jac_row = np.array(jac)
                 tension_var = float(jac_row @ p @ jac_row)
             except UNDEFINED:  # at the anchor or no tension: the chord term alone
@@ -514,7 +515,7 @@ class DynamicTetherEstimator(InputFeed):
             slack_tension_n=self.dynamic.slack_tension_n,
             position_covariance_m2=p[state.POSITION, state.POSITION],
             max_horizontal_std_m=self.dynamic.max_horizontal_std_m,
-            horizontal_pull_n=self._horizontal_pull_n(x),
+            horizontal_pull_n=0.0 if bank is None else self._horizontal_pull_n(values),
             min_horizontal_pull_n=self._min_pull_n,
         )
         return NavigationEstimate(

@@ -503,7 +503,7 @@ class DynamicTetherEstimator(InputFeed):
             try:
                 (tension,), jac = c.models.tension(values, (), c.values())
                 jac_row = np.array(jac)
-                tension_var = float(jac_row @ p @ jac_row)
+                tension_var = float(jac_row @ (p @ jac_row))
             except UNDEFINED:  # at the anchor or no tension: the chord term alone
                 tension, tension_var = float(x[state.TENSION]), float(p[6, 6])
         status, reason = assess(

@@ -117,14 +117,16 @@ class MemberFilter(ExtendedKalmanFilter):
             self.rejected_predictions += 1
             return False
         if dt_s > 0.0:
-            x = self.x
-            xdot, self._dv = self.process_function(x.tolist(), u, self.constants.values())  # type: ignore[arg-type]
-            self.x = x + dt_s * np.array(xdot, dtype=float)
+            x = self.x_values()
+            xdot, self._dv = self.process_function(x, u, self.constants.values())  # type: ignore[arg-type]
+            x = [a + dt_s * b for a, b in zip(x, xdot, strict=True)]
+            self.x = np.array(x)
             self._pending_s += dt_s
+            if not math.isfinite(sum(x)):
+                self.reset()
+                return True
         if covariance:
             self.propagate_covariance()
-        elif not math.isfinite(float(self.x.sum())):
-            self.reset()
         return True
 
     def propagate_covariance(self) -> None:

@@ -99,12 +99,25 @@ def test_lean_member_equals_the_generic_ekf(cable: str, weight: float) -> None:
         want = reference.update("accel", z, measure, np.eye(3) * r)
         assert got.status == want.status
         assert got.nis == pytest.approx(want.nis, rel=1e-9, abs=1e-9)
+        if k % 10 == 3:  # a scalar measurement (the rangefinder's height), outliers too
+            height = np.array([2.5 + rng.normal(scale=0.05) + (3.0 if k % 70 == 3 else 0.0)])
+            got = lean.update("range", height, _height, np.eye(1) * 0.0025)
+            want = reference.update("range", height, _height, np.eye(1) * 0.0025)
+            assert got.status == want.status
+            assert got.nis == pytest.approx(want.nis, rel=1e-9, abs=1e-9)
         np.testing.assert_allclose(lean.x, reference.x, rtol=0.0, atol=1e-9)
         np.testing.assert_allclose(lean.P, reference.P, rtol=0.0, atol=1e-9)
         outcomes.append(got.status)
     assert {"fused", "gated"} <= set(outcomes)
+    assert lean.sensors["range"].gated > 0 and lean.sensors["range"].fused > 0
     ours, theirs = lean.sensors["accel"], reference.sensors["accel"]
     assert (ours.fused, ours.gated, ours.forced) == (theirs.fused, theirs.gated, theirs.forced)
+
+
+def _height(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    row = np.zeros((1, N))
+    row[0, 2] = -1.0
+    return np.array([-x[2]]), row
 
 
 def test_not_finite_or_not_definite_innovation_covariance_is_counted() -> None:

@@ -61,7 +61,8 @@ class FilterBank:
         self, filters: list[MemberFilter], start_s: float, max_bank_s: float = MAX_BANK_S
     ) -> None:
         self.filters = filters
-        self.log_likelihood = np.zeros(len(filters))
+        self.log_likelihood = [0.0] * len(filters)
+        """Each member's tempered log-likelihood so far (Python floats: read every tick)."""
         self.start_s = start_s
         self.max_bank_s = max_bank_s
 
@@ -76,12 +77,24 @@ class FilterBank:
         filters = self.filters
         if len(filters) == 1:
             return filters[0]
-        return filters[int(np.argmax(self.log_likelihood))]
+        return filters[self._best_index()]
+
+    def _best_index(self) -> int:
+        ll = self.log_likelihood
+        return ll.index(max(ll))
 
     def weights(self) -> FloatArray:
         """Normalised posterior weights, shape (members,)."""
-        w = np.exp(self.log_likelihood - self.log_likelihood.max())
-        return w / w.sum()
+        ll = self.log_likelihood
+        top = max(ll)
+        w = [math.exp(v - top) for v in ll]
+        total = sum(w)
+        return np.array([v / total for v in w])
+
+    def keep(self, indices: list[int]) -> None:
+        """Keep only the members at ``indices`` (with their log-likelihoods)."""
+        self.filters = [self.filters[i] for i in indices]
+        self.log_likelihood = [self.log_likelihood[i] for i in indices]
 
     def predict(self, dt_s: float, u: list[float], covariance: bool = True) -> None:
         """Predict every member (``u`` the inputs as floats; the covariance too when
@@ -104,8 +117,7 @@ class FilterBank:
     def add_best_nis(self, nis: float) -> None:
         """The best member's NIS of the sample just fused."""
         if math.isfinite(nis):
-            best = int(np.argmax(self.log_likelihood))
-            self.log_likelihood[best] -= 0.5 * nis / LIKELIHOOD_TEMPERING
+            self.log_likelihood[self._best_index()] -= 0.5 * nis / LIKELIHOOD_TEMPERING
 
     def drop_unhealthy(self, max_distance_m: float) -> None:
         """Drop members whose state is not finite or farther than ``max_distance_m``."""
@@ -119,8 +131,7 @@ class FilterBank:
             if math.isfinite(sum(x)) and distance_sq <= limit:
                 keep.append(i)
         if keep and len(keep) < len(self.filters):
-            self.filters = [self.filters[i] for i in keep]
-            self.log_likelihood = self.log_likelihood[keep]
+            self.keep(keep)
 
     def mixture(self) -> tuple[FloatArray, FloatArray]:
         """Mean (n,) and covariance (n, n) of the weighted mixture (with one member left,
@@ -130,11 +141,14 @@ class FilterBank:
             return kf.x, kf.P
         w = self.weights()
         xs = np.array([kf.x for kf in self.filters])
+        n = xs.shape[1]
         mean = w @ xs
         spread = xs - mean
-        cov = np.tensordot(w, np.array([kf.P for kf in self.filters]), 1)
+        cov = (w @ np.array([kf.P.ravel() for kf in self.filters])).reshape(n, n)
         cov += (spread.T * w) @ spread
-        return mean, 0.5 * (cov + cov.T)
+        cov += cov.T
+        cov *= 0.5
+        return mean, cov
 
     def maybe_decide(self, time_s: float) -> None:
         """Keep one member when its weight passes :data:`SELECT_WEIGHT` (after
@@ -147,8 +161,7 @@ class FilterBank:
         w = self.weights()
         best = int(np.argmax(w))
         if w[best] >= SELECT_WEIGHT:
-            self.filters = [self.filters[best]]
-            self.log_likelihood = np.zeros(1)
+            self.keep([best])
         elif elapsed >= self.max_bank_s:
             mean, cov = self.mixture()
             kf = self.filters[best]
@@ -156,4 +169,4 @@ class FilterBank:
             kf.reset(mean, cov)
             kf.resets = resets  # a collapse is not a restart
             self.filters = [kf]
-            self.log_likelihood = np.zeros(1)
+            self.log_likelihood = [0.0]

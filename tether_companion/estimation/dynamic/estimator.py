@@ -441,9 +441,7 @@ class DynamicTetherEstimator(InputFeed):
             self._restart("state or covariance not finite")
             return
         if any(reset):  # drop the members that restarted
-            keep = [i for i, r in enumerate(reset) if not r]
-            bank.filters = [bank.filters[i] for i in keep]
-            bank.log_likelihood = bank.log_likelihood[keep]
+            bank.keep([i for i, r in enumerate(reset) if not r])
         self.health.pd_repairs = sum(kf.pd_repairs for kf in bank.filters)
 
     def _fuse_accel(

@@ -44,6 +44,7 @@ from tether_companion.estimation.ekf import (
     NONFINITE,
     SINGULAR,
     ExtendedKalmanFilter,
+    MeasurementFunction,
     SensorStatus,
     UpdateResult,
 )
@@ -146,11 +147,37 @@ class MemberFilter(ExtendedKalmanFilter):
         self.P = rate
         self._check_health()
 
-    def update(self, sensor, z, measure, r):  # type: ignore[no-untyped-def]  # noqa: ANN001, ANN201
+    def update(
+        self, sensor: str, z: FloatArray, measure: MeasurementFunction, r: FloatArray
+    ) -> UpdateResult:
         """:meth:`ExtendedKalmanFilter.update` on the covariance brought up to the state's
-        time first."""
+        time first; a scalar measurement (rangefinder, winch, load cell) in the lean form:
+        ``t = P h``, ``s = h t + r``, ``K = t / s``, ``P - K t^T`` made exactly symmetric
+        (no 13x13x13 product), same checks, gate and counts."""
         self.propagate_covariance()
-        return super().update(sensor, z, measure, r)
+        if z.size != 1:
+            return super().update(sensor, z, measure, r)
+        status = self.sensors.get(sensor)
+        if status is None:
+            status = self.sensors[sensor] = SensorStatus()
+        z_pred, h_jac = measure(self.x)
+        p = self.P
+        h_row = h_jac[0]
+        pht = p @ h_row
+        s = float(h_row @ pht) + float(r[0, 0])
+        y = float(z[0]) - float(z_pred[0])
+        if not s > 0.0:
+            return self._rejected(status, s)
+        nis = y * y / s
+        status.last_nis = nis
+        status.innovation = (y,)
+        threshold, in_force = self._gate(status, 1)
+        if self._gated(status, nis, threshold, in_force):
+            return UpdateResult(GATED, nis)
+        gain = pht / s
+        x = self.x + gain * y
+        p_new = p - np.outer(gain, pht)
+        return self._accept(status, nis, x, p_new)
 
     def reset(self, x: FloatArray | None = None, p: FloatArray | None = None) -> None:
         """:meth:`ExtendedKalmanFilter.reset`; nothing pending."""
@@ -200,9 +227,15 @@ class MemberFilter(ExtendedKalmanFilter):
         if self._gated(status, nis, threshold, in_force):
             return UpdateResult(GATED, nis)
         s_inv = np.array(((i00, i01, i02), (i01, i11, i12), (i02, i12, i22)))
-        gain = pht @ s_inv
         x = self.x + pht @ np.array((w0, w1, w2))
-        p_new = p - gain @ pht.T
+        p_new = p - (pht @ s_inv) @ pht.T
+        return self._accept(status, nis, x, p_new)
+
+    def _accept(
+        self, status: SensorStatus, nis: float, x: FloatArray, p_new: FloatArray
+    ) -> UpdateResult:
+        """Keep the updated state and covariance (the latter made exactly symmetric) unless
+        they are not finite; the Cholesky test and repair as the generic filter's."""
         p_new += p_new.T
         p_new *= 0.5
         if not math.isfinite(float(x.sum()) + float(p_new.sum())):

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from tether_companion.estimation.dynamic import bank as bank_module
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
@@ -25,7 +24,7 @@ def _direct(xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_mixture_covariance_holds_the_spread_between_members() -> None:
-    bank = FilterBank([_member(-0.5), _member(0.5)], start_s=0.0)
+    bank = FilterBank([_member(-0.5), _member(0.5)], start_s=0.0, max_bank_s=30.0)
     mean, cov = bank.mixture()
     assert mean[0] == 2.0
     assert cov[0, 0] == 0.01 + 0.25  # own variance + spread
@@ -33,7 +32,7 @@ def test_mixture_covariance_holds_the_spread_between_members() -> None:
 
 
 def test_the_member_the_data_favour_is_kept() -> None:
-    bank = FilterBank([_member(-0.5), _member(0.0), _member(0.5)], start_s=0.0)
+    bank = FilterBank([_member(-0.5), _member(0.0), _member(0.5)], start_s=0.0, max_bank_s=30.0)
     for k in range(400):
         bank.update_others("x", np.array((2.5,)), _direct, np.array([[0.01]]))
         result = bank.best.update("x", np.array((2.5,)), _direct, np.array([[0.01]]))
@@ -44,9 +43,9 @@ def test_the_member_the_data_favour_is_kept() -> None:
 
 
 def test_undecided_bank_collapses_to_its_moments() -> None:
-    bank = FilterBank([_member(-0.5), _member(0.5)], start_s=0.0)
+    bank = FilterBank([_member(-0.5), _member(0.5)], start_s=0.0, max_bank_s=30.0)
     mean, cov = bank.mixture()
-    bank.maybe_decide(bank_module.MAX_BANK_S + 1.0)
+    bank.maybe_decide(31.0)
     assert bank.decided
     np.testing.assert_allclose(bank.best.x, mean)
     np.testing.assert_allclose(bank.best.P, cov)
@@ -59,6 +58,6 @@ def test_members_far_away_or_not_finite_are_dropped() -> None:
     far.x[0] = 5000.0
     nan_member.x = nan_member.x.copy()
     nan_member.x[1] = np.nan
-    bank = FilterBank([_member(0.0), far, nan_member], start_s=0.0)
+    bank = FilterBank([_member(0.0), far, nan_member], start_s=0.0, max_bank_s=30.0)
     bank.drop_unhealthy(1000.0)
     assert bank.decided and bank.best.x[0] == 2.0

@@ -47,4 +47,3 @@ def drag_accel_body_mps2(
         ax -= k * air_u_mps * abs(air_u_mps)
         ay -= k * air_v_mps * abs(air_v_mps)
     return ax, ay
-

@@ -146,9 +146,7 @@ class FcTimeGate:
             if not agrees:
                 self._ahead = []
         self._ahead.append((fc_s, local_s))
-        return len(self._ahead) >= self.confirmations and self._spans(
-            [t for _, t in self._ahead]
-        )
+        return len(self._ahead) >= self.confirmations and self._spans([t for _, t in self._ahead])
 
     def _backstep(self, fc_s: float, local_s: float | None) -> str:
         if self._backsteps == 0:

@@ -10,8 +10,9 @@ members run side by side on the same measurements, and each accumulates the log-
 is the mixture's mean and covariance (weights from the log-likelihoods; the covariance
 includes the spread between members, so it stays honest while they disagree). When one
 member's weight passes ``SELECT_WEIGHT`` after ``MIN_BANK_S`` the others are dropped; after
-``MAX_BANK_S`` without a decision (a steady hover gives the thrust scale no information) the
-bank collapses into one filter holding the mixture's moments.
+``max_bank_s`` (the config's ``initial.thrust_scale_bank_max_s``) without a decision (a steady
+hover gives the thrust scale no information) the bank collapses into one filter holding the
+mixture's moments.
 
 Pure and synchronous.
 """
@@ -32,12 +33,6 @@ SELECT_WEIGHT = 0.99
 """Posterior weight at which one member is kept and the others dropped."""
 MIN_BANK_S = 3.0
 """Shortest time the members run side by side [s]."""
-MAX_BANK_S = 6.0
-"""Longest time [s]: then the bank collapses to its moments. With the tempered likelihood the
-weights hardly move in that time on the realistic flights (20 s of the 4 N circle: 0.25 each ->
-0.12-0.36), so what the members add after the first seconds is their different linearisation
-points, at N times the cost; collapsing at 6 s instead of 30 s made the IMU-only filter more
-accurate on the tuning flights and collapsing at 3 s less (docs/estimation.md, the bank)."""
 LIKELIHOOD_TEMPERING = 20.0
 """Each sample's ``-NIS/2`` is divided by this: the innovations of consecutive IMU ticks are
 not independent (motor lag, unmodelled forces and the FC's attitude error last tens of
@@ -57,9 +52,7 @@ class FilterBank:
         Time the bank started [s].
     """
 
-    def __init__(
-        self, filters: list[MemberFilter], start_s: float, max_bank_s: float = MAX_BANK_S
-    ) -> None:
+    def __init__(self, filters: list[MemberFilter], start_s: float, max_bank_s: float) -> None:
         self.filters = filters
         self.log_likelihood = [0.0] * len(filters)
         """Each member's tempered log-likelihood so far (Python floats: read every tick)."""
@@ -152,7 +145,7 @@ class FilterBank:
 
     def maybe_decide(self, time_s: float) -> None:
         """Keep one member when its weight passes :data:`SELECT_WEIGHT` (after
-        :data:`MIN_BANK_S`), or collapse to the moments after :data:`MAX_BANK_S`."""
+        :data:`MIN_BANK_S`), or collapse to the moments after ``max_bank_s``."""
         if self.decided:
             return
         elapsed = time_s - self.start_s

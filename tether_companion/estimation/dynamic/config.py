@@ -74,6 +74,13 @@ class DynamicInitial:
     window_s: float = spec(
         1.0, exclusive_minimum=0.0, doc="data averaged to initialise (tension direction) [s]"
     )
+    thrust_scale_bank_max_s: float = spec(
+        30.0,
+        exclusive_minimum=0.0,
+        doc="the hypotheses run side by side at most this long, then collapse to their"
+        " moments (6 s: 2-3x cheaper and more accurate IMU-only, less honest with the winch"
+        " length, docs/estimation.md) [s]",
+    )
 
 
 @dataclass(frozen=True)
@@ -120,11 +127,12 @@ class DynamicFilterConfig:
         " a wind of initial.wind_std_mps (the bearing is unknown below) [1]",
     )
     imu_ticks_per_fusion: int = spec(
-        4,
+        1,
         minimum=1,
         maximum=20,
         doc="inertial: the force balance (and the covariance prediction) every this many IMU"
-        " ticks, its white noise scaled to that interval; the state is predicted every tick [1]",
+        " ticks, its white noise scaled to that interval; the state is predicted every tick"
+        " (4: 2-3x cheaper, less honest with the winch length, docs/estimation.md) [1]",
     )
     noise: DynamicNoise = spec(default_factory=DynamicNoise, doc="process noise")
     initial: DynamicInitial = spec(default_factory=DynamicInitial, doc="initialisation")

@@ -45,7 +45,7 @@ from tether_companion.estimation.dynamic.aid.cable_angle import CableAngleAid
 from tether_companion.estimation.dynamic.aid.load_cell import LoadCellAid
 from tether_companion.estimation.dynamic.aid.rangefinder import RangefinderAid
 from tether_companion.estimation.dynamic.aid.winch import WinchAid
-from tether_companion.estimation.dynamic.bank import MAX_BANK_S, FilterBank
+from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterConfig
 from tether_companion.estimation.dynamic.initialise import Initialiser
 from tether_companion.estimation.dynamic.member import MemberFilter
@@ -172,8 +172,6 @@ class DynamicTetherEstimator(InputFeed):
         makes every tick's sample mostly redundant; the force balance is the process in the
         other formulation, fused every tick)."""
         self._ticks_since_fusion = 0
-        self.max_bank_s = MAX_BANK_S
-        """Longest time the thrust-scale bank runs before it collapses to its moments [s]."""
         self._q = self._process_noise()
         self._min_pull_n = (
             dynamic.min_pull_over_wind_drag
@@ -398,7 +396,7 @@ class DynamicTetherEstimator(InputFeed):
             )
             for x0, p0 in starts
         ]
-        self.bank = FilterBank(members, t, self.max_bank_s)
+        self.bank = FilterBank(members, t, self.dynamic.initial.thrust_scale_bank_max_s)
         self.health.initialisations += 1
         inputs = [*rotation.ravel().tolist(), thrust]
         self._inputs = [*inputs[:9], *force.tolist()] if self._inertial else inputs

@@ -20,8 +20,9 @@ with ``a`` the output's position between the SPIN_MIN and SPIN_MAX pulses: our q
 ``(0, K (1 - e), K e)``, exactly. The compensated demand makes each rotor give ``K * throttle``
 at any voltage, so a hover at ``MOT_THST_HOVER`` (the learned hover throttle, 0-1) gives the
 scale ``K = m g / (n MOT_THST_HOVER)`` from the mass alone. Air-density compensation (also in
-``get_compensation_gain``) is left out: ``K`` is then the thrust at the air density of the
-hover ArduPilot learned.
+``get_compensation_gain``: the demand is divided by the air-density ratio too) is left out, so
+a hover throttle ArduPilot learned away from sea-level density makes ``K`` too high by about
+1 / that ratio (4.3 % after a SITL hover at its 584 m field, docs/ardupilot.md).
 """
 
 from __future__ import annotations

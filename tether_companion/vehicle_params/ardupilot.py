@@ -21,8 +21,8 @@ with ``a`` the output's position between the SPIN_MIN and SPIN_MAX pulses: our q
 at any voltage, so a hover at ``MOT_THST_HOVER`` (the learned hover throttle, 0-1) gives the
 scale ``K = m g / (n MOT_THST_HOVER)`` from the mass alone. Air-density compensation (also in
 ``get_compensation_gain``: the demand is divided by the air-density ratio too) is left out, so
-a hover throttle ArduPilot learned away from sea-level density makes ``K`` too high by about
-1 / that ratio (4.3 % after a SITL hover at its 584 m field, docs/ardupilot.md).
+a hover throttle ArduPilot learned away from sea-level density gives a ``K`` too high (4.3 %
+after a SITL hover at its 584 m field, docs/ardupilot.md).
 """
 
 from __future__ import annotations

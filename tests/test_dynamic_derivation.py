@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 
 from tether_companion.estimation.dynamic import generated, state
+from tether_companion.estimation.dynamic import models as models_module
 from tether_companion.estimation.tether_models import FourStateModel
 from tether_companion.frames import rotation_ned_to_body
+from tether_companion.physics.cable import CableConfig, make_cable
 
 sympy = pytest.importorskip("sympy", reason="sympy (test extra) derives the models")
 from tether_companion.estimation.dynamic.derivation import derive  # noqa: E402
@@ -18,10 +20,17 @@ from tether_companion.estimation.dynamic.derivation import derive  # noqa: E402
 ROTATION_MODELS = {
     "force_balance_straight",
     "force_balance_catenary",
+    "force_balance_grounded",
     "accel_straight",
     "accel_catenary",
+    "accel_grounded",
 }
-PROCESS_MODELS = {"force_balance_straight", "force_balance_catenary", "inertial"}
+PROCESS_MODELS = {
+    "force_balance_straight",
+    "force_balance_catenary",
+    "force_balance_grounded",
+    "inertial",
+}
 ALL_MODELS = [name for name, *_ in derive.models()]
 
 
@@ -163,3 +172,83 @@ def test_the_straight_line_is_the_catenarys_taut_limit() -> None:
         np.testing.assert_allclose(catenary, straight, rtol=1e-6, err_msg=name)
     (length,), _ = generated.winch_length_straight(x, [], light)
     assert length == pytest.approx(13.0)
+
+
+def _cable_force_n(models: models_module.CableModels, x: list, c: list) -> np.ndarray:
+    """The cable's force on the drone, NED [N], read from formulation (a) with no thrust."""
+    xdot, _ = models.force_balance(x, [*np.eye(3).ravel(), 0.0], c)
+    return c[0] * (np.array(xdot[3:6]) - np.array([0.0, 0.0, 9.80665]))
+
+
+@pytest.mark.parametrize(
+    ("span_m", "height_m", "length_m", "density_kg_per_m"),
+    [
+        (6.5, 3.0, 7.5, 0.0167),  # the realistic sagging circle's far side: 0.15 m on the ground
+        (4.5, 3.0, 7.0, 0.0167),  # 1.3 m on the ground
+        (5.0, 3.0, 7.0, 0.1),  # heavy
+        (6.0, 1.0, 6.5, 0.1),  # low: most of it on the ground
+    ],
+)
+def test_a_cable_resting_on_the_ground_matches_the_simulators(
+    span_m: float, height_m: float, length_m: float, density_kg_per_m: float
+) -> None:
+    """Where the free catenary would dip below the anchor the filter's models (the switch in
+    models.py) are the simulator's cable lying on the anchor's level from the anchor to a
+    touchdown point (physics/cable.py: touchdown solved by bracketing, the rise by
+    physics/catenary.py): force at the drone, its size, the paid-out length, the flat angle."""
+    cable = make_cable(
+        CableConfig(
+            model="catenary",
+            length_m=length_m,
+            linear_density_kg_per_m=density_kg_per_m,
+            stiffness_n_per_m=100.0,
+        )
+    )
+    bearing = -2.0
+    p = np.array([span_m * math.cos(bearing), span_m * math.sin(bearing), -height_m])
+    expected = np.array(cable.force_components(*p, 0.0, 0.0, 0.0))
+    pull = math.hypot(expected[0], expected[1])
+    x = [*p, 0, 0, 0, pull * np.linalg.norm(p) / span_m, 1.0, 0, 0, 0, 0, 0]
+    c = [1.5, 0.0, density_kg_per_m * 9.80665]
+    assert models_module.rests_on_ground(x, c)
+    cable_models = models_module.CATENARY
+    np.testing.assert_allclose(_cable_force_n(cable_models, x, c), expected, rtol=1e-8)
+    (tension,), _ = cable_models.tension(x, [], c)
+    assert tension == pytest.approx(cable.tension_n, rel=1e-8)
+    (length,), _ = cable_models.winch_length(x, [], c)
+    assert length == pytest.approx(length_m, rel=1e-8)
+    (elevation, azimuth), _ = cable_models.cable_angle(x, [], c)
+    assert elevation == 0.0
+    assert azimuth == pytest.approx(bearing)
+    # the free catenary at the same tension misses the length by more than the winch's
+    # 5 cm noise: the error this model removed (the filter pulled its tension to match)
+    (free_length,), _ = generated.winch_length_catenary(x, [], c)
+    assert free_length - length_m > 0.05
+
+
+def test_the_free_and_the_grounded_cable_meet_where_the_lowest_point_is_the_anchor() -> None:
+    """At the switch (the free curve's lowest point at the anchor, touchdown at the anchor)
+    both variants give the same values, and the same Jacobians for the force, the tension and
+    the length: no jump for the filter. The anchor's elevation has a kink there (it stays 0
+    while the cable lies on the ground), so only its value is compared."""
+    from tether_companion.physics.catenary import end_tensions, solve_lowest_point_at_anchor
+
+    span, height, weight = 5.0, 3.0, 0.5
+    curve = solve_lowest_point_at_anchor(span, height)
+    pull = end_tensions(curve, weight).horizontal_n
+    p = np.array([span, 0.0, -height])
+    x = [*p, 0.2, -0.1, 0.0, pull * np.linalg.norm(p) / span, 1.0, 0, 0, 0, 0, 0]
+    c = [1.5, 0.2, weight]
+    u_rotation = [*rotation_ned_to_body(0.1, -0.2, 0.5).ravel(), 14.0]
+    for name, u in (
+        ("force_balance", u_rotation),
+        ("accel", u_rotation),
+        ("tension", []),
+        ("winch_length", []),
+        ("cable_angle", []),
+    ):
+        free_value, free_jac = getattr(generated, f"{name}_catenary")(x, u, c)
+        ground_value, ground_jac = getattr(generated, f"{name}_grounded")(x, u, c)
+        np.testing.assert_allclose(ground_value, free_value, atol=1e-6, err_msg=name)
+        if name != "cable_angle":
+            np.testing.assert_allclose(ground_jac, free_jac, atol=1e-4, err_msg=name)

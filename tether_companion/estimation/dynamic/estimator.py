@@ -50,7 +50,7 @@ from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterCo
 from tether_companion.estimation.dynamic.initialise import Initialiser
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.dynamic.models import UNDEFINED, ModelConstants
-from tether_companion.estimation.dynamic.observability import assess
+from tether_companion.estimation.dynamic.observability import assess, min_horizontal_pull_n
 from tether_companion.estimation.dynamic.output import NavigationEstimate
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
 from tether_companion.estimation.inputs import InputFeed, range_height_m, range_reading_ok
@@ -173,11 +173,8 @@ class DynamicTetherEstimator(InputFeed):
         other formulation, fused every tick)."""
         self._ticks_since_fusion = 0
         self._q = self._process_noise()
-        self._min_pull_n = (
-            dynamic.min_pull_over_wind_drag
-            * vehicle.mass_kg
-            * self.constants.drag_per_s
-            * dynamic.initial.wind_std_mps
+        self._pull_per_wind_n_s_per_m = (
+            dynamic.min_pull_over_wind_drag * vehicle.mass_kg * self.constants.drag_per_s
         )
         self.accel = AccelAid(self._accel_measurement_std(), config.min_cable_length_m)
         self.rangefinder = RangefinderAid(
@@ -512,7 +509,12 @@ class DynamicTetherEstimator(InputFeed):
             position_covariance_m2=p[state.POSITION, state.POSITION],
             max_horizontal_std_m=self.dynamic.max_horizontal_std_m,
             horizontal_pull_n=0.0 if bank is None else self._horizontal_pull_n(values),
-            min_horizontal_pull_n=self._min_pull_n,
+            min_horizontal_pull_n=min_horizontal_pull_n(
+                self._pull_per_wind_n_s_per_m,
+                self.dynamic.initial.wind_std_mps,
+                float(x[state.WIND][0]),
+                float(x[state.WIND][1]),
+            ),
         )
         return NavigationEstimate(
             time_s=self._time_s,

@@ -414,6 +414,145 @@ def cable_angle_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[flo
     return (math.atan2(-t18 - 1/2*t31, t29*t34), math.atan2(t35, t36),), (t36*t61, t35*t61, t65*(t14*t42*t5*t53 - 1/2*t33*(p_d*t46*tension + 8*p_d*t51*weight_n_per_m*(-t16*t50 + t47*t49 + 1) - t29*weight_n_per_m*(4*p_d*t19*t26*t29 + p_d*t20*t59*t8*weight_n_per_m*(-t0*t22 + t63 + t64) + 2*t0*t23*t55*t8*weight_n_per_m - t21*t62 - t58*t63 - t60*t9))), 0, 0, 0, t65*((1/2)*t33*(-4*t28*t29 + t29*t8*weight_n_per_m*(4*p_d*t19*t20*t7 + 2*p_d*t4*t8*weight_n_per_m - t0*t20*t59*t9*(-t21*t44*t9 + t60 + t64) - t19*t26*t62 - t4*t53*t56*t9) - t3*t52*(t48 - t57)) - t43), 0, 0, 0, 0, 0, 0, -p_e*t66, p_n*t66, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
 
 
+def force_balance_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Formulation (a): ``x' = f(x, u)`` with ``u = (R_v^b row-major, thrust_n)``; returns ``(x' (13,), dv'/dx (3x13 row-major))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
+    mass_kg, drag_per_s, weight_n_per_m = c
+    t0 = 1/mass_kg
+    t1 = t0*thrust_n
+    t2 = r20*t1
+    t3 = p_d**2
+    t4 = p_e**2
+    t5 = p_n**2
+    t6 = t4 + t5
+    t7 = t3 + t6
+    t8 = 1/math.sqrt(t7)
+    t9 = t0*t8
+    t10 = p_n*t9
+    t11 = t10*tension
+    t12 = v_n - wind_n
+    t13 = v_e - wind_e
+    t14 = drag_per_s*(r00*t12 + r01*t13 + r02*v_d)
+    t15 = drag_per_s*(r10*t12 + r11*t13 + r12*v_d)
+    t16 = r21*t1
+    t17 = p_e*t9
+    t18 = t17*tension
+    t19 = r22*t1
+    t20 = math.sqrt(t6)
+    t21 = t20*tension/weight_n_per_m
+    t22 = t21*t8
+    t23 = math.sqrt(p_d*(p_d - 2*t22))
+    t24 = 1/t7
+    t25 = t9*tension
+    t26 = t7**(-3/2)
+    t27 = p_n*t0*t26*tension
+    t28 = p_e*t27
+    t29 = drag_per_s*(r00**2 + r10**2)
+    t30 = drag_per_s*(r00*r01 + r10*r11)
+    t31 = -t30
+    t32 = drag_per_s*(r00*r02 + r10*r12)
+    t33 = -t32
+    t34 = drag_per_s*(r01**2 + r11**2)
+    t35 = drag_per_s*(r01*r02 + r11*r12)
+    t36 = -t35
+    t37 = 1/t23
+    t38 = p_d*t37
+    t39 = t38*(t20*t24 - 1/t20)
+    return (v_n, v_e, v_d, -r00*t14 - r10*t15 - scale*t2 - t11, -r01*t14 - r11*t15 - scale*t16 - t18, -r02*t14 - r12*t15 - scale*t19 + t0*t23*weight_n_per_m + 9.80665, 0, 0, 0, 0, 0, 0, 0,), (t25*(t24*t5 - 1), t28, p_d*t27, -t29, t31, t33, -t10, -t2, 0, 0, 0, t29, t30, t28, t25*(t24*t4 - 1), p_d*p_e*t0*t26*tension, t31, -t34, t36, -t17, -t16, 0, 0, 0, t30, t34, t11*t39, t18*t39, t0*t37*weight_n_per_m*(p_d + t21*t26*t3 - t22), t33, t36, -drag_per_s*(r02**2 + r12**2), -t20*t38*t9, -t19, 0, 0, 0, t32, t35,)
+
+
+def accel_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Accelerometer force balance ``h = f + b`` [m/s^2], FRD body, with ``u = (R_v^b row-major, thrust_n)``; returns ``(h (3,), H (3x13 row-major))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
+    mass_kg, drag_per_s, weight_n_per_m = c
+    t0 = v_n - wind_n
+    t1 = v_e - wind_e
+    t2 = 1/mass_kg
+    t3 = p_e*r01
+    t4 = p_d**2
+    t5 = p_e**2
+    t6 = p_n**2
+    t7 = t5 + t6
+    t8 = t4 + t7
+    t9 = 1/math.sqrt(t8)
+    t10 = t9*tension
+    t11 = p_n*r00
+    t12 = math.sqrt(t7)
+    t13 = t12/weight_n_per_m
+    t14 = t10*t13
+    t15 = math.sqrt(p_d*(p_d - 2*t14))
+    t16 = t15*weight_n_per_m
+    t17 = p_e*r11
+    t18 = p_n*r10
+    t19 = t2*thrust_n
+    t20 = p_e*r21
+    t21 = p_n*r20
+    t22 = 1/t8
+    t23 = p_n*t22
+    t24 = t22*t6
+    t25 = 1/t15
+    t26 = r02*t25
+    t27 = p_d*(t12*t22 - 1/t12)
+    t28 = t26*t27
+    t29 = t2*t9
+    t30 = t29*tension
+    t31 = p_e*t22
+    t32 = t22*t5
+    t33 = tension/t8**(3/2)
+    t34 = p_d*t33
+    t35 = weight_n_per_m*(p_d + t13*t33*t4 - t14)
+    t36 = drag_per_s*r00
+    t37 = drag_per_s*r01
+    t38 = p_d*t12
+    t39 = r12*t25
+    t40 = t27*t39
+    t41 = drag_per_s*r10
+    t42 = drag_per_s*r11
+    t43 = r22*t25
+    t44 = t27*t43
+    return (b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t2*(-r02*t16 + t10*t11 + t10*t3), b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t2*(-r12*t16 + t10*t17 + t10*t18), b_z - scale*t19 - t2*(-r22*t16 + t10*t20 + t10*t21),), (t30*(p_n*t28 + r00*t24 - r00 + t23*t3), t30*(p_e*t28 + r01*t32 - r01 + t11*t31), t2*(t11*t34 + t26*t35 + t3*t34), -t36, -t37, -drag_per_s*r02, -t29*(t11 + t26*t38 + t3), 0, 1, 0, 0, t36, t37, t30*(p_n*t40 + r10*t24 - r10 + t17*t23), t30*(p_e*t40 + r11*t32 - r11 + t18*t31), t2*(t17*t34 + t18*t34 + t35*t39), -t41, -t42, -drag_per_s*r12, -t29*(t17 + t18 + t38*t39), 0, 0, 1, 0, t41, t42, t30*(p_n*t44 + r20*t24 - r20 + t20*t23), t30*(p_e*t44 + r21*t32 - r21 + t21*t31), t2*(t20*t34 + t21*t34 + t35*t43), 0, 0, 0, -t29*(t20 + t21 + t38*t43), -t19, 0, 0, 1, 0, 0,)
+
+
+def tension_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Load cell at the drone: ``|F_c|`` [N]; returns ``(h (1,), H (1x13))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    mass_kg, drag_per_s, weight_n_per_m = c
+    t0 = p_e**2
+    t1 = p_d**2
+    t2 = p_n**2
+    t3 = t0 + t2
+    t4 = t1 + t3
+    t5 = 1/t4
+    t6 = tension**2
+    t7 = t5*t6
+    t8 = weight_n_per_m**2
+    t9 = 1/math.sqrt(t4)
+    t10 = math.sqrt(t3)
+    t11 = t10*tension/weight_n_per_m
+    t12 = t11*t9
+    t13 = math.sqrt(p_d*t8*(p_d - 2*t12) + t0*t7 + t2*t7)
+    t14 = 1/t13
+    t15 = t5*tension
+    t16 = t4**(-2)
+    t17 = p_d*t9*weight_n_per_m
+    t18 = t14*tension*(t0*t16*tension - t15 + t16*t2*tension - t17*(t10*t5 - 1/t10))
+    t19 = p_d*t16*t6
+    return (t13,), (-p_n*t18, -p_e*t18, -t14*(t0*t19 + t19*t2 - t8*(p_d + t1*t11/t4**(3/2) - t12)), 0, 0, 0, t14*(t0*t15 - t10*t17 + t15*t2), 0, 0, 0, 0, 0, 0,)
+
+
+def cable_angle_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Ground-station cable angle: (elevation up, azimuth from north) [rad]; returns ``(h (2,), H (2x13))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    mass_kg, drag_per_s, weight_n_per_m = c
+    t0 = p_e**2 + p_n**2
+    t1 = 1/math.sqrt(p_d**2 + t0)
+    t2 = t1*tension
+    t3 = 1/t0
+    return (math.atan2(0, math.sqrt(t0)*t1*abs(tension)), math.atan2(p_e*t2, p_n*t2),), (0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, -p_e*t3, p_n*t3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
+
+
 def inertial(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Formulation (b): ``x' = f(x, u)`` with ``u = (R_v^b row-major, f_x, f_y, f_z)`` (accelerometer as the input); returns ``(x' (13,), dv'/dx (3x13))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
@@ -456,6 +595,37 @@ def winch_length_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[fl
     t15 = t2**(-2)
     t16 = t11*t9*(-t1*t11*t15 + t12 + t14)
     return (t8,), (p_n*t16, p_e*t16, p_d*t9*(t11*t14 - t15*t7 + 1), 0, 0, 0, t1*t10*t9*(t12 - t13/t4), 0, 0, 0, 0, 0, 0,)
+
+
+def winch_length_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Winch paid-out length: the cable's arc length [m]; returns ``(h (1,), H (1x13))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    mass_kg, drag_per_s, weight_n_per_m = c
+    t0 = p_e**2 + p_n**2
+    t1 = math.sqrt(t0)
+    t2 = p_d**2
+    t3 = t0 + t2
+    t4 = math.sqrt(t3)
+    t5 = 1/t4
+    t6 = 1/weight_n_per_m
+    t7 = t1*t5*t6
+    t8 = t7*tension
+    t9 = math.sqrt(p_d*(p_d - 2*t8))
+    t10 = 1/t1
+    t11 = p_d/tension
+    t12 = t10*t11*weight_n_per_m
+    t13 = t12*t4
+    t14 = math.acosh(1 - t13)
+    t15 = t6*tension
+    t16 = t14*t15
+    t17 = t1/t3**(3/2)
+    t18 = t16*t17
+    t19 = 1/t9
+    t20 = p_d*t19
+    t21 = 1/(math.sqrt(-t12)*math.sqrt(2 - t13))
+    t22 = t21/t3**(3/4)
+    t23 = p_d*t22*(t5 - t4/t0) - t10*t16*t5 + t10 + t15*t20*t5*(t1/t3 - t10) + t18
+    return (t1 - t14*t8 + t9,), (p_n*t23, p_e*t23, p_d*t18 + t19*(p_d + t15*t17*t2 - t8) + t22*(t2*t5 + t4), 0, 0, 0, -t11*t21/t3**(1/4) - t14*t7 - t20*t7, 0, 0, 0, 0, 0, 0,)
 
 
 def height_above_ground(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:

@@ -7,20 +7,21 @@ thrust, drag and bias:
     c = mean(R^T f) - mean(R^T) b + s mean(R^T e_z T / m) - mu mean(R^T diag(1,1,0) R) w
 
 (``f`` specific force, FRD body; ``T`` thrust from the map, ``s`` its scale; ``b`` bias;
-``w`` wind). The chord part ``F_ch = m c - (w_c L / 2) e_d`` points from the drone to the
-anchor: ``u = -F_ch/|F_ch|``; the rangefinder's height above the anchor ``h`` places the
-drone at ``p = u h / (-u_d)`` (or a winch length ``L`` at ``p = L u`` without a height), and
-``T_ch = |F_ch|``. The prior of everything the window cannot measure (``s``, ``b``, ``w``
-from the config; the accelerometer's and the rangefinder's noise averaged over the window)
-is mapped through this construction by central differences, so the initial covariance
+``w`` wind). Its horizontal part points from the drone to the anchor; with the rangefinder's
+height above the anchor the filter's own cable curve (straight, catenary, or resting on the
+ground, :meth:`Initialiser._place`) gives the span and the chord tension ``T_ch``; a cable
+resting on the ground pulls the same at every span beyond its touchdown, so there only the
+winch length places the drone. The prior of everything the window cannot measure (``s``,
+``b``, ``w`` from the config; the accelerometer's and the rangefinder's noise averaged over
+the window) is mapped through this construction by central differences, so the initial covariance
 carries the correlations (position with thrust scale, bias and wind) that let later data
 correct the position when those become known. In a steady hover they do not: the thrust
 scale trades against the cable's vertical pull and the wind against its horizontal pull, and
 the covariance says so.
 
 Not possible yet (reported, and the window starts again): no height and no winch length,
-thrust far below the weight (on the ground), cable slack, or a cable that does not rise to the
-drone when only a height is known.
+thrust far below the weight (on the ground), cable slack, a cable that does not rise to the
+drone, or one resting on the ground when only a height is known.
 """
 
 from __future__ import annotations
@@ -43,6 +44,15 @@ _A, _S, _B, _W, _H, _L = slice(0, 3), 3, slice(4, 7), slice(7, 9), 9, 10
 _MIN_RISE = 0.1
 """``-u_d`` below this: the cable is too close to horizontal for a height to place the drone."""
 _REL_STEP = 1e-6
+PLACEMENT_FAILED = (
+    "the cable does not rise to the drone, or rests on the ground with no winch length:"
+    " no position fix"
+)
+"""Why the window gave no state when the pull does not place the drone."""
+NO_COVARIANCE = (
+    "initial covariance not finite (degenerate): the pull does not place the drone nearby"
+)
+"""Why the window gave no state when a nearby pull would not place the drone."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -197,15 +207,15 @@ class Initialiser:
         theta[_L] = length_m
         y = self._solve(theta)
         if y is None or not np.all(np.isfinite(y)):
-            return Initialisation(None, None, "the cable does not rise to the drone: no height fix")
+            return Initialisation(None, None, PLACEMENT_FAILED)
         if y[3] < cfg.slack_tension_n:
             return Initialisation(
                 None, None, f"cable slack (chord tension {y[3]:.2f} N < {cfg.slack_tension_n} N)"
             )
         x, p = self._state_and_covariance(theta, y, n, scale_std)
         if x is None or p is None:
-            return Initialisation(None, None, "initial covariance not finite (degenerate)")
-        motion = self._fitted_motion(time_s, scale)
+            return Initialisation(None, None, NO_COVARIANCE)
+        motion = self._fitted_motion(time_s, scale, length_m)
         if motion is not None:  # the window's motion: position now and velocity
             position, velocity, velocity_se = motion
             x[state.POSITION] = position
@@ -236,37 +246,58 @@ class Initialiser:
     def _place(self, force: FloatArray, height: float, length: float) -> FloatArray | None:
         """``(p_n, p_e, p_d, T_ch)`` of a cable force on the drone ``force`` (NED [N]) with
         the drone ``height`` [m] above the anchor and/or a cable ``length`` [m] (``nan``:
-        unknown); None when the cable does not rise to the drone."""
-        half_weight = 0.5 * self.config.cable_weight_n_per_m
-        known_length = not math.isnan(length)
-        distance = length if known_length else (height if not math.isnan(height) else 0.0)
-        position = np.zeros(3)
-        tension = 0.0
-        for _ in range(8):  # the chord length feeds the weight term: fixed point
-            chord = force - np.array((0.0, 0.0, half_weight * distance))
+        unknown); None when the cable does not rise to the drone or the data cannot place it.
+
+        With a height the curve is the filter's own (derive.py): the straight line for a
+        weightless cable; for a heavy one the catenary of parameter ``c = H/w`` (``H`` the
+        force's horizontal part, ``V`` its down part) whose slope at the drone is ``V/H``: the
+        anchor sits where ``cosh(x_a/c) = sqrt(1 + (V/H)^2) - b/c``, so the span is
+        ``a = c (asinh(V/H) - acosh(that))``. A cable resting on the ground has that at
+        exactly 1 (its lowest point, the touchdown, is at the anchor's level) whatever the
+        span beyond the touchdown, so only the winch length places it: a length at least the
+        rise ``sqrt(b^2 + 2 b c)`` (longer than any free curve reaching the height) lies on
+        the ground over ``L - rise`` and ``a = L - rise + c acosh(1 + b/c)``; without a
+        length a pull with ``cosh`` at or below 1 places nothing. Without a height, the chord of a
+        winch length ``L`` along the force (the weight's pull taken as half the cable's, a
+        first guess the filter refines)."""
+        weight = self.config.cable_weight_n_per_m
+        if math.isnan(height):
+            chord = force - np.array((0.0, 0.0, 0.5 * weight * length))
             tension = float(np.linalg.norm(chord))
-            if tension <= 0.0:
+            if not tension > 0.0:
                 return None
-            u = -chord / tension
-            if not math.isnan(height):
-                if -u[2] < _MIN_RISE:
-                    return None
-                span = height / -u[2]
+            return np.array((*(-chord / tension * length), tension))
+        pull = math.hypot(float(force[0]), float(force[1]))
+        down = float(force[2])
+        if not (pull > 0.0 and down > 0.0 and height > 0.0):
+            return None
+        if weight > 0.0:
+            parameter = pull / weight
+            rise = math.sqrt(height * height + 2.0 * height * parameter)
+            anchor = math.hypot(1.0, down / pull) - height / parameter
+            if length >= rise:  # longer than any free curve to this height: on the ground
+                span = length - rise + parameter * math.acosh(1.0 + height / parameter)
+            elif anchor >= 1.0 or not math.isnan(length):
+                span = parameter * (math.asinh(down / pull) - math.acosh(max(anchor, 1.0)))
             else:
-                span = length
-            distance = length if known_length else span
-            position = u * span
-        return np.array((*position, tension))
+                return None
+        else:
+            span = height * pull / down
+        distance = math.hypot(span, height)
+        if not span > 0.0 or height / distance < _MIN_RISE:
+            return None
+        bearing = -np.asarray(force[:2]) / pull
+        return np.array((*(bearing * span), -height, pull * distance / span))
 
     def _fitted_motion(
-        self, time_s: float, scale: float
+        self, time_s: float, scale: float, length_m: float
     ) -> tuple[FloatArray, FloatArray, float] | None:
         """Position [m] and velocity [m/s] at ``time_s`` from a quadratic fit of the
         window's per-tick positions (thrust scale ``scale``), and the velocity's standard
         error [m/s]."""
         times, positions = [], []
         for t, accel_force, thrust_vector, height in self._snapshots:
-            placed = self._place(accel_force + scale * thrust_vector, height, math.nan)
+            placed = self._place(accel_force + scale * thrust_vector, height, length_m)
             if placed is not None:
                 times.append(t)
                 positions.append(placed[:3])

@@ -41,14 +41,46 @@ STRAIGHT = CableModels(
     generated.winch_length_straight,
 )
 """A weightless cable: the straight line (the taut limit)."""
+
+
+def rests_on_ground(x: Sequence[float], c: Sequence[float]) -> bool:
+    """Whether the cable of state ``x`` (constants ``c``) lies partly on the anchor's level:
+    the free catenary through anchor and drone with the state's horizontal tension ``H``
+    would have its lowest point between them, below the anchor; on the ground it touches
+    down at ``x_t = a - c acosh(1 + b/c)`` > 0 instead (``c = H/w``, span ``a``, height
+    ``b``; derive.py). False for a weightless cable, a drone at or below the anchor's level,
+    right above it, or without tension."""
+    weight = c[2]
+    span = math.hypot(x[0], x[1])
+    height = -x[2]
+    tension = x[state.TENSION]
+    if weight <= 0.0 or height <= 0.0 or span <= 0.0 or tension <= 0.0:
+        return False
+    parameter = tension * span / (math.hypot(span, height) * weight)
+    return span > parameter * math.acosh(1.0 + height / parameter)
+
+
+def _free_or_grounded(free: Generated, grounded: Generated) -> Generated:
+    """The generated ``free`` model, or ``grounded`` where the cable rests on the ground."""
+
+    def model(
+        x: Sequence[float], u: Sequence[float], c: Sequence[float]
+    ) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        return (grounded if rests_on_ground(x, c) else free)(x, u, c)
+
+    model.__doc__ = free.__doc__
+    return model
+
+
 CATENARY = CableModels(
-    generated.force_balance_catenary,
-    generated.accel_catenary,
-    generated.tension_catenary,
-    generated.cable_angle_catenary,
-    generated.winch_length_catenary,
+    _free_or_grounded(generated.force_balance_catenary, generated.force_balance_grounded),
+    _free_or_grounded(generated.accel_catenary, generated.accel_grounded),
+    _free_or_grounded(generated.tension_catenary, generated.tension_grounded),
+    _free_or_grounded(generated.cable_angle_catenary, generated.cable_angle_grounded),
+    _free_or_grounded(generated.winch_length_catenary, generated.winch_length_grounded),
 )
-"""A cable with weight: the exact catenary through anchor and drone."""
+"""A cable with weight: the exact catenary through anchor and drone, resting on the anchor's
+level (a winch on the ground) where the free curve would dip below it."""
 
 
 @dataclass(slots=True)

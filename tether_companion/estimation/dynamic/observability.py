@@ -36,6 +36,19 @@ from tether_companion.estimation.dynamic.output import (
 FloatArray = NDArray[np.float64]
 
 
+def min_horizontal_pull_n(
+    pull_per_wind_n_s_per_m: float, wind_std_mps: float, wind_n_mps: float, wind_e_mps: float
+) -> float:
+    """The least horizontal pull that fixes the bearing [N]: ``pull_per_wind_n_s_per_m``
+    (``min_pull_over_wind_drag`` times the drag per unit airspeed, ``m mu`` [N s/m]) times the
+    larger of the wind prior's standard deviation and the wind the filter itself estimates
+    [m/s]. A filter that started on a wrong bearing explains the pull it reads with a wind it
+    invents (realistic sagging circle, winch length given: 6-8 m/s of wind against 1.8 m/s
+    blown, estimated pull 4.5 N against 1.3 N): the bearing it claims is then no better than
+    that wind's drag."""
+    return pull_per_wind_n_s_per_m * max(wind_std_mps, math.hypot(wind_n_mps, wind_e_mps))
+
+
 def assess(
     *,
     initialised_reason: str | None,

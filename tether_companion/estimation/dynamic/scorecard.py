@@ -2,8 +2,8 @@
 
 * ``dynamic``: :class:`~tether_companion.estimation.dynamic.estimator.DynamicTetherEstimator`
   with the IMU, attitude, PWM and rangefinder only (the paper 4-state filter's inputs), the
-  scenario's cable weight per length and anchor height above the ground (ground-station
-  facts), default :class:`DynamicFilterConfig` otherwise;
+  simulated cable's weight per length (:func:`simulated_cable_weight_n_per_m`) and anchor
+  height above the ground (ground-station facts), default :class:`DynamicFilterConfig` otherwise;
 * ``dynamic-winch``: the same, also given the winch's paid-out length each tick (the ground
   station's report; the cable model then uses that length and the length is fused).
 
@@ -27,6 +27,21 @@ from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 
+HEAVY_CABLE_MODELS = ("elastic", "catenary")
+"""The simulator's cable models that have weight (``physics/cable.py``); its constant-tension
+winch is the paper's weightless straight line whatever ``linear_density_kg_per_m`` says."""
+
+
+def simulated_cable_weight_n_per_m(context: FlightContext) -> float:
+    """The weight per length [N/m] of the cable the scenario's simulator flies: what a user
+    would configure for that cable (0 for the weightless constant-tension line; telling the
+    filter 0.164 N/m there bent its cable model by ``w |p| / (2 T)``: 4 degrees at 4 N and
+    3 m, 9 degrees for the take-off's 3 N at 5 m)."""
+    cable = context.scenario.cable
+    if cable.model not in HEAVY_CABLE_MODELS:
+        return 0.0
+    return cable.linear_density_kg_per_m * context.gravity_mps2
+
 
 class DynamicKind:
     """:class:`DynamicTetherEstimator` as a :class:`FlightEstimator`.
@@ -40,10 +55,8 @@ class DynamicKind:
     """
 
     def __init__(self, context: FlightContext, use_winch: bool) -> None:
-        cable = context.scenario.cable
         dynamic = dataclasses.replace(
-            DynamicFilterConfig(),
-            cable_weight_n_per_m=cable.linear_density_kg_per_m * context.gravity_mps2,
+            DynamicFilterConfig(), cable_weight_n_per_m=simulated_cable_weight_n_per_m(context)
         )
         config = context.estimator_config(EstimatorConfig())  # anchor height, rangefinder mounting
         self._estimator = DynamicTetherEstimator(config, context.vehicle, dynamic)

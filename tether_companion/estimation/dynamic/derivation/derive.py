@@ -17,9 +17,16 @@ The model (SI units, NED world, FRD body, ``R = R_v^b`` maps NED to body; state 
   ``F_d = (T_ch/|p|) (sinh z sqrt(a^2 + (b z/sinh z)^2) + b z cosh z/sinh z)``; as ``w -> 0`` it
   tends to the straight line's ``T_ch b/|p|``. From the catenary ``y = c cosh((x - x0)/c)``
   through both ends: ``sinh((a - 2 x0)/(2c)) = b/(2c sinh z)`` gives ``x0``, and the vertical
-  force at the drone is ``H sinh((a - x0)/c)``. Two variants: ``*_straight`` (``w = 0``,
+  force at the drone is ``H sinh((a - x0)/c)``. Variants: ``*_straight`` (``w = 0``,
   the taut line) and ``*_catenary`` (``w > 0``); neither needs the cable's length: the two
-  ends, the weight and the tension fix the curve.
+  ends, the weight and the tension fix the curve. ``*_grounded``: where that free catenary
+  would dip below the anchor's level (its lowest point between anchor and drone), a cable
+  resting on that level (a winch on the ground) lies on it from the anchor to a touchdown
+  point ``x_t = a - c acosh(1 + b/c)`` and rises from there as a catenary whose lowest point
+  is the touchdown point: the force at the drone is ``H`` horizontally and the weight of the
+  rising part, ``w sqrt(b^2 + 2 b c)``, down; the arc length is ``x_t + sqrt(b^2 + 2 b c)``;
+  the cable leaves the anchor flat. Which one holds is a property of the state (``x_t > 0``:
+  grounded), chosen in ``models.py``; at ``x_t = 0`` the two coincide.
 * Rotor drag, body horizontal (ArduPilot's EK3_DRAG_MCOEF "momentum drag"):
   ``a_drag = -mu (R (v - w))_{x,y}`` with ``w = (w_n, w_e, 0)`` the wind, ``mu`` [1/s].
 * Thrust ``s T`` along body ``-z`` (``T`` from the PWM through the thrust map, ``s`` state).
@@ -94,13 +101,29 @@ def _catenary_down_n() -> sp.Expr:
 CATENARY_LENGTH = sp.sqrt(HEIGHT**2 + SPAN_SQ * (sp.sinh(Z) / Z) ** 2)
 """Arc length of the catenary between anchor and drone [m]."""
 
+STRAIGHT, CATENARY, GROUNDED = "straight", "catenary", "grounded"
+CABLES = (STRAIGHT, CATENARY, GROUNDED)
+"""The cable variants (module docstring)."""
 
-def cable_force_ned(catenary: bool) -> sp.Matrix:
-    """Force of the cable on the drone, NED [N]: the straight line or the catenary."""
+GROUNDED_PARAMETER = TCH * sp.sqrt(SPAN_SQ) / (NORM * WPL)
+"""Catenary parameter ``c = H/w`` of the cable resting on the anchor's level [m]."""
+GROUNDED_RISE = sp.sqrt(HEIGHT**2 + 2 * HEIGHT * GROUNDED_PARAMETER)
+"""Arc length of the grounded cable's rising part, touchdown to drone [m]."""
+GROUNDED_LENGTH = (
+    sp.sqrt(SPAN_SQ)
+    - GROUNDED_PARAMETER * sp.acosh(1 + HEIGHT / GROUNDED_PARAMETER)
+    + GROUNDED_RISE
+)
+"""Arc length of the grounded cable, anchor to drone (the part on the ground included) [m]."""
+
+
+def cable_force_ned(cable: str) -> sp.Matrix:
+    """Force of the cable on the drone, NED [N], for one of :data:`CABLES`."""
     straight = -TCH * P / NORM
-    if not catenary:
+    if cable == STRAIGHT:
         return straight
-    return sp.Matrix([straight[0], straight[1], _catenary_down_n()])
+    down = _catenary_down_n() if cable == CATENARY else WPL * GROUNDED_RISE
+    return sp.Matrix([straight[0], straight[1], down])
 
 
 def rotor_specific_force_body() -> sp.Matrix:
@@ -109,29 +132,31 @@ def rotor_specific_force_body() -> sp.Matrix:
     return sp.Matrix([-DRAG * air[0], -DRAG * air[1], -SCALE * THRUST / MASS])
 
 
-def specific_force_body(catenary: bool) -> sp.Matrix:
+def specific_force_body(cable: str) -> sp.Matrix:
     """Modelled specific force (no bias), FRD body [m/s^2]."""
-    return rotor_specific_force_body() + R * cable_force_ned(catenary) / MASS
+    return rotor_specific_force_body() + R * cable_force_ned(cable) / MASS
 
 
-def anchor_tangent_ned(catenary: bool) -> sp.Matrix:
+def anchor_tangent_ned(cable: str) -> sp.Matrix:
     """Direction (unnormalised) in which the cable leaves the anchor, NED [N]."""
-    force = cable_force_ned(catenary)
-    if not catenary:
+    force = cable_force_ned(cable)
+    if cable == STRAIGHT:
         return -force
+    if cable == GROUNDED:  # flat on the anchor's level, toward the drone
+        return sp.Matrix([-force[0], -force[1], 0])
     return sp.Matrix([-force[0], -force[1], WPL * CATENARY_LENGTH - force[2]])
 
 
-CABLES = {"straight": False, "catenary": True}
+ARC_LENGTH = {STRAIGHT: NORM, CATENARY: CATENARY_LENGTH, GROUNDED: GROUNDED_LENGTH}
 
 
 def models() -> list[tuple[str, str, list[sp.Symbol], list[sp.Expr], sp.Matrix | None, str]]:
     """``(name, doc, inputs, values, jacobian_wrt, returns)`` for each generated function."""
     out = []
-    for suffix, catenary in CABLES.items():
-        f_body = specific_force_body(catenary)
+    for suffix in CABLES:
+        f_body = specific_force_body(suffix)
         # R^T R = I written out: m v' = R^T (thrust + drag) + F_c + m g
-        vdot = R.T * rotor_specific_force_body() + cable_force_ned(catenary) / MASS + G * E_D
+        vdot = R.T * rotor_specific_force_body() + cable_force_ned(suffix) / MASS + G * E_D
         out.append(
             (
                 f"force_balance_{suffix}",
@@ -155,7 +180,7 @@ def models() -> list[tuple[str, str, list[sp.Symbol], list[sp.Expr], sp.Matrix |
                 "measurement",
             )
         )
-        force = cable_force_ned(catenary)
+        force = cable_force_ned(suffix)
         tension = _norm(force)
         out.append(
             (
@@ -167,7 +192,7 @@ def models() -> list[tuple[str, str, list[sp.Symbol], list[sp.Expr], sp.Matrix |
                 "measurement",
             )
         )
-        tangent = anchor_tangent_ned(catenary)
+        tangent = anchor_tangent_ned(suffix)
         angles = sp.Matrix(
             [
                 sp.atan2(-tangent[2], sp.sqrt(tangent[0] ** 2 + tangent[1] ** 2)),
@@ -197,7 +222,7 @@ def models() -> list[tuple[str, str, list[sp.Symbol], list[sp.Expr], sp.Matrix |
             "process",
         )
     )
-    for suffix, arc in (("straight", NORM), ("catenary", CATENARY_LENGTH)):
+    for suffix, arc in ARC_LENGTH.items():
         out.append(
             (
                 f"winch_length_{suffix}",

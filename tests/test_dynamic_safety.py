@@ -20,7 +20,10 @@ from tether_companion.estimation.dynamic.initialise import (
     PLACEMENT_FAILED,
     Initialiser,
 )
-from tether_companion.estimation.dynamic.observability import min_horizontal_pull_n
+from tether_companion.estimation.dynamic.observability import (
+    InnovationExcess,
+    min_horizontal_pull_n,
+)
 from tether_companion.estimation.dynamic.scorecard import simulated_cable_weight_n_per_m
 from tether_companion.physics.cable import CableConfig, make_cable
 from tether_companion.physics.vehicle import load_vehicle
@@ -112,3 +115,19 @@ def test_the_scorecard_tells_the_filter_the_simulated_cables_weight(
     context = FlightContext(loaded, load_vehicle(loaded.vehicle), GRAVITY_MPS2)
     assert loaded.cable.linear_density_kg_per_m == DENSITY_KG_PER_M
     assert simulated_cable_weight_n_per_m(context) == pytest.approx(weight_n_per_m)
+
+
+def test_the_innovations_excess_variance_is_what_the_filter_did_not_predict() -> None:
+    """Innovations drawn with the predicted variance leave no excess; innovations from a state
+    0.3 m off (the take-off's height) show about 0.3^2 m^2 of it."""
+    rng = np.random.default_rng(4)
+    honest, biased = InnovationExcess(2.0), InnovationExcess(2.0)
+    predicted = 0.105  # H P H^T + R of the rangefinder: 0.32 m noise, 0.07 m state
+    for i in range(400):  # 20 s at 20 Hz
+        noise = rng.normal(scale=math.sqrt(predicted))
+        honest.add(noise, predicted, i * 0.05)
+        biased.add(0.3 + noise, predicted, i * 0.05)
+    assert honest.variance < 0.05
+    assert biased.variance == pytest.approx(0.09, abs=0.05)
+    biased.add(math.nan, predicted, 20.0)  # a non-finite innovation changes nothing
+    assert math.isfinite(biased.variance)

@@ -516,11 +516,13 @@ class DynamicTetherEstimator(InputFeed):
                 float(x[state.WIND][1]),
             ),
         )
+        published_covariance = p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy()
+        published_covariance[2, 2] += self.rangefinder.excess.variance
         return NavigationEstimate(
             time_s=self._time_s,
             position_ned_m=x[state.POSITION].copy(),
             velocity_ned_mps=x[state.VELOCITY].copy(),
-            position_velocity_covariance=p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy(),
+            position_velocity_covariance=published_covariance,
             tension_n=float(tension),
             tension_variance_n2=tension_var,
             reset_counter=self._resets,

@@ -1,6 +1,8 @@
 """Rangefinder: the tilt-corrected reading is the height above the ground,
 ``-p_d + anchor_height_m`` (the anchor's height above the ground under the drone; flat
-ground). Validity (range, tilt, staleness) is checked by the estimator, which counts it."""
+ground). Validity (range, tilt, staleness) is checked by the estimator, which counts it. The
+innovations' variance beyond the predicted (:class:`InnovationExcess`) is kept for the
+published height variance."""
 
 from __future__ import annotations
 
@@ -10,10 +12,13 @@ from numpy.typing import NDArray
 from tether_companion.estimation.dynamic import generated, state
 from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
 from tether_companion.estimation.dynamic.bank import FilterBank
+from tether_companion.estimation.dynamic.observability import InnovationExcess
 
 FloatArray = NDArray[np.float64]
 
 NAME = "rangefinder"
+EXCESS_TIME_CONSTANT_S = 2.0
+"""Averaging time of the innovations' excess variance [s] (40 readings at 20 Hz)."""
 _NO_CONSTANTS = (0.0, 0.0, 0.0)
 """The height model uses none of the constants ``c``."""
 
@@ -31,6 +36,8 @@ class RangefinderAid:
 
     def __init__(self, noise_variance_m2: float, anchor_height_m: float) -> None:
         self.status = AidStatus()
+        self.excess = InnovationExcess(EXCESS_TIME_CONSTANT_S)
+        """Height variance [m^2] the innovations show beyond the filter's (published only)."""
         self._r = np.array([[noise_variance_m2]])
         self._u = [anchor_height_m]
         # the model is linear: its Jacobian is the same everywhere
@@ -46,4 +53,12 @@ class RangefinderAid:
             return np.array(h), jacobian
 
         z = np.array((height_above_ground_m,))
-        return fuse(bank, NAME, self.status, z, measure, self._r, time_s)
+        status = self.status
+        fused = fuse(bank, NAME, status, z, measure, self._r, time_s)
+        if status.last_innovation.size:
+            self.excess.add(
+                float(status.last_innovation[0]),
+                float(status.last_innovation_variance[0]),
+                time_s,
+            )
+        return fused

@@ -124,7 +124,8 @@ class DynamicFilterConfig:
         4.0,
         minimum=0.0,
         doc="publish only while the horizontal pull exceeds this many times the rotor drag of"
-        " a wind of initial.wind_std_mps (the bearing is unknown below) [1]",
+        " a wind of initial.wind_std_mps or of the estimated wind, whichever is larger (the"
+        " bearing is unknown below) [1]",
     )
     imu_ticks_per_fusion: int = spec(
         1,

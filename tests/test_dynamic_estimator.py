@@ -19,6 +19,7 @@ from tether_companion.estimation.dynamic.output import (
     OK,
     ON_GROUND,
     RESET,
+    SLACK,
     STATUSES,
 )
 from tether_companion.physics.vehicle import VehicleProfile
@@ -193,3 +194,19 @@ def test_a_thrust_map_ten_percent_off_is_learned() -> None:
     assert abs(float(run.thrust_scale[-1]) - 1.1) < 0.03
     paper = run.paper_position_ned_m[settled] - run.truth_position_ned_m[settled]
     assert np.sqrt(np.mean(paper[:, :2] ** 2)) > 1.0
+
+
+def test_a_pushing_cable_is_reported_slack_not_as_a_huge_tension() -> None:
+    """A chord tension driven below zero (the light sagging circle's winch kind did) has no
+    catenary: the reported tension is 0 and the cable slack, where the curve's arithmetic gave
+    1e98 N."""
+    est, run = _started_estimator()
+    est.constants.weight_n_per_m = 0.164  # a light cable: the catenary's arithmetic
+    for member in est.bank.filters:
+        member.x = member.x.copy()
+        member.x[state.TENSION] = -0.5
+    t = float(run.time_s[-1]) + 0.005
+    est.on_attitude(AttitudeSample(t, 0.0, 0.0, 0.0))
+    estimate = est.on_imu(ImuSample(t, np.array([0.0, 0.0, -9.8]), np.zeros(3)))
+    assert estimate.tension_n == 0.0
+    assert estimate.status == SLACK

@@ -493,12 +493,15 @@ class DynamicTetherEstimator(InputFeed):
             x, p = bank.mixture()
             c = self.constants
             values = x.tolist()
-            try:
-                (tension,), jac = c.models.tension(values, (), c.values())
-                jac_row = np.array(jac)
-                tension_var = float(jac_row @ (p @ jac_row))
-            except UNDEFINED:  # at the anchor or no tension: the chord term alone
-                tension, tension_var = float(x[state.TENSION]), float(p[6, 6])
+            tension, tension_var = max(values[state.TENSION], 0.0), float(p[6, 6])
+            if tension > 0.0:  # a chord tension <= 0 is a slack cable: no curve (its
+                # catenary overflowed to 1e98 N on the sagging circle)
+                try:
+                    (tension,), jac = c.models.tension(values, (), c.values())
+                    jac_row = np.array(jac)
+                    tension_var = float(jac_row @ (p @ jac_row))
+                except UNDEFINED:  # at the anchor: the chord term alone
+                    pass
         status, reason = assess(
             initialised_reason=None if bank is not None else self._initialiser.reason,
             reset_reason=reset_reason,

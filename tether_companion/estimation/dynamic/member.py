@@ -16,10 +16,13 @@ cheaper operations:
   Joseph form's value for the optimal gain (the Joseph form guards against a gain that is not
   optimal; here ``K`` is computed from the same ``S``), as PX4 EKF2's updates; the covariance
   then gets the same finite check and Cholesky test as before (a repair is counted).
+* the covariance may lag the state (``predict(..., covariance=False)``, the
+  ``imu_ticks_per_fusion`` option): the time is summed and one Euler step with the latest
+  Jacobian is taken before the next update or covariance prediction.
 
 Numbers: the generic EKF spent most of a member's tick in numpy calls on 13x13 arrays
 (Joseph form: four 13x13 products; LAPACK Cholesky of S and of P twice); see
-docs/estimation.md (Speed of the dynamic filter) for the measured costs. The results equal the
+docs/estimation.md ("Cost per IMU tick") for the measured costs. The results equal the
 generic EKF's to rounding (tests: 1e-9).
 
 Straight-line scalar Python for the same algebra (generated with the Jacobians' sparsity, as

@@ -211,13 +211,22 @@ def test_catenary_position_source_on_a_heavy_cable_in_lock_step() -> None:
     and weight from config. What the flight controller receives is close to the truth
     (``bench catenary --flight hover --seed 5``: RMSE 0.047 / 0.064 / 0.048 m; the 4-state
     EKF's straight-cable model is 2.2 m off in north there), and the tension filter's force on
-    the drone, published as NAMED_VALUE_FLOAT, matches the simulator's cable force."""
+    the drone, published as NAMED_VALUE_FLOAT, matches the simulator's cable force. The
+    scenario flies the clean world (exact thrust map, no accelerometer bias, drag or attitude
+    error), so the tension's error budget is configured to say so: with the shipped budget
+    (a 5 % thrust map, 0.1 m/s^2 bias) this heavy cable's height is uncertain by 1.4 m (sd)
+    and the service rightly withholds the position (variance above publish's 0.5 m^2)."""
     scenario, emulator_config = load_emulator_scenario("catenary-hover")
     scenario = dataclasses.replace(scenario, duration_s=12.0, events=())
     controller = FlightController(scenario, emulator_config)
     cable = scenario.cable
     overrides = {
         "position": {"source": "catenary"},
+        "tension_filter": {
+            "thrust_scale_std": 0.0,
+            "accel_bias_std_mps2": 0.0,
+            "attitude_error_std_rad": 0.0,
+        },
         "catenary": {
             "case": "known_length",
             "weight_per_length_n_per_m": cable.linear_density_kg_per_m * GRAVITY_MPS2,

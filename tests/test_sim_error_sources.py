@@ -22,7 +22,8 @@ from tether_companion.sim.ground import Ground, GroundConfig
 from tether_companion.sim.propulsion import BatteryConfig, PropulsionConfig
 from tether_companion.sim.scenario import REALISTIC_SCENARIOS, load_scenario
 from tether_companion.sim.sensors import SensorConfig, SensorSuite
-from tether_companion.sim.simulator import FlightImpossibleError, Simulator
+from tether_companion.sim.simulator import Simulator
+from tether_companion.sim.truth import FlightImpossibleError
 from tether_companion.sim.wind import DrydenParameters, DrydenTurbulence, dryden_psd
 
 G = 9.80665

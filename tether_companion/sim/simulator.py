@@ -16,13 +16,11 @@ called; from then on it flies the set-points it is sent (the emulator's mode).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tether_companion.constants import GRAVITY_MPS2
-from tether_companion.errors import InputError
 from tether_companion.frames import rotation_ned_to_body
 from tether_companion.physics.cable import CableConfig, CableModel, make_cable
 from tether_companion.physics.cable_drag import cable_drag_force_ned_n
@@ -42,6 +40,7 @@ from tether_companion.sim.propulsion import PropulsionConfig
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.sensors import SensorConfig, SensorSuite
 from tether_companion.sim.trajectory import Trajectory
+from tether_companion.sim.truth import FlightImpossibleError, TruthState
 from tether_companion.sim.wind import DrydenParameters, DrydenTurbulence
 
 FloatArray = NDArray[np.float64]
@@ -50,45 +49,6 @@ CRASH_SPEED_MPS = 3.0
 """Touching the ground faster than this is a crash, not a landing."""
 SATURATION_LIMIT_S = 2.0
 """Every motor at full command for this long: the vehicle cannot fly the scenario."""
-
-
-class FlightImpossibleError(InputError):
-    """The scenario's flight cannot be flown (crash, saturation, non-finite state).
-
-    The message names the simulation time and the cause; the command line prints it on one
-    line and exits with code 2, like any other bad input.
-    """
-
-
-@dataclass(frozen=True, slots=True)
-class TruthState:
-    """Noise-free state of the simulated vehicle at ``time_s`` (SI units, NED/FRD)."""
-
-    time_s: float
-    position_ned_m: FloatArray
-    """Position of the drone relative to the anchor, NED, shape (3,) [m]."""
-    velocity_ned_m_s: FloatArray
-    """Velocity, NED, shape (3,) [m/s]."""
-    euler_rad: FloatArray
-    """(roll, pitch, yaw), shape (3,) [rad]."""
-    body_rates_rad_s: FloatArray
-    """(p, q, r), FRD, shape (3,) [rad/s]."""
-    motor_thrust_n: FloatArray
-    """Each motor's thrust, shape (n_motors,) [N]."""
-    pwm_us: FloatArray
-    """PWM outputs, whole microseconds, shape (n_motors,) [us]."""
-    cable_force_ned_n: FloatArray
-    """Force of the cable on the drone, NED, shape (3,) [N]."""
-    tension_n: float
-    """Cable tension at the drone end [N]."""
-    specific_force_body_mps2: FloatArray
-    """Accelerometer specific force without noise or bias, FRD, shape (3,) [m/s^2]."""
-    landed: bool
-    """True while the drone rests on the ground."""
-    wind_ned_m_s: FloatArray
-    """Wind (mean + gusts) at the drone, NED, shape (3,) [m/s]."""
-    battery_voltage_v: float
-    """Battery pack voltage [V]."""
 
 
 class Simulator:

@@ -34,8 +34,9 @@ from tether_companion.mavlink.units import (
 )
 from tether_companion.physics.thrust import COMMAND_UNITS
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
-from tether_companion.service.config import InputLimitsConfig, LinkConfig, TensionConfig
+from tether_companion.service.config import InputLimitsConfig, TensionConfig
 from tether_companion.service.fc_time import BACKSTEP, IMPLAUSIBLE, REBOOT, FcTimeGate
+from tether_companion.service.link_config import LinkConfig
 from tether_companion.service.reorder import ReorderBuffer
 
 _UINT32_US = 1 << 32

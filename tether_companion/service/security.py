@@ -19,7 +19,7 @@ from collections.abc import Callable
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.mavlink.signing import SignatureVerifier, Signer, is_signed, load_key
 from tether_companion.mavlink.trust import OFF, REQUIRED, LinkTrust
-from tether_companion.service.config import LinkConfig, SecurityConfig
+from tether_companion.service.link_config import LinkConfig, SecurityConfig
 
 NOT_A_COMMAND_SOURCE = "not_a_command_source"
 UNSIGNED_COMMAND = "unsigned_command"

@@ -17,7 +17,6 @@ import math
 from dataclasses import dataclass
 
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
-from tether_companion.service.config import LinkConfig, StreamsConfig
 from tether_companion.service.ingest import (
     ATTITUDE,
     FC_POSITION,
@@ -26,6 +25,7 @@ from tether_companion.service.ingest import (
     RANGE,
     SYSTEM_TIME,
 )
+from tether_companion.service.link_config import LinkConfig, StreamsConfig
 
 INPUT_SILENT_S = 0.5
 """An input not heard for this long [s] (local time) while the link is up is re-requested."""

@@ -21,9 +21,10 @@ from tether_companion.emulator.config import load_emulator_scenario
 from tether_companion.emulator.lockstep import LockstepPeer, build_controller
 from tether_companion.estimation.runner import run_scenario
 from tether_companion.mavlink.framing import FrameParser, dialect
-from tether_companion.service.app import ORIGIN_ATTEMPTS, CompanionService
+from tether_companion.service.app import CompanionService
 from tether_companion.service.config import load_service_config, load_vehicle_for
 from tether_companion.service.emulator_process import EmulatorProcess
+from tether_companion.service.origin import ORIGIN_ATTEMPTS
 from tether_companion.service.recording import read_tlog
 from tether_companion.service.replay import replay_log
 from tether_companion.service.status import render

@@ -35,17 +35,14 @@ from tether_companion.config import ConfigError
 from tether_companion.mavlink.endpoints import open_link, parse_endpoint
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.mavlink.link import Link, LinkClosed
-from tether_companion.mavlink.units import seconds_to_usec
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.service.clock import FcClock
 from tether_companion.service.config import ServiceConfig
 from tether_companion.service.health import NO_IMU, STALE
-from tether_companion.service.ingest import (
-    IMU,
-)
+from tether_companion.service.ingest import IMU
+from tether_companion.service.origin import OriginRequests
 from tether_companion.service.publish import Publication
-from tether_companion.service.recording import RecordingLimits, TlogWriter
-from tether_companion.service.recording_thread import RecorderThread
+from tether_companion.service.recording_thread import RecorderThread, open_recorder
 from tether_companion.service.security import LinkSecurity
 from tether_companion.service.session import EstimationSession
 from tether_companion.service.state import ServiceState
@@ -57,9 +54,6 @@ from tether_companion.vehicle_params.profile import profile_from_parameters
 HOUSEKEEPING_PERIOD_S = 0.05
 LINK_OPEN_TIMEOUT_S = 2.0
 """An open (name lookup, TCP connect) taking longer than this [s] counts as failed."""
-RATE_WINDOW_S = 1.0
-ORIGIN_RETRY_S = 1.0
-ORIGIN_ATTEMPTS = 5
 
 
 class CompanionService:
@@ -125,10 +119,8 @@ class CompanionService:
         self._fc_heard_s = -math.inf
         self._next_heartbeat_s = -math.inf
         self._next_timesync_s = -math.inf
-        self._origin_attempts = 0
-        self._origin_last_s = -math.inf
-        self._rate_counts: dict[str, int] = {}
-        self._rate_time_s = -math.inf
+        self.origin = OriginRequests(config.origin, config.link.fc_system_id)
+        """When to send the EKF origin again."""
         self._last_latest_fc_s = -math.inf
         self._key_installed = False
 
@@ -145,7 +137,7 @@ class CompanionService:
         ConfigError
             When the recording directory cannot be created or written.
         """
-        self._open_recording()
+        self.recorder = open_recorder(self.config.recording)
         gc.collect()
         gc.freeze()  # start-up objects leave the collector's view: shorter pauses on the hot path
         self.notifier.ready(status="started, connecting to the flight controller")
@@ -167,25 +159,6 @@ class CompanionService:
             if self.recorder is not None:
                 await asyncio.to_thread(self.recorder.close)
             self.notifier.close()
-
-    def _open_recording(self) -> None:
-        rec = self.config.recording
-        if not rec.enabled:
-            return
-        limits = RecordingLimits(
-            max_file_bytes=int(rec.max_file_mb * 2**20),
-            max_total_bytes=int(rec.max_total_mb * 2**20),
-            flush_interval_s=rec.flush_interval_s,
-        )
-        try:
-            self.recorder = RecorderThread(TlogWriter(rec.directory, limits), rec.flush_interval_s)
-        except OSError as exc:
-            raise ConfigError(
-                "",
-                "recording.directory",
-                rec.directory,
-                f"cannot write there ({exc.strerror or exc})",
-            ) from None
 
     async def _open_default_link(self) -> Link:
         link_cfg = self.config.link
@@ -289,7 +262,7 @@ class CompanionService:
         self._fc_heard_s = -math.inf
         self._next_heartbeat_s = -math.inf
         self.streams.reset()
-        self._origin_attempts = 0
+        self.origin.reset()
         self.state.origin_confirmed = False
         self._key_installed = False
 
@@ -397,7 +370,7 @@ class CompanionService:
         self.clock.reset()
         self._last_latest_fc_s = -math.inf
         self.streams.reset()
-        self._origin_attempts = 0
+        self.origin.reset()
         self.state.origin_confirmed = False
         self._timesync_pending.clear()
         self._key_installed = False
@@ -489,43 +462,19 @@ class CompanionService:
 
     def _send_origin(self, link: Link, now_s: float) -> None:
         """SET_GPS_GLOBAL_ORIGIN after each FC boot until GPS_GLOBAL_ORIGIN answers (bounded)."""
-        origin = self.config.origin
-        if (
-            not origin.send
-            or self.state.origin_confirmed
-            or self._origin_attempts >= ORIGIN_ATTEMPTS
-        ):
-            return
-        if now_s - self._origin_last_s < ORIGIN_RETRY_S:
-            return
-        self._origin_attempts += 1
-        self._origin_last_s = now_s
-        self.state.origin_sent += 1
-        fc_now = self.clock.fc_now_s(now_s)
-        self._send(
-            link,
-            dialect.MAVLink_set_gps_global_origin_message(
-                self.config.link.fc_system_id,
-                round(origin.latitude_deg * 1e7),
-                round(origin.longitude_deg * 1e7),
-                round(origin.altitude_m * 1e3),
-                seconds_to_usec(fc_now) if fc_now is not None else 0,
-            ),
-        )
+        msg = self.origin.due(now_s, self.state.origin_confirmed, self.clock.fc_now_s(now_s))
+        if msg is not None:
+            self.state.origin_sent += 1
+            self._send(link, msg)
 
     def _update_rates(self, now_s: float) -> None:
-        elapsed = now_s - self._rate_time_s
-        if elapsed < RATE_WINDOW_S:
-            return
-        counts = dict(self.session.ingest.counters.accepted)
-        counts["published"] = self.session.publisher.counters.published
-        if math.isfinite(self._rate_time_s):
-            for key, value in counts.items():
-                self.state.rates_hz[key] = (value - self._rate_counts.get(key, value)) / elapsed
-        self._rate_counts = counts
-        self._rate_time_s = now_s
-        for kind in self.streams.table:
-            self.state.ages_s[kind] = self.streams.silent_s(kind, now_s)
+        counts = {
+            **self.session.ingest.counters.accepted,
+            "published": self.session.publisher.counters.published,
+        }
+        if self.state.update_rates(now_s, counts):
+            for kind in self.streams.table:
+                self.state.ages_s[kind] = self.streams.silent_s(kind, now_s)
 
     # ------------------------------------------------------------------ systemd, recording
     async def _watchdog(self, stop: asyncio.Event) -> None:

@@ -16,8 +16,13 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
-from tether_companion.service.recording import TlogWriter
+from tether_companion.config import ConfigError
+from tether_companion.service.recording import RecordingLimits, TlogWriter
+
+if TYPE_CHECKING:
+    from tether_companion.service.config import RecordingConfig
 
 DRAIN_INTERVAL_S = 0.02
 MAX_PENDING_BYTES = 8 << 20
@@ -96,3 +101,26 @@ class RecorderThread:
         self._thread.join()
         self._drain()
         self.writer.close()
+
+
+def open_recorder(rec: RecordingConfig) -> RecorderThread | None:
+    """The recorder the ``recording`` section asks for (None when disabled).
+
+    Raises
+    ------
+    ConfigError
+        When the directory cannot be created or written (naming ``recording.directory``).
+    """
+    if not rec.enabled:
+        return None
+    limits = RecordingLimits(
+        max_file_bytes=int(rec.max_file_mb * 2**20),
+        max_total_bytes=int(rec.max_total_mb * 2**20),
+        flush_interval_s=rec.flush_interval_s,
+    )
+    try:
+        return RecorderThread(TlogWriter(rec.directory, limits), rec.flush_interval_s)
+    except OSError as exc:
+        raise ConfigError(
+            "", "recording.directory", rec.directory, f"cannot write there ({exc.strerror or exc})"
+        ) from None

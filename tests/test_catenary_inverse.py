@@ -8,13 +8,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tether_companion.physics.catenary import (
+from tether_companion.physics.catenary import solve_known_length, solve_lowest_point_at_anchor
+from tether_companion.physics.catenary_forces import (
     curve_from_tension_known_length,
     curve_from_tension_lowest_point_at_anchor,
     drone_point,
     end_tensions,
-    solve_known_length,
-    solve_lowest_point_at_anchor,
 )
 
 W = 0.25  # N/m

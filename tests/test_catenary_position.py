@@ -27,12 +27,8 @@ from tether_companion.estimation.catenary_position import (
 from tether_companion.estimation.tension_budget import BUDGET_COLUMNS
 from tether_companion.estimation.tension_kf import TensionEstimate, TensionHealth
 from tether_companion.physics.cable import CatenaryCable, ElasticCable
-from tether_companion.physics.catenary import (
-    end_tensions,
-    force_on_drone_ned_n,
-    solve_known_length,
-    solve_lowest_point_at_anchor,
-)
+from tether_companion.physics.catenary import solve_known_length, solve_lowest_point_at_anchor
+from tether_companion.physics.catenary_forces import end_tensions, force_on_drone_ned_n
 
 W = 0.05 * 9.80665  # N/m
 

@@ -11,14 +11,12 @@ from hypothesis import strategies as st
 
 from tether_companion.physics.catenary import (
     CatenaryCurve,
-    drone_point,
-    end_tensions,
-    force_on_drone_ned_n,
     initial_guess_known_length,
     initial_guess_lowest_point_at_anchor,
     solve_known_length,
     solve_lowest_point_at_anchor,
 )
+from tether_companion.physics.catenary_forces import drone_point, end_tensions, force_on_drone_ned_n
 
 RELATIVE = 1e-6
 

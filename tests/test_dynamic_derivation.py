@@ -135,7 +135,8 @@ def test_catenary_models_match_the_simulators_catenary(
 ) -> None:
     """Force at the drone, its size, the arc length and the angle at the anchor against
     physics/catenary.py (an independent solver: known length, Newton on the parameter)."""
-    from tether_companion.physics.catenary import end_tensions, solve_known_length
+    from tether_companion.physics.catenary import solve_known_length
+    from tether_companion.physics.catenary_forces import end_tensions
 
     curve = solve_known_length(span_m, height_m, length_m)
     ends = end_tensions(curve, weight_n_per_m)
@@ -231,7 +232,8 @@ def test_the_free_and_the_grounded_cable_meet_where_the_lowest_point_is_the_anch
     both variants give the same values, and the same Jacobians for the force, the tension and
     the length: no jump for the filter. The anchor's elevation has a kink there (it stays 0
     while the cable lies on the ground), so only its value is compared."""
-    from tether_companion.physics.catenary import end_tensions, solve_lowest_point_at_anchor
+    from tether_companion.physics.catenary import solve_lowest_point_at_anchor
+    from tether_companion.physics.catenary_forces import end_tensions
 
     span, height, weight = 5.0, 3.0, 0.5
     curve = solve_lowest_point_at_anchor(span, height)

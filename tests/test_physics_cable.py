@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tether_companion.constants import GRAVITY_MPS2
-from tether_companion.physics import catenary
+from tether_companion.physics import catenary, catenary_forces
 from tether_companion.physics.cable import (
     CableConfig,
     CatenaryCable,
@@ -118,11 +118,11 @@ def test_stiff_catenary_matches_the_inextensible_catenary_solution() -> None:
     cable = _catenary(5.2, stiffness=1e9)
     position = (4.0, 0.0, -3.0)
     force = cable.force_on_drone_ned_n(position, (0.0, 0.0, 0.0))
-    expected = catenary.force_on_drone_ned_n(position, 5.2, 0.05 * G)
+    expected = catenary_forces.force_on_drone_ned_n(position, 5.2, 0.05 * G)
     assert force == pytest.approx(expected, rel=1e-6)
     curve = catenary.solve_known_length(4.0, 3.0, 5.2)
     assert cable.tension_n == pytest.approx(
-        catenary.end_tensions(curve, 0.05 * G).drone_n, rel=1e-6
+        catenary_forces.end_tensions(curve, 0.05 * G).drone_n, rel=1e-6
     )
     # the horizontal pull points at the anchor, the vertical one is down
     assert force[0] < 0.0 and force[1] == 0.0 and force[2] > 0.0
@@ -132,7 +132,9 @@ def test_catenary_stretch_balances_its_tension() -> None:
     cable = _catenary(5.2, stiffness=50.0)
     cable.force_components(4.0, 0.0, -3.0, 0.0, 0.0, 0.0)
     assert cable.stretch_m == pytest.approx(cable.tension_n / 50.0, rel=1e-6)
-    inextensible = catenary.end_tensions(catenary.solve_known_length(4.0, 3.0, 5.2), 0.05 * G)
+    inextensible = catenary_forces.end_tensions(
+        catenary.solve_known_length(4.0, 3.0, 5.2), 0.05 * G
+    )
     assert cable.tension_n < inextensible.drone_n  # stretched, it sags more and pulls less
 
 

@@ -82,14 +82,13 @@ from numpy.typing import NDArray
 
 from tether_companion.config import spec
 from tether_companion.estimation.tension_kf import TensionEstimate
-from tether_companion.physics.catenary import (
+from tether_companion.physics.catenary import solve_known_length, solve_lowest_point_at_anchor
+from tether_companion.physics.catenary_forces import (
     curve_from_tension_known_length,
     curve_from_tension_lowest_point_at_anchor,
     drone_point,
     end_tensions,
     plane_coordinates,
-    solve_known_length,
-    solve_lowest_point_at_anchor,
 )
 
 FloatArray = NDArray[np.float64]
@@ -227,7 +226,7 @@ def position_from_force_ned_m(
     ------
     ValueError
         Inputs the geometry cannot explain (see
-        :func:`~tether_companion.physics.catenary.curve_from_tension_lowest_point_at_anchor`).
+        :func:`~tether_companion.physics.catenary_forces.curve_from_tension_lowest_point_at_anchor`).
     """
     fn, fe, fd = (float(v) for v in force_on_drone_ned_n)
     horizontal_n = math.hypot(fn, fe)

@@ -45,11 +45,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from tether_companion.config import ConfigError, spec
 from tether_companion.constants import GRAVITY_MPS2
-from tether_companion.physics.catenary import (
-    end_tensions,
-    solve_known_length,
-    solve_lowest_point_at_anchor,
-)
+from tether_companion.physics.catenary import solve_known_length, solve_lowest_point_at_anchor
+from tether_companion.physics.catenary_forces import end_tensions
 
 FloatArray = NDArray[np.float64]
 

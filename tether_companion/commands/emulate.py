@@ -147,25 +147,13 @@ def emulator_config_from_args(args: argparse.Namespace, base: EmulatorConfig) ->
     if args.autopilot:
         data["autopilot"] = args.autopilot
     for text in args.param:
-        name, sep, value = text.partition("=")
-        try:
-            data["parameters"][name.strip()] = float(value)
-        except ValueError:
-            raise ConfigError(
-                "", "--param", text, "expected NAME=VALUE, e.g. MOT_SPIN_MIN=0.5"
-            ) from None
-        if not sep:
-            raise ConfigError("", "--param", text, "expected NAME=VALUE, e.g. MOT_SPIN_MIN=0.5")
+        name, value = _name_value(text, "--param", "NAME=VALUE, e.g. MOT_SPIN_MIN=0.5")
+        data["parameters"][name] = value
     if args.score_start is not None:
         data["score_start_s"] = args.score_start
     for text in args.rate:
-        name, sep, value = text.partition("=")
-        try:
-            data["stream_rates_hz"][name.strip()] = float(value)
-        except ValueError:
-            raise ConfigError("", "--rate", text, "expected MSG=HZ, e.g. RAW_IMU=400") from None
-        if not sep:
-            raise ConfigError("", "--rate", text, "expected MSG=HZ, e.g. RAW_IMU=400")
+        name, value = _name_value(text, "--rate", "MSG=HZ, e.g. RAW_IMU=400")
+        data["stream_rates_hz"][name] = value
     for flag, key in (
         ("drop", "drop_probability"),
         ("duplicate", "duplicate_probability"),
@@ -262,3 +250,15 @@ async def _status(controller: FlightController, server: EmulatorServer) -> None:
             f"in {controller.counters.messages_in}  slips {server.counters.slips}",
             flush=True,
         )
+
+
+def _name_value(text: str, flag: str, form: str) -> tuple[str, float]:
+    """``NAME=VALUE`` of a repeatable flag (ConfigError naming the flag when it is not one)."""
+    name, sep, value = text.partition("=")
+    try:
+        number = float(value)
+    except ValueError:
+        number = None
+    if not sep or number is None:
+        raise ConfigError("", flag, text, f"expected {form}")
+    return name.strip(), number

@@ -235,7 +235,7 @@ def position_from_force_ned_m(
         r, z = drone_point(curve_from_tension_lowest_point_at_anchor(horizontal_n, fd, w))
     else:
         curve = curve_from_tension_known_length(horizontal_n, fd, length_m, w)
-        if anchor_on_ground and curve.s2_m <= length_m:
+        if _grounded(case, anchor_on_ground, curve.s2_m, length_m):
             grounded = length_m - curve.s2_m
             rise = curve_from_tension_lowest_point_at_anchor(horizontal_n, fd, w)
             r, z = drone_point(rise)

@@ -93,6 +93,8 @@ def test_nonfinite_samples_are_reported_and_not_stored(bad: float) -> None:
         aligner.on_pwm(PwmSample(1.01, np.array([1500.0, bad, 1500.0, 1500.0]))) == NONFINITE_INPUT
     )
     assert aligner.on_pwm(PwmSample(bad, HOVER_PWM)) == NONFINITE_INPUT
+    both = np.array([math.inf, -math.inf, 1500.0, 1500.0])  # a sum check must not cancel them
+    assert aligner.on_pwm(PwmSample(1.02, both)) == NONFINITE_INPUT
     assert thrust.times_s == [1.0]  # non-finite PWM never reaches the thrust input
     assert aligner.attitude.time_s == 1.0 and aligner.pwm_time_s == 1.0
     assert aligner.align(_imu(1.0, (0.0, bad, -9.8))) == NONFINITE_INPUT

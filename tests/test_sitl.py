@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import socket
 import time
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -85,9 +86,14 @@ SITL_MASS_KG = 3.0
 """SIM_Frame's default model mass: the one value no ArduPilot parameter holds."""
 
 
-async def _read_vehicle(service: CompanionService, timeout_s: float) -> float:
+async def _read_vehicle(
+    service: CompanionService, timeout_s: float, heard: Callable[[], bool], heard_s: float
+) -> float:
     """Run ``service`` until it has built its profile from the flight controller (or
-    ``timeout_s`` [s] pass); returns the wall time it took [s]."""
+    ``timeout_s`` [s] pass), then on until ``heard()`` (the ground station saw what it said)
+    or ``heard_s`` [s] more pass: stopping at once would close the TCP link before SITL has
+    parsed the bytes it received (it drops its receive buffer with the connection). Returns
+    the wall time the profile took [s]."""
     stop = asyncio.Event()
     start = time.monotonic()
     task = asyncio.create_task(service.run(stop), name="service")
@@ -96,7 +102,10 @@ async def _read_vehicle(service: CompanionService, timeout_s: float) -> float:
             if time.monotonic() - start > timeout_s:
                 break
             await asyncio.sleep(0.05)
-        return time.monotonic() - start
+        took_s = time.monotonic() - start
+        while not heard() and not task.done() and time.monotonic() - start < took_s + heard_s:
+            await asyncio.sleep(0.05)
+        return took_s
     finally:
         stop.set()
         await asyncio.wait_for(task, timeout=10.0)
@@ -122,11 +131,13 @@ def test_service_builds_the_vehicle_from_sitls_parameters(sitl_available) -> Non
             service = CompanionService(
                 config, load_vehicle_for(config), notifier=SystemdNotifier({})
             )
-            took_s = asyncio.run(_read_vehicle(service, timeout_s=30.0))
-            gcs.wait_for(
-                "the companion's STATUSTEXT",
-                lambda _s: any("from FC params" in t for t in gcs.companion_texts()),
-                timeout_s=5.0,
+
+            def said() -> bool:
+                return any("from FC params" in t for t in gcs.companion_texts())
+
+            took_s = asyncio.run(_read_vehicle(service, 30.0, said, heard_s=5.0))
+            assert said(), (
+                f"the companion's STATUSTEXT never reached the GCS: {gcs.companion_texts()}"
             )
     print(f"profile from SITL's parameters in {took_s:.2f} s")
     built, frame = service.vehicle, load_vehicle(SITL_VEHICLE)

@@ -151,7 +151,7 @@ class InputAligner:
         """
         if sample is self._pwm_in:  # the same sample from another estimator
             return self._pwm_outcome
-        if not math.isfinite(sample.time_s) or not np.isfinite(sample.pwm_us).all():
+        if not math.isfinite(sample.time_s + sum(sample.pwm_us.tolist())):  # NaN/inf in any
             outcome: str | None = NONFINITE_INPUT
         else:
             thrust_n = self.thrust_input.total_thrust_n(sample.pwm_us, sample.time_s)

@@ -4,7 +4,8 @@ The shared time-alignment, gate and rangefinder-validity settings stay in
 :class:`~tether_companion.estimation.config.EstimatorConfig`; this section holds what only
 the dynamic filter has: its noise densities, the cable's weight, the rotor-drag coefficient,
 the anchor's height above the ground, the initialisation window and the publication bounds
-behind its observability status.
+behind its observability status. :func:`drag_per_s` resolves the rotor-drag coefficient from
+this section or, when unset, the vehicle profile.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from tether_companion.config import load_yaml, spec
+from tether_companion.physics.vehicle import VehicleProfile
 
 FORCE_BALANCE = "force_balance"
 """Formulation (a): the force balance drives the prediction, the accelerometer is measured."""
@@ -148,3 +150,14 @@ def load_dynamic_config(path: str | Path) -> DynamicFilterConfig:
         When the file is missing or a key is unknown, mistyped or out of range.
     """
     return load_yaml(DynamicFilterConfig, path)
+
+
+def drag_per_s(dynamic: DynamicFilterConfig, vehicle: VehicleProfile) -> float:
+    """Rotor drag coefficient ``mu`` [1/s]: the config's, else the profile's
+    ``rotor_drag_per_s`` when set (> 0), else its legacy isotropic linear drag coefficient over
+    the mass."""
+    if dynamic.drag_per_s is not None:
+        return dynamic.drag_per_s
+    if vehicle.rotor_drag_per_s > 0.0:
+        return vehicle.rotor_drag_per_s
+    return vehicle.drag_coefficient_n_s_per_m / vehicle.mass_kg

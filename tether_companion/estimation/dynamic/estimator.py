@@ -21,10 +21,7 @@ initialisation; ``reset_counter`` counts it and the tick's status is ``reset`` w
 
 from __future__ import annotations
 
-import dataclasses
 import math
-import operator
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,12 +43,12 @@ from tether_companion.estimation.dynamic.aid.load_cell import LoadCellAid
 from tether_companion.estimation.dynamic.aid.rangefinder import RangefinderAid
 from tether_companion.estimation.dynamic.aid.winch import WinchAid
 from tether_companion.estimation.dynamic.bank import FilterBank
-from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterConfig
+from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterConfig, drag_per_s
 from tether_companion.estimation.dynamic.initialise import Initialiser
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.dynamic.models import UNDEFINED, ModelConstants
 from tether_companion.estimation.dynamic.observability import assess, min_horizontal_pull_n
-from tether_companion.estimation.dynamic.output import NavigationEstimate
+from tether_companion.estimation.dynamic.output import DynamicHealth, NavigationEstimate
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
 from tether_companion.estimation.inputs import InputFeed, range_height_m, range_reading_ok
 from tether_companion.estimation.pipeline import default_thrust_input
@@ -69,57 +66,6 @@ UNKNOWN_VARIANCE = 1e6
 """Variance reported for every component while there is no state [SI units^2]."""
 NOMINAL_IMU_STEP_S = 0.005
 """IMU period the inertial formulation's per-sample noise is converted with [s]."""
-
-
-@dataclass(slots=True)
-class DynamicHealth:
-    """Counters of what the dynamic filter did with its inputs (monotonic except ``last_*``).
-
-    Field names shared with :class:`~tether_companion.estimation.pipeline.EstimatorHealth`
-    mean the same (the service reads ``stale_attitude``, ``stale_pwm``, ``stale_tension``).
-    """
-
-    imu_ticks: int = 0
-    accel_fused: int = 0
-    accel_gated: int = 0
-    stale_attitude: int = 0
-    stale_pwm: int = 0
-    stale_tension: int = 0
-    on_ground: int = 0
-    near_anchor: int = 0
-    range_fused: int = 0
-    range_gated: int = 0
-    range_out_of_range: int = 0
-    range_stale: int = 0
-    load_cell_fused: int = 0
-    winch_fused: int = 0
-    cable_angle_fused: int = 0
-    nonfinite_rejected: int = 0
-    pwm_invalid: int = 0
-    out_of_order: int = 0
-    initialisations: int = 0
-    resets: int = 0
-    pd_repairs: int = 0
-    last_accel_nis: float = math.nan
-    last_range_nis: float = math.nan
-
-    def values(self) -> tuple:
-        """All fields in declaration order (a cheap snapshot)."""
-        return _HEALTH_VALUES(self)
-
-
-_HEALTH_VALUES = operator.attrgetter(*(f.name for f in dataclasses.fields(DynamicHealth)))
-
-
-def drag_per_s(dynamic: DynamicFilterConfig, vehicle: VehicleProfile) -> float:
-    """Rotor drag coefficient ``mu`` [1/s]: the config's, else the profile's
-    ``rotor_drag_per_s`` when set (> 0), else its legacy isotropic linear drag coefficient over
-    the mass."""
-    if dynamic.drag_per_s is not None:
-        return dynamic.drag_per_s
-    if vehicle.rotor_drag_per_s > 0.0:
-        return vehicle.rotor_drag_per_s
-    return vehicle.drag_coefficient_n_s_per_m / vehicle.mass_kg
 
 
 class DynamicTetherEstimator(InputFeed):

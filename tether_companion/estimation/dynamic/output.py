@@ -1,4 +1,5 @@
-"""What the dynamic tether filter hands to the service: :class:`NavigationEstimate`.
+"""What the dynamic tether filter hands to the service: :class:`NavigationEstimate`, and its
+counters (:class:`DynamicHealth`).
 
 One estimate per IMU tick: position and velocity of the drone relative to the tether anchor
 (NED), their joint 6x6 covariance, the cable tension at the drone, and an observability status
@@ -18,6 +19,9 @@ Pure data; no behaviour beyond views of the stored arrays.
 
 from __future__ import annotations
 
+import dataclasses
+import math
+import operator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -137,3 +141,43 @@ class NavigationEstimate:
         if self.health_type is None:
             return self.health_values
         return self.health_type(*self.health_values)
+
+
+@dataclass(slots=True)
+class DynamicHealth:
+    """Counters of what the dynamic filter did with its inputs (monotonic except ``last_*``).
+
+    Field names shared with :class:`~tether_companion.estimation.pipeline.EstimatorHealth`
+    mean the same (the service reads ``stale_attitude``, ``stale_pwm``, ``stale_tension``).
+    """
+
+    imu_ticks: int = 0
+    accel_fused: int = 0
+    accel_gated: int = 0
+    stale_attitude: int = 0
+    stale_pwm: int = 0
+    stale_tension: int = 0
+    on_ground: int = 0
+    near_anchor: int = 0
+    range_fused: int = 0
+    range_gated: int = 0
+    range_out_of_range: int = 0
+    range_stale: int = 0
+    load_cell_fused: int = 0
+    winch_fused: int = 0
+    cable_angle_fused: int = 0
+    nonfinite_rejected: int = 0
+    pwm_invalid: int = 0
+    out_of_order: int = 0
+    initialisations: int = 0
+    resets: int = 0
+    pd_repairs: int = 0
+    last_accel_nis: float = math.nan
+    last_range_nis: float = math.nan
+
+    def values(self) -> tuple:
+        """All fields in declaration order (a cheap snapshot)."""
+        return _HEALTH_VALUES(self)
+
+
+_HEALTH_VALUES = operator.attrgetter(*(f.name for f in dataclasses.fields(DynamicHealth)))

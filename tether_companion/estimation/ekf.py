@@ -349,8 +349,15 @@ class ExtendedKalmanFilter:
         a = self._eye - gain @ h_jac
         p = (a @ self.P) @ a.T
         p += (gain @ r) @ gain.T
-        # NaN/inf anywhere in z, h(x), H or R reaches x or P: one reduction catches it, and
-        # the state is left untouched
+        return self._accept(status, nis, x, p)
+
+    def _accept(
+        self, status: SensorStatus, nis: float, x: FloatArray, p: FloatArray
+    ) -> UpdateResult:
+        """Keep an updated state ``x`` and covariance ``p`` (made exactly symmetric, in place)
+        unless they are not finite: NaN/inf anywhere in z, h(x), H or R reaches x or P, one
+        reduction catches it and the state is left untouched. A covariance that fails the
+        Cholesky test is repaired."""
         if not math.isfinite(float(x.sum()) + float(p.sum())):
             status.nonfinite += 1
             return UpdateResult(NONFINITE, math.nan)
@@ -360,7 +367,7 @@ class ExtendedKalmanFilter:
         self.P = p
         status.fused += 1
         status.consecutive_rejections = 0
-        if dpotrf(self.P, lower=1, clean=0)[1] != 0:  # Cholesky failed: not PD
+        if dpotrf(p, lower=1, clean=0)[1] != 0:  # Cholesky failed: not PD
             self._repair_covariance()
         return UpdateResult(FUSED, nis)
 

@@ -37,12 +37,10 @@ from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg.lapack import dpotrf
 
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.models import Generated, ModelConstants
 from tether_companion.estimation.ekf import (
-    FUSED,
     GATED,
     NONFINITE,
     SINGULAR,
@@ -233,24 +231,6 @@ class MemberFilter(ExtendedKalmanFilter):
         x = self.x + pht @ np.array((w0, w1, w2))
         p_new = p - (pht @ s_inv) @ pht.T
         return self._accept(status, nis, x, p_new)
-
-    def _accept(
-        self, status: SensorStatus, nis: float, x: FloatArray, p_new: FloatArray
-    ) -> UpdateResult:
-        """Keep the updated state and covariance (the latter made exactly symmetric) unless
-        they are not finite; the Cholesky test and repair as the generic filter's."""
-        p_new += p_new.T
-        p_new *= 0.5
-        if not math.isfinite(float(x.sum()) + float(p_new.sum())):
-            status.nonfinite += 1
-            return UpdateResult(NONFINITE, math.nan)
-        self.x = x
-        self.P = p_new
-        status.fused += 1
-        status.consecutive_rejections = 0
-        if dpotrf(p_new, lower=1, clean=0)[1] != 0:  # Cholesky failed: not PD
-            self._repair_covariance()
-        return UpdateResult(FUSED, nis)
 
     @staticmethod
     def _rejected(status: SensorStatus, s_sum: float) -> UpdateResult:

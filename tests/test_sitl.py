@@ -251,8 +251,9 @@ def test_gps_less_landing_by_reeling_the_tether_in(sitl_available, tmp_path) -> 
     tension mode on (MAV_CMD_USER_2) and SITL's line is reeled in at 0.3 m/s: the mode feels
     the pull, follows it down and hands over to LAND near the ground; the drone disarms
     within 0.5 m of the anchor, with no failsafe and EKF3 never without a position."""
-    from tether_companion.ardupilot_sitl.flights import TRACE_COLUMNS, FlightOptions, gps_less
+    from tether_companion.ardupilot_sitl.flights import FlightOptions, gps_less
     from tether_companion.ardupilot_sitl.ground_station import COPTER_MODES
+    from tether_companion.ardupilot_sitl.scoring import TRACE_COLUMNS
 
     options = FlightOptions(workdir=tmp_path, hold_s=20.0, land_by_tether=True)
     result = gps_less(options, log=print)

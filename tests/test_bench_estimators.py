@@ -175,6 +175,10 @@ def test_tiny_scorecard_on_a_local_cluster(local_card):
         # cable's vertical pull, and it withholds the position as weak_pull)
         assert cell["horizontal_rmse_m"] < 1.0 or cell["share_published"] < 0.5, name
         assert cell["nees_mean"] > 0.0
+        # the pooled RMSE is a tick-weighted RMS of the per-seed ones, so it lies between them
+        per_seed = cell["horizontal_rmse_per_seed_m"]
+        assert len(per_seed) == 2
+        assert min(per_seed) - 1e-12 <= cell["horizontal_rmse_m"] <= max(per_seed) + 1e-12
         has_velocity = kinds()[name].has_velocity
         assert (cell["velocity_rmse_mps"] is None) == (not has_velocity), name
     assert card["ekf-3s"]["tension_rmse_n"] is None

@@ -201,13 +201,15 @@ def pool(runs: list[KindRunScore], has_tension: bool, has_velocity: bool) -> dic
     all_nees = all_nees[np.isfinite(all_nees)]
     converge = [r.converge_s for r in runs]
     finite_converge = [c for c in converge if math.isfinite(c)]
-    per_seed_h = [_root_mean(r.sq_horizontal_m2, r.estimated) for r in runs if r.estimated > 0]
+    seed_h = [_root_mean(r.sq_horizontal_m2, r.estimated) for r in runs]
+    per_seed_h = [h for h in seed_h if math.isfinite(h)]
     return {
         "seeds": len(runs),
         "horizontal_rmse_m": horizontal,
         "horizontal_rmse_seed_std_m": float(np.std(per_seed_h, ddof=1))
         if len(per_seed_h) > 1
         else 0.0,
+        "horizontal_rmse_per_seed_m": seed_h,
         "vertical_rmse_m": vertical,
         "max_error_m": max(
             (r.max_error_m for r in runs if math.isfinite(r.max_error_m)), default=math.nan

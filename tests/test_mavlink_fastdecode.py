@@ -1,8 +1,9 @@
 """The fast decoder of the hot input streams against pymavlink's decoder (issue 12).
 
 Property: for every frame, the parser with the fast decoder and the parser with pymavlink's
-return equal message objects (same class, every attribute equal, header included) and the
-same counts (same verdict for every rejected frame).
+return the same messages (for the hot streams a record: every field bit for bit pymavlink's,
+the sender ids, sequence and frame bytes too, and ``to_message()`` pymavlink's own object) and
+the same counts (same verdict for every rejected frame).
 """
 
 from __future__ import annotations
@@ -12,7 +13,13 @@ import struct
 import numpy as np
 import pytest
 
-from tether_companion.mavlink.fastdecode import HOT_MESSAGES, FastDecoder, MessageLayout
+from tether_companion.mavlink.fastdecode import (
+    HOT_MESSAGES,
+    FastDecoder,
+    HotRecord,
+    MessageLayout,
+    record_class,
+)
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
 from tether_companion.service.config import load_service_config, load_vehicle_for
 from tether_companion.service.synthetic import HoverStreams
@@ -37,10 +44,34 @@ def _bits(value):
 
 
 def _state(msg) -> tuple:
-    """Everything a message object holds (its header's attributes included), bit for bit."""
+    """Everything a pymavlink message object holds (its header's attributes included), bit
+    for bit."""
     attrs = dict(vars(msg))
     header = vars(attrs.pop("_header"))
     return type(msg), header, {key: _bits(value) for key, value in attrs.items()}
+
+
+def _received(msg) -> tuple:
+    """What a receiver reads of a message or record: type, sender, sequence, frame bytes and
+    every field by name, bit for bit."""
+    names = type(msg).fieldnames if not isinstance(msg, HotRecord) else msg._fields[:-4]
+    return (
+        msg.get_type(),
+        msg.get_srcSystem(),
+        msg.get_srcComponent(),
+        msg.get_seq(),
+        bytes(msg.get_msgbuf()),
+        {name: _bits(getattr(msg, name)) for name in names},
+    )
+
+
+def _same(fast, slow) -> bool:
+    """A fast-decoded record reads as pymavlink's message and converts to it; any other
+    message is pymavlink's on both sides."""
+    if not isinstance(fast, HotRecord):
+        return _state(fast) == _state(slow)
+    assert list(fast._fields[:-4]) == type(slow).fieldnames
+    return _received(fast) == _received(slow) and _state(fast.to_message()) == _state(slow)
 
 
 def _decode_both(datagrams: list[bytes]) -> tuple[list, list, dict, dict]:
@@ -60,7 +91,7 @@ def _assert_same(datagrams: list[bytes]) -> list:
     assert counts_fast == counts_slow
     assert len(out_fast) == len(out_slow)
     for a, b in zip(out_fast, out_slow, strict=True):
-        assert _state(a) == _state(b)
+        assert _same(a, b)
     return out_fast
 
 
@@ -137,6 +168,7 @@ def _flight_frames(seconds: float, version: int) -> list[bytes]:
 def test_recorded_flight_decodes_identically(version: int) -> None:
     frames = _flight_frames(5.0, version)
     messages = _assert_same(frames)
+    assert all(isinstance(m, HotRecord) for m in messages)
     types = {m.get_type() for m in messages}
     assert {"RAW_IMU", "ATTITUDE", "SERVO_OUTPUT_RAW", "DISTANCE_SENSOR"} <= types
     assert len(messages) == len(frames)
@@ -195,7 +227,7 @@ def _verdict_run(rng: np.random.Generator, n_frames: int) -> dict:
         datagrams.append(b"".join(parts))
     out_fast, out_slow, counts_fast, counts_slow = _decode_both(datagrams)
     assert counts_fast == counts_slow
-    assert [_state(m) for m in out_fast] == [_state(m) for m in out_slow]
+    assert all(_same(a, b) for a, b in zip(out_fast, out_slow, strict=True))
     return counts_fast
 
 
@@ -220,6 +252,9 @@ def test_layouts_come_from_the_dialect() -> None:
     assert servo.crc_extra == dialect.MAVLink_servo_output_raw_message.crc_extra
     with pytest.raises(ValueError, match="char fields"):
         MessageLayout(dialect.MAVLink_statustext_message)
+    record = record_class(dialect.MAVLink_raw_imu_message)
+    assert record._fields[:-4] == tuple(dialect.MAVLink_raw_imu_message.fieldnames)
+    assert record.msgname == "RAW_IMU" and record.msg_id == dialect.MAVLINK_MSG_ID_RAW_IMU
 
 
 class _RefuseAttitude:

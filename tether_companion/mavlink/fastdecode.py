@@ -1,32 +1,35 @@
 """Fast payload decoding of the hot input streams, straight from intact frame bytes.
 
 pymavlink's ``MAVLink.decode`` re-parses the header, checks the CRC a second time, reorders
-the fields with Python loops and calls the generated ``__init__``: about 40 us a message on
-a small board, and the service receives ~600 input messages a second. For the messages the
-estimators live on (:data:`HOT_MESSAGES`) :class:`FastDecoder` builds the *same* pymavlink
-message object (same class, same attributes, so ``get_type()``, ``get_srcSystem()``,
-``get_msgbuf()`` and every field read exactly as before) from a layout precompiled out of the
-dialect's own generated class: its ``struct`` format (wire order, MAVLink 2 extension fields
-last), its field order, array lengths and ``crc_extra``. Everything else still goes through
-pymavlink.
+the fields with Python loops, builds a header object and calls the generated ``__init__``:
+several microseconds a message, and the service receives ~600 input messages a second. For
+the messages the estimators live on (:data:`HOT_MESSAGES`) :class:`FastDecoder` instead makes
+a :class:`HotRecord`: a tuple of the message's fields (pymavlink's names and values, arrays as
+lists) and of the header items a receiver reads (sender ids, sequence, the frame itself),
+built by one generated function per message from the dialect's own generated class: its wire-
+order ``struct`` format (MAVLink 2 extension fields last), its field order, array lengths and
+``crc_extra``. A record answers the part of pymavlink's message interface the receivers use
+(``get_type()``, ``get_srcSystem()``, ``get_srcComponent()``, ``get_seq()``,
+``get_msgbuf()``, every field by name); :meth:`HotRecord.to_message` makes pymavlink's own
+object from the frame for anything else. Everything else still goes through pymavlink.
 
 The caller (:class:`~tether_companion.mavlink.framing.FrameParser`) hands in a frame whose
 checksum (with the message's ``crc_extra``) it has already checked and that the link-trust
 layer admitted; :meth:`FastDecoder.decode` only unpacks. A MAVLink 2 payload whose trailing
 zero bytes were truncated by the sender is zero-padded back to the full length, as pymavlink
-does. The ``_payload`` attribute copies pymavlink's (``msgbuf[6:-2]`` whatever the header
-length) so that the two decoders' objects are equal attribute for attribute; the property
-tests in ``tests/test_mavlink_fastdecode.py`` check exactly that on recorded and fuzzed frames.
+does. The property tests in ``tests/test_mavlink_fastdecode.py`` check on recorded and fuzzed
+frames that every field of a record is bit for bit pymavlink's, and its header items too.
 """
 
 from __future__ import annotations
 
 import struct
+from collections import namedtuple
 from collections.abc import Iterable
 
 from pymavlink.dialects.v20 import ardupilotmega as dialect
 
-__all__ = ["HOT_MESSAGES", "FastDecoder", "MessageLayout"]
+__all__ = ["HOT_MESSAGES", "FastDecoder", "HotRecord", "MessageLayout", "record_class"]
 
 HOT_MESSAGES: tuple[str, ...] = (
     "RAW_IMU",
@@ -40,73 +43,127 @@ HOT_MESSAGES: tuple[str, ...] = (
 _HEADER_LEN_V1 = dialect.HEADER_LEN_V1
 _HEADER_LEN_V2 = dialect.HEADER_LEN_V2
 _STX_V1 = dialect.PROTOCOL_MARKER_V1
-_Header = dialect.MAVLink_header
-_CRC = struct.Struct("<H")
-_new_object = object.__new__
+_new_tuple = tuple.__new__
+_HEADER_ITEMS = ("src_system", "src_component", "seq", "frame")
+"""What a record keeps of the header, after the message's fields."""
 
 
-class MessageLayout:
-    """How one message id's payload maps to its pymavlink message's attributes.
+class HotRecord(tuple):
+    """Base of the generated record classes: one message's fields, then :data:`_HEADER_ITEMS`.
 
-    Built from the dialect's generated class, never written by hand: ``unpacker`` is the
-    class's wire-order ``struct`` (extensions last), ``orders`` says which wire field each
-    constructor argument is, ``lengths`` groups array fields.
+    Subclasses (one per hot message, see :func:`record_class`) name every item; they are
+    tuples, so building one is a single C call.
+    """
+
+    __slots__ = ()
+    msgname = ""
+    """pymavlink's message name (``RAW_IMU``...)."""
+    msg_id = -1
+    """The MAVLink message id."""
+
+    def get_type(self) -> str:
+        """The message name, as pymavlink's ``get_type()``."""
+        return self.msgname
+
+    def get_msgId(self) -> int:  # noqa: N802 - pymavlink's name
+        """The message id."""
+        return self.msg_id
+
+    def get_srcSystem(self) -> int:  # noqa: N802 - pymavlink's name
+        """The sender's system id."""
+        return self[-4]
+
+    def get_srcComponent(self) -> int:  # noqa: N802 - pymavlink's name
+        """The sender's component id."""
+        return self[-3]
+
+    def get_seq(self) -> int:
+        """The frame's sequence number."""
+        return self[-2]
+
+    def get_msgbuf(self) -> bytearray:
+        """The whole frame as received (signature included), as pymavlink's."""
+        return self[-1]
+
+    def to_message(self) -> dialect.MAVLink_message:
+        """pymavlink's own message object of the same frame."""
+        return dialect.MAVLink(None).decode(self[-1])
+
+
+def record_class(message_class: type[dialect.MAVLink_message]) -> type[HotRecord]:
+    """The :class:`HotRecord` subclass of one message: its fields by pymavlink's names.
 
     Raises
     ------
     ValueError
-        For a message with ``char`` fields (pymavlink strips their NULs; not a hot message).
+        For a message with ``char`` fields (pymavlink strips their NULs; not a hot message),
+        or a field named like a header item.
+    """
+    if any(t == "char" for t in message_class.fieldtypes):
+        raise ValueError(f"{message_class.msgname}: char fields are not fast-decoded")
+    names = tuple(message_class.fieldnames) + _HEADER_ITEMS
+    if len(set(names)) != len(names):
+        raise ValueError(f"{message_class.msgname}: a field is named like a header item")
+    base = namedtuple(f"{message_class.msgname}_fields", names)  # noqa: PYI024 - generated
+    return type(
+        f"{message_class.msgname.title().replace('_', '')}Record",
+        (base, HotRecord),
+        {"__slots__": (), "msgname": message_class.msgname, "msg_id": message_class.id},
+    )
+
+
+class MessageLayout:
+    """How one message id's payload maps to its :class:`HotRecord`.
+
+    Built from the dialect's generated class, never written by hand: ``unpacker`` is the
+    class's wire-order ``struct`` (extensions last), ``make`` puts the unpacked items in the
+    class's field order, arrays grouped into lists.
+
+    Raises
+    ------
+    ValueError
+        As :func:`record_class`.
     """
 
     def __init__(self, message_class: type[dialect.MAVLink_message]) -> None:
-        if any(t == "char" for t in message_class.fieldtypes):
-            raise ValueError(f"{message_class.msgname}: char fields are not fast-decoded")
-        self.message_class = message_class
+        self.record = record_class(message_class)
         self.msg_id: int = message_class.id
         self.crc_extra: int = message_class.crc_extra
         self.unpacker: struct.Struct = message_class.unpacker
         self.size: int = message_class.unpacker.size
         self.padding = bytes(self.size)
-        self.attributes = _attribute_builder(message_class)
-        """``attributes(flat, header, frame, payload, crc) -> dict``: the instance attributes
-        pymavlink's decoder sets, from the unpacked struct items ``flat`` (wire order)."""
+        self.make = _record_builder(message_class, self.record)
+        """``make(flat, src_system, src_component, seq, frame) -> record`` from the unpacked
+        struct items ``flat`` (wire order)."""
 
 
-def _attribute_builder(message_class: type[dialect.MAVLink_message]):
-    """A function building one message's attribute dict, generated from its layout.
+def _record_builder(message_class: type[dialect.MAVLink_message], record: type[HotRecord]):
+    """A function building one message's record, generated from its layout.
 
-    A dict display with constant keys is several times cheaper in CPython than filling a dict
-    from ``zip(names, values)``; the source is generated here from the dialect's field names
-    and array lengths (nothing is written by hand per message).
+    One tuple display in the record's order, from constant indices into the wire-order items
+    (the source is generated here from the dialect's field names and array lengths; nothing is
+    written by hand per message).
     """
-    items = []
+    where = {}
     flat_index = 0
     for name, length in zip(message_class.ordered_fieldnames, message_class.lengths, strict=True):
         if length == 1:
-            items.append(f"{name!r}: flat[{flat_index}]")
+            where[name] = f"flat[{flat_index}]"
         else:
-            items.append(f"{name!r}: list(flat[{flat_index}:{flat_index + length}])")
+            where[name] = f"list(flat[{flat_index}:{flat_index + length}])"
         flat_index += length
-    constants = {
-        "_fieldnames": message_class.fieldnames,
-        "_type": message_class.msgname,
-        "_signed": False,
-        "_link_id": None,
-        "_instances": None,
-        "_instance_field": message_class.instance_field,
-        "_instance_offset": message_class.instance_offset,
-    }
-    namespace = {f"c{i}": value for i, value in enumerate(constants.values())}
-    items += [f"{key!r}: c{i}" for i, key in enumerate(constants)]
-    items += ["'_header': header", "'_msgbuf': frame", "'_payload': payload", "'_crc': crc"]
-    body = ", ".join(items)
-    source = f"def attributes(flat, header, frame, payload, crc):\n    return {{{body}}}\n"
+    items = [where[name] for name in message_class.fieldnames] + list(_HEADER_ITEMS)
+    source = (
+        f"def make(flat, {', '.join(_HEADER_ITEMS)}):\n"
+        f"    return new(record, ({', '.join(items)},))\n"
+    )
+    namespace = {"new": _new_tuple, "record": record}
     exec(compile(source, f"<fastdecode {message_class.msgname}>", "exec"), namespace)  # noqa: S102
-    return namespace["attributes"]
+    return namespace["make"]
 
 
 class FastDecoder:
-    """Decodes intact frames of the hot messages into pymavlink message objects.
+    """Decodes intact frames of the hot messages into :class:`HotRecord` s.
 
     Parameters
     ----------
@@ -124,41 +181,25 @@ class FastDecoder:
         """Whether frames of ``msg_id`` are decoded here."""
         return msg_id in self.layouts
 
-    def decode(self, frame: bytearray, signature_len: int) -> dialect.MAVLink_message:
-        """The message of one whole, checksum-verified frame of a handled id.
+    def decode(self, frame: bytearray, signature_len: int) -> HotRecord:
+        """The record of one whole, checksum-verified frame of a handled id.
 
         ``frame`` (MAVLink 1 or 2, with its ``signature_len`` signature bytes, 13 or 0) becomes
-        the message's ``_msgbuf``, as in pymavlink; do not reuse it.
+        the record's ``frame``; do not reuse it.
         """
         if frame[0] == _STX_V1:
             header_len = _HEADER_LEN_V1
-            _, mlen, seq, src_system, src_component, msg_id = frame[:_HEADER_LEN_V1]
-            incompat = compat = 0
+            seq, src_system, src_component, msg_id = frame[2], frame[3], frame[4], frame[5]
         else:
             header_len = _HEADER_LEN_V2
-            _, mlen, incompat, compat, seq, src_system, src_component = frame[:7]
+            seq, src_system, src_component = frame[4], frame[5], frame[6]
             msg_id = frame[7] | (frame[8] << 8) | (frame[9] << 16)
         layout = self.layouts[msg_id]
         end = len(frame) - 2 - signature_len
-        payload = frame[header_len:end]
-        if len(payload) < layout.size:  # MAVLink 2 trailing zeros truncated by the sender
-            payload += layout.padding[len(payload) :]
-        header = _new_object(_Header)
-        header.__dict__ = {
-            "mlen": mlen,
-            "seq": seq,
-            "srcSystem": src_system,
-            "srcComponent": src_component,
-            "msgId": msg_id,
-            "incompat_flags": incompat,
-            "compat_flags": compat,
-        }
-        msg = _new_object(layout.message_class)
-        msg.__dict__ = layout.attributes(
-            layout.unpacker.unpack(payload),
-            header,
-            frame,
-            frame[6:end],
-            _CRC.unpack_from(frame, end)[0],
-        )
-        return msg
+        size = layout.size
+        if end - header_len >= size:
+            flat = layout.unpacker.unpack_from(frame, header_len)
+        else:  # MAVLink 2 trailing zeros truncated by the sender
+            payload = frame[header_len:end] + layout.padding[end - header_len :]
+            flat = layout.unpacker.unpack(payload)
+        return layout.make(flat, src_system, src_component, seq, frame)

@@ -10,7 +10,9 @@ Why not pymavlink's own ``MAVLink.parse_char``: on a bad checksum it raises and 
 whole claimed frame (up to 280 bytes), and it keeps no per-cause counts. Here pymavlink still
 decodes the payload (``MAVLink.decode``) once the frame is known to be intact, except for the
 estimators' input streams, which :class:`~tether_companion.mavlink.fastdecode.FastDecoder`
-turns into the same message objects from precompiled layouts (``fast=False`` turns that off).
+turns into :class:`~tether_companion.mavlink.fastdecode.HotRecord` s (the same fields, the
+part of the message interface receivers use) from precompiled layouts (``fast=False`` turns
+that off: pymavlink objects for every message).
 
 Example
 -------
@@ -31,7 +33,7 @@ from typing import TYPE_CHECKING
 from fastcrc.crc16 import mcrf4xx
 from pymavlink.dialects.v20 import ardupilotmega as dialect
 
-from tether_companion.mavlink.fastdecode import FastDecoder
+from tether_companion.mavlink.fastdecode import FastDecoder, HotRecord
 
 if TYPE_CHECKING:
     from tether_companion.mavlink.signing import Signer
@@ -42,11 +44,16 @@ __all__ = [
     "FrameParser",
     "FramingCounters",
     "MAVLinkMessage",
+    "Received",
     "dialect",
 ]
 
 MAVLinkMessage = dialect.MAVLink_message
 """Base class of every decoded message (``msg.get_type()``, ``msg.get_srcSystem()``, ...)."""
+Received = MAVLinkMessage | HotRecord
+"""What a :class:`FrameParser` returns: pymavlink's message, or for the hot input streams a
+record with the same fields and ``get_type()``, ``get_srcSystem()``, ``get_srcComponent()``,
+``get_seq()``, ``get_msgbuf()``."""
 
 _STX_V1 = dialect.PROTOCOL_MARKER_V1
 _STX_V2 = dialect.PROTOCOL_MARKER_V2
@@ -122,7 +129,8 @@ class FrameParser:
     one, signed frames are decoded without checking the signature.
 
     With ``fast`` (the default) the hot input messages of admitted frames are decoded by a
-    :class:`~tether_companion.mavlink.fastdecode.FastDecoder` (same objects, same counts).
+    :class:`~tether_companion.mavlink.fastdecode.FastDecoder` into records (same fields, same
+    counts; ``record.to_message()`` gives pymavlink's object).
     """
 
     def __init__(
@@ -143,7 +151,7 @@ class FrameParser:
 
     def feed(
         self, data: bytes | bytearray | memoryview, source: Hashable | None = None
-    ) -> list[MAVLinkMessage]:
+    ) -> list[Received]:
         """Add ``data`` (sent by ``source``: an address, for the gate) and return every message
         completed by it, in order."""
         self.counters.bytes_in += len(data)
@@ -151,9 +159,9 @@ class FrameParser:
         self._source = source
         return self._parse()
 
-    def _parse(self) -> list[MAVLinkMessage]:
+    def _parse(self) -> list[Received]:
         """Frames in the buffer; an incomplete one stays for the next call."""
-        out: list[MAVLinkMessage] = []
+        out: list[Received] = []
         buf = self._buf
         pos = 0
         counters = self.counters
@@ -224,6 +232,7 @@ class FrameParser:
                 counters.untrusted += 1
                 pos += frame_len
                 continue
+            msg: Received
             if fast is not None and msg_id in fast.layouts:
                 msg = fast.decode(frame, signature_len)
             else:
@@ -242,7 +251,7 @@ class FrameParser:
             buf.clear()
         return out
 
-    def end_datagram(self) -> list[MAVLinkMessage]:
+    def end_datagram(self) -> list[Received]:
         """Close the datagram just fed; returns frames recovered behind a false start marker.
 
         A frame never spans two UDP datagrams, so bytes left waiting for "the rest of a frame"
@@ -250,7 +259,7 @@ class FrameParser:
         parser drops the first byte and looks again, so a good frame behind a stray marker in
         the same datagram is not lost.
         """
-        out: list[MAVLinkMessage] = []
+        out: list[Received] = []
         if self._buf:
             self.counters.truncated += 1
         while self._buf:

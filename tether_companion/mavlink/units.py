@@ -33,6 +33,7 @@ right triangle of the 6x6 pose covariance (x, y, z, roll, pitch, yaw): entries 0
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Sequence
 
 import numpy as np
@@ -43,6 +44,7 @@ from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 
 FloatArray = NDArray[np.float64]
+Vector3 = tuple[float, float, float]
 
 MILLI_G_TO_MPS2: float = GRAVITY_MPS2 / 1000.0
 """One milli-g in m/s^2 (ArduPilot scales RAW_IMU by 1000 / GRAVITY_MSS)."""
@@ -190,16 +192,23 @@ def raw_imu_message(sample: ImuSample, *, imu_id: int = 0) -> MAVLinkMessage:
     )
 
 
+def raw_imu_si(msg: MAVLinkMessage) -> tuple[float, Vector3, Vector3]:
+    """RAW_IMU (ArduPilot units: milli-g, milli-rad/s, ``time_usec`` since boot) in SI
+    scalars: time [s], specific force (FRD) [m/s^2], body rates [rad/s]."""
+    g, rad = MILLI_G_TO_MPS2, MILLI_RAD_TO_RAD
+    return (
+        msg.time_usec * 1e-6,
+        (msg.xacc * g, msg.yacc * g, msg.zacc * g),
+        (msg.xgyro * rad, msg.ygyro * rad, msg.zgyro * rad),
+    )
+
+
 def imu_from_raw_imu(msg: MAVLinkMessage) -> ImuSample:
     """RAW_IMU (ArduPilot units: milli-g, milli-rad/s, ``time_usec`` since boot) to SI."""
     # scaled in scalars, one array each: the same doubles as scaling arrays, at every IMU
     # message without four array allocations
-    g, rad = MILLI_G_TO_MPS2, MILLI_RAD_TO_RAD
-    return ImuSample(
-        time_s=msg.time_usec * 1e-6,
-        specific_force_body_mps2=np.array((msg.xacc * g, msg.yacc * g, msg.zacc * g)),
-        angular_rate_body_rad_s=np.array((msg.xgyro * rad, msg.ygyro * rad, msg.zgyro * rad)),
-    )
+    time_s, force, rate = raw_imu_si(msg)
+    return ImuSample(time_s, np.array(force), np.array(rate))
 
 
 def imu_from_scaled_imu(msg: MAVLinkMessage) -> ImuSample:
@@ -237,13 +246,20 @@ def highres_imu_message(sample: ImuSample, *, imu_id: int = 0) -> MAVLinkMessage
     )
 
 
+def highres_imu_si(msg: MAVLinkMessage) -> tuple[float, Vector3, Vector3]:
+    """HIGHRES_IMU (m/s^2, rad/s, ``time_usec``) in scalars: time [s], specific force (FRD)
+    [m/s^2], body rates [rad/s]."""
+    return (
+        msg.time_usec * 1e-6,
+        (float(msg.xacc), float(msg.yacc), float(msg.zacc)),
+        (float(msg.xgyro), float(msg.ygyro), float(msg.zgyro)),
+    )
+
+
 def imu_from_highres_imu(msg: MAVLinkMessage) -> ImuSample:
     """HIGHRES_IMU (m/s^2, rad/s, ``time_usec``) to an :class:`ImuSample`."""
-    return ImuSample(
-        time_s=msg.time_usec * 1e-6,
-        specific_force_body_mps2=np.array([msg.xacc, msg.yacc, msg.zacc], dtype=float),
-        angular_rate_body_rad_s=np.array([msg.xgyro, msg.ygyro, msg.zgyro], dtype=float),
-    )
+    time_s, force, rate = highres_imu_si(msg)
+    return ImuSample(time_s, np.array(force), np.array(rate))
 
 
 # --- attitude, motors, rangefinder ----------------------------------------------------------
@@ -293,6 +309,17 @@ def servo_output_raw_message(sample: PwmSample, *, port: int = 0) -> MAVLinkMess
 
 _SERVO_FIELDS = tuple(f"servo{i + 1}_raw" for i in range(SERVO_CHANNELS))
 """SERVO_OUTPUT_RAW's channel fields in channel order."""
+_SERVO_GETTERS = {
+    n: operator.attrgetter(*_SERVO_FIELDS[:n], _SERVO_FIELDS[0])
+    for n in range(1, SERVO_CHANNELS + 1)
+}
+"""``_SERVO_GETTERS[n](msg)``: channels 1..n then channel 1 again (so that n = 1 also gives a
+tuple; the extra item is dropped)."""
+
+
+def servo_outputs(msg: MAVLinkMessage, n_motors: int) -> tuple[int, ...]:
+    """SERVO_OUTPUT_RAW's channels 1..``n_motors`` as sent [us] (n_motors in 1..16)."""
+    return _SERVO_GETTERS[n_motors](msg)[:-1]
 
 
 def pwm_from_servo_output_raw(
@@ -312,7 +339,7 @@ def pwm_from_servo_output_raw(
     """
     if not 1 <= n_motors <= SERVO_CHANNELS:
         raise ValueError(f"n_motors must be 1..16, got {n_motors}")
-    pwm = np.array([getattr(msg, name) for name in _SERVO_FIELDS[:n_motors]], dtype=float)
+    pwm = np.array(servo_outputs(msg, n_motors), dtype=float)
     return PwmSample(time_s=msg.time_usec * 1e-6 if time_s is None else time_s, pwm_us=pwm)
 
 

@@ -24,13 +24,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from tether_companion.mavlink.framing import MAVLinkMessage
+import numpy as np
+
+from tether_companion.mavlink.framing import Received
 from tether_companion.mavlink.units import (
     DOWNWARD_ORIENTATION,
     attitude_from_attitude,
-    imu_from_highres_imu,
-    imu_from_raw_imu,
-    pwm_from_servo_output_raw,
+    highres_imu_si,
+    raw_imu_si,
+    servo_outputs,
 )
 from tether_companion.physics.thrust import COMMAND_UNITS
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
@@ -153,13 +155,22 @@ class Ingest:
         self._latest_by_kind: dict[str, float] = {}
         self._local_s: float | None = None
         self._imu_type = "RAW_IMU" if link.autopilot == "ardupilot" else "HIGHRES_IMU"
+        self._imu_si = raw_imu_si if self._imu_type == "RAW_IMU" else highres_imu_si
+        self._inputs = {
+            self._imu_type: (IMU, self._imu),
+            "ATTITUDE": (ATTITUDE, self._attitude),
+            "SERVO_OUTPUT_RAW": (PWM, self._pwm),
+            "DISTANCE_SENSOR": (RANGE, self._range),
+            "LOCAL_POSITION_NED": (FC_POSITION, self._fc_position),
+        }
+        """The flight controller's input messages by name: (kind, decoder)."""
         self._tension_name = (
             tension.message_name.encode("ascii") if tension.source == "message" else None
         )
         self.rebooted = False
         """True right after the message that confirmed a reboot (cleared on the next call)."""
 
-    def from_flight_controller(self, msg: MAVLinkMessage) -> bool:
+    def from_flight_controller(self, msg: Received) -> bool:
         """Whether ``msg`` was sent by the configured flight controller."""
         return (
             msg.get_srcSystem() == self.link.fc_system_id
@@ -171,7 +182,7 @@ class Ingest:
         """Newest believed flight-controller stamp [s] (-inf before the first)."""
         return self.clock.latest_fc_s
 
-    def receive(self, msg: MAVLinkMessage, local_s: float | None = None) -> list[Sample]:
+    def receive(self, msg: Received, local_s: float | None = None) -> list[Sample]:
         """The checked SI samples ``msg`` releases from the reorder buffer, oldest first.
 
         ``local_s`` is the local time [s] it arrived at (None in replay: no plausibility check
@@ -183,15 +194,18 @@ class Ingest:
             return []
         kind, sample = held
         released = self.reorder.push(kind, sample.time_s, sample)
+        if len(released) == 1:  # the clean link's path (one in, one out)
+            kind, sample = released[0]
+            return [sample] if self._in_order(kind, sample) else []
         return [s for k, s in released if self._in_order(k, s)]
 
-    def decode(self, msg: MAVLinkMessage, local_s: float | None = None) -> Sample | None:
+    def decode(self, msg: Received, local_s: float | None = None) -> Sample | None:
         """The newest sample :meth:`receive` releases for ``msg``, or None (not an input,
         dropped, or still held by the reorder buffer)."""
         released = self.receive(msg, local_s)
         return released[-1] if released else None
 
-    def _decode(self, msg: MAVLinkMessage) -> tuple[str, Sample] | None:
+    def _decode(self, msg: Received) -> tuple[str, Sample] | None:
         """(kind, checked sample) carried by ``msg`` before reordering, or None."""
         self.rebooted = False
         counters = self.counters
@@ -205,30 +219,25 @@ class Ingest:
         if kind_name == "SYSTEM_TIME":
             self._system_time(msg)
             return None
-        if kind_name == self._imu_type:
-            return self._timed(IMU, self._imu(msg))
-        if kind_name == "ATTITUDE":
-            return self._timed(ATTITUDE, self._attitude(msg))
-        if kind_name == "SERVO_OUTPUT_RAW":
-            return self._timed(PWM, self._pwm(msg))
-        if kind_name == "DISTANCE_SENSOR":
-            return self._timed(RANGE, self._range(msg))
-        if kind_name == "LOCAL_POSITION_NED":
-            return self._timed(FC_POSITION, self._fc_position(msg))
-        counters.not_input += 1
-        return None
+        known = self._inputs.get(kind_name)
+        if known is None:
+            counters.not_input += 1
+            return None
+        kind, decode = known
+        return self._timed(kind, decode(msg))
 
     # ------------------------------------------------------------------ per message
-    def _imu(self, msg: MAVLinkMessage) -> ImuSample | None:
+    def _imu(self, msg: Received) -> ImuSample | None:
         if (
             getattr(msg, "id", 0) != 0
         ):  # only the first IMU (ArduPilot sends others as SCALED_IMU2/3)
             self.counters.not_input += 1
             return None
-        sample = imu_from_raw_imu(msg) if self._imu_type == "RAW_IMU" else imu_from_highres_imu(msg)
-        # in scalars: numpy's per-call overhead is most of the cost of checking 3-vectors
-        fx, fy, fz = sample.specific_force_body_mps2.tolist()
-        p, q, r = sample.angular_rate_body_rad_s.tolist()
+        # checked in scalars, arrays made for a sample kept: numpy's per-call overhead is most
+        # of the cost of checking 3-vectors
+        time_s, force, rate = self._imu_si(msg)
+        fx, fy, fz = force
+        p, q, r = rate
         if not math.isfinite(fx + fy + fz + p + q + r):  # NaN/inf in any
             self.counters.nonfinite += 1
             return None
@@ -239,12 +248,15 @@ class Ingest:
         ):
             self.counters.absurd += 1
             return None
-        return sample
+        return ImuSample(time_s, np.array(force), np.array(rate))
 
-    def _attitude(self, msg: MAVLinkMessage) -> AttitudeSample | None:
+    def _attitude(self, msg: Received) -> AttitudeSample | None:
         sample = attitude_from_attitude(msg)
-        angles = (sample.roll_rad, sample.pitch_rad, sample.yaw_rad)
-        if not all(math.isfinite(a) for a in angles):
+        if not (
+            math.isfinite(sample.roll_rad)
+            and math.isfinite(sample.pitch_rad)
+            and math.isfinite(sample.yaw_rad)
+        ):
             self.counters.nonfinite += 1
             return None
         if (
@@ -256,21 +268,18 @@ class Ingest:
             return None
         return sample
 
-    def _pwm(self, msg: MAVLinkMessage) -> PwmSample | None:
+    def _pwm(self, msg: Received) -> PwmSample | None:
         if msg.port != 0:  # channels 9-16 come as port 1; motors are on 1..n of port 0
             self.counters.not_input += 1
             return None
-        sample = pwm_from_servo_output_raw(
-            msg, self.n_motors, time_s=self._unwrap_uint32_us(msg.time_usec)
-        )
-        pwm = sample.pwm_us.tolist()
+        outputs = servo_outputs(msg, self.n_motors)
         low, high = self._output_range
-        if min(pwm) < low or max(pwm) > high:
+        if min(outputs) < low or max(outputs) > high:
             self.counters.absurd += 1
             return None
-        return sample
+        return PwmSample(self._unwrap_uint32_us(msg.time_usec), np.array(outputs, dtype=float))
 
-    def _range(self, msg: MAVLinkMessage) -> RangeSample | None:
+    def _range(self, msg: Received) -> RangeSample | None:
         if msg.orientation != DOWNWARD_ORIENTATION:
             self.counters.not_input += 1
             return None
@@ -284,14 +293,14 @@ class Ingest:
             return None
         return RangeSample(time_s=msg.time_boot_ms * 1e-3, distance_m=distance_m)
 
-    def _fc_position(self, msg: MAVLinkMessage) -> FcPosition | None:
+    def _fc_position(self, msg: Received) -> FcPosition | None:
         position = (float(msg.x), float(msg.y), float(msg.z))
         if not all(math.isfinite(v) for v in position):
             self.counters.nonfinite += 1
             return None
         return FcPosition(time_s=msg.time_boot_ms * 1e-3, position_ned_m=position)
 
-    def _tension(self, msg: MAVLinkMessage) -> TensionReading | None:
+    def _tension(self, msg: Received) -> TensionReading | None:
         name = msg.name if isinstance(msg.name, bytes) else str(msg.name).encode("ascii", "replace")
         if name.rstrip(b"\0") != self._tension_name:
             self.counters.not_input += 1
@@ -311,7 +320,7 @@ class Ingest:
             return None
         return TensionReading(time_s=msg.time_boot_ms * 1e-3, tension_n=value)
 
-    def _system_time(self, msg: MAVLinkMessage) -> None:
+    def _system_time(self, msg: Received) -> None:
         verdict = self.clock.on_system_time(msg.time_boot_ms * 1e-3, self._local_s)
         if verdict == IMPLAUSIBLE:
             self.counters.implausible += 1

@@ -24,7 +24,9 @@ Estimators, all fed the same samples:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -204,6 +206,19 @@ class EstimationSession:
         """Flight-controller reboots seen (each restarts the estimator)."""
         self.commands_refused: dict[str, int] = {}
         """Commands to this component answered DENIED for their sender, by reason."""
+        self._feeds_tension = messages or config.position.runs_catenary
+        """Whether the tension modes' filter runs (with messages, or for the catenary
+        estimator)."""
+        self._handlers: dict[type, Callable[[Any], Step]] = {
+            ImuSample: self._on_imu,
+            AttitudeSample: self._on_attitude,
+            PwmSample: self._on_pwm,
+            RangeSample: self._on_range,
+            TensionReading: self._on_tension_reading,
+            FcPosition: self._on_fc_position,
+        }
+        """The handler of each sample type: one dict lookup per sample, not a chain of
+        ``isinstance`` tests."""
 
     def restart(self) -> None:
         """Start a fresh estimator run (after a flight-controller reboot)."""
@@ -292,9 +307,10 @@ class EstimationSession:
     def on_message(self, msg: MAVLinkMessage, local_s: float | None = None) -> Step:
         """Process one received message (any sender, any type) that arrived at local time
         ``local_s`` [s] (None in replay: stamps are not checked against the clock model)."""
-        if msg.get_type() == "COMMAND_LONG" and self._for_us(msg):
+        kind = msg.get_type()
+        if kind == "COMMAND_LONG" and self._for_us(msg):
             return Step(messages=[self._mode_command(msg)])
-        if msg.get_type() in BATTERY_MESSAGES and self.ingest.from_flight_controller(msg):
+        if kind in BATTERY_MESSAGES and self.ingest.from_flight_controller(msg):
             self.on_battery_voltage_v(battery_voltage_v(msg))
         samples = self.ingest.receive(msg, local_s)
         if self.ingest.rebooted:
@@ -326,65 +342,64 @@ class EstimationSession:
         """Process one checked sample (from :meth:`on_message` or a dataflash log).
 
         Every sample goes to the estimators as it arrives: the pipeline aligns the streams (its
-        clock moves only with the IMU; a rangefinder sample is fused at the filter's time).
+        clock moves only with the IMU; a rangefinder sample is fused at the filter's time). The
+        tension modes' filter is fed each sample first (when it runs: with messages, or for
+        the catenary estimator), then the EKF; then the modes' logic (with messages).
         """
-        if not self.messages:
-            tension = self._feed_tension_filter(sample) if self.catenary is not None else None
-            return self._estimate(sample, tension)
-        tension = self._feed_tension_filter(sample)
-        step = self._estimate(sample, tension)
-        if tension is not None:
-            step.messages += self.publisher.on_filtered(tension, self.last_catenary)
-        step.messages += self._run_modes(self.modes, sample)
-        return step
+        return self._handlers[type(sample)](sample)
 
-    def _feed_tension_filter(self, sample: Sample) -> TensionEstimate | None:
-        """Feed the tension filter (the modes'); its estimate at an IMU tick, else None.
-        The catenary estimator, when it runs, follows every tension estimate."""
-        modes = self.modes
-        if isinstance(sample, AttitudeSample):
-            modes.on_attitude(sample)
-        elif isinstance(sample, PwmSample):
-            modes.on_pwm(sample)
-        elif isinstance(sample, ImuSample):
-            tension = modes.on_imu(sample)
+    def _on_imu(self, sample: ImuSample) -> Step:
+        tension = None
+        if self._feeds_tension:
+            tension = self.modes.on_imu(sample)
             if tension is not None and self.catenary is not None:
                 self.last_catenary = self.catenary.on_tension(tension)
-            return tension
-        return None
+        step = self._tick(sample, tension)
+        if self.messages:
+            if tension is not None:
+                step.messages += self.publisher.on_filtered(tension, self.last_catenary)
+            step.messages += self._mode_tick(sample.time_s)
+        return step
 
-    def _estimate(self, sample: Sample, tension: TensionEstimate | None) -> Step:
-        estimator = self.estimator
-        if isinstance(sample, ImuSample):
-            return self._tick(sample, tension)
-        if isinstance(sample, AttitudeSample):
-            self.attitude = sample
-            estimator.on_attitude(sample)
-        elif isinstance(sample, PwmSample):
-            estimator.on_pwm(sample)
-            self._static_thrust_n = self._static_thrust.total_thrust_n(sample.pwm_us, sample.time_s)
-        elif isinstance(sample, RangeSample):
-            estimator.on_range(sample)
-        elif isinstance(sample, TensionReading):
-            estimator.set_known_tension_n(sample.tension_n, sample.time_s)
+    def _on_attitude(self, sample: AttitudeSample) -> Step:
+        if self._feeds_tension:
+            self.modes.on_attitude(sample)
+        self.attitude = sample
+        self.estimator.on_attitude(sample)
+        return Step(messages=self._mode_tick(sample.time_s)) if self.messages else Step()
+
+    def _on_pwm(self, sample: PwmSample) -> Step:
+        if self._feeds_tension:
+            self.modes.on_pwm(sample)
+        self.estimator.on_pwm(sample)
+        self._static_thrust_n = self._static_thrust.total_thrust_n(sample.pwm_us, sample.time_s)
         return Step()
 
-    def _run_modes(self, modes: TensionModeSession, sample: Sample) -> list[MAVLinkMessage]:
-        """Run the tension modes' logic at ``MODE_TICK_S`` on IMU and ATTITUDE stamps (either
-        keeps it running when the other stream stops); their filter is fed already.
+    def _on_range(self, sample: RangeSample) -> Step:
+        self.estimator.on_range(sample)
+        if self.messages and self.attitude is not None:  # the modes' height above ground
+            tilt = math.cos(self.attitude.roll_rad) * math.cos(self.attitude.pitch_rad)
+            self._height_m, self._height_time_s = sample.distance_m * tilt, sample.time_s
+        return Step()
+
+    def _on_tension_reading(self, sample: TensionReading) -> Step:
+        self.estimator.set_known_tension_n(sample.tension_n, sample.time_s)
+        return Step()
+
+    def _on_fc_position(self, sample: FcPosition) -> Step:
+        if self.messages:  # the modes' targets are in the flight controller's frame
+            self._fc_position = sample
+        return Step()
+
+    def _mode_tick(self, t: float) -> list[MAVLinkMessage]:
+        """Run the tension modes' logic at ``MODE_TICK_S`` on IMU and ATTITUDE stamps
+        ``t`` [s] (either keeps it running when the other stream stops); their filter is fed
+        already.
 
         The height above ground is the tilt-corrected rangefinder when it is fresh, else the
         flight controller's own height above its EKF origin (``-z`` of LOCAL_POSITION_NED; the
         service puts the origin at the anchor, so this is the height above the anchor's
         ground), else unknown (a landing then hands over to the autopilot's LAND)."""
-        if isinstance(sample, RangeSample) and self.attitude is not None:
-            tilt = math.cos(self.attitude.roll_rad) * math.cos(self.attitude.pitch_rad)
-            self._height_m, self._height_time_s = sample.distance_m * tilt, sample.time_s
-        elif isinstance(sample, FcPosition):
-            self._fc_position = sample
-        if not isinstance(sample, (ImuSample, AttitudeSample)):
-            return []
-        t = sample.time_s
         if t < self._next_mode_tick_s:
             return []
         self._next_mode_tick_s = t + MODE_TICK_S
@@ -397,7 +412,7 @@ class EstimationSession:
             height_m = self._height_m
         else:
             height_m = -position[2]  # nan when the FC position is missing or stale too
-        return modes.tick(t, position, height_m)
+        return self.modes.tick(t, position, height_m)
 
     def _tick(self, sample: ImuSample, tension: TensionEstimate | None) -> Step:
         """One IMU tick: the EKF's estimate, and the publisher fed the chosen source's."""

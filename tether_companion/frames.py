@@ -16,18 +16,24 @@ from numpy.typing import NDArray
 FloatArray = NDArray[np.float64]
 
 
-def rotation_ned_to_body(roll_rad: float, pitch_rad: float, yaw_rad: float) -> FloatArray:
-    """``R_v^b(phi, theta, psi)`` of the paper's eq. 2, shape (3, 3): ``v_body = R @ v_ned``."""
+def rotation_ned_to_body_rows(
+    roll_rad: float, pitch_rad: float, yaw_rad: float
+) -> list[list[float]]:
+    """``R_v^b(phi, theta, psi)`` of the paper's eq. 2 row by row, as Python floats (for scalar
+    code: no array made)."""
     cr, sr = math.cos(roll_rad), math.sin(roll_rad)
     cp, sp = math.cos(pitch_rad), math.sin(pitch_rad)
     cy, sy = math.cos(yaw_rad), math.sin(yaw_rad)
-    return np.array(
-        [
-            [cp * cy, cp * sy, -sp],
-            [sr * sp * cy - cr * sy, sr * sp * sy + cr * cy, sr * cp],
-            [cr * sp * cy + sr * sy, cr * sp * sy - sr * cy, cr * cp],
-        ]
-    )
+    return [
+        [cp * cy, cp * sy, -sp],
+        [sr * sp * cy - cr * sy, sr * sp * sy + cr * cy, sr * cp],
+        [cr * sp * cy + sr * sy, cr * sp * sy - sr * cy, cr * cp],
+    ]
+
+
+def rotation_ned_to_body(roll_rad: float, pitch_rad: float, yaw_rad: float) -> FloatArray:
+    """``R_v^b(phi, theta, psi)`` of the paper's eq. 2, shape (3, 3): ``v_body = R @ v_ned``."""
+    return np.array(rotation_ned_to_body_rows(roll_rad, pitch_rad, yaw_rad))
 
 
 def rotation_body_to_ned(roll_rad: float, pitch_rad: float, yaw_rad: float) -> FloatArray:

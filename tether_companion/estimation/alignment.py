@@ -20,14 +20,13 @@ advanced exactly once per PWM sample.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import NamedTuple
+from collections.abc import Callable, Iterator
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.thrust_input import ThrustInput
-from tether_companion.frames import rotation_ned_to_body
+from tether_companion.frames import rotation_ned_to_body_rows
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample
 
 FloatArray = NDArray[np.float64]
@@ -40,7 +39,34 @@ STALE_PWM = "stale_pwm"
 """No PWM yet, or the latest one is further from the IMU time than its bound."""
 
 
-class AlignedInputs(NamedTuple):
+class Rotation:
+    """One attitude's ``R_v^b`` (paper eq. 2): its rows as Python floats, made at once, and
+    the numpy matrix, made on first read (the scalar filters never read it).
+
+    Attributes
+    ----------
+    rows
+        ``R_v^b`` row by row (do not modify).
+    """
+
+    __slots__ = ("_matrix", "rows")
+
+    def __init__(self, rows: list[list[float]]) -> None:
+        self.rows = rows
+        self._matrix: FloatArray | None = None
+
+    @property
+    def matrix(self) -> FloatArray:
+        """``R_v^b``, shape (3, 3): ``v_body = R @ v_ned`` (the same array at every read)."""
+        if self._matrix is None:
+            self._matrix = np.array(self.rows)
+        return self._matrix
+
+
+_IDENTITY = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+
+
+class AlignedInputs:
     """Inputs of one IMU tick, aligned in time.
 
     Attributes
@@ -49,24 +75,45 @@ class AlignedInputs(NamedTuple):
         IMU time [s].
     specific_force_body_mps2
         Accelerometer specific force, FRD body frame, shape (3,) [m/s^2].
-    rotation_ned_to_body
-        ``R_v^b`` of the latest attitude (paper eq. 2), shape (3, 3): ``v_body = R @ v_ned``.
+    rotation
+        The latest attitude's :class:`Rotation`.
     thrust_n
         Total rotor thrust of the latest motor outputs, along body -z [N].
 
-    The aligner that made it holds the same inputs as Python floats for scalar code
-    (:attr:`InputAligner.specific_force_values`, :attr:`InputAligner.rotation_rows`).
+    Unpacks as ``time_s, specific_force_body_mps2, rotation_ned_to_body, thrust_n`` (which
+    makes the matrix; scalar code reads the attributes it needs instead). The aligner that made
+    it holds the same inputs as Python floats (:attr:`InputAligner.specific_force_values`,
+    :attr:`InputAligner.rotation_rows`).
     """
 
-    time_s: float
-    specific_force_body_mps2: FloatArray
-    rotation_ned_to_body: FloatArray
-    thrust_n: float
+    __slots__ = ("rotation", "specific_force_body_mps2", "thrust_n", "time_s")
+
+    def __init__(
+        self,
+        time_s: float,
+        specific_force_body_mps2: FloatArray,
+        rotation: Rotation,
+        thrust_n: float,
+    ) -> None:
+        self.time_s = time_s
+        self.specific_force_body_mps2 = specific_force_body_mps2
+        self.rotation = rotation
+        self.thrust_n = thrust_n
+
+    def __iter__(self) -> Iterator:
+        return iter(
+            (self.time_s, self.specific_force_body_mps2, self.rotation.matrix, self.thrust_n)
+        )
+
+    @property
+    def rotation_ned_to_body(self) -> FloatArray:
+        """``R_v^b`` of the latest attitude (paper eq. 2), shape (3, 3): ``v_body = R @ v_ned``."""
+        return self.rotation.matrix
 
     @property
     def rotation_body_to_ned(self) -> FloatArray:
         """``R_b^v = (R_v^b)^T``, shape (3, 3): ``v_ned = R @ v_body``."""
-        return self.rotation_ned_to_body.T
+        return self.rotation.matrix.T
 
 
 class InputAligner:
@@ -87,9 +134,10 @@ class InputAligner:
     attitude
         Latest finite attitude sample (``None`` before the first).
     rotation_ned_to_body
-        ``R_v^b`` of ``attitude``, shape (3, 3) (identity before the first).
+        ``R_v^b`` of ``attitude``, shape (3, 3) (identity before the first; made on first
+        read).
     rotation_rows
-        The same row by row as Python floats (converted once per attitude sample).
+        The same row by row as Python floats (computed once per attitude sample).
     specific_force_values
         The specific force of the last IMU sample handed to :meth:`align`, 3 Python floats
         [m/s^2] (converted once per sample).
@@ -106,8 +154,7 @@ class InputAligner:
         self.pwm_staleness_s = pwm_staleness_s
         self.thrust_input = thrust_input
         self.attitude: AttitudeSample | None = None
-        self.rotation_ned_to_body: FloatArray = np.eye(3)
-        self.rotation_rows: list[list[float]] = self.rotation_ned_to_body.tolist()
+        self._rotation = Rotation(_IDENTITY)
         self.specific_force_values: list[float] = [math.nan] * 3
         self.cos_tilt = 1.0
         self.pwm_time_s = math.nan
@@ -118,6 +165,16 @@ class InputAligner:
         self._pwm_outcome: str | None = None
         self._imu_in: ImuSample | None = None
         self._imu_outcome: AlignedInputs | str = NONFINITE_INPUT
+
+    @property
+    def rotation_rows(self) -> list[list[float]]:
+        """``R_v^b`` of :attr:`attitude` row by row (Python floats)."""
+        return self._rotation.rows
+
+    @property
+    def rotation_ned_to_body(self) -> FloatArray:
+        """``R_v^b`` of :attr:`attitude`, shape (3, 3) (made on first read)."""
+        return self._rotation.matrix
 
     def on_attitude(self, sample: AttitudeSample) -> str | None:
         """Store the latest attitude; ``None`` when stored, else :data:`NONFINITE_INPUT`."""
@@ -131,8 +188,7 @@ class InputAligner:
             self._attitude_outcome = NONFINITE_INPUT
             return NONFINITE_INPUT
         self.attitude = sample
-        self.rotation_ned_to_body = rotation_ned_to_body(roll, pitch, yaw)
-        self.rotation_rows = self.rotation_ned_to_body.tolist()
+        self._rotation = Rotation(rotation_ned_to_body_rows(roll, pitch, yaw))
         self.cos_tilt = math.cos(roll) * math.cos(pitch)
         self._attitude_outcome = None
         self._imu_in = None
@@ -193,7 +249,7 @@ class InputAligner:
         elif not abs(t - self.pwm_time_s) <= self.pwm_staleness_s:  # nan before the first
             outcome = STALE_PWM
         else:
-            outcome = AlignedInputs(t, force, self.rotation_ned_to_body, self.thrust_n)
+            outcome = AlignedInputs(t, force, self._rotation, self.thrust_n)
         self._imu_in, self._imu_outcome = sample, outcome
         return outcome
 

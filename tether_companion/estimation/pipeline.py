@@ -379,7 +379,7 @@ class TetherEstimator(InputFeed):
         if aligned is STALE_PWM:
             health.stale_pwm += 1
             return False
-        t, accel, _, thrust_n = aligned
+        t, accel, thrust_n = aligned.time_s, aligned.specific_force_body_mps2, aligned.thrust_n
         model = self.model
         tension_n = self._known_tension_n
         if not model.has_tension_state and (

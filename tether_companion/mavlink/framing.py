@@ -25,7 +25,6 @@ Example
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Hashable
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING
@@ -62,17 +61,17 @@ _HEADER_V2 = dialect.HEADER_LEN_V2
 _SIGNATURE_LEN = dialect.MAVLINK_SIGNATURE_BLOCK_LEN
 _IFLAG_SIGNED = dialect.MAVLINK_IFLAG_SIGNED
 _CRC_LEN = 2
-_CRC = struct.Struct("<H")
 _MESSAGE_TYPES = dialect.mavlink_map
-_MAX_PAYLOAD = {msg_id: cls.unpacker.size for msg_id, cls in _MESSAGE_TYPES.items()}
-"""Largest payload of each message (all fields incl. extensions) [bytes]."""
-_CRC_EXTRA = {msg_id: bytes((cls.crc_extra,)) for msg_id, cls in _MESSAGE_TYPES.items()}
-"""The byte each message's checksum ends with (its ``crc_extra``)."""
+_KNOWN = {
+    msg_id: (cls.unpacker.size, bytes((cls.crc_extra,))) for msg_id, cls in _MESSAGE_TYPES.items()
+}
+"""Each known message's largest payload (all fields incl. extensions) [bytes] and the byte its
+checksum ends with (its ``crc_extra``)."""
 _MAX_BUFFER_BYTES = 1 << 16
 """A stream parser never holds more than this many unparsed bytes (a frame is <= 280)."""
 
 
-def _checksum(covered: bytes, extra: bytes) -> int:
+def _checksum(covered: bytes | bytearray, extra: bytes) -> int:
     """MAVLink's CRC-16/MCRF4XX of ``covered`` (header after the marker, payload) then the
     message's ``crc_extra`` byte: fastcrc's C function (pymavlink's own dependency), called
     directly instead of through a pymavlink ``x25crc`` object per frame."""
@@ -199,8 +198,8 @@ class FrameParser:
                     break
                 msg_id = buf[pos + 5]
                 incompat = 0
-            msg_type = _MESSAGE_TYPES.get(msg_id)
-            if msg_type is not None and buf[pos + 1] > _MAX_PAYLOAD[msg_id]:
+            known = _KNOWN.get(msg_id)
+            if known is not None and buf[pos + 1] > known[0]:
                 # longer than the message can be: a stray marker, known without waiting
                 counters.bad_header += 1
                 counters.garbage_bytes += 1
@@ -208,7 +207,7 @@ class FrameParser:
                 continue
             if n - pos < frame_len:
                 break
-            if msg_type is None:
+            if known is None:
                 # No checksum to verify: take it as a frame only if the next frame (or the end
                 # of the data) follows where its length says; otherwise it is a stray marker.
                 end = pos + frame_len
@@ -221,8 +220,8 @@ class FrameParser:
                 continue
             signature_len = _SIGNATURE_LEN if incompat & _IFLAG_SIGNED else 0
             crc_end = pos + frame_len - signature_len
-            crc = _checksum(bytes(buf[pos + 1 : crc_end - _CRC_LEN]), _CRC_EXTRA[msg_id])
-            if crc != _CRC.unpack_from(buf, crc_end - _CRC_LEN)[0]:
+            crc = _checksum(buf[pos + 1 : crc_end - _CRC_LEN], known[1])
+            if crc != buf[crc_end - 2] | (buf[crc_end - 1] << 8):  # little-endian on the wire
                 counters.bad_crc += 1
                 counters.garbage_bytes += 1
                 pos += 1

@@ -12,13 +12,18 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tether_companion.estimation.dynamic.bank import LIKELIHOOD_TEMPERING, FilterBank
+from tether_companion.estimation.dynamic.bank import (
+    LIKELIHOOD_TEMPERING,
+    FilterBank,
+    RowsFunction,
+)
+from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.ekf import (
     FUSED,
     GATED,
@@ -29,9 +34,6 @@ from tether_companion.estimation.ekf import (
 )
 
 FloatArray = NDArray[np.float64]
-
-RowsFunction = Callable[[list[float]], tuple[Sequence[float], Sequence[float]]]
-"""``measure(x) -> (h(x) (m,), H (m*n row-major))`` at the state ``x`` (a list)."""
 
 _threshold = functools.lru_cache(maxsize=32)(chi2_threshold)
 
@@ -122,33 +124,51 @@ def fuse_force_balance(
     r_variance: float,
     time_s: float,
 ) -> bool:
-    """:func:`fuse` for a 3-axis measurement with ``R = r_variance I`` through the members'
-    lean update (``MemberFilter.update_force_balance``): ``measure(x)`` gives
+    """:func:`fuse` for a 3-axis measurement with ``R = r_variance I`` through the bank's
+    stacked update (:meth:`FilterBank.update_force_balance`): ``measure(x)`` gives
     ``(h(x) (3,), H (39, row-major))`` at the state as a list ``x``."""
     best = bank.best
-    best_result = None
-    best_jacobian: Sequence[float] = ()
-    best_prior: FloatArray | None = None
-    for i, kf in enumerate(bank.filters):
-        kf.propagate_covariance()
-        value, jacobian = measure(kf.x_values())
-        innovation = [z[0] - value[0], z[1] - value[1], z[2] - value[2]]
-        prior = kf.P
-        result = kf.update_force_balance(name, innovation, jacobian, r_variance)
+    results, jacobians, priors = bank.update_force_balance(name, z, measure, r_variance)
+    return _record_bank(bank, best, name, status, results, jacobians, priors, r_variance, time_s)
+
+
+def _record_bank(
+    bank: FilterBank,
+    best: MemberFilter,
+    name: str,
+    status: AidStatus,
+    results: list[UpdateResult],
+    jacobians: Sequence[FloatArray | Sequence[float]],
+    priors: list[FloatArray],
+    r_variance: float,
+    time_s: float,
+) -> bool:
+    """Add the members' ``-NIS/2`` of a sample fused into every member (``best`` the best
+    member before it) and record the best member's outcome in ``status``; whether it was
+    fused into the best member."""
+    best_index = 0
+    for i, (kf, result) in enumerate(zip(bank.filters, results, strict=True)):
         if kf is best:
-            best_result, best_jacobian, best_prior = result, jacobian, prior
+            best_index = i
         elif math.isfinite(result.nis):
             bank.log_likelihood[i] -= 0.5 * result.nis / LIKELIHOOD_TEMPERING
-    assert best_result is not None and best_prior is not None
+    best_result = results[best_index]
     if not bank.decided:
         bank.add_best_nis(best_result.nis)
     if math.isfinite(best_result.nis):
+        m = len(best.sensors[name].innovation)
         status.last_innovation = best.sensors[name].last_innovation
-        status._last_jacobian, status._last_prior = best_jacobian, best_prior
-        status._last_noise = r_variance * np.eye(3)
-        threshold = _threshold(best.gate_probability, 3)
+        status._last_jacobian, status._last_prior = jacobians[best_index], priors[best_index]
+        status._last_noise = _noise(r_variance, m)
+        threshold = _threshold(best.gate_probability, m)
         status.last_test_ratio = best_result.nis / threshold if math.isfinite(threshold) else 0.0
     return _record(status, best_result, time_s)
+
+
+@functools.lru_cache(maxsize=8)
+def _noise(r_variance: float, m: int) -> FloatArray:
+    """``R = r_variance I`` (m, m) (shared: read only)."""
+    return r_variance * np.eye(m)
 
 
 def fuse(
@@ -161,10 +181,18 @@ def fuse(
     time_s: float,
 ) -> bool:
     """Fuse ``z`` (shape (m,)) with noise ``r`` (m, m) into every member of ``bank``; record
-    the best member's outcome in ``status``.
+    the best member's outcome in ``status`` (a scalar through the bank's stacked update,
+    :meth:`FilterBank.update_scalar`).
 
     Returns whether the sample was fused into the best member.
     """
+    best = bank.best
+    if z.size == 1:
+        r_variance = float(r[0, 0])
+        results, jacobians, priors = bank.update_scalar(name, float(z[0]), measure, r_variance)
+        return _record_bank(
+            bank, best, name, status, results, jacobians, priors, r_variance, time_s
+        )
     if not bank.decided:
         bank.update_others(name, z, measure, r)
     kf = bank.best
@@ -174,7 +202,7 @@ def fuse(
     def measure_and_keep(x: FloatArray) -> tuple[FloatArray, FloatArray]:
         value, h_jac = measure(x)
         jacobians.append(h_jac)
-        priors.append(kf.P)  # as the update sees it (a member's covariance is brought to x's time)
+        priors.append(kf.P)
         return value, h_jac
 
     result = kf.update(name, z, measure_and_keep, r)

@@ -20,14 +20,21 @@ Pure and synchronous.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.imu_batch import ImuBatch
 from tether_companion.estimation.dynamic.member import MemberFilter
-from tether_companion.estimation.ekf import MeasurementFunction
+from tether_companion.estimation.ekf import MeasurementFunction, UpdateResult
 
 FloatArray = NDArray[np.float64]
+RowsFunction = Callable[[list[float]], tuple[Sequence[float], Sequence[float]]]
+"""``measure(x) -> (h(x) (m,), H (m*n row-major))`` at the state ``x`` (a list)."""
+
+_N = state.N_STATES
 
 SELECT_WEIGHT = 0.99
 """Posterior weight at which one member is kept and the others dropped."""
@@ -58,6 +65,11 @@ class FilterBank:
         """Each member's tempered log-likelihood so far (Python floats: read every tick)."""
         self.start_s = start_s
         self.max_bank_s = max_bank_s
+        self._mixture_cache: tuple[list[FloatArray], list[float], tuple[FloatArray, FloatArray]]
+        self._mixture_cache = ([], [], (np.zeros(0), np.zeros((0, 0))))
+        """The members' arrays and log-likelihoods the last mixture was computed from, and
+        it: the members replace their arrays when they change (never in place), so the same
+        objects mean the same moments."""
 
     @property
     def decided(self) -> bool:
@@ -89,11 +101,110 @@ class FilterBank:
         self.filters = [self.filters[i] for i in indices]
         self.log_likelihood = [self.log_likelihood[i] for i in indices]
 
-    def predict(self, dt_s: float, u: list[float], covariance: bool = True) -> None:
-        """Predict every member (``u`` the inputs as floats; the covariance too when
-        ``covariance``, see :meth:`MemberFilter.predict`)."""
+    def predict(self, dt_s: float, u: list[float]) -> None:
+        """Predict every member over ``dt_s`` [s] (``u`` the inputs as floats)."""
         for kf in self.filters:
-            kf.predict(dt_s, u, covariance=covariance)
+            kf.predict(dt_s, u)
+
+    def predict_batch(self, batch: ImuBatch, q: FloatArray) -> None:
+        """Step every member over the IMU ticks summed in ``batch`` (inertial formulation;
+        ``q`` the process noise spectral density (13, 13)), all members in stacked arrays."""
+        filters = self.filters
+        xs = batch.step_state(np.array([kf.x for kf in filters]), q)
+        ps = batch.step_covariance(np.array([kf.P for kf in filters]), q)
+        # Phi P Phi^T + T Q stays positive definite: only finiteness is in doubt
+        healthy = math.isfinite(float(xs.sum()) + float(ps.sum()))
+        for kf, x, p in zip(filters, xs, ps, strict=True):
+            kf.set_predicted(x, p, healthy=healthy)
+
+    def update_force_balance(
+        self,
+        sensor: str,
+        z: Sequence[float],
+        measure: RowsFunction,
+        r_variance: float,
+    ) -> tuple[list[UpdateResult], list[Sequence[float]], list[FloatArray]]:
+        """Fuse a 3-axis measurement ``z`` with ``R = r_variance I`` into every member
+        (``measure(x)`` gives ``(h(x) (3,), H (39, row-major))`` at a state list): ``P H^T``,
+        ``H P H^T``, the gain and ``P - K (P H^T)^T`` for all members in stacked arrays, the
+        3x3 ``S``, NIS and gate per member in scalars
+        (:meth:`~tether_companion.estimation.dynamic.member.MemberFilter.test_force_balance`).
+        Returns each member's outcome, Jacobian and prior covariance."""
+        filters = self.filters
+        priors = [kf.P for kf in filters]
+        innovations = []
+        jacobians = []
+        for kf in filters:
+            value, jacobian = measure(kf.x_values())
+            innovations.append((z[0] - value[0], z[1] - value[1], z[2] - value[2]))
+            jacobians.append(jacobian)
+        p = np.array(priors)
+        h_jac = np.array(jacobians, dtype=float).reshape(len(filters), 3, _N)
+        pht = p @ h_jac.swapaxes(1, 2)
+        s_values = (h_jac @ pht).reshape(len(filters), 9).tolist()
+        results: list[UpdateResult | None] = []
+        chosen = []
+        for i, kf in enumerate(filters):
+            result, solved = kf.test_force_balance(sensor, innovations[i], s_values[i], r_variance)
+            results.append(result)
+            if result is None:
+                chosen.append((i, solved))
+        if chosen:
+            index = [i for i, _ in chosen]
+            if len(index) < len(filters):
+                p, pht = p[index], pht[index]
+            s_inv = np.array([solved[1:10] for _, solved in chosen]).reshape(len(index), 3, 3)
+            w = np.array([solved[10:] for _, solved in chosen])
+            xs = np.array([filters[i].x for i in index])
+            xs += (pht @ w[:, :, None])[:, :, 0]
+            ps = p - (pht @ s_inv) @ pht.swapaxes(1, 2)
+            ps += ps.swapaxes(1, 2)
+            ps *= 0.5
+            checked = _finite_and_definite(xs, ps)
+            for (i, solved), x, p_new in zip(chosen, xs, ps, strict=True):
+                results[i] = filters[i].accept_update(sensor, solved[0], x, p_new, checked=checked)
+        return results, jacobians, priors  # type: ignore[return-value]
+
+    def update_scalar(
+        self, sensor: str, z: float, measure: MeasurementFunction, r_variance: float
+    ) -> tuple[list[UpdateResult], list[FloatArray], list[FloatArray]]:
+        """Fuse a scalar measurement ``z`` with noise ``r_variance`` into every member
+        (``measure(x)`` gives ``(h(x) (1,), H (1, 13))`` at a state array): ``P h``, the gain
+        ``K = P h / s`` and ``P - K (P h)^T`` for all members in stacked arrays, the test and
+        gate per member
+        (:meth:`~tether_companion.estimation.dynamic.member.MemberFilter.test_scalar`).
+        Returns each member's outcome, Jacobian and prior covariance."""
+        filters = self.filters
+        priors = [kf.P for kf in filters]
+        innovations = []
+        jacobians = []
+        for kf in filters:
+            value, jacobian = measure(kf.x)
+            innovations.append(z - float(value[0]))
+            jacobians.append(jacobian)
+        p = np.array(priors)
+        rows = np.array(jacobians).reshape(len(filters), _N)
+        pht = (p @ rows[:, :, None])[:, :, 0]
+        s_values = ((pht * rows).sum(axis=1) + r_variance).tolist()
+        results: list[UpdateResult | None] = [
+            kf.test_scalar(sensor, y, s)
+            for kf, y, s in zip(filters, innovations, s_values, strict=True)
+        ]
+        index = [i for i, result in enumerate(results) if result is None]
+        if index:
+            if len(index) < len(filters):
+                p, pht = p[index], pht[index]
+            gain = pht / np.array([s_values[i] for i in index])[:, None]
+            xs = np.array([filters[i].x for i in index])
+            xs += gain * np.array([innovations[i] for i in index])[:, None]
+            ps = p - gain[:, :, None] * pht[:, None, :]
+            ps += ps.swapaxes(1, 2)
+            ps *= 0.5
+            checked = _finite_and_definite(xs, ps)
+            for i, x, p_new in zip(index, xs, ps, strict=True):
+                nis = innovations[i] * innovations[i] / s_values[i]
+                results[i] = filters[i].accept_update(sensor, nis, x, p_new, checked=checked)
+        return results, jacobians, priors  # type: ignore[return-value]
 
     def update_others(
         self, name: str, z: FloatArray, measure: MeasurementFunction, r: FloatArray
@@ -128,10 +239,18 @@ class FilterBank:
 
     def mixture(self) -> tuple[FloatArray, FloatArray]:
         """Mean (n,) and covariance (n, n) of the weighted mixture (with one member left,
-        that member's own arrays: the caller copies what it keeps)."""
+        that member's own arrays; either way the caller copies what it keeps)."""
         if self.decided:  # the member's own arrays: read them, do not change them
             kf = self.filters[0]
             return kf.x, kf.P
+        arrays = [a for kf in self.filters for a in (kf.x, kf.P)]
+        cached_arrays, cached_ll, moments = self._mixture_cache
+        if (
+            cached_ll == self.log_likelihood
+            and len(cached_arrays) == len(arrays)
+            and all(a is b for a, b in zip(arrays, cached_arrays, strict=True))
+        ):
+            return moments
         w = self.weights()
         xs = np.array([kf.x for kf in self.filters])
         n = xs.shape[1]
@@ -141,6 +260,7 @@ class FilterBank:
         cov += (spread.T * w) @ spread
         cov += cov.T
         cov *= 0.5
+        self._mixture_cache = (arrays, list(self.log_likelihood), (mean, cov))
         return mean, cov
 
     def maybe_decide(self, time_s: float) -> None:
@@ -163,3 +283,15 @@ class FilterBank:
             kf.resets = resets  # a collapse is not a restart
             self.filters = [kf]
             self.log_likelihood = [0.0]
+
+
+def _finite_and_definite(xs: FloatArray, ps: FloatArray) -> bool:
+    """Whether the states (m, 13) and covariances (m, 13, 13) are all finite and every
+    covariance passes the Cholesky test (one call for the stack)."""
+    if not math.isfinite(float(xs.sum()) + float(ps.sum())):
+        return False
+    try:
+        np.linalg.cholesky(ps)
+    except np.linalg.LinAlgError:
+        return False
+    return True

@@ -22,6 +22,7 @@ initialisation; ``reset_counter`` counts it and the tick's status is ``reset`` w
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,6 +45,7 @@ from tether_companion.estimation.dynamic.aid.rangefinder import RangefinderAid
 from tether_companion.estimation.dynamic.aid.winch import WinchAid
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterConfig, drag_per_s
+from tether_companion.estimation.dynamic.imu_batch import ImuBatch
 from tether_companion.estimation.dynamic.initialise import Initialiser
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.dynamic.models import UNDEFINED, ModelConstants
@@ -114,11 +116,14 @@ class DynamicTetherEstimator(InputFeed):
         self._weight_n = vehicle.mass_kg * GRAVITY_MPS2
         self._inertial = dynamic.formulation == INERTIAL
         self._ticks_per_fusion = dynamic.imu_ticks_per_fusion if self._inertial else 1
-        """IMU ticks per force-balance fusion (the inertial formulation's correlated residual
-        makes every tick's sample mostly redundant; the force balance is the process in the
-        other formulation, fused every tick)."""
+        """IMU ticks per prediction and force-balance fusion (the inertial formulation's
+        correlated residual makes every tick's sample mostly redundant; the force balance is
+        the process in the other formulation, fused every tick)."""
         self._ticks_since_fusion = 0
+        self._batch = ImuBatch() if self._inertial else None
+        """The inertial prediction summed over the ticks since the members last stepped."""
         self._q = self._process_noise()
+        self._q_matrix = np.diag(self._q)
         self._pull_per_wind_n_s_per_m = (
             dynamic.min_pull_over_wind_drag * vehicle.mass_kg * self.constants.drag_per_s
         )
@@ -208,6 +213,7 @@ class DynamicTetherEstimator(InputFeed):
             self.health.nonfinite_rejected += 1
             return
         if self.bank is not None and self._fresh(time_s, self.config.staleness.tension_s):
+            self._step_batch()
             if self.load_cell.fuse(self.bank, self.constants, tension_n, self._time_s):
                 self.health.load_cell_fused += 1
 
@@ -218,6 +224,7 @@ class DynamicTetherEstimator(InputFeed):
             return
         self.constants.length_m = length_m
         if self.bank is not None and self._fresh(time_s, self.config.staleness.tension_s):
+            self._step_batch()
             if self.winch.fuse(self.bank, self.constants, length_m, self._time_s):
                 self.health.winch_fused += 1
 
@@ -228,6 +235,7 @@ class DynamicTetherEstimator(InputFeed):
             self.health.nonfinite_rejected += 1
             return
         if self.bank is not None and self._fresh(time_s, self.config.staleness.tension_s):
+            self._step_batch()
             if self.cable_angle.fuse(
                 self.bank, self.constants, elevation_rad, azimuth_rad, self._time_s
             ):
@@ -250,6 +258,9 @@ class DynamicTetherEstimator(InputFeed):
             return
         if not self._fresh(sample.time_s, self.config.staleness.range_s):
             health.range_stale += 1
+            return
+        self._step_batch()
+        if self.bank is None:  # the step diverged and restarted
             return
         fused = self.rangefinder.fuse(self.bank, height_m, self._time_s)
         health.last_range_nis = self.bank.best.sensors["rangefinder"].last_nis
@@ -288,8 +299,16 @@ class DynamicTetherEstimator(InputFeed):
             return self._initialise_tick(aligned, stale)
         self._ticks_since_fusion += 1
         fusion_tick = self._ticks_since_fusion >= self._ticks_per_fusion
-        self._predict(t - self._last_tick_s, fusion_tick)
-        self._last_tick_s = t
+        dt_s, self._last_tick_s = t - self._last_tick_s, t
+        batch = self._batch
+        assert self._inputs is not None
+        if batch is None:  # formulation (a): the force balance is the process, every tick
+            inputs = self._inputs
+            self._step_members(lambda bank: bank.predict(dt_s, inputs))
+        elif not batch.add(dt_s, self._inputs, self.constants.values()):
+            health.nonfinite_rejected += 1
+        if fusion_tick:
+            self._step_batch()
         if self.bank is None:  # the prediction diverged and restarted
             return self._estimate(False, stale, False)
         on_ground = False
@@ -346,6 +365,8 @@ class DynamicTetherEstimator(InputFeed):
         self._last_tick_s = t
         self._gated_since_s = math.nan
         self._ticks_since_fusion = 0
+        if self._batch is not None:
+            self._batch.clear()
         return self._estimate(False, False, False)
 
     def _hypotheses(self, t: float) -> list[tuple[FloatArray, FloatArray]]:
@@ -368,12 +389,22 @@ class DynamicTetherEstimator(InputFeed):
             initialiser.restart(t, results[len(results) // 2].reason)
         return starts
 
-    def _predict(self, dt_s: float, covariance: bool) -> None:
+    def _step_batch(self) -> None:
+        """Step the members over the IMU ticks summed since they last stepped (inertial)."""
+        batch = self._batch
+        if batch is None or batch.ticks == 0 or self.bank is None:
+            return
+        self._step_members(lambda bank: bank.predict_batch(batch, self._q_matrix))
+        batch.clear()
+
+    def _step_members(self, step: Callable[[FilterBank], None]) -> None:
+        """Run a prediction ``step`` on the bank; drop the members it reset, restart when
+        it reset all of them or the model is undefined."""
         bank = self.bank
-        assert bank is not None and self._inputs is not None
+        assert bank is not None
         resets_before = [kf.resets for kf in bank.filters]
         try:
-            bank.predict(dt_s, self._inputs, covariance)
+            step(bank)
         except UNDEFINED:  # at the anchor, or zero tension: the cable model is undefined
             self._restart("position at the anchor or no tension")
             return
@@ -411,13 +442,15 @@ class DynamicTetherEstimator(InputFeed):
         bank = self.bank
         if bank is None:
             return
-        bank.drop_unhealthy(MAX_DISTANCE_M)
-        if fusion_tick:  # the members' covariances are current
-            bank.maybe_decide(t)
-        x = bank.best.x_values()
         if not math.isnan(self._gated_since_s) and t - self._gated_since_s >= DIVERGED_AFTER_S:
             self._restart(f"accelerometer innovations gated for {DIVERGED_AFTER_S:g} s")
-        elif x[0] * x[0] + x[1] * x[1] + x[2] * x[2] > MAX_DISTANCE_M**2:
+            return
+        if not fusion_tick:  # the members have not stepped since the last check
+            return
+        bank.drop_unhealthy(MAX_DISTANCE_M)
+        bank.maybe_decide(t)
+        x = bank.best.x_values()
+        if x[0] * x[0] + x[1] * x[1] + x[2] * x[2] > MAX_DISTANCE_M**2:
             self._restart(f"position beyond {MAX_DISTANCE_M:g} m")
 
     def _restart(self, reason: str) -> None:
@@ -428,6 +461,17 @@ class DynamicTetherEstimator(InputFeed):
         self.health.resets = self._resets
         self._reset_reason = f"filter restarted: {reason}"
 
+    def _moments(self, bank: FilterBank) -> tuple[FloatArray, FloatArray]:
+        """The bank's mixture mean and covariance stepped over the IMU ticks the members have
+        not stepped over yet (the same step: the mixture of stepped members is the stepped
+        mixture, the step being affine)."""
+        x, p = bank.mixture()
+        batch = self._batch
+        if batch is None or batch.ticks == 0:
+            return x, p
+        q = self._q_matrix
+        return batch.step_state(x, q), batch.step_covariance(p, q)
+
     def _estimate(self, accel_fused: bool, stale: bool, on_ground: bool) -> NavigationEstimate:
         bank = self.bank
         reset_reason, self._reset_reason = self._reset_reason, None
@@ -436,7 +480,7 @@ class DynamicTetherEstimator(InputFeed):
             p = np.eye(state.N_STATES) * UNKNOWN_VARIANCE
             tension, tension_var = 0.0, UNKNOWN_VARIANCE
         else:
-            x, p = bank.mixture()
+            x, p = self._moments(bank)
             c = self.constants
             values = x.tolist()
             tension, tension_var = max(values[state.TENSION], 0.0), float(p[6, 6])

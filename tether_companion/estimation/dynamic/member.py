@@ -15,10 +15,15 @@ cheaper operations:
   ``K = P H^T S^-1``, ``x + K y`` and ``P - K (P H^T)^T`` made exactly symmetric. That is the
   Joseph form's value for the optimal gain (the Joseph form guards against a gain that is not
   optimal; here ``K`` is computed from the same ``S``), as PX4 EKF2's updates; the covariance
-  then gets the same finite check and Cholesky test as before (a repair is counted).
-* the covariance may lag the state (``predict(..., covariance=False)``, the
-  ``imu_ticks_per_fusion`` option): the time is summed and one Euler step with the latest
-  Jacobian is taken before the next update or covariance prediction.
+  then gets the same finite check and Cholesky test as before (a repair is counted); a scalar
+  measurement (rangefinder, winch, load cell) likewise, ``K = P h / s``;
+* the bank runs the linear algebra of these steps for all its members at once (stacked
+  arrays: :mod:`~tether_companion.estimation.dynamic.bank`), the member its scalar part
+  (:meth:`MemberFilter.test_force_balance`: the 3x3 ``S`` and the gate;
+  :meth:`MemberFilter.test_scalar`, :meth:`MemberFilter.accept_update`,
+  :meth:`MemberFilter.set_predicted`); the
+  inertial formulation is predicted over several IMU ticks at once
+  (:mod:`~tether_companion.estimation.dynamic.imu_batch`).
 
 Numbers: the generic EKF spent most of a member's tick in numpy calls on 13x13 arrays
 (Joseph form: four 13x13 products; LAPACK Cholesky of S and of P twice); see
@@ -41,11 +46,11 @@ from numpy.typing import NDArray
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.models import Generated, ModelConstants
 from tether_companion.estimation.ekf import (
+    FUSED,
     GATED,
     NONFINITE,
     SINGULAR,
     ExtendedKalmanFilter,
-    MeasurementFunction,
     SensorStatus,
     UpdateResult,
 )
@@ -100,109 +105,78 @@ class MemberFilter(ExtendedKalmanFilter):
         self._q = np.diag(q_diagonal).copy()
         self._fp = np.zeros((_N, _N))
         """``F P``, rows 0-5 rewritten each prediction, the rest stay zero."""
-        self._pending_s = 0.0
-        """Time the state has been predicted over and the covariance not yet [s]."""
-        self._dv: Sequence[float] = ()
-        """``dv'/dx`` of the latest state prediction (39, row-major)."""
 
-    def predict(  # type: ignore[override]
-        self, dt_s: float, u: Sequence[float] | None = None, *, covariance: bool = True
-    ) -> bool:
-        """One Euler step of the state over ``dt_s`` [s] with the inputs ``u`` (floats), and of
-        the covariance over the time since its last step when ``covariance`` (otherwise that
-        waits for the next prediction with ``covariance`` or the next update, with the
-        latest Jacobian). ``False`` (and ``rejected_predictions``) when ``dt_s`` or ``u`` is
-        not finite or ``dt_s < 0``."""
+    def predict(self, dt_s: float, u: Sequence[float] | None = None) -> bool:  # type: ignore[override]
+        """One Euler step of the state and the covariance over ``dt_s`` [s] with the inputs
+        ``u`` (floats). ``False`` (and ``rejected_predictions``) when ``dt_s`` or ``u`` is not
+        finite or ``dt_s < 0``."""
         if not (dt_s >= 0.0 and math.isfinite(dt_s)) or (
             u is not None and not math.isfinite(sum(u))
         ):
             self.rejected_predictions += 1
             return False
-        if dt_s > 0.0:
-            x = self.x_values()
-            xdot, self._dv = self.process_function(x, u, self.constants.values())  # type: ignore[arg-type]
-            x = [a + dt_s * b for a, b in zip(x, xdot, strict=True)]
-            self.x = np.array(x)
-            self._pending_s += dt_s
-            if not math.isfinite(sum(x)):
-                self.reset()
-                return True
-        if covariance:
-            self.propagate_covariance()
-        return True
-
-    def propagate_covariance(self) -> None:
-        """``P + h (F P + (F P)^T + Q)`` over the time the state has gone ahead of it."""
-        h = self._pending_s
-        if h == 0.0:
-            return
-        self._pending_s = 0.0
+        if dt_s == 0.0:
+            return True
+        x = self.x_values()
+        xdot, dv = self.process_function(x, u, self.constants.values())  # type: ignore[arg-type]
+        x = [a + dt_s * b for a, b in zip(x, xdot, strict=True)]
+        self.x = np.array(x)
+        if not math.isfinite(sum(x)):
+            self.reset()
+            return True
         p = self.P
         fp = self._fp
         fp[_P] = p[_V]
-        fp[_V] = np.array(self._dv).reshape(3, _N) @ p
+        fp[_V] = np.array(dv).reshape(3, _N) @ p
         rate = fp + fp.T
         rate += self._q
-        rate *= h
+        rate *= dt_s
         rate += p
         self.P = rate
         self._check_health()
+        return True
 
-    def update(
-        self, sensor: str, z: FloatArray, measure: MeasurementFunction, r: FloatArray
-    ) -> UpdateResult:
-        """:meth:`ExtendedKalmanFilter.update` on the covariance brought up to the state's
-        time first; a scalar measurement (rangefinder, winch, load cell) in the lean form:
-        ``t = P h``, ``s = h t + r``, ``K = t / s``, ``P - K t^T`` made exactly symmetric
-        (no 13x13x13 product), same checks, gate and counts."""
-        self.propagate_covariance()
-        if z.size != 1:
-            return super().update(sensor, z, measure, r)
+    def set_predicted(self, x: FloatArray, p: FloatArray, *, healthy: bool) -> None:
+        """Keep a state (13,) and covariance (13, 13) predicted for the whole bank at once
+        (:meth:`~tether_companion.estimation.dynamic.bank.FilterBank.predict_batch`); unless
+        known ``healthy`` (finite and positive definite) they are checked as after
+        :meth:`predict`: reset when not finite, repaired when not positive definite."""
+        self.x = x
+        self.P = p
+        if not healthy:
+            self._check_health()
+
+    def test_scalar(self, sensor: str, innovation: float, s_value: float) -> UpdateResult | None:
+        """The scalar part of a 1-D update: ``s_value`` is ``H P H^T + R``; tested, the NIS
+        ``y^2 / s`` gated (counted as :meth:`test_force_balance` counts). The outcome when the
+        sample is rejected, ``None`` to fuse with :meth:`accept_update`."""
         status = self.sensors.get(sensor)
         if status is None:
             status = self.sensors[sensor] = SensorStatus()
-        z_pred, h_jac = measure(self.x)
-        p = self.P
-        h_row = h_jac[0]
-        pht = p @ h_row
-        s = float(h_row @ pht) + float(r[0, 0])
-        y = float(z[0]) - float(z_pred[0])
-        if not s > 0.0:
-            return self._rejected(status, s)
-        nis = y * y / s
+        if not s_value > 0.0:
+            return self._rejected(status, s_value)
+        nis = innovation * innovation / s_value
         status.last_nis = nis
-        status.innovation = (y,)
+        status.innovation = (innovation,)
         threshold, in_force = self._gate(status, 1)
         if self._gated(status, nis, threshold, in_force):
             return UpdateResult(GATED, nis)
-        gain = pht / s
-        x = self.x + gain * y
-        p_new = p - np.outer(gain, pht)
-        return self._accept(status, nis, x, p_new)
+        return None
 
-    def reset(self, x: FloatArray | None = None, p: FloatArray | None = None) -> None:
-        """:meth:`ExtendedKalmanFilter.reset`; nothing pending."""
-        self._pending_s = 0.0
-        super().reset(x, p)
-
-    def update_force_balance(
-        self,
-        sensor: str,
-        innovation: Sequence[float],
-        jacobian: Sequence[float],
-        r_variance: float,
-    ) -> UpdateResult:
-        """Fuse a 3-axis measurement: ``innovation`` ``z - h(x)`` (3), ``jacobian`` (39,
-        row-major 3x13), noise ``r_variance`` on each axis; same checks, gate and counts as
-        :meth:`~tether_companion.estimation.ekf.ExtendedKalmanFilter.update`."""
-        self.propagate_covariance()
+    def test_force_balance(
+        self, sensor: str, innovation: Sequence[float], s_values: Sequence[float], r_variance: float
+    ) -> tuple[UpdateResult | None, tuple[float, ...]]:
+        """The scalar part of a 3-axis update with ``R = r_variance I``: ``s_values`` is
+        ``H P H^T`` (9, row-major), ``innovation`` ``z - h(x)`` (3). ``S`` is tested for
+        definiteness (Sylvester's leading minors) and inverted in scalars, the NIS gated
+        (counted as :meth:`~tether_companion.estimation.ekf.ExtendedKalmanFilter.update`
+        counts). Returns the outcome when the sample is rejected (non-finite, singular,
+        gated) and ``()``, or ``None`` and ``(nis, S^-1 row-major (9), S^-1 y (3))`` to fuse
+        with :meth:`accept_update`."""
         status = self.sensors.get(sensor)
         if status is None:
             status = self.sensors[sensor] = SensorStatus()
-        h_jac = np.array(jacobian, dtype=float).reshape(3, _N)
-        p = self.P
-        pht = p @ h_jac.T
-        s00, s01, s02, _, s11, s12, _, _, s22 = (h_jac @ pht).ravel().tolist()
+        s00, s01, s02, _, s11, s12, _, _, s22 = s_values
         s00 += r_variance
         s11 += r_variance
         s22 += r_variance
@@ -211,7 +185,7 @@ class MemberFilter(ExtendedKalmanFilter):
         c0, c1, c2 = s11 * s22 - s12 * s12, s02 * s12 - s01 * s22, s01 * s12 - s02 * s11
         det = s00 * c0 + s01 * c1 + s02 * c2
         if not (s00 > 0.0 and m01 > 0.0 and det > 0.0):
-            return self._rejected(status, s00 + s11 + s22 + s01 + s02 + s12)
+            return self._rejected(status, s00 + s11 + s22 + s01 + s02 + s12), ()
         inv = 1.0 / det
         i00, i01, i02 = c0 * inv, c1 * inv, c2 * inv
         i11 = (s00 * s22 - s02 * s02) * inv
@@ -226,11 +200,25 @@ class MemberFilter(ExtendedKalmanFilter):
         status.innovation = innovation
         threshold, in_force = self._gate(status, 3)
         if self._gated(status, nis, threshold, in_force):
-            return UpdateResult(GATED, nis)
-        s_inv = np.array(((i00, i01, i02), (i01, i11, i12), (i02, i12, i22)))
-        x = self.x + pht @ np.array((w0, w1, w2))
-        p_new = p - (pht @ s_inv) @ pht.T
-        return self._accept(status, nis, x, p_new)
+            return UpdateResult(GATED, nis), ()
+        return None, (nis, i00, i01, i02, i01, i11, i12, i02, i12, i22, w0, w1, w2)
+
+    def accept_update(
+        self, sensor: str, nis: float, x: FloatArray, p: FloatArray, *, checked: bool
+    ) -> UpdateResult:
+        """Keep the updated state (13,) and covariance (13, 13) of a sample that
+        :meth:`test_force_balance` or :meth:`test_scalar` let through: when ``checked``
+        (finite, exactly symmetric and positive definite, tested for the whole bank at once)
+        counted and stored, otherwise through the generic EKF's finite check, symmetrisation and
+        Cholesky test (and repair)."""
+        status = self.sensors[sensor]
+        if not checked:
+            return self._accept(status, nis, x, p)
+        self.x = x
+        self.P = p
+        status.fused += 1
+        status.consecutive_rejections = 0
+        return UpdateResult(FUSED, nis)
 
     @staticmethod
     def _rejected(status: SensorStatus, s_sum: float) -> UpdateResult:

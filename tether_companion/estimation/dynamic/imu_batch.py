@@ -1,0 +1,134 @@
+"""The inertial formulation's prediction over several IMU ticks at once (a delta-velocity batch).
+
+The inertial process (formulation (b), ``generated.inertial``) is affine in the state, with
+coefficients that depend only on the inputs ``u`` (attitude, specific force): ``p' = v``,
+``v' = c(u) + J(u) b`` (``c`` the specific force rotated into NED plus gravity, ``J = -R^T``
+the Jacobian's bias columns: both taken from the generated function at the zero state), and
+the other states are random walks. The Euler steps of consecutive ticks (``p += dt v``, then
+``v += dt v'``) therefore compose into one step over the batch,
+
+    p_N = p_0 + T v_0 + D_p + B_p b,        v_N = v_0 + D_v + B_v b,
+
+with ``T = sum dt_k``, ``D_v = sum dt_k c(u_k)``, ``B_v = sum dt_k J(u_k)``, and for the
+position the velocity sums as they were before each tick: ``D_p = sum dt_k D_v(<k)``,
+``B_p = sum dt_k B_v(<k)``. None of these depends on the state, so they are accumulated once
+per tick and shared by every bank member and by the published mean; a member then steps once
+per batch, with the state the tick-by-tick Euler gives (to rounding). The covariance goes
+through the same step's transition ``Phi = I + E`` (``E``: position rows ``T`` on the velocity
+and ``B_p`` on the bias columns; velocity rows ``B_v`` on the bias columns), ``Phi P Phi^T +
+T Q``: the tick-by-tick covariance's Euler steps composed, with the second-order terms kept
+(``E P E^T``) and the process noise added once for the whole batch (not carried through the
+batch's own transition: second order in ``T``). PX4 EKF2 predicts over summed IMU deltas the
+same way.
+
+Pure.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.estimation.dynamic import generated, state
+
+FloatArray = NDArray[np.float64]
+
+_N = state.N_STATES
+_ZERO_STATE = (0.0,) * _N
+_BIAS_COLUMNS = tuple(row * _N + state.BIAS.start + col for row in range(3) for col in range(3))
+"""Positions of ``dv'/db`` (3x3, row-major) in the generated ``dv'/dx`` (3x13, row-major)."""
+
+
+class ImuBatch:
+    """The summed inertial step of the IMU ticks since the last :meth:`clear`."""
+
+    __slots__ = (
+        "_offset",
+        "_phi",
+        "_q",
+        "_q_step",
+        "_stale",
+        "b_p",
+        "b_v",
+        "d_p",
+        "d_v",
+        "duration_s",
+        "ticks",
+    )
+
+    def __init__(self) -> None:
+        self._phi = np.eye(_N)
+        self._offset = np.zeros(_N)
+        self._q: FloatArray | None = None
+        self._q_step = np.zeros((_N, _N))
+        self.clear()
+
+    def clear(self) -> None:
+        """Start an empty batch."""
+        self.ticks = 0
+        self.duration_s = 0.0
+        """``T`` [s]."""
+        self.d_p = [0.0, 0.0, 0.0]
+        """``D_p`` [m]."""
+        self.d_v = [0.0, 0.0, 0.0]
+        """``D_v`` [m/s]."""
+        self.b_p = [0.0] * 9
+        """``B_p`` [s^2], 3x3 row-major (NED position row, body bias column)."""
+        self.b_v = [0.0] * 9
+        """``B_v`` [s], 3x3 row-major."""
+        self._stale = True
+
+    def add(self, dt_s: float, u: Sequence[float], c: Sequence[float]) -> bool:
+        """One IMU tick of ``dt_s`` [s] with the inputs ``u = (R_v^b row-major, f_x, f_y,
+        f_z)`` (floats; specific force [m/s^2], FRD body) and constants ``c``. ``False`` (the
+        batch unchanged) when ``dt_s`` is negative or anything is not finite."""
+        if not (dt_s >= 0.0 and math.isfinite(dt_s) and math.isfinite(sum(u))):
+            return False
+        xdot, jac = generated.inertial(_ZERO_STATE, u, c)
+        d_v, b_v = self.d_v, self.b_v
+        self.d_p = [a + dt_s * b for a, b in zip(self.d_p, d_v, strict=True)]
+        self.b_p = [a + dt_s * b for a, b in zip(self.b_p, b_v, strict=True)]
+        self.d_v = [d_v[0] + dt_s * xdot[3], d_v[1] + dt_s * xdot[4], d_v[2] + dt_s * xdot[5]]
+        self.b_v = [b + dt_s * jac[k] for b, k in zip(b_v, _BIAS_COLUMNS, strict=True)]
+        self.duration_s += dt_s
+        self.ticks += 1
+        self._stale = True
+        return True
+
+    def transition(self, q: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``Phi`` (13, 13), the offset ``(D_p, D_v, 0...)`` (13,) and ``T q`` (13, 13) for
+        the process noise spectral density ``q``: the batch's own arrays, filled again when
+        ticks were added since (read them at once, do not keep or change them)."""
+        phi, offset = self._phi, self._offset
+        if self._stale or self._q is not q:
+            t = self.duration_s
+            b_p, b_v = self.b_p, self.b_v
+            phi[0, 3] = phi[1, 4] = phi[2, 5] = t
+            phi[0:3, state.BIAS] = (b_p[0:3], b_p[3:6], b_p[6:9])
+            phi[3:6, state.BIAS] = (b_v[0:3], b_v[3:6], b_v[6:9])
+            offset[:6] = (*self.d_p, *self.d_v)
+            self._q_step = q * t
+            self._q = q
+            self._stale = False
+        return phi, offset, self._q_step
+
+    def step_state(self, x: FloatArray, q: FloatArray) -> FloatArray:
+        """States (..., 13) stepped over the batch (new array): ``Phi x + (D_p, D_v, 0...)``
+        (``q`` as for :meth:`transition`)."""
+        phi, offset, _ = self.transition(q)
+        out = x @ phi.T
+        out += offset
+        return out
+
+    def step_covariance(self, p: FloatArray, q: FloatArray) -> FloatArray:
+        """``Phi P Phi^T + T Q`` (new array, exactly symmetric) for covariances ``p`` (..., 13,
+        13) and the process noise spectral density ``q`` (13, 13)."""
+        phi, _, q_step = self.transition(q)
+        out = phi @ p @ phi.T
+        out += out.swapaxes(-1, -2)
+        out *= 0.5
+        out += q_step
+        return out

@@ -24,6 +24,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.linalg.lapack import dpotrf
 
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.imu_batch import ImuBatch
@@ -110,8 +111,8 @@ class FilterBank:
         """Step every member over the IMU ticks summed in ``batch`` (inertial formulation;
         ``q`` the process noise spectral density (13, 13)), all members in stacked arrays."""
         filters = self.filters
-        xs = batch.step_state(np.array([kf.x for kf in filters]), q)
-        ps = batch.step_covariance(np.array([kf.P for kf in filters]), q)
+        xs = batch.step_state(_stack([kf.x for kf in filters]), q)
+        ps = batch.step_covariance(_stack([kf.P for kf in filters]), q)
         # Phi P Phi^T + T Q stays positive definite: only finiteness is in doubt
         healthy = math.isfinite(float(xs.sum()) + float(ps.sum()))
         for kf, x, p in zip(filters, xs, ps, strict=True):
@@ -138,7 +139,7 @@ class FilterBank:
             value, jacobian = measure(kf.x_values())
             innovations.append((z[0] - value[0], z[1] - value[1], z[2] - value[2]))
             jacobians.append(jacobian)
-        p = np.array(priors)
+        p = _stack(priors)
         h_jac = np.array(jacobians, dtype=float).reshape(len(filters), 3, _N)
         pht = p @ h_jac.swapaxes(1, 2)
         s_values = (h_jac @ pht).reshape(len(filters), 9).tolist()
@@ -155,8 +156,8 @@ class FilterBank:
                 p, pht = p[index], pht[index]
             s_inv = np.array([solved[1:10] for _, solved in chosen]).reshape(len(index), 3, 3)
             w = np.array([solved[10:] for _, solved in chosen])
-            xs = np.array([filters[i].x for i in index])
-            xs += (pht @ w[:, :, None])[:, :, 0]
+            xs = _stack([filters[i].x for i in index])
+            xs = xs + (pht @ w[:, :, None])[:, :, 0]
             ps = p - (pht @ s_inv) @ pht.swapaxes(1, 2)
             ps += ps.swapaxes(1, 2)
             ps *= 0.5
@@ -182,7 +183,7 @@ class FilterBank:
             value, jacobian = measure(kf.x)
             innovations.append(z - float(value[0]))
             jacobians.append(jacobian)
-        p = np.array(priors)
+        p = _stack(priors)
         rows = np.array(jacobians).reshape(len(filters), _N)
         pht = (p @ rows[:, :, None])[:, :, 0]
         s_values = ((pht * rows).sum(axis=1) + r_variance).tolist()
@@ -195,8 +196,8 @@ class FilterBank:
             if len(index) < len(filters):
                 p, pht = p[index], pht[index]
             gain = pht / np.array([s_values[i] for i in index])[:, None]
-            xs = np.array([filters[i].x for i in index])
-            xs += gain * np.array([innovations[i] for i in index])[:, None]
+            xs = _stack([filters[i].x for i in index])
+            xs = xs + gain * np.array([innovations[i] for i in index])[:, None]
             ps = p - gain[:, :, None] * pht[:, None, :]
             ps += ps.swapaxes(1, 2)
             ps *= 0.5
@@ -285,13 +286,14 @@ class FilterBank:
             self.log_likelihood = [0.0]
 
 
+def _stack(arrays: list[FloatArray]) -> FloatArray:
+    """The members' arrays stacked along a new first axis (one member: a view, no copy)."""
+    return arrays[0][None] if len(arrays) == 1 else np.array(arrays)
+
+
 def _finite_and_definite(xs: FloatArray, ps: FloatArray) -> bool:
     """Whether the states (m, 13) and covariances (m, 13, 13) are all finite and every
-    covariance passes the Cholesky test (one call for the stack)."""
+    covariance passes the Cholesky test."""
     if not math.isfinite(float(xs.sum()) + float(ps.sum())):
         return False
-    try:
-        np.linalg.cholesky(ps)
-    except np.linalg.LinAlgError:
-        return False
-    return True
+    return all(dpotrf(p, lower=1, clean=0)[1] == 0 for p in ps)

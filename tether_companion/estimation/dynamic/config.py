@@ -133,9 +133,10 @@ class DynamicFilterConfig:
         1,
         minimum=1,
         maximum=20,
-        doc="inertial: the force balance (and the covariance prediction) every this many IMU"
-        " ticks, its white noise scaled to that interval; the state is predicted every tick"
-        " (4: 2-3x cheaper, less honest with the winch length, docs/estimation.md) [1]",
+        doc="inertial: the filter steps over this many IMU ticks at once (their specific"
+        " forces summed, the state as tick by tick) and fuses the force balance then, its"
+        " white noise scaled to that interval; the published estimate is stepped every tick"
+        " (docs/estimation.md, Cost per IMU tick) [1]",
     )
     noise: DynamicNoise = spec(default_factory=DynamicNoise, doc="process noise")
     initial: DynamicInitial = spec(default_factory=DynamicInitial, doc="initialisation")

@@ -40,6 +40,13 @@ _N = state.N_STATES
 _ZERO_STATE = (0.0,) * _N
 _BIAS_COLUMNS = tuple(row * _N + state.BIAS.start + col for row in range(3) for col in range(3))
 """Positions of ``dv'/db`` (3x3, row-major) in the generated ``dv'/dx`` (3x13, row-major)."""
+_TRANSITION_ENTRIES = np.array(
+    [0 * _N + 3, 1 * _N + 4, 2 * _N + 5]
+    + [row * _N + col for row in range(3) for col in range(8, 11)]
+    + [row * _N + col for row in range(3, 6) for col in range(8, 11)]
+)
+"""Flat positions in ``Phi`` of ``T`` (position rows, velocity columns), ``B_p`` and ``B_v``
+(position and velocity rows, bias columns)."""
 
 
 class ImuBatch:
@@ -88,10 +95,11 @@ class ImuBatch:
         if not (dt_s >= 0.0 and math.isfinite(dt_s) and math.isfinite(sum(u))):
             return False
         xdot, jac = generated.inertial(_ZERO_STATE, u, c)
-        d_v, b_v = self.d_v, self.b_v
-        self.d_p = [a + dt_s * b for a, b in zip(self.d_p, d_v, strict=True)]
-        self.b_p = [a + dt_s * b for a, b in zip(self.b_p, b_v, strict=True)]
-        self.d_v = [d_v[0] + dt_s * xdot[3], d_v[1] + dt_s * xdot[4], d_v[2] + dt_s * xdot[5]]
+        d_p, d_v, b_p, b_v = self.d_p, self.d_v, self.b_p, self.b_v
+        v0, v1, v2 = d_v
+        self.d_p = [d_p[0] + dt_s * v0, d_p[1] + dt_s * v1, d_p[2] + dt_s * v2]
+        self.d_v = [v0 + dt_s * xdot[3], v1 + dt_s * xdot[4], v2 + dt_s * xdot[5]]
+        self.b_p = [b + dt_s * v for b, v in zip(b_p, b_v, strict=True)]
         self.b_v = [b + dt_s * jac[k] for b, k in zip(b_v, _BIAS_COLUMNS, strict=True)]
         self.duration_s += dt_s
         self.ticks += 1
@@ -105,10 +113,7 @@ class ImuBatch:
         phi, offset = self._phi, self._offset
         if self._stale or self._q is not q:
             t = self.duration_s
-            b_p, b_v = self.b_p, self.b_v
-            phi[0, 3] = phi[1, 4] = phi[2, 5] = t
-            phi[0:3, state.BIAS] = (b_p[0:3], b_p[3:6], b_p[6:9])
-            phi[3:6, state.BIAS] = (b_v[0:3], b_v[3:6], b_v[6:9])
+            phi.flat[_TRANSITION_ENTRIES] = (t, t, t, *self.b_p, *self.b_v)
             offset[:6] = (*self.d_p, *self.d_v)
             self._q_step = q * t
             self._q = q

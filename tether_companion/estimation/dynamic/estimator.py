@@ -316,8 +316,9 @@ class DynamicTetherEstimator(InputFeed):
         if not stale:
             assert isinstance(aligned, AlignedInputs)
             on_ground = aligned.thrust_n < self.dynamic.min_thrust_fraction * self._weight_n
-            inputs = [*aligned.rotation_ned_to_body.ravel().tolist(), aligned.thrust_n]
-            force = aligned.specific_force_body_mps2.tolist()
+            rows = aligned.rotation.rows  # Python floats, made once per attitude sample
+            inputs = [*rows[0], *rows[1], *rows[2], aligned.thrust_n]
+            force = self.aligner.specific_force_values
             if fusion_tick:
                 accel_fused = self._fuse_accel(inputs, force, on_ground, t)
                 self._ticks_since_fusion = 0

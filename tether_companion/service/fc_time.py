@@ -122,7 +122,8 @@ class FcTimeGate:
             assert local_s is not None  # no plausibility check without local times
             if not self._jump_confirmed(fc_s, local_s):
                 return IMPLAUSIBLE
-        self._ahead = []
+        if self._ahead:  # a run of stamps ahead ends (no new list per stamp otherwise)
+            self._ahead = []
         if fc_s < self.latest_fc_s - self.backstep_s:
             return self._backstep(fc_s, local_s)
         self._claim = None

@@ -137,7 +137,7 @@ class CatenaryEstimate:
         )
 
 
-@dataclass
+@dataclass(slots=True)
 class Step:
     """What one input produced: messages to send and the publication record, if any."""
 

@@ -13,7 +13,8 @@ process, best of ``--repeat``:
   the next one (CPU time only is counted: what sleeping costs is the caches it loses).
 
 Run: ``python tests/hot_path_cost.py [--imu-rate 200] [--seconds 20] [--repeat 3]
-[--sleep-ms 0]``.
+[--sleep-ms 0] [--estimator four_state|three_state|dynamic]`` (default: the service's default
+estimator; fix it to compare code before and after a change of default).
 """
 
 from __future__ import annotations
@@ -55,13 +56,16 @@ def _datagrams(imu_hz: float, seconds: float) -> list[tuple[float, bytes]]:
     return out
 
 
-def _session() -> EstimationSession:
-    config = load_service_config(None, {"recording": {"enabled": False}})
+def _session(estimator: str | None) -> EstimationSession:
+    overrides: dict = {"recording": {"enabled": False}}
+    if estimator is not None:
+        overrides["estimator"] = {"kind": estimator}
+    config = load_service_config(None, overrides)
     return EstimationSession(config, load_vehicle_for(config))
 
 
-def _warm(datagrams: list[tuple[float, bytes]]) -> tuple[float, float]:
-    parser, session = FrameParser(), _session()
+def _warm(datagrams: list[tuple[float, bytes]], estimator: str | None) -> tuple[float, float]:
+    parser, session = FrameParser(), _session(estimator)
     t0 = time.process_time()
     messages = [(t, m) for t, d in datagrams for m in parser.feed(d, SOURCE)]
     t1 = time.process_time()
@@ -70,8 +74,10 @@ def _warm(datagrams: list[tuple[float, bytes]]) -> tuple[float, float]:
     return t1 - t0, time.process_time() - t1
 
 
-def _interleaved(datagrams: list[tuple[float, bytes]], sleep_s: float) -> dict[str, float]:
-    parser, session = FrameParser(), _session()
+def _interleaved(
+    datagrams: list[tuple[float, bytes]], sleep_s: float, estimator: str | None
+) -> dict[str, float]:
+    parser, session = FrameParser(), _session(estimator)
     clock = time.thread_time
     spent: dict[str, float] = defaultdict(float)
     tick_s = datagrams[0][0]
@@ -97,14 +103,17 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--sleep-ms", type=float, default=0.0)
+    parser.add_argument("--estimator", choices=("four_state", "three_state", "dynamic"))
     args = parser.parse_args()
     datagrams = _datagrams(args.imu_rate, args.seconds)
     n = len(datagrams)
     counts: dict[str, int] = defaultdict(int)
     for _, msg in ((t, m) for t, d in datagrams for m in FrameParser().feed(d, SOURCE)):
         counts[msg.get_type()] += 1
-    warm = min((_warm(datagrams) for _ in range(args.repeat)), key=sum)
-    passes = [_interleaved(datagrams, 1e-3 * args.sleep_ms) for _ in range(args.repeat)]
+    warm = min((_warm(datagrams, args.estimator) for _ in range(args.repeat)), key=sum)
+    passes = [
+        _interleaved(datagrams, 1e-3 * args.sleep_ms, args.estimator) for _ in range(args.repeat)
+    ]
     cold = min(passes, key=lambda spent: sum(spent.values()))
     share = 100.0 / args.seconds
     print(

@@ -33,6 +33,7 @@ from fastcrc.crc16 import mcrf4xx
 from pymavlink.dialects.v20 import ardupilotmega as dialect
 
 from tether_companion.mavlink.fastdecode import FastDecoder, HotRecord
+from tether_companion.mavlink.fastencode import FastEncoder
 
 if TYPE_CHECKING:
     from tether_companion.mavlink.signing import Signer
@@ -301,6 +302,7 @@ class FrameEncoder:
         if not (1 <= system_id <= 255 and 0 <= component_id <= 255):
             raise ValueError(f"system_id {system_id} / component_id {component_id} out of range")
         self._packer = dialect.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        self._fast = FastEncoder()
         self.frames_out = 0
         self.signer = signer
 
@@ -320,7 +322,8 @@ class FrameEncoder:
         return self._packer.srcComponent
 
     def encode(self, msg: MAVLinkMessage) -> bytes:
-        """One MAVLink 2 frame holding ``msg``; advances the sequence number.
+        """One MAVLink 2 frame holding ``msg`` (pymavlink's bytes, made by
+        :class:`~tether_companion.mavlink.fastencode.FastEncoder`); advances the sequence number.
 
         Raises
         ------
@@ -328,8 +331,9 @@ class FrameEncoder:
             When a field does not fit its wire type (callers convert and saturate first,
             see :mod:`tether_companion.mavlink.units`).
         """
-        frame = msg.pack(self._packer)
-        self._packer.seq = (self._packer.seq + 1) & 0xFF
+        packer = self._packer
+        frame = self._fast.frame(msg, packer.seq, packer.srcSystem, packer.srcComponent)
+        packer.seq = (packer.seq + 1) & 0xFF
         self.frames_out += 1
         if self.signer is not None:
             return self.signer.sign(frame)

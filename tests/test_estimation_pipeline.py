@@ -249,3 +249,20 @@ def test_pwm_with_wrong_motor_count_is_refused_and_counted() -> None:
     estimator.on_pwm(PwmSample(0.001, np.full(8, 1500.0)))
     assert estimator.health.pwm_invalid == 1
     assert estimator.on_imu(_imu(0.002)).accel_fused  # the earlier valid PWM still serves
+
+
+def test_an_estimate_made_of_values_reads_as_arrays() -> None:
+    """Estimate.of_values keeps Python floats and builds the arrays on first read; an estimate
+    made of arrays gives the same values back as floats."""
+    from tether_companion.estimation.pipeline import Estimate
+
+    state = [1.0, 2.0, -3.0, 4.5]
+    covariance = np.diag([0.1, 0.2, 0.3, 0.4]).ravel().tolist()
+    lazy = Estimate.of_values(1.5, state, covariance, 4.5, 2, True, (), None)
+    np.testing.assert_array_equal(lazy.position_ned_m, [1.0, 2.0, -3.0])
+    np.testing.assert_array_equal(lazy.covariance, np.diag([0.1, 0.2, 0.3, 0.4]))
+    assert lazy.position_ned_m is lazy.position_ned_m  # built once
+    np.testing.assert_array_equal(lazy.position_covariance_m2, np.diag([0.1, 0.2, 0.3]))
+    eager = Estimate(1.5, np.array(state[:3]), 4.5, np.array(covariance).reshape(4, 4), 2, True, ())
+    assert eager.state_values == state
+    assert eager.covariance_values == covariance

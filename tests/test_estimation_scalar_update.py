@@ -95,3 +95,22 @@ def test_paper_filter_on_the_simulator_equals_the_numpy_path() -> None:
     _, scalar_x = _ours(rows, config, model)
     _, numpy_x = _ours(rows, config, model, scalar=False)
     assert np.max(np.abs(scalar_x - numpy_x)) < 1e-9
+
+
+@pytest.mark.parametrize("n", [3, 4])
+def test_a_constant_jacobian_gives_the_general_update_exactly(n: int, rng) -> None:
+    """The altimeter's update compiled with its Jacobian as literals (zeros left out) equals
+    the general update bit for bit (products by 0 and -1 are exact), gated or fused."""
+    from tether_companion.estimation import scalar_update
+
+    h = tuple([0.0, 0.0, -1.0, 0.0][:n])
+    general = scalar_update.updater(n, 1)
+    constant = scalar_update.updater(n, 1, h)
+    for threshold in (math.inf, 0.5):
+        for _ in range(50):
+            a = rng.normal(size=(n, n))
+            p = (a @ a.T + 0.1 * np.eye(n)).ravel().tolist()
+            x = rng.normal(size=n).tolist()
+            y = [float(rng.normal())]
+            r = float(rng.uniform(0.01, 1.0))
+            assert constant(x, p, None, y, r, threshold) == general(x, p, list(h), y, r, threshold)

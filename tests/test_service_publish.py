@@ -35,7 +35,12 @@ P_GOOD = np.array(
 
 
 def _estimate(
-    t: float, position=(2.0, 1.0, -3.0), tension=4.0, covariance=P_GOOD, resets=0
+    t: float,
+    position=(2.0, 1.0, -3.0),
+    tension=4.0,
+    covariance=P_GOOD,
+    resets=0,
+    missing_input=None,
 ) -> Estimate:
     return Estimate(
         time_s=t,
@@ -45,6 +50,7 @@ def _estimate(
         reset_counter=resets,
         accel_fused=True,
         health_values=HEALTH_VALUES,
+        missing_input=missing_input,
     )
 
 
@@ -290,7 +296,7 @@ def test_stale_input_health_names_the_input() -> None:
 def test_variance_grown_for_a_missing_rangefinder_is_no_range_health() -> None:
     publisher = Publisher(PublishConfig(settle_s=0.0), has_tension_state=True)
     grown = np.diag([0.3, 0.2, 0.9, 0.01])
-    lost = dataclasses.replace(_estimate(1.0, covariance=grown), missing_input=RANGEFINDER)
+    lost = _estimate(1.0, covariance=grown, missing_input=RANGEFINDER)
     sent = _feed(publisher, [lost])
     assert not _of(sent, "VISION_POSITION_ESTIMATE") and publisher.health == NO_RANGE
     assert any("rangefinder" in m.text for m in _of(sent, "STATUSTEXT"))

@@ -115,12 +115,12 @@ def _record(scenario: Scenario, ticks: int) -> list[tuple]:
 def _ours(
     rows: list[tuple], config: EstimatorConfig, model: FourStateModel, *, scalar: bool = True
 ) -> tuple[float, np.ndarray]:
-    """Our filter on the recorded inputs: the service's scalar update (``update_rows``), or
+    """Our filter on the recorded inputs: the service's scalar update (``update_values``), or
     with ``scalar=False`` the numpy reference path (``update`` with a measurement function)."""
     ekf = ExtendedKalmanFilter(config.x0(), config.p0(), config.q_density())
     r_acc = config.accel_noise.variance_mps2_sq
     r_alt = config.altimeter_noise_variance_m2
-    alt_rows = altimeter(ekf.x)[1].tolist()
+    alt_jacobian = tuple(altimeter(ekf.x)[1].ravel().tolist())
     inputs = [
         (dt, rotation.tolist(), thrust, accel.tolist(), height, rotation, accel)
         for dt, rotation, thrust, accel, height in rows
@@ -130,11 +130,12 @@ def _ours(
     for dt, rot_rows, thrust, acc, height, rotation, accel in inputs:
         ekf.predict(dt)
         if scalar:
-            predicted, h_rows = model.accel_rows(ekf.x_values(), rot_rows, thrust)
+            predicted, jacobian = model.accel_values(ekf.x_values(), rot_rows, thrust)
             innovation = [acc[0] - predicted[0], acc[1] - predicted[1], acc[2] - predicted[2]]
-            ekf.update_rows("accel", innovation, h_rows, r_acc)
+            ekf.update_values("accel", innovation, jacobian, r_acc)
             if height is not None:
-                ekf.update_rows("altimeter", [height + ekf.x_values()[2]], alt_rows, r_alt)
+                innovation = [height + ekf.x_values()[2]]
+                ekf.update_values("altimeter", innovation, alt_jacobian, r_alt, constant=True)
         else:
             ekf.update(
                 "accel",

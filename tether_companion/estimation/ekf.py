@@ -188,7 +188,7 @@ class ExtendedKalmanFilter:
         self.gate_probability = gate_probability
         self.max_consecutive_rejections = max_consecutive_rejections
         self._thresholds: dict[int, float] = {}
-        self._updaters: dict[int, Callable[..., scalar_update.UpdateOutcome]] = {}
+        self._updaters: dict[object, Callable[..., scalar_update.UpdateOutcome]] = {}
         self._eye = np.eye(n)
         self._n = n
         # The state and covariance live in one of two forms at a time: numpy arrays (the numpy
@@ -249,6 +249,14 @@ class ExtendedKalmanFilter:
         """A new list of the n state values (no conversion on the scalar path)."""
         xl = self._xl
         return list(xl) if xl is not None else self._xa.tolist()  # type: ignore[union-attr]
+
+    def values(self) -> tuple[list[float], list[float]]:
+        """New lists of the n state values and the n*n covariance entries, row-major (no
+        array on the scalar path)."""
+        xl, pl = self._xl, self._pl
+        x = list(xl) if xl is not None else self._xa.tolist()  # type: ignore[union-attr]
+        p = list(pl) if pl is not None else self._pa.ravel().tolist()  # type: ignore[union-attr]
+        return x, p
 
     def snapshot(self) -> tuple[FloatArray, FloatArray]:
         """New arrays of the state, shape (n,), and covariance, shape (n, n)."""
@@ -378,24 +386,42 @@ class ExtendedKalmanFilter:
         h_rows: list[list[float]],
         r_variance: float,
     ) -> UpdateResult:
+        """:meth:`update_values` with the Jacobian given row by row (m rows of n)."""
+        return self.update_values(
+            sensor, innovation, [v for row in h_rows for v in row], r_variance
+        )
+
+    def update_values(
+        self,
+        sensor: str,
+        innovation: list[float],
+        h: Sequence[float],
+        r_variance: float,
+        *,
+        constant: bool = False,
+    ) -> UpdateResult:
         """:meth:`update` for a small filter, in scalar Python (same checks, counts, gate).
 
-        ``innovation`` is ``z - h(x)`` (m values), ``h_rows`` the Jacobian's m rows of n, and
-        the noise is ``r_variance`` on each axis (``R = r I``). See
-        :mod:`~tether_companion.estimation.scalar_update` for the arithmetic; the result
-        equals :meth:`update`'s to rounding. Give Python floats: numpy scalars give the same
-        result several times slower (every product a numpy operation).
+        ``innovation`` is ``z - h(x)`` (m values), ``h`` the Jacobian's m*n entries row by row,
+        and the noise is ``r_variance`` on each axis (``R = r I``). With ``constant`` the
+        Jacobian never changes (give it as a tuple): the update is compiled with its entries
+        as literals, its zeros left out. See :mod:`~tether_companion.estimation.scalar_update`
+        for the arithmetic; the result equals :meth:`update`'s to rounding. Give Python floats:
+        numpy scalars give the same result several times slower (every product a numpy
+        operation).
         """
         status = self.sensors.get(sensor)
         if status is None:
             status = self.sensors[sensor] = SensorStatus()
         m = len(innovation)
         threshold, in_force = self._gate(status, m)
-        update = self._updaters.get(m)
+        key = (m, h) if constant else m
+        update = self._updaters.get(key)
         if update is None:
-            update = self._updaters[m] = scalar_update.updater(self._n, m)
+            update = self._updaters[key] = scalar_update.updater(
+                self._n, m, tuple(h) if constant else None
+            )
         x, p = self._lists()
-        h = [v for row in h_rows for v in row]
         outcome = update(x, p, h, innovation, float(r_variance), in_force)
         if outcome is None:  # S not positive definite: NaN/inf somewhere, or singular
             if not math.isfinite(sum(p) + sum(h) + sum(innovation) + r_variance):

@@ -25,7 +25,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import operator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -126,9 +126,8 @@ class EstimatorHealth:
 _HEALTH_VALUES = operator.attrgetter(*(f.name for f in dataclasses.fields(EstimatorHealth)))
 
 
-@dataclass(frozen=True, slots=True)
 class Estimate:
-    """The estimator's output at one IMU tick.
+    """The estimator's output at one IMU tick (read-only).
 
     Attributes
     ----------
@@ -151,16 +150,115 @@ class Estimate:
         The input whose absence leaves part of the position unobserved (``"rangefinder"``:
         no height fused for ``observability.range_lost_after_s``; the covariance along the
         cable grows meanwhile), or None.
+
+    The estimator makes it from the filter's state and covariance as Python floats
+    (:meth:`of_values`, also readable as :attr:`state_values` and :attr:`covariance_values`)
+    and builds the arrays only when ``position_ned_m`` or ``covariance`` is first read: an
+    estimate is made at every IMU tick and most consumers offline read a few numbers.
     """
 
-    time_s: float
-    position_ned_m: FloatArray
-    tension_n: float
-    covariance: FloatArray
-    reset_counter: int
-    accel_fused: bool
-    health_values: tuple = field(repr=False)
-    missing_input: str | None = None
+    __slots__ = (
+        "time_s",
+        "tension_n",
+        "reset_counter",
+        "accel_fused",
+        "health_values",
+        "missing_input",
+        "_state",
+        "_covariance_values",
+        "_position",
+        "_covariance",
+    )
+
+    def __init__(
+        self,
+        time_s: float,
+        position_ned_m: FloatArray,
+        tension_n: float,
+        covariance: FloatArray,
+        reset_counter: int,
+        accel_fused: bool,
+        health_values: tuple,
+        missing_input: str | None = None,
+    ) -> None:
+        self.time_s = time_s
+        self.tension_n = tension_n
+        self.reset_counter = reset_counter
+        self.accel_fused = accel_fused
+        self.health_values = health_values
+        self.missing_input = missing_input
+        self._position: FloatArray | None = position_ned_m
+        self._covariance: FloatArray | None = covariance
+        self._state: list[float] | None = None
+        self._covariance_values: list[float] | None = None
+
+    @classmethod
+    def of_values(
+        cls,
+        time_s: float,
+        state: list[float],
+        covariance: list[float],
+        tension_n: float,
+        reset_counter: int,
+        accel_fused: bool,
+        health_values: tuple,
+        missing_input: str | None,
+    ) -> Estimate:
+        """An estimate from the state (n values, position first) and covariance (n*n values,
+        row-major) as lists the estimate keeps (give it copies)."""
+        estimate = cls.__new__(cls)
+        estimate.time_s = time_s
+        estimate.tension_n = tension_n
+        estimate.reset_counter = reset_counter
+        estimate.accel_fused = accel_fused
+        estimate.health_values = health_values
+        estimate.missing_input = missing_input
+        estimate._state = state
+        estimate._covariance_values = covariance
+        estimate._position = None
+        estimate._covariance = None
+        return estimate
+
+    @property
+    def position_ned_m(self) -> FloatArray:
+        """Drone position relative to the tether anchor, NED, shape (3,) [m]."""
+        position = self._position
+        if position is None:
+            state = self._state
+            assert state is not None
+            position = self._position = np.array(state[POSITION])
+        return position
+
+    @property
+    def covariance(self) -> FloatArray:
+        """State covariance, shape (n, n): position block [m^2] first, then tension [N^2]."""
+        covariance = self._covariance
+        if covariance is None:
+            n = len(self._state)  # type: ignore[arg-type]
+            covariance = np.array(self._covariance_values).reshape(n, n)
+            self._covariance = covariance
+        return covariance
+
+    @property
+    def state_values(self) -> list[float]:
+        """The position (3 values, NED [m]) followed by the state's tension [N] if it has one,
+        as Python floats (a list the caller must not change)."""
+        state = self._state
+        if state is None:
+            state = self._state = self._position.tolist()  # type: ignore[union-attr]
+            n = self.covariance.shape[0]
+            if n > len(state):
+                state.append(self.tension_n)
+        return state
+
+    @property
+    def covariance_values(self) -> list[float]:
+        """The covariance's n*n entries row-major as Python floats (a list the caller must not
+        change)."""
+        values = self._covariance_values
+        if values is None:
+            values = self._covariance_values = self.covariance.ravel().tolist()
+        return values
 
     @property
     def health(self) -> EstimatorHealth:
@@ -171,6 +269,13 @@ class Estimate:
     def position_covariance_m2(self) -> FloatArray:
         """Position block of the covariance, shape (3, 3) [m^2]."""
         return self.covariance[POSITION, POSITION]
+
+    def __repr__(self) -> str:
+        return (
+            f"Estimate(time_s={self.time_s!r}, position_ned_m={self.position_ned_m!r}, "
+            f"tension_n={self.tension_n!r}, reset_counter={self.reset_counter!r}, "
+            f"accel_fused={self.accel_fused!r}, missing_input={self.missing_input!r})"
+        )
 
 
 def default_thrust_input(config: EstimatorConfig, vehicle: VehicleProfile) -> ThrustInput:
@@ -249,8 +354,8 @@ class TetherEstimator(InputFeed):
         self._r_accel_variance = config.accel_noise.variance_mps2_sq
         """Accelerometer noise variance per axis [(m/s^2)^2] (``R = r I``)."""
         self._r_alt = config.altimeter_noise_variance_m2
-        self._altimeter_rows = altimeter(self.filter.x)[1].tolist()
-        """The altimeter's Jacobian (constant: ``h_alt = -p_d``)."""
+        self._altimeter_jacobian = tuple(altimeter(self.filter.x)[1].ravel().tolist())
+        """The altimeter's Jacobian, n entries (constant: ``h_alt = -p_d``)."""
         self._stale = config.staleness
         self._time_s = math.nan
         self._early_range: RangeSample | None = None
@@ -332,8 +437,13 @@ class TetherEstimator(InputFeed):
         )
         if height_m is None:
             return
-        result = self.filter.update_rows(
-            ALTIMETER, [height_m + self.filter.x_values()[P_D]], self._altimeter_rows, self._r_alt
+        kf = self.filter
+        result = kf.update_values(
+            ALTIMETER,
+            [height_m + kf.x_values()[P_D]],
+            self._altimeter_jacobian,
+            self._r_alt,
+            constant=True,
         )
         health.last_range_nis = result.nis
         if result.status == FUSED:
@@ -395,10 +505,11 @@ class TetherEstimator(InputFeed):
             health.near_anchor += 1
             return False
         aligner = self.aligner
-        predicted, h_rows = model.accel_rows(x, aligner.rotation_rows, thrust_n, tension_n)
+        (hx, hy, hz), jacobian = model.accel_values(x, aligner.rotation_rows, thrust_n, tension_n)
         ax, ay, az = aligner.specific_force_values
-        innovation = [ax - predicted[0], ay - predicted[1], az - predicted[2]]
-        result = self.filter.update_rows(ACCEL, innovation, h_rows, self._r_accel_variance)
+        result = self.filter.update_values(
+            ACCEL, [ax - hx, ay - hy, az - hz], jacobian, self._r_accel_variance
+        )
         health.last_accel_nis = result.nis
         status = self.filter.sensors[ACCEL]
         health.accel_forced = status.forced
@@ -433,14 +544,15 @@ class TetherEstimator(InputFeed):
         self.health.pd_repairs = self.filter.pd_repairs
 
     def _estimate(self, accel_fused: bool) -> Estimate:
-        x, covariance = self.filter.snapshot()
-        return Estimate(
-            time_s=self._time_s,
-            position_ned_m=x[POSITION],
-            tension_n=self.model.tension_n(x, self._known_tension_n),
-            covariance=covariance,
-            reset_counter=self.filter.resets,
-            accel_fused=accel_fused,
-            health_values=self.health.values(),
-            missing_input=RANGEFINDER if self._range_watch.lost(self._time_s) else None,
+        kf = self.filter
+        x, covariance = kf.values()
+        return Estimate.of_values(
+            self._time_s,
+            x,
+            covariance,
+            self.model.tension_n(x, self._known_tension_n),
+            kf.resets,
+            accel_fused,
+            self.health.values(),
+            RANGEFINDER if self._range_watch.lost(self._time_s) else None,
         )

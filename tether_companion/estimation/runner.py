@@ -8,6 +8,7 @@ as from a load cell) ticking on every IMU sample. Used by ``simulate`` and the b
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -104,12 +105,10 @@ def run_scenario(
     )
     schedule = _schedule(scenario)
     n_ticks = sum(1 for _, kind in schedule if kind == _IMU)
-    time_s = np.empty(n_ticks)
-    truth_p, p4, p3 = np.empty((n_ticks, 3)), np.empty((n_ticks, 3)), np.empty((n_ticks, 3))
-    truth_f, f4 = np.empty(n_ticks), np.empty(n_ticks)
-    var4, var3 = np.empty((n_ticks, 4)), np.empty((n_ticks, 3))
+    # one row of Python floats per tick, made into arrays at the end (no array per tick)
+    rows: list[tuple[float, ...]] = []
+    missing = (math.nan,) * (4 + 4 + 3 + 3)
     dt_s = sim.physics_dt_s
-    tick = 0
     report_every = max(1, n_ticks // 50)
     for step, kind in schedule:
         sim.advance_to(step * dt_s)
@@ -132,36 +131,32 @@ def run_scenario(
             est3.set_known_tension_n(tension_n, imu.time_s)
             e4 = est4.on_imu(imu)
             e3 = est3.on_imu(imu)
-            time_s[tick] = imu.time_s
-            truth_p[tick] = sim.position_ned_m
-            truth_f[tick] = tension_n
+            truth = (imu.time_s, *sim.position_ned_m, tension_n)
             if e4 is None or e3 is None:  # a rejected IMU sample: no estimate this tick
-                p4[tick], f4[tick], var4[tick], p3[tick], var3[tick] = (
-                    np.nan,
-                    np.nan,
-                    np.nan,
-                    np.nan,
-                    np.nan,
-                )
+                rows.append(truth + missing)
             else:
-                p4[tick], f4[tick], var4[tick] = (
-                    e4.position_ned_m,
-                    e4.tension_n,
-                    e4.covariance.diagonal(),
+                c4, c3 = e4.covariance_values, e3.covariance_values
+                rows.append(
+                    (
+                        *truth,
+                        *e4.state_values,
+                        *c4[::5],  # the diagonal of 4 x 4
+                        *e3.state_values,
+                        *c3[::4],  # of 3 x 3
+                    )
                 )
-                p3[tick], var3[tick] = e3.position_ned_m, e3.covariance.diagonal()
-            tick += 1
-            if progress is not None and tick % report_every == 0:
-                progress(tick / n_ticks)
+            if progress is not None and len(rows) % report_every == 0:
+                progress(len(rows) / n_ticks)
+    table = np.array(rows, dtype=float).reshape(len(rows), 5 + 4 + 4 + 3 + 3)
     return RunResult(
-        time_s=time_s[:tick],
-        truth_position_ned_m=truth_p[:tick],
-        truth_tension_n=truth_f[:tick],
-        position_4s_ned_m=p4[:tick],
-        tension_4s_n=f4[:tick],
-        variance_4s=var4[:tick],
-        position_3s_ned_m=p3[:tick],
-        variance_3s=var3[:tick],
+        time_s=table[:, 0].copy(),
+        truth_position_ned_m=table[:, 1:4].copy(),
+        truth_tension_n=table[:, 4].copy(),
+        position_4s_ned_m=table[:, 5:8].copy(),
+        tension_4s_n=table[:, 8].copy(),
+        variance_4s=table[:, 9:13].copy(),
+        position_3s_ned_m=table[:, 13:16].copy(),
+        variance_3s=table[:, 16:19].copy(),
         health_4s=est4.health.copy(),
         health_3s=est3.health.copy(),
     )

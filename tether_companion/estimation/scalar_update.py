@@ -15,9 +15,10 @@ step, with noise ``R = r I`` (``r`` [measurement units^2] on each axis):
 * ``K = T S^-1``, ``x + K y``;
 * the Joseph form ``(I - K H) P (I - K H)^T + r K K^T``, associated to save products:
   ``B = (I - K H) P = P - K T^T``, ``B (I - K H)^T = B - (B H^T) K^T``, so the result is
-  ``B - D K^T`` with ``D = B H^T - r K`` (``D`` vanishes for the exact optimal gain: it is the
-  Joseph form's first-order correction of rounding in ``K``). Only the lower triangle is
-  computed and mirrored, so the result is exactly symmetric;
+  ``B - D K^T`` with ``D = B H^T - r K``, which is ``T - K S`` (``H T = H P H^T = S - r I``):
+  it vanishes for the exact optimal gain, the Joseph form's first-order correction of
+  rounding in ``K``, and the identity holds for any ``K``. Only the lower triangles of ``B``
+  and of the result are computed, the result mirrored, so it is exactly symmetric;
 * a finite check of the new state and covariance, and the Cholesky test of the covariance.
 
 Only the summation order differs from the BLAS path, so states agree to rounding (~1e-15
@@ -44,9 +45,25 @@ def compile_function(name: str, body: list[str], arguments: str) -> Callable:
     return namespace[name]
 
 
-def sum_of(terms: list[str]) -> str:
-    """The generated expression adding ``terms`` (``0.0`` for none)."""
-    return " + ".join(terms) if terms else "0.0"
+def sum_of(terms: list[str | None]) -> str:
+    """The generated expression adding ``terms``, leaving out ``None`` (``0.0`` for none)."""
+    kept = [t for t in terms if t is not None]
+    return " + ".join(kept) if kept else "0.0"
+
+
+def times(coefficient: float | str, name: str) -> str | None:
+    """``coefficient * name`` as generated code: ``coefficient`` is the name of a variable, or
+    a constant written in as a literal (exact: ``repr`` of a float round-trips); ``None`` for a
+    zero constant, the bare (or negated) name for +-1."""
+    if isinstance(coefficient, str):
+        return f"{coefficient} * {name}"
+    if coefficient == 0.0:
+        return None
+    if coefficient == 1.0:
+        return name
+    if coefficient == -1.0:
+        return f"-{name}"
+    return f"{coefficient!r} * {name}"
 
 
 def _cholesky_lines(size: int, entry: Callable[[int, int], str], low: str, fail: str) -> list[str]:
@@ -81,11 +98,18 @@ def _unpack(names: list[str], source: str) -> str:
 
 
 @functools.cache
-def updater(n: int, m: int) -> Callable[..., UpdateOutcome]:
+def updater(
+    n: int, m: int, constant_h: tuple[float, ...] | None = None
+) -> Callable[..., UpdateOutcome]:
     """The update of an n-state filter by an m-dimensional measurement, compiled once:
     ``update(x, p, h, y, r, threshold)`` with the state ``x`` (n values), covariance ``p`` (n*n,
     row-major), Jacobian ``h`` (m*n, row-major), innovation ``y = z - h(x)`` (m values), noise
     ``r`` on each axis and the gate's NIS ``threshold``.
+
+    With ``constant_h`` (the m*n entries of a Jacobian that never changes, such as the
+    altimeter's ``[0, 0, -1, 0]``) its entries are written in as literals and the products with
+    its zeros left out; the function then ignores its ``h`` argument. Multiplying by 0 or +-1
+    is exact, so the result is the same as the general function's for finite inputs.
 
     The function returns
 
@@ -97,15 +121,22 @@ def updater(n: int, m: int) -> Callable[..., UpdateOutcome]:
     """
     x = [f"x{i}" for i in range(n)]
     p = [f"p{i}_{j}" for i in range(n) for j in range(n)]
-    h = [f"h{a}_{j}" for a in range(m) for j in range(n)]
     y = [f"y{a}" for a in range(m)]
-    body = [_unpack(p, "p"), _unpack(h, "h"), _unpack(y, "y")]
+    body = [_unpack(p, "p"), _unpack(y, "y")]
+    if constant_h is None:
+        h: list[float | str] = [f"h{a}_{j}" for a in range(m) for j in range(n)]
+        body.append(_unpack(h, "h"))  # type: ignore[arg-type]
+    else:
+        if len(constant_h) != m * n:
+            raise ValueError(f"constant_h needs {m * n} entries, got {len(constant_h)}")
+        h = [float(v) for v in constant_h]
     for i in range(n):  # T = P H^T
         for a in range(m):
-            body.append(f"t{i}_{a} = " + sum_of([f"p{i}_{k} * h{a}_{k}" for k in range(n)]))
+            terms = [times(h[a * n + k], f"p{i}_{k}") for k in range(n)]
+            body.append(f"t{i}_{a} = " + sum_of(terms))
     for a in range(m):  # S, lower triangle
         for b in range(a + 1):
-            expr = sum_of([f"h{a}_{k} * t{k}_{b}" for k in range(n)])
+            expr = sum_of([times(h[a * n + k], f"t{k}_{b}") for k in range(n)])
             body.append(f"s{a}_{b} = {expr}" + (" + r" if a == b else ""))
     if m == 1:
         body += ["if not s0_0 > 0.0:", "    return None", "nis = y0 * y0 / s0_0"]
@@ -122,14 +153,14 @@ def updater(n: int, m: int) -> Callable[..., UpdateOutcome]:
     body.append(_unpack(x, "x"))
     for i in range(n):
         body.append(f"u{i} = x{i} + " + sum_of([f"k{i}_{a} * y{a}" for a in range(m)]))
-    for i in range(n):  # B = (I - K H) P = P - K T^T
-        for j in range(n):
+    for i in range(n):  # B = (I - K H) P = P - K T^T, lower triangle
+        for j in range(i + 1):
             kt = sum_of([f"k{i}_{c} * t{j}_{c}" for c in range(m)])
             body.append(f"b{i}_{j} = p{i}_{j} - ({kt})")
-    for i in range(n):  # D = B H^T - r K
+    for i in range(n):  # D = B H^T - r K = T - K S
         for a in range(m):
-            bh = sum_of([f"b{i}_{k} * h{a}_{k}" for k in range(n)])
-            body.append(f"e{i}_{a} = {bh} - r * k{i}_{a}")
+            ks = sum_of([f"k{i}_{c} * s{max(c, a)}_{min(c, a)}" for c in range(m)])
+            body.append(f"e{i}_{a} = t{i}_{a} - ({ks})")
     for i in range(n):  # B - D K^T, lower triangle
         for j in range(i + 1):
             dk = sum_of([f"e{i}_{c} * k{j}_{c}" for c in range(m)])

@@ -26,18 +26,9 @@ import functools
 import numpy as np
 from numpy.typing import NDArray
 
-from tether_companion.estimation.scalar_update import compile_function, sum_of
+from tether_companion.estimation.scalar_update import compile_function, sum_of, times
 
 FloatArray = NDArray[np.float64]
-
-
-def _times(coefficient: float, name: str) -> str | None:
-    """``coefficient * name`` as generated code; None for a zero coefficient."""
-    if coefficient == 0.0:
-        return None
-    if coefficient == 1.0:
-        return name
-    return f"{coefficient!r} * {name}"
 
 
 def _lower(n: int, name: str) -> list[str]:
@@ -54,17 +45,15 @@ def _predict(a: tuple[tuple[float, ...], ...], q: tuple[tuple[float, ...], ...])
     new_x = []
     for i in range(n):
         for k in range(3):
-            terms = [_times(a[i][j], f"x{j}_{k}") for j in range(n)]
-            new_x.append(sum_of([t for t in terms if t is not None]))
+            new_x.append(sum_of([times(a[i][j], f"x{j}_{k}") for j in range(n)]))
     for i in range(n):  # M = A P
         for j in range(n):
-            terms = [_times(a[i][k], f"p{k}_{j}") for k in range(n)]
-            body.append(f"m{i}_{j} = " + sum_of([t for t in terms if t is not None]))
+            body.append(f"m{i}_{j} = " + sum_of([times(a[i][k], f"p{k}_{j}") for k in range(n)]))
     for i in range(n):  # M A^T + Q, lower triangle
         for j in range(i + 1):
-            terms = [_times(a[j][k], f"m{i}_{k}") for k in range(n)]
+            terms = [times(a[j][k], f"m{i}_{k}") for k in range(n)]
             terms.append(repr(q[i][j]) if q[i][j] != 0.0 else None)
-            body.append(f"q{i}_{j} = " + sum_of([t for t in terms if t is not None]))
+            body.append(f"q{i}_{j} = " + sum_of(terms))
     body.append(f"return [{', '.join(new_x)}], [{', '.join(_lower(n, 'q'))}]")
     return compile_function("predict", body, "x, p")
 

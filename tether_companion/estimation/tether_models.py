@@ -37,16 +37,16 @@ POSITION = slice(P_N, P_D + 1)
 """Slice of the position block of either state vector."""
 
 
-def accel_rows(
+def accel_values(
     position_ned_m: list[float],
     tension_n: float,
     rotation_rows: list[list[float]],
     thrust_n: float,
     mass_kg: float,
     tension_column: bool,
-) -> tuple[list[float], list[list[float]]]:
-    """``h_acc`` [m/s^2] (3 values) and its Jacobian's 3 rows (4 values with the ``d/d f_c``
-    column, else 3), as Python floats; ``rotation_rows`` is ``R_v^b`` row by row.
+) -> tuple[tuple[float, float, float], list[float]]:
+    """``h_acc`` [m/s^2] (3 values) and its Jacobian's entries row by row (3 x 4 with the
+    ``d/d f_c`` column, else 3 x 3), as Python floats; ``rotation_rows`` is ``R_v^b`` row by row.
 
     Written in scalars (the EKF evaluates it at every IMU tick and numpy's per-call overhead
     would dominate 3x3 arithmetic): with ``a = R u``,
@@ -61,18 +61,19 @@ def accel_rows(
     a2 = r20 * un + r21 * ue + r22 * ud
     k = -tension_n / mass_kg
     kl = k * inv_length
-    accel = [k * a0, k * a1, k * a2 - thrust_n / mass_kg]
-    rows = [
-        [kl * (r00 - a0 * un), kl * (r01 - a0 * ue), kl * (r02 - a0 * ud)],
-        [kl * (r10 - a1 * un), kl * (r11 - a1 * ue), kl * (r12 - a1 * ud)],
-        [kl * (r20 - a2 * un), kl * (r21 - a2 * ue), kl * (r22 - a2 * ud)],
-    ]
+    accel = (k * a0, k * a1, k * a2 - thrust_n / mass_kg)
     if tension_column:
         inv_m = -1.0 / mass_kg
-        rows[0].append(inv_m * a0)
-        rows[1].append(inv_m * a1)
-        rows[2].append(inv_m * a2)
-    return accel, rows
+        return accel, [
+            kl * (r00 - a0 * un), kl * (r01 - a0 * ue), kl * (r02 - a0 * ud), inv_m * a0,
+            kl * (r10 - a1 * un), kl * (r11 - a1 * ue), kl * (r12 - a1 * ud), inv_m * a1,
+            kl * (r20 - a2 * un), kl * (r21 - a2 * ue), kl * (r22 - a2 * ud), inv_m * a2,
+        ]  # fmt: skip
+    return accel, [
+        kl * (r00 - a0 * un), kl * (r01 - a0 * ue), kl * (r02 - a0 * ud),
+        kl * (r10 - a1 * un), kl * (r11 - a1 * ue), kl * (r12 - a1 * ud),
+        kl * (r20 - a2 * un), kl * (r21 - a2 * ue), kl * (r22 - a2 * ud),
+    ]  # fmt: skip
 
 
 class _StraightTetherModel:
@@ -108,23 +109,24 @@ class _StraightTetherModel:
         ``tension_n`` [N] is the known tension of the 3-state model; the 4-state model ignores
         it (the tension is the state's fourth component).
         """
-        accel, rows = self.accel_rows(
+        accel, jacobian = self.accel_values(
             x.tolist(), rotation_ned_to_body.tolist(), thrust_n, tension_n
         )
-        return np.array(accel), np.array(rows)
+        return np.array(accel), np.array(jacobian).reshape(3, self.n)
 
-    def accel_rows(
+    def accel_values(
         self,
         state: list[float],
         rotation_rows: list[list[float]],
         thrust_n: float,
         tension_n: float = math.nan,
-    ) -> tuple[list[float], list[list[float]]]:
-        """:meth:`accel` on Python lists: ``h_acc`` (3 values) and the Jacobian's 3 rows of n
-        (``state`` the n state values, ``rotation_rows`` ``R_v^b`` row by row)."""
+    ) -> tuple[tuple[float, float, float], list[float]]:
+        """:meth:`accel` on Python floats: ``h_acc`` (3 values) and the Jacobian's 3 x n
+        entries row by row (``state`` the n state values, ``rotation_rows`` ``R_v^b`` row by
+        row)."""
         if self.has_tension_state:
             tension_n = state[F_C]
-        return accel_rows(
+        return accel_values(
             state[P_N : P_D + 1],
             tension_n,
             rotation_rows,
@@ -140,7 +142,7 @@ class FourStateModel(_StraightTetherModel):
     n = 4
     has_tension_state = True
 
-    def tension_n(self, x: FloatArray, known_tension_n: float = math.nan) -> float:
+    def tension_n(self, x: FloatArray | list[float], known_tension_n: float = math.nan) -> float:
         """Tension of the state [N]."""
         return float(x[F_C])
 
@@ -151,7 +153,7 @@ class ThreeStateModel(_StraightTetherModel):
     n = 3
     has_tension_state = False
 
-    def tension_n(self, x: FloatArray, known_tension_n: float = math.nan) -> float:
+    def tension_n(self, x: FloatArray | list[float], known_tension_n: float = math.nan) -> float:
         """The known tension [N] (the state has none)."""
         return known_tension_n
 

@@ -93,6 +93,6 @@ def test_filter_step_costs_time_both_estimators_on_the_same_samples() -> None:
     result = step_costs("realistic-circle", 2.0, 1)
     us = result["us_per_tick"]
     assert result["ticks"]["paper_4s"] == result["ticks"]["dynamic"] == 400
-    assert result["ticks"]["dynamic_fast"] == 400
+    assert result["ticks"]["dynamic_former"] == 400
     assert 0.0 < us["paper_4s"] < 1e5 and 0.0 < us["dynamic"] < 1e5
     assert result["ratio_dynamic_to_paper"] == pytest.approx(us["dynamic"] / us["paper_4s"])

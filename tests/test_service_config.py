@@ -14,11 +14,28 @@ from tether_companion.resources import CONFIGS_DIR, PROJECT_ROOT
 from tether_companion.service.config import config_reference, load_service_config, load_vehicle_for
 
 
-def test_shipped_config_loads_with_paper_estimator() -> None:
+def test_shipped_config_and_the_built_in_defaults_run_the_dynamic_filter() -> None:
     config = load_service_config(CONFIGS_DIR / "companion.yaml")
     assert config.link.connect.startswith("serial:") and config.publish.rate_hz == 30.0
-    assert config.estimator.kind == "four_state"
+    assert config.estimator.kind == "dynamic"
     assert load_vehicle_for(config).n_motors == 4
+    assert load_service_config(None).estimator.kind == "dynamic"
+    # a partial estimator section keeps the service's default kind, not the paper's
+    partial = load_service_config(None, {"estimator": {"min_cable_length_m": 0.5}})
+    assert partial.estimator.kind == "dynamic"
+
+
+def test_the_paper_filter_is_one_line_away_with_the_shipped_tuned_noise(tmp_path) -> None:
+    """companion.yaml keeps the paper filters' tuned process noise (configs/estimator-tuned.yaml):
+    switching to the paper's 4-state EKF is the one line ``kind: four_state``."""
+    shipped = (CONFIGS_DIR / "companion.yaml").read_text(encoding="utf-8")
+    assert shipped.count("kind: dynamic") == 1
+    path = tmp_path / "companion.yaml"
+    path.write_text(shipped.replace("kind: dynamic", "kind: four_state"), encoding="utf-8")
+    config = load_service_config(path)
+    assert config.estimator.kind == "four_state"
+    assert config.estimator.process_noise.position_m2 == (5.0e-3, 5.0e-3, 2.5e-4)
+    assert config.estimator.process_noise.tension_n2 == 1.0e-3
 
 
 @pytest.mark.parametrize(

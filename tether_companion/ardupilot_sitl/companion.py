@@ -12,10 +12,12 @@ from pathlib import Path
 
 import yaml
 
-from tether_companion.resources import VEHICLES_DIR
+from tether_companion.resources import CONFIGS_DIR, VEHICLES_DIR
 
 SITL_VEHICLE = VEHICLES_DIR / "ardupilot-sitl-plus.yaml"
 """The profile written from SITL's '+' frame model (configs/vehicles/ardupilot-sitl-plus.yaml)."""
+SHIPPED_ESTIMATION_KEYS = ("thrust_dynamics", "estimator", "dynamic_filter")
+"""The sections of configs/companion.yaml a SITL run takes as they ship."""
 
 
 def companion_config(
@@ -23,18 +25,16 @@ def companion_config(
 ) -> Path:
     """Write the service YAML for a SITL run into ``workdir`` and return its path.
 
-    Starts from configs/companion.yaml's choices (motor_lag thrust, tuned four-state EKF);
-    the origin is SITL's home (the tether's anchor); recordings go to ``workdir/rec``.
+    Starts from configs/companion.yaml's estimator choices (its ``thrust_dynamics``,
+    ``estimator`` and ``dynamic_filter`` sections: the shipped default filter); the origin is
+    SITL's home (the tether's anchor); recordings go to ``workdir/rec``.
     """
+    shipped = yaml.safe_load((CONFIGS_DIR / "companion.yaml").read_text(encoding="utf-8"))
     config: dict = {
         "vehicle": str(SITL_VEHICLE),
         "link": {"autopilot": "ardupilot", "fc_system_id": 1, "fc_component_id": 1},
         "origin": {"latitude_deg": home[0], "longitude_deg": home[1], "altitude_m": home[2]},
-        "thrust_dynamics": "motor_lag",
-        "estimator": {
-            "kind": "four_state",
-            "process_noise": {"position_m2": [5.0e-3, 5.0e-3, 2.5e-4], "tension_n2": 1.0e-3},
-        },
+        **{key: shipped[key] for key in SHIPPED_ESTIMATION_KEYS if key in shipped},
         "recording": {"enabled": True, "directory": str(workdir / "rec")},
     }
     for section, values in (overrides or {}).items():

@@ -160,17 +160,21 @@ class GroundStation:
     )
 
 
+ESTIMATOR_KINDS = ("four_state", "three_state", "dynamic")
+"""``kind``: the paper's 4-state (position and tension) and 3-state (tension known) EKFs, and
+the 13-state dynamic filter (``estimation/dynamic``)."""
+ESTIMATOR_KIND_DOC = (
+    "four_state / three_state: the paper's random-walk EKF; dynamic: the 13-state filter with "
+    "velocity, thrust scale, accelerometer bias and wind (the service's dynamic_filter section; "
+    "docs/estimation.md)"
+)
+
+
 @dataclass(frozen=True)
 class EstimatorConfig:
     """Everything the tether EKF needs beyond the vehicle profile (defaults: the paper's)."""
 
-    kind: str = spec(
-        "four_state",
-        choices=("four_state", "three_state", "dynamic"),
-        doc="four_state / three_state: the paper's random-walk EKF; dynamic: the 13-state "
-        "filter with velocity, thrust scale, accelerometer bias and wind (the service's "
-        "dynamic_filter section; docs/estimation.md)",
-    )
+    kind: str = spec("four_state", choices=ESTIMATOR_KINDS, doc=ESTIMATOR_KIND_DOC)
     process_noise: ProcessNoise = spec(default_factory=ProcessNoise, doc="random-walk Q")
     accel_noise: AccelNoise = spec(default_factory=AccelNoise, doc="accelerometer R")
     altimeter_noise_variance_m2: float = spec(

@@ -12,6 +12,7 @@ filter status   health
 ==============  ==================================================================
 ok              ``ok`` (still subject to the variance bound of :func:`assess_health`)
 initialising    ``converging``
+thrust_scale    ``thrust_scale``, or ``short_cable`` closer than ``short_cable_m``
 weak_pull       ``weak_pull``, or ``short_cable`` closer than ``short_cable_m``
 slack           ``slack``, or ``short_cable`` closer than ``short_cable_m``
 on_ground       ``motors_idle``
@@ -51,9 +52,11 @@ STALE_PWM = "stale_pwm"
 STALE_TENSION = "stale_tension"
 WEAK_PULL = "weak_pull"
 SHORT_CABLE = "short_cable"
+THRUST_SCALE = "thrust_scale"
 HEALTH_STATES = (
     OK,
     CONVERGING,
+    THRUST_SCALE,
     DIVERGED,
     SLACK,
     STALE,
@@ -72,6 +75,7 @@ HEALTH_STATES = (
 _HEALTH_TEXT = {
     OK: "position OK",
     CONVERGING: "converging, position withheld",
+    THRUST_SCALE: "learning thrust scale, position withheld",
     DIVERGED: "estimate diverged",
     SLACK: "tether slack, position unobservable",
     STALE: "inputs stale, no estimate",
@@ -174,14 +178,20 @@ def dynamic_health(
     status = estimate.status
     if status == dynamic_output.OK or status == dynamic_output.STALE_INPUTS:
         return SHORT_CABLE if near_anchor else None
-    if status in (dynamic_output.WEAK_PULL, dynamic_output.SLACK):
+    if status in _DYNAMIC_WITHHELD:
         distance = float(np.linalg.norm(estimate.position_ned_m))
         if near_anchor or distance < short_cable_m:
             return SHORT_CABLE
-        return WEAK_PULL if status == dynamic_output.WEAK_PULL else SLACK
+        return _DYNAMIC_WITHHELD[status]
     return _DYNAMIC_STATUS_HEALTH.get(status, DIVERGED)  # a status added later: withheld
 
 
+_DYNAMIC_WITHHELD = {
+    dynamic_output.THRUST_SCALE: THRUST_SCALE,
+    dynamic_output.WEAK_PULL: WEAK_PULL,
+    dynamic_output.SLACK: SLACK,
+}
+"""Filter statuses that withhold a position far from the anchor, and their health."""
 _DYNAMIC_STATUS_HEALTH = {
     dynamic_output.INITIALISING: CONVERGING,
     dynamic_output.ON_GROUND: MOTORS_IDLE,

@@ -49,7 +49,11 @@ from tether_companion.estimation.dynamic.imu_batch import ImuBatch
 from tether_companion.estimation.dynamic.initialise import Initialiser
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.dynamic.models import UNDEFINED, ModelConstants
-from tether_companion.estimation.dynamic.observability import assess, min_horizontal_pull_n
+from tether_companion.estimation.dynamic.observability import (
+    ThrustScaleKnowledge,
+    assess,
+    min_horizontal_pull_n,
+)
 from tether_companion.estimation.dynamic.output import DynamicHealth, NavigationEstimate
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
 from tether_companion.estimation.inputs import InputFeed, range_height_m, range_reading_ok
@@ -508,6 +512,14 @@ class DynamicTetherEstimator(InputFeed):
                 self.dynamic.initial.wind_std_mps,
                 float(x[state.WIND][0]),
                 float(x[state.WIND][1]),
+            ),
+            thrust_scale=None
+            if bank is None
+            else ThrustScaleKnowledge(
+                float(x[state.SCALE]),
+                float(p[state.SCALE, state.SCALE]),
+                p[:2, state.SCALE],
+                len(bank.filters),
             ),
         )
         published_covariance = p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy()

@@ -2,10 +2,12 @@
 
 Checked in this order (the first that applies wins): restarted this tick, not initialised,
 on the ground, inputs stale, cable slack, the horizontal pull no larger than the wind's drag
-could be, horizontal position standard deviation beyond the bound (the pull is too weak for
-the data to fix the position: low tension, short cable, or a steady hover where thrust scale
-and wind trade against the cable's pull). The covariance itself grows in those cases
-(nothing pins the position); the status names the cause.
+could be, horizontal position standard deviation beyond the bound: ``thrust_scale`` when the
+part of the horizontal covariance the thrust scale does not explain is within the bound (the
+position waits only for the thrust scale: after the start, and in a steady hover where it
+trades against the cable's vertical pull), otherwise ``weak_pull`` (low tension, short cable,
+wind). The covariance itself grows in those cases (nothing pins the position); the status
+names the cause.
 
 The pull-against-drag rule does not trust the filter's own covariance: the bearing of the
 drone from the anchor is the direction of the cable's horizontal pull, which the filter reads
@@ -19,6 +21,7 @@ standard deviation of 0.3 m).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,6 +33,7 @@ from tether_companion.estimation.dynamic.output import (
     RESET,
     SLACK,
     STALE_INPUTS,
+    THRUST_SCALE,
     WEAK_PULL,
 )
 
@@ -68,6 +72,44 @@ class InnovationExcess:
         return max(self._mean, 0.0)
 
 
+@dataclass(frozen=True)
+class ThrustScaleKnowledge:
+    """What the filter knows of the thrust scale at one tick.
+
+    Attributes
+    ----------
+    scale, variance
+        The estimate [1] and its variance [1].
+    position_cross
+        Its covariance with the horizontal position, shape (2,) [m].
+    hypotheses
+        Members of the thrust-scale bank still running (1: decided or collapsed).
+    """
+
+    scale: float
+    variance: float
+    position_cross: FloatArray
+    hypotheses: int
+
+    def explains(self, horizontal_covariance_m2: FloatArray, max_std_m: float) -> bool:
+        """Whether the horizontal position waits only for the thrust scale: the bank is still
+        choosing between hypotheses (their spread is the thrust scale's), or the horizontal
+        covariance without the part the thrust scale explains (its Schur complement) has its
+        larger standard deviation within ``max_std_m`` [m]."""
+        if self.hypotheses > 1:
+            return True
+        if not self.variance > 0.0:
+            return False
+        cross = self.position_cross
+        known = horizontal_covariance_m2 - np.outer(cross, cross) / self.variance
+        return _largest_std(known) <= max_std_m
+
+    def describe(self) -> str:
+        """``1.041 +- 0.025`` and, while the bank runs, how many hypotheses are left."""
+        text = f"{self.scale:.3f} +- {math.sqrt(max(self.variance, 0.0)):.3f}"
+        return text + (f", {self.hypotheses} hypotheses" if self.hypotheses > 1 else "")
+
+
 def min_horizontal_pull_n(
     pull_per_wind_n_s_per_m: float, wind_std_mps: float, wind_n_mps: float, wind_e_mps: float
 ) -> float:
@@ -93,6 +135,7 @@ def assess(
     max_horizontal_std_m: float,
     horizontal_pull_n: float = math.inf,
     min_horizontal_pull_n: float = 0.0,
+    thrust_scale: ThrustScaleKnowledge | None = None,
 ) -> tuple[str, str]:
     """``(status, reason)`` of one tick (reason empty when ``ok``).
 
@@ -113,6 +156,9 @@ def assess(
     horizontal_pull_n, min_horizontal_pull_n
         The cable's estimated horizontal pull at the drone and the least that fixes the
         bearing (a multiple of the wind drag's prior standard deviation) [N].
+    thrust_scale
+        What the filter knows of the thrust scale (None: not told; then never
+        ``thrust_scale``).
     """
     if reset_reason is not None:
         return RESET, reset_reason
@@ -129,12 +175,24 @@ def assess(
             f"horizontal pull {horizontal_pull_n:.2f} N < {min_horizontal_pull_n:.2f} N: the"
             " wind's drag could turn the bearing"
         )
-    (a, b), (_, c) = position_covariance_m2[:2, :2].tolist()
-    largest = 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)  # 2x2 eigenvalue
-    std = math.sqrt(max(largest, 0.0))
-    if std > max_horizontal_std_m:
-        return WEAK_PULL, (
-            f"horizontal std {std:.2f} m > {max_horizontal_std_m:g} m: pull too weak "
-            f"({tension_n:.1f} N)"
+    horizontal = position_covariance_m2[:2, :2]
+    std = _largest_std(horizontal)
+    if std <= max_horizontal_std_m:
+        return OK, ""
+    if thrust_scale is not None and thrust_scale.explains(horizontal, max_horizontal_std_m):
+        return THRUST_SCALE, (
+            f"thrust scale not learned yet ({thrust_scale.describe()}): horizontal std"
+            f" {std:.2f} m > {max_horizontal_std_m:g} m; motion (a climb, a turn) or a load"
+            " cell fixes it"
         )
-    return OK, ""
+    return WEAK_PULL, (
+        f"horizontal std {std:.2f} m > {max_horizontal_std_m:g} m: pull too weak "
+        f"({tension_n:.1f} N)"
+    )
+
+
+def _largest_std(covariance_m2: FloatArray) -> float:
+    """Square root of the larger eigenvalue of a symmetric 2x2 covariance [m]."""
+    (a, b), (_, c) = covariance_m2.tolist()
+    largest = 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
+    return math.sqrt(max(largest, 0.0))

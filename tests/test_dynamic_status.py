@@ -1,15 +1,16 @@
-"""The dynamic filter's status names the thrust scale when it alone keeps the position from
-being published, and the weak pull otherwise."""
+"""The dynamic filter's status says ``learning`` when only the thrust scale and the wind (what a
+steady hover does not observe) keep the position from being published, ``weak_pull``
+otherwise."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from tether_companion.estimation.dynamic.observability import ThrustScaleKnowledge, assess
-from tether_companion.estimation.dynamic.output import OK, THRUST_SCALE, WEAK_PULL
+from tether_companion.estimation.dynamic.observability import HoverUnknowns, assess
+from tether_companion.estimation.dynamic.output import LEARNING, OK, WEAK_PULL
 
 
-def _status(horizontal: np.ndarray, knowledge: ThrustScaleKnowledge | None) -> tuple[str, str]:
+def _status(horizontal: np.ndarray, unknowns: HoverUnknowns | None) -> tuple[str, str]:
     covariance = np.eye(3) * 0.01
     covariance[:2, :2] = horizontal
     return assess(
@@ -17,28 +18,40 @@ def _status(horizontal: np.ndarray, knowledge: ThrustScaleKnowledge | None) -> t
         reset_reason=None,
         on_ground=False,
         inputs_stale=False,
-        tension_n=4.0,
+        tension_n=16.0,
         slack_tension_n=0.2,
         position_covariance_m2=covariance,
         max_horizontal_std_m=0.5,
-        thrust_scale=knowledge,
+        hover_unknowns=unknowns,
     )
 
 
-def test_a_range_unknown_only_through_the_thrust_scale_is_thrust_scale() -> None:
-    # north std 1 m, all of it from a thrust scale of std 0.05 (20 m per unit of scale)
-    cross = np.array([20.0 * 0.05**2, 0.0])
-    horizontal = np.diag([1.0, 0.04]) + np.diag([1e-4, 0.0])
-    one = ThrustScaleKnowledge(1.04, 0.05**2, cross, hypotheses=1)
-    status, reason = _status(horizontal, one)
-    assert status == THRUST_SCALE
-    assert "thrust scale not learned yet (1.040 +- 0.050)" in reason
-    # the same spread with no correlation to the thrust scale: the pull is too weak
-    unrelated = ThrustScaleKnowledge(1.04, 0.05**2, np.zeros(2), hypotheses=1)
-    assert _status(horizontal, unrelated)[0] == WEAK_PULL
+def _unknowns(cross: np.ndarray, hypotheses: int = 1) -> HoverUnknowns:
+    return HoverUnknowns(
+        scale=1.008,
+        wind_ne_mps=np.array([-0.1, 0.5]),
+        covariance=np.diag([0.015**2, 2.0**2, 2.0**2]),
+        position_cross=cross,
+        hypotheses=hypotheses,
+    )
+
+
+def test_a_range_unknown_only_through_thrust_scale_and_wind_is_learning() -> None:
+    # north std 1.0 m: 0.6 m from a thrust scale of std 0.015 (40 m per unit of scale), 0.78 m
+    # from a north wind of std 2 m/s (0.39 s), 0.1 m of its own
+    cross = np.array([[40.0 * 0.015**2, 0.39 * 4.0, 0.0], [0.0, 0.0, 0.0]])
+    horizontal = np.diag([0.6**2 + 0.78**2 + 0.1**2, 0.04])
+    status, reason = _status(horizontal, _unknowns(cross))
+    assert status == LEARNING
+    assert "thrust scale 1.008 +- 0.015, wind (-0.1, 0.5) +- 2.0 m/s" in reason
+    # the same spread unrelated to them: the pull is too weak
+    assert _status(horizontal, _unknowns(np.zeros((2, 3))))[0] == WEAK_PULL
     assert _status(horizontal, None)[0] == WEAK_PULL
-    # while the bank still runs several hypotheses, their spread is the thrust scale's
-    bank = ThrustScaleKnowledge(1.04, 0.05**2, np.zeros(2), hypotheses=4)
-    status, reason = _status(horizontal, bank)
-    assert status == THRUST_SCALE and "4 hypotheses" in reason
-    assert _status(np.diag([0.04, 0.04]), bank) == (OK, "")
+    # the thrust scale alone does not explain enough: weak_pull
+    scale_only = cross.copy()
+    scale_only[0, 1] = 0.0
+    assert _status(horizontal, _unknowns(scale_only))[0] == WEAK_PULL
+    # while the bank still runs several thrust hypotheses, their spread is the thrust scale's
+    status, reason = _status(horizontal, _unknowns(np.zeros((2, 3)), hypotheses=4))
+    assert status == LEARNING and "4 thrust hypotheses" in reason
+    assert _status(np.diag([0.04, 0.04]), _unknowns(cross)) == (OK, "")

@@ -17,7 +17,7 @@ from rich.console import Console
 from tether_companion.emulator.autopilot import FlightController
 from tether_companion.emulator.config import load_emulator_scenario
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
-from tether_companion.service.health import THRUST_SCALE
+from tether_companion.service.health import LEARNING
 from tether_companion.service.status import render
 
 pytestmark = pytest.mark.integration
@@ -50,10 +50,10 @@ def test_start_up_withholds_while_learning_the_thrust_scale_and_says_so() -> Non
     assert not [m for m in sent if m.get_type() == "VISION_POSITION_ESTIMATE"]
     assert published_errors(lockstep)["time_s"].size == 0
     texts = [m.text for m in sent if m.get_type() == "STATUSTEXT"]
-    assert any("learning thrust scale" in text for text in texts), texts
-    assert session.publisher.health == THRUST_SCALE
+    assert any("learning thrust & wind" in text for text in texts), texts
+    assert session.publisher.health == LEARNING
     view = io.StringIO()
     Console(file=view, width=200).print(render(lockstep.service))
-    assert "thrust scale not learned yet" in view.getvalue()
+    assert "learning the thrust scale and the wind" in view.getvalue()
     last = session.last_estimate
     assert last is not None and np.all(np.isfinite(last.position_ned_m))

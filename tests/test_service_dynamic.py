@@ -24,11 +24,11 @@ from tether_companion.service.emulator_process import EmulatorProcess
 from tether_companion.service.health import (
     CONVERGING,
     DIVERGED,
+    LEARNING,
     MOTORS_IDLE,
     OK,
     SHORT_CABLE,
     SLACK,
-    THRUST_SCALE,
     WEAK_PULL,
     dynamic_health,
 )
@@ -71,8 +71,8 @@ STATUS_CASES = [
     (output.OK, FAR, True, SHORT_CABLE),
     (output.STALE_INPUTS, FAR, False, None),
     (output.INITIALISING, FAR, False, CONVERGING),
-    (output.THRUST_SCALE, FAR, False, THRUST_SCALE),
-    (output.THRUST_SCALE, NEAR, False, SHORT_CABLE),
+    (output.LEARNING, FAR, False, LEARNING),
+    (output.LEARNING, NEAR, False, SHORT_CABLE),
     (output.WEAK_PULL, FAR, False, WEAK_PULL),
     (output.WEAK_PULL, NEAR, False, SHORT_CABLE),
     (output.SLACK, FAR, False, SLACK),
@@ -187,7 +187,7 @@ DYNAMIC_OVERRIDES = {
 def test_dynamic_filter_over_udp_on_the_paper_circle(tmp_path) -> None:
     """The emulator (its own process, real time) flies the paper's circle (4 N) for 30 s;
     the service runs the dynamic filter. It withholds while the thrust scale is not yet
-    learned (``thrust_scale``, named in STATUSTEXT), then publishes VISION_POSITION_ESTIMATE,
+    learned (``learning``, named in STATUSTEXT), then publishes VISION_POSITION_ESTIMATE,
     ODOMETRY with velocity and VISION_SPEED_ESTIMATE, each with its covariance, all scored by
     the emulator against its truth. Measured (seed 1, filter of adc8176): horizontal RMSE
     0.100 m, velocity 0.033 m/s 3-D, position NEES mean 0.79, none beyond 3 sigma.
@@ -202,7 +202,7 @@ def test_dynamic_filter_over_udp_on_the_paper_circle(tmp_path) -> None:
     print(_score_line(score))  # the numbers the docs quote (pytest -s)
     publisher = service.session.publisher
     assert isinstance(service.session.estimator, DynamicTetherEstimator)
-    assert publisher.counters.by_health[THRUST_SCALE] > 0  # withheld before it could know
+    assert publisher.counters.by_health[LEARNING] > 0  # withheld before it could know
     assert service.state.sent_by_type.get("STATUSTEXT", 0) >= 2  # the health changes said
     status = io.StringIO()
     Console(file=status, width=140).print(render(service))

@@ -37,6 +37,22 @@ from tether_companion.service.systemd import SystemdNotifier
 
 pytestmark = [pytest.mark.integration, pytest.mark.sitl]
 
+HOLD_WITHHELD = (
+    "the default dynamic filter withholds SITL's steady hovers (measured by replaying the "
+    "flight's .tlog, docs/ardupilot.md): at the taut hold (7.2 m out, 12-22 N) the thrust scale "
+    "and the wind trade against the cable's pull and the horizontal std grows 0.6 -> 1.3 m "
+    "(0.22-0.28 m were they known); above the anchor there is no horizontal pull. With "
+    "on_unhealthy inflate EKF3 gets our position at 100 m^2 and drifts 0.9-1.5 m from the hold"
+)
+"""Why the flights' 0.3 m hold fails with the default filter (strict: passes once fixed)."""
+KINDS = [
+    pytest.param("four_state", id="four_state"),
+    pytest.param(
+        "dynamic", id="dynamic", marks=pytest.mark.xfail(strict=True, reason=HOLD_WITHHELD)
+    ),
+]
+"""The paper's filter, which holds these flights, and the service's default."""
+
 
 @pytest.fixture
 def sitl_available() -> None:
@@ -192,7 +208,8 @@ def test_a_binary_that_dies_at_start_fails_with_its_output(tmp_path, monkeypatch
 
 @pytest.mark.slow
 @pytest.mark.timeout(900)
-def test_gps_to_external_navigation_switch_at_a_taut_hover(sitl_available, tmp_path) -> None:
+@pytest.mark.parametrize("kind", KINDS)
+def test_gps_to_external_navigation_switch_at_a_taut_hover(sitl_available, tmp_path, kind) -> None:
     """Issue 14's flight: take off on GPS, fly out until SITL's tether is taut, switch EKF3 to
     our position (source set 2), hold 60 s, fly a 1 m/s circle about the anchor, land.
 
@@ -203,7 +220,10 @@ def test_gps_to_external_navigation_switch_at_a_taut_hover(sitl_available, tmp_p
     """
     from tether_companion.ardupilot_sitl.flights import FlightOptions, gps_to_external_nav
 
-    result = gps_to_external_nav(FlightOptions(workdir=tmp_path), log=print)
+    overrides = {"estimator": {"kind": kind}}
+    result = gps_to_external_nav(
+        FlightOptions(workdir=tmp_path, companion_overrides=overrides), log=print
+    )
     for phase in result.phases:
         print(phase)
     assert result.completed, result.stopped_at
@@ -221,7 +241,8 @@ def test_gps_to_external_navigation_switch_at_a_taut_hover(sitl_available, tmp_p
 
 @pytest.mark.slow
 @pytest.mark.timeout(900)
-def test_gps_less_flight_from_the_ground_up(sitl_available, tmp_path) -> None:
+@pytest.mark.parametrize("kind", KINDS)
+def test_gps_less_flight_from_the_ground_up(sitl_available, tmp_path, kind) -> None:
     """GPS1_TYPE 0: arm, take off above the anchor until SITL's line is taut, hold 60 s there
     and land, EKF3 on our position alone. Bounds: no failsafe, EKF3 never without a horizontal
     position, the hold within 0.3 m of the point above the anchor with test ratio < 1, and it
@@ -230,7 +251,8 @@ def test_gps_less_flight_from_the_ground_up(sitl_available, tmp_path) -> None:
     About 3 minutes at speedup 1."""
     from tether_companion.ardupilot_sitl.flights import FlightOptions, gps_less
 
-    result = gps_less(FlightOptions(workdir=tmp_path), log=print)
+    overrides = {"estimator": {"kind": kind}}
+    result = gps_less(FlightOptions(workdir=tmp_path, companion_overrides=overrides), log=print)
     for phase in result.phases:
         print(phase)
     assert result.completed, result.stopped_at

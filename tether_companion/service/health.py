@@ -12,7 +12,7 @@ filter status   health
 ==============  ==================================================================
 ok              ``ok`` (still subject to the variance bound of :func:`assess_health`)
 initialising    ``converging``
-thrust_scale    ``thrust_scale``, or ``short_cable`` closer than ``short_cable_m``
+learning        ``learning``, or ``short_cable`` closer than ``short_cable_m``
 weak_pull       ``weak_pull``, or ``short_cable`` closer than ``short_cable_m``
 slack           ``slack``, or ``short_cable`` closer than ``short_cable_m``
 on_ground       ``motors_idle``
@@ -52,11 +52,11 @@ STALE_PWM = "stale_pwm"
 STALE_TENSION = "stale_tension"
 WEAK_PULL = "weak_pull"
 SHORT_CABLE = "short_cable"
-THRUST_SCALE = "thrust_scale"
+LEARNING = "learning"
 HEALTH_STATES = (
     OK,
     CONVERGING,
-    THRUST_SCALE,
+    LEARNING,
     DIVERGED,
     SLACK,
     STALE,
@@ -75,7 +75,7 @@ HEALTH_STATES = (
 _HEALTH_TEXT = {
     OK: "position OK",
     CONVERGING: "converging, position withheld",
-    THRUST_SCALE: "learning thrust scale, position withheld",
+    LEARNING: "learning thrust & wind, position withheld",
     DIVERGED: "estimate diverged",
     SLACK: "tether slack, position unobservable",
     STALE: "inputs stale, no estimate",
@@ -187,7 +187,7 @@ def dynamic_health(
 
 
 _DYNAMIC_WITHHELD = {
-    dynamic_output.THRUST_SCALE: THRUST_SCALE,
+    dynamic_output.LEARNING: LEARNING,
     dynamic_output.WEAK_PULL: WEAK_PULL,
     dynamic_output.SLACK: SLACK,
 }

@@ -50,7 +50,7 @@ from tether_companion.estimation.dynamic.initialise import Initialiser
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.dynamic.models import UNDEFINED, ModelConstants
 from tether_companion.estimation.dynamic.observability import (
-    ThrustScaleKnowledge,
+    HoverUnknowns,
     assess,
     min_horizontal_pull_n,
 )
@@ -72,6 +72,8 @@ UNKNOWN_VARIANCE = 1e6
 """Variance reported for every component while there is no state [SI units^2]."""
 NOMINAL_IMU_STEP_S = 0.005
 """IMU period the inertial formulation's per-sample noise is converted with [s]."""
+_HOVER_UNKNOWNS = [state.SCALE, state.WIND.start, state.WIND.start + 1]
+"""State indices of the thrust scale and the wind (what a steady hover does not observe)."""
 
 
 class DynamicTetherEstimator(InputFeed):
@@ -513,12 +515,13 @@ class DynamicTetherEstimator(InputFeed):
                 float(x[state.WIND][0]),
                 float(x[state.WIND][1]),
             ),
-            thrust_scale=None
+            hover_unknowns=None
             if bank is None
-            else ThrustScaleKnowledge(
+            else HoverUnknowns(
                 float(x[state.SCALE]),
-                float(p[state.SCALE, state.SCALE]),
-                p[:2, state.SCALE],
+                x[state.WIND].copy(),
+                p[_HOVER_UNKNOWNS][:, _HOVER_UNKNOWNS],
+                p[:2][:, _HOVER_UNKNOWNS],
                 len(bank.filters),
             ),
         )

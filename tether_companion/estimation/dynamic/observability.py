@@ -2,12 +2,12 @@
 
 Checked in this order (the first that applies wins): restarted this tick, not initialised,
 on the ground, inputs stale, cable slack, the horizontal pull no larger than the wind's drag
-could be, horizontal position standard deviation beyond the bound: ``thrust_scale`` when the
-part of the horizontal covariance the thrust scale does not explain is within the bound (the
-position waits only for the thrust scale: after the start, and in a steady hover where it
-trades against the cable's vertical pull), otherwise ``weak_pull`` (low tension, short cable,
-wind). The covariance itself grows in those cases (nothing pins the position); the status
-names the cause.
+could be, horizontal position standard deviation beyond the bound: ``learning`` when the part of the
+horizontal covariance the thrust scale and the wind do not explain is within the bound (the
+position waits only for them: after the start, and in a steady hover, where the thrust scale
+trades against the cable's vertical pull and the wind's drag against its horizontal pull),
+otherwise ``weak_pull`` (low tension, short cable). The covariance itself grows in those cases
+(nothing pins the position); the status names the cause.
 
 The pull-against-drag rule does not trust the filter's own covariance: the bearing of the
 drone from the anchor is the direction of the cable's horizontal pull, which the filter reads
@@ -28,12 +28,12 @@ from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic.output import (
     INITIALISING,
+    LEARNING,
     OK,
     ON_GROUND,
     RESET,
     SLACK,
     STALE_INPUTS,
-    THRUST_SCALE,
     WEAK_PULL,
 )
 
@@ -73,41 +73,55 @@ class InnovationExcess:
 
 
 @dataclass(frozen=True)
-class ThrustScaleKnowledge:
-    """What the filter knows of the thrust scale at one tick.
+class HoverUnknowns:
+    """What the filter knows at one tick of the two things a steady hover does not tell from
+    the cable's pull: the thrust scale (it trades against the cable's vertical pull) and the
+    wind (its drag trades against the horizontal pull).
 
     Attributes
     ----------
-    scale, variance
-        The estimate [1] and its variance [1].
+    scale
+        The thrust scale's estimate [1].
+    wind_ne_mps
+        The wind's estimate, north and east, shape (2,) [m/s].
+    covariance
+        The covariance of (scale, wind north, wind east), shape (3, 3).
     position_cross
-        Its covariance with the horizontal position, shape (2,) [m].
+        Their covariance with the horizontal position, shape (2, 3) [m, m^2/s].
     hypotheses
         Members of the thrust-scale bank still running (1: decided or collapsed).
     """
 
     scale: float
-    variance: float
+    wind_ne_mps: FloatArray
+    covariance: FloatArray
     position_cross: FloatArray
     hypotheses: int
 
     def explains(self, horizontal_covariance_m2: FloatArray, max_std_m: float) -> bool:
-        """Whether the horizontal position waits only for the thrust scale: the bank is still
-        choosing between hypotheses (their spread is the thrust scale's), or the horizontal
-        covariance without the part the thrust scale explains (its Schur complement) has its
-        larger standard deviation within ``max_std_m`` [m]."""
+        """Whether the horizontal position waits only for these: the bank is still choosing
+        between thrust-scale hypotheses (their spread is the thrust scale's), or the horizontal
+        covariance given the thrust scale and the wind (its Schur complement) has its larger
+        standard deviation within ``max_std_m`` [m]."""
         if self.hypotheses > 1:
             return True
-        if not self.variance > 0.0:
+        try:
+            gain = np.linalg.solve(self.covariance, self.position_cross.T)
+        except np.linalg.LinAlgError:
             return False
-        cross = self.position_cross
-        known = horizontal_covariance_m2 - np.outer(cross, cross) / self.variance
+        known = horizontal_covariance_m2 - self.position_cross @ gain
         return _largest_std(known) <= max_std_m
 
     def describe(self) -> str:
-        """``1.041 +- 0.025`` and, while the bank runs, how many hypotheses are left."""
-        text = f"{self.scale:.3f} +- {math.sqrt(max(self.variance, 0.0)):.3f}"
-        return text + (f", {self.hypotheses} hypotheses" if self.hypotheses > 1 else "")
+        """``thrust scale 1.041 +- 0.025, wind (-0.1, 0.5) +- 2.2 m/s`` and, while the bank
+        runs, how many hypotheses are left."""
+        sd = np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
+        wind = ", ".join(f"{w:.1f}" for w in self.wind_ne_mps)
+        text = (
+            f"thrust scale {self.scale:.3f} +- {sd[0]:.3f}, wind ({wind}) +- "
+            f"{max(sd[1], sd[2]):.1f} m/s"
+        )
+        return text + (f", {self.hypotheses} thrust hypotheses" if self.hypotheses > 1 else "")
 
 
 def min_horizontal_pull_n(
@@ -135,7 +149,7 @@ def assess(
     max_horizontal_std_m: float,
     horizontal_pull_n: float = math.inf,
     min_horizontal_pull_n: float = 0.0,
-    thrust_scale: ThrustScaleKnowledge | None = None,
+    hover_unknowns: HoverUnknowns | None = None,
 ) -> tuple[str, str]:
     """``(status, reason)`` of one tick (reason empty when ``ok``).
 
@@ -156,9 +170,9 @@ def assess(
     horizontal_pull_n, min_horizontal_pull_n
         The cable's estimated horizontal pull at the drone and the least that fixes the
         bearing (a multiple of the wind drag's prior standard deviation) [N].
-    thrust_scale
-        What the filter knows of the thrust scale (None: not told; then never
-        ``thrust_scale``).
+    hover_unknowns
+        What the filter knows of the thrust scale and the wind (None: not told; then never
+        ``learning``).
     """
     if reset_reason is not None:
         return RESET, reset_reason
@@ -179,11 +193,11 @@ def assess(
     std = _largest_std(horizontal)
     if std <= max_horizontal_std_m:
         return OK, ""
-    if thrust_scale is not None and thrust_scale.explains(horizontal, max_horizontal_std_m):
-        return THRUST_SCALE, (
-            f"thrust scale not learned yet ({thrust_scale.describe()}): horizontal std"
-            f" {std:.2f} m > {max_horizontal_std_m:g} m; motion (a climb, a turn) or a load"
-            " cell fixes it"
+    if hover_unknowns is not None and hover_unknowns.explains(horizontal, max_horizontal_std_m):
+        return LEARNING, (
+            f"learning the thrust scale and the wind ({hover_unknowns.describe()}): horizontal"
+            f" std {std:.2f} m > {max_horizontal_std_m:g} m; a steady hover does not tell"
+            " them from the cable's pull, motion (a climb, a turn) or a load cell does"
         )
     return WEAK_PULL, (
         f"horizontal std {std:.2f} m > {max_horizontal_std_m:g} m: pull too weak "

@@ -35,9 +35,10 @@ INITIALISING = "initialising"
 """No state yet: the first second of data has not given a cable direction and a height."""
 WEAK_PULL = "weak_pull"
 """The horizontal pull is too weak for the horizontal position (covariance beyond the bound)."""
-THRUST_SCALE = "thrust_scale"
-"""The horizontal position is beyond the bound only for the thrust scale not yet learned (the
-cable's vertical pull trades against it until motion or a load cell separates them)."""
+LEARNING = "learning"
+"""The horizontal position is beyond the bound only for the thrust scale and the wind not yet
+learned (the cable's pull trades against them in a steady hover, until motion or a load cell
+separates them)."""
 SLACK = "slack"
 """The cable tension at the drone is below the slack threshold: the direction says nothing."""
 ON_GROUND = "on_ground"
@@ -47,7 +48,7 @@ STALE_INPUTS = "stale_inputs"
 RESET = "reset"
 """The filter diverged (non-finite or inconsistent state) or had an IMU gap and restarted."""
 
-STATUSES = (OK, INITIALISING, THRUST_SCALE, WEAK_PULL, SLACK, ON_GROUND, STALE_INPUTS, RESET)
+STATUSES = (OK, INITIALISING, LEARNING, WEAK_PULL, SLACK, ON_GROUND, STALE_INPUTS, RESET)
 """Every status, best first."""
 
 POSITION_BLOCK = slice(0, 3)

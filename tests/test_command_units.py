@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from paper_filter import with_paper_filter
 
 from tether_companion.config import ConfigError, from_mapping
 from tether_companion.errors import InputError
@@ -76,11 +77,13 @@ def test_crazyflie_profile_replays_a_log_of_raw_commands(tmp_path: Path) -> None
     assert writer.current_path is not None
     config = load_service_config(  # a 27 g drone's tether pulls ~0.1 N: slack well below that
         None,
-        {
-            "recording": {"enabled": False},
-            "vehicle": "crazyflie",
-            "publish": {"slack_tension_n": 0.02},
-        },
+        with_paper_filter(
+            {
+                "recording": {"enabled": False},
+                "vehicle": "crazyflie",
+                "publish": {"slack_tension_n": 0.02},
+            }
+        ),
     )
     out = io.StringIO()
     summary = replay_log(writer.current_path, config, vehicle, out)

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+from paper_filter import with_paper_filter
 from pymavlink import mavutil
 
 from tether_companion.config import ConfigError
@@ -186,7 +187,9 @@ def test_catenary_beside_the_ekf_is_sent_as_named_values_only() -> None:
     VISION_POSITION_ESTIMATEs still carry the EKF's position."""
     length = float(np.linalg.norm(POSITION)) + 0.01
     catenary = {"weight_per_length_n_per_m": 0.01, "default_length_m": length}
-    session = _session({"position": {"catenary_beside": True}, "catenary": catenary})
+    session = _session(
+        with_paper_filter({"position": {"catenary_beside": True}, "catenary": catenary})
+    )
     published: list = []
     sent = _fly(session, 20.0, published=published)
     values = _named(m for t, m in sent if t >= 25.0)
@@ -316,7 +319,7 @@ def test_a_fresh_rangefinder_wins_then_the_fc_position_takes_over_when_it_goes_s
 def test_the_ekf_and_the_tension_filter_share_one_alignment_stage() -> None:
     """Each attitude and PWM sample is converted once: both estimators use the session's
     aligner (with the configured thrust dynamics), and a restart gives both a new one."""
-    session = _session({"thrust_dynamics": "motor_lag"})
+    session = _session(with_paper_filter({"thrust_dynamics": "motor_lag"}))
     first = session.aligner
     assert isinstance(first.thrust_input, MotorLagThrustInput)
     assert session.estimator.aligner is first

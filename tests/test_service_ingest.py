@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from paper_filter import with_paper_filter
 
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
 from tether_companion.service.clock import FcClock
@@ -23,7 +24,8 @@ def config():
     """Ingest's rules message by message: no reorder buffer (tests/test_service_trust.py
     tests it)."""
     return load_service_config(
-        None, {"recording": {"enabled": False}, "inputs": {"reorder_window_s": 0.0}}
+        None,
+        with_paper_filter({"recording": {"enabled": False}, "inputs": {"reorder_window_s": 0.0}}),
     )
 
 

@@ -9,6 +9,7 @@ import socket
 
 import numpy as np
 import pytest
+from paper_filter import with_paper_filter
 from rich.console import Console
 
 from tether_companion.mavlink.endpoints import open_link, parse_endpoint
@@ -43,7 +44,7 @@ def _config(endpoint: str, tmp_path, **sections):
     }
     for key, value in sections.items():
         overrides.setdefault(key, {}).update(value)
-    return load_service_config(None, overrides)
+    return load_service_config(None, with_paper_filter(overrides))
 
 
 def test_service_talks_to_a_flight_controller_over_udp(tmp_path) -> None:

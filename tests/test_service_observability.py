@@ -10,6 +10,7 @@ import dataclasses
 import numpy as np
 import pytest
 from lockstep_service import LockstepService, published_errors
+from paper_filter import PAPER_FILTER
 
 from tether_companion.emulator.autopilot import FlightController
 from tether_companion.emulator.config import FaultConfig, Outage, Window, load_emulator_scenario
@@ -20,13 +21,15 @@ pytestmark = pytest.mark.integration
 
 
 def _fly(duration_s: float, faults: FaultConfig, seed: int | None = None) -> LockstepService:
-    """The shipped service configuration on the paper's circle (4 N) with ``faults``."""
+    """The shipped service configuration with the paper's 4-state EKF (whose covariance growth
+    these tests check: ``estimation/observability.py``) on the paper's circle (4 N) with
+    ``faults``."""
     scenario, emulator_config = load_emulator_scenario("paper-circle")
     scenario = dataclasses.replace(scenario, duration_s=duration_s)
     if seed is not None:
         scenario = dataclasses.replace(scenario, seed=seed)
     controller = FlightController(scenario, dataclasses.replace(emulator_config, faults=faults))
-    lockstep = LockstepService(controller, {}, record=True)
+    lockstep = LockstepService(controller, {"estimator": PAPER_FILTER}, record=True)
     while controller.time_s < duration_s:
         lockstep.advance()
         lockstep.serve()

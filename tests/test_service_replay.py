@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from paper_filter import with_paper_filter
 
 from tether_companion.cli import main
 from tether_companion.errors import InputError
@@ -27,7 +28,7 @@ LIMITS = RecordingLimits(
 
 @pytest.fixture(scope="module")
 def config():
-    return load_service_config(None, {"recording": {"enabled": False}})
+    return load_service_config(None, with_paper_filter({"recording": {"enabled": False}}))
 
 
 def _write_tlog(directory: Path, config, seconds: float, skip: tuple[str, ...] = ()) -> Path:
@@ -195,7 +196,9 @@ def test_replay_says_why_nothing_was_published(tmp_path: Path, config, capsys) -
     # 800 IMU ticks, all processed (in order: the reorder buffer holds nothing)
     assert summary.estimates == 800 and summary.not_ok.get("no_range", 0) > 0
     out = tmp_path / "estimates.csv"
-    assert main(["replay", str(path), "--out", str(out)]) == 0
+    paper = tmp_path / "paper.yaml"
+    paper.write_text("estimator: {kind: four_state}\n", encoding="utf-8")
+    assert main(["replay", str(path), "--out", str(out), "--config", str(paper)]) == 0
     err = capsys.readouterr().err
     assert "no_range" in err and "no rangefinder height" in err, err
 
@@ -209,8 +212,12 @@ def test_summary_without_any_imu_tick_says_so() -> None:
 @pytest.mark.parametrize(
     "overrides",
     [
-        {},
-        {"publish": {"on_unhealthy": "inflate", "odometry": True}, "tension_mode": {}},
+        {"estimator": {"kind": "four_state"}},
+        {
+            "estimator": {"kind": "four_state"},
+            "publish": {"on_unhealthy": "inflate", "odometry": True},
+            "tension_mode": {},
+        },
         {"estimator": {"kind": "three_state"}, "tension": {"source": "config"}},
         {
             "position": {"source": "catenary"},
@@ -221,7 +228,7 @@ def test_summary_without_any_imu_tick_says_so() -> None:
             },
         },
     ],
-    ids=["default", "inflate-odometry", "three-state", "catenary"],
+    ids=["four-state", "inflate-odometry", "three-state", "catenary"],
 )
 def test_a_session_without_messages_publishes_the_same(tmp_path: Path, overrides) -> None:
     """Replay's session builds no messages (nobody reads them) and skips the tension modes;

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from paper_filter import with_paper_filter
 
 from tether_companion.mavlink.endpoints import open_link, parse_endpoint
 from tether_companion.service import recording
@@ -42,15 +43,17 @@ def test_a_slow_disk_does_not_delay_the_estimates(tmp_path, monkeypatch) -> None
         )
         config = load_service_config(
             None,
-            {
-                "link": {"connect": f"udpout:127.0.0.1:{fc_link.local_address[1]}"},
-                "recording": {
-                    "directory": str(tmp_path / "rec"),
-                    "max_file_mb": 0.1,
-                    "max_total_mb": 1.0,
-                    "flush_interval_s": 0.5,
-                },
-            },
+            with_paper_filter(
+                {
+                    "link": {"connect": f"udpout:127.0.0.1:{fc_link.local_address[1]}"},
+                    "recording": {
+                        "directory": str(tmp_path / "rec"),
+                        "max_file_mb": 0.1,
+                        "max_total_mb": 1.0,
+                        "flush_interval_s": 0.5,
+                    },
+                }
+            ),
         )
         service = CompanionService(config, load_vehicle_for(config), notifier=SystemdNotifier({}))
         fc = FakeFlightController(

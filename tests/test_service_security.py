@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 import pytest
+from paper_filter import with_paper_filter
 from pymavlink import mavutil
 
 from tether_companion.cli import main
@@ -138,11 +139,13 @@ def test_signing_required_live_spoofers_change_nothing(tmp_path) -> None:
     async def scenario():
         config = load_service_config(
             None,
-            {
-                "link": {"connect": "udpin:127.0.0.1:0", "fc_system_id": 1},
-                "recording": {"enabled": False},
-                "security": {"signing": "required", "key_file": str(_key_file(tmp_path))},
-            },
+            with_paper_filter(
+                {
+                    "link": {"connect": "udpin:127.0.0.1:0", "fc_system_id": 1},
+                    "recording": {"enabled": False},
+                    "security": {"signing": "required", "key_file": str(_key_file(tmp_path))},
+                }
+            ),
         )
         service = CompanionService(config, load_vehicle_for(config), notifier=SystemdNotifier({}))
         stop = asyncio.Event()

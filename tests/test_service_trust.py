@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from paper_filter import with_paper_filter
 
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
 from tether_companion.service.config import load_service_config, load_vehicle_for
@@ -84,7 +85,7 @@ def test_without_system_time_a_silent_old_clock_means_a_reboot_after_two_seconds
 
 
 def _stream(seconds: float, start_s: float, seed: int = 5):
-    config = load_service_config(None, {"recording": {"enabled": False}})
+    config = load_service_config(None, with_paper_filter({"recording": {"enabled": False}}))
     streams = HoverStreams(load_vehicle_for(config), POSITION, 4.0, rng=np.random.default_rng(seed))
     fc = FrameEncoder(1, 1)
     for k in range(int(seconds * 200)):
@@ -101,7 +102,7 @@ def test_spoofed_bombs_and_reboots_without_signing_do_not_interrupt_positions() 
     """Once a second a stranger's datagram claims to be the flight controller: a RAW_IMU
     stamped 2^63 us, a SYSTEM_TIME of a fresh boot with samples of that boot, a stream stamped
     a second in the past. No restart, no publication gap over 0.1 s of FC time."""
-    config = load_service_config(None, {"recording": {"enabled": False}})
+    config = load_service_config(None, with_paper_filter({"recording": {"enabled": False}}))
     session = EstimationSession(config, load_vehicle_for(config))
     parser = FrameParser()
     spoof = FrameEncoder(1, 1)
@@ -133,7 +134,7 @@ def test_spoofed_bombs_and_reboots_without_signing_do_not_interrupt_positions() 
 
 
 def test_a_real_reboot_restarts_the_estimator_once_system_time_says_so() -> None:
-    config = load_service_config(None, {"recording": {"enabled": False}})
+    config = load_service_config(None, with_paper_filter({"recording": {"enabled": False}}))
     session = EstimationSession(config, load_vehicle_for(config))
     parser = FrameParser()
     fc = FrameEncoder(1, 1)

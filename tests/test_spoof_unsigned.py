@@ -11,6 +11,7 @@ import socket
 
 import numpy as np
 import pytest
+from paper_filter import with_paper_filter
 
 from tether_companion.mavlink.endpoints import open_link, parse_endpoint
 from tether_companion.mavlink.framing import FrameEncoder, dialect
@@ -34,10 +35,12 @@ def test_unsigned_spoofers_on_other_ports_interrupt_nothing() -> None:
     async def scenario():
         config = load_service_config(
             None,
-            {
-                "link": {"connect": "udpin:127.0.0.1:0", "fc_system_id": 1},
-                "recording": {"enabled": False},
-            },
+            with_paper_filter(
+                {
+                    "link": {"connect": "udpin:127.0.0.1:0", "fc_system_id": 1},
+                    "recording": {"enabled": False},
+                }
+            ),
         )
         service = CompanionService(config, load_vehicle_for(config), notifier=SystemdNotifier({}))
         stop = asyncio.Event()

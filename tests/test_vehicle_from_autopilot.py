@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+from paper_filter import with_paper_filter
 from test_service_emulator import _fly as fly_service
 
 from tether_companion.config import ConfigError
@@ -79,7 +80,7 @@ def test_service_reads_the_vehicle_from_the_emulator_and_estimates(tmp_path) -> 
         "autopilot_vehicle": {"mass_kg": MASS_KG},
         "recording": {"enabled": False},
     }
-    service = asyncio.run(fly_service(emulator, overrides))
+    service = asyncio.run(fly_service(emulator, with_paper_filter(overrides)))
     score = emulator.score()
     truth = load_vehicle("default-quad").thrust_curve
     assert service.vehicle.frame == "quad-x"

@@ -12,6 +12,7 @@ import sys
 
 import pytest
 import yaml
+from paper_filter import PAPER_FILTER, with_paper_filter
 from test_service_emulator import _fly as fly_service
 
 from tether_companion.mavlink.framing import FrameParser
@@ -41,7 +42,7 @@ def test_service_reads_px4_parameters_over_udp_and_estimates(tmp_path) -> None:
         "autopilot_vehicle": {"mass_kg": MASS_KG},
         "recording": {"enabled": False},
     }
-    service = asyncio.run(fly_service(emulator, overrides))
+    service = asyncio.run(fly_service(emulator, with_paper_filter(overrides)))
     score = emulator.score()
     truth = load_vehicle("default-quad").thrust_curve
     assert service.vehicle.name == "from-px4-4-rotors", service.state.last_error
@@ -64,6 +65,7 @@ def _config(tmp_path, **vehicle_settings) -> str:
         "vehicle": "from_autopilot",
         "autopilot_vehicle": {"mass_kg": MASS_KG, "attempts": 1, **vehicle_settings},
         "recording": {"enabled": True, "directory": str(tmp_path / "rec")},
+        "estimator": PAPER_FILTER,  # the hover withholds the default's position
     }
     path.write_text(yaml.safe_dump(config), encoding="utf-8")
     return str(path)

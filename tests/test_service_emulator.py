@@ -178,10 +178,11 @@ def test_closed_loop_hover_on_received_estimates_holds_within_half_a_metre() -> 
 
 def test_demo_command_flies_and_prints_the_emulator_score(capsys) -> None:
     """The demo with its defaults: the dynamic filter learns the thrust scale and the wind for
-    ~9 s of the circle (in lock-step), then publishes."""
+    the first ~10 s of the circle (first position at 9.8 s of FC time in a 1x run), then
+    publishes. Real time: at 1.5x on the loaded machine it published nothing in 15 s."""
     from tether_companion.cli import main
 
-    assert main(["demo", "--duration", "15", "--speed", "1.5", "--no-status"]) == 0
+    assert main(["demo", "--duration", "20", "--no-status"]) == 0
     out = capsys.readouterr().out
     assert "accuracy scored by the emulator" in out
     assert "VISION_POSITION_ESTIMATE" in out and "RMSE north" in out

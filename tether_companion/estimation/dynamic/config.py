@@ -123,6 +123,14 @@ class DynamicFilterConfig:
     max_horizontal_std_m: float = spec(
         0.5, exclusive_minimum=0.0, doc="horizontal std beyond which the pull is too weak [m]"
     )
+    unmodelled_force_std_n: float = spec(
+        0.2,
+        minimum=0.0,
+        doc="horizontal force on the drone the model leaves out and the filter cannot average"
+        " away (gusts' and body drag correlated over seconds): the turn of the cable it"
+        " causes, |p| sigma / T across the cable, is added to the published position"
+        " covariance [N]",
+    )
     min_pull_over_wind_drag: float = spec(
         4.0,
         minimum=0.0,

@@ -53,6 +53,7 @@ from tether_companion.estimation.dynamic.observability import (
     HoverUnknowns,
     assess,
     min_horizontal_pull_n,
+    unmodelled_position_covariance,
 )
 from tether_companion.estimation.dynamic.output import DynamicHealth, NavigationEstimate
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
@@ -499,6 +500,15 @@ class DynamicTetherEstimator(InputFeed):
                     tension_var = float(jac_row @ (p @ jac_row))
                 except UNDEFINED:  # at the anchor: the chord term alone
                     pass
+        published_covariance = p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy()
+        published_covariance[2, 2] += self.rangefinder.excess.variance
+        if bank is not None:
+            published_covariance[:3, :3] += unmodelled_position_covariance(
+                x[state.POSITION],
+                tension,
+                self.dynamic.unmodelled_force_std_n,
+                self.dynamic.winch_length_noise_std_m if self.health.winch_fused else 0.0,
+            )
         status, reason = assess(
             initialised_reason=None if bank is not None else self._initialiser.reason,
             reset_reason=reset_reason,
@@ -506,7 +516,7 @@ class DynamicTetherEstimator(InputFeed):
             inputs_stale=stale,
             tension_n=tension,
             slack_tension_n=self.dynamic.slack_tension_n,
-            position_covariance_m2=p[state.POSITION, state.POSITION],
+            position_covariance_m2=published_covariance[:3, :3],
             max_horizontal_std_m=self.dynamic.max_horizontal_std_m,
             horizontal_pull_n=0.0 if bank is None else self._horizontal_pull_n(values),
             min_horizontal_pull_n=min_horizontal_pull_n(
@@ -525,8 +535,6 @@ class DynamicTetherEstimator(InputFeed):
                 len(bank.filters),
             ),
         )
-        published_covariance = p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy()
-        published_covariance[2, 2] += self.rangefinder.excess.variance
         return NavigationEstimate(
             time_s=self._time_s,
             position_ned_m=x[state.POSITION].copy(),

@@ -124,6 +124,50 @@ class HoverUnknowns:
         return text + (f", {self.hypotheses} thrust hypotheses" if self.hypotheses > 1 else "")
 
 
+MIN_TENSION_N = 0.01
+"""Tension [N] below which :func:`unmodelled_position_covariance` takes this instead (the
+cable's direction is then unknown and the variance huge but finite)."""
+
+
+def unmodelled_position_covariance(
+    position_ned_m: FloatArray, tension_n: float, force_std_n: float, length_std_m: float
+) -> FloatArray:
+    """What the filter's own covariance leaves out, as a position covariance (3, 3) [m^2].
+
+    The filter reads the cable's direction as the horizontal force beyond the modelled
+    thrust, drag and bias, and it fuses that every IMU tick as if what it leaves out (gusts'
+    drag, the quadratic body drag, vibration) were white: averaged over the seconds the INS
+    ties together, its covariance shrinks below the error a force correlated over seconds
+    leaves. A horizontal force error ``dF`` (isotropic, std ``force_std_n`` [N]) turns the
+    cable's direction by its component across the cable over the tension ``T``, which moves
+    the drone by ``|p| (I - u u^T) dF / T`` (``u = p / |p|``, the range kept): the variance
+    grows with the range and falls with the pull, as a bearing error does. ``length_std_m``
+    [m] is kept along the cable (the winch length fused at every sample as if its error were
+    white; 0 without a length).
+
+    Parameters
+    ----------
+    position_ned_m
+        Estimated position from the anchor, NED, shape (3,) [m] (not at the anchor).
+    tension_n
+        Estimated tension at the drone [N] (at least :data:`MIN_TENSION_N` is used).
+    force_std_n
+        Standard deviation of the unmodelled horizontal force [N].
+    length_std_m
+        Standard deviation kept along the cable [m].
+    """
+    distance = float(np.linalg.norm(position_ned_m))
+    if distance == 0.0:
+        return np.zeros((3, 3))
+    u = np.asarray(position_ned_m, dtype=float) / distance
+    across = np.eye(3) - np.outer(u, u)
+    horizontal_across = across[:, :2]  # the horizontal force's columns
+    gain = distance * force_std_n / max(tension_n, MIN_TENSION_N)
+    return gain * gain * (horizontal_across @ horizontal_across.T) + length_std_m**2 * np.outer(
+        u, u
+    )
+
+
 def min_horizontal_pull_n(
     pull_per_wind_n_s_per_m: float, wind_std_mps: float, wind_n_mps: float, wind_e_mps: float
 ) -> float:

@@ -49,9 +49,14 @@ from tether_companion.estimation.dynamic.imu_batch import ImuBatch
 from tether_companion.estimation.dynamic.initialise import Initialiser
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.dynamic.models import UNDEFINED, ModelConstants
+from tether_companion.estimation.dynamic.noise import (
+    accel_measurement_std_mps2,
+    process_noise_density,
+)
 from tether_companion.estimation.dynamic.observability import (
     HoverUnknowns,
     assess,
+    horizontal_pull_n,
     min_horizontal_pull_n,
     unmodelled_position_covariance,
 )
@@ -71,8 +76,6 @@ MAX_DISTANCE_M = 1000.0
 """A position farther than this from the anchor [m] is a divergence."""
 UNKNOWN_VARIANCE = 1e6
 """Variance reported for every component while there is no state [SI units^2]."""
-NOMINAL_IMU_STEP_S = 0.005
-"""IMU period the inertial formulation's per-sample noise is converted with [s]."""
 _HOVER_UNKNOWNS = [state.SCALE, state.WIND.start, state.WIND.start + 1]
 """State indices of the thrust scale and the wind (what a steady hover does not observe)."""
 
@@ -129,12 +132,12 @@ class DynamicTetherEstimator(InputFeed):
         self._ticks_since_fusion = 0
         self._batch = ImuBatch() if self._inertial else None
         """The inertial prediction summed over the ticks since the members last stepped."""
-        self._q = self._process_noise()
+        self._q = process_noise_density(dynamic)
         self._q_matrix = np.diag(self._q)
         self._pull_per_wind_n_s_per_m = (
             dynamic.min_pull_over_wind_drag * vehicle.mass_kg * self.constants.drag_per_s
         )
-        self.accel = AccelAid(self._accel_measurement_std(), config.min_cable_length_m)
+        self.accel = AccelAid(accel_measurement_std_mps2(dynamic), config.min_cable_length_m)
         self.rangefinder = RangefinderAid(
             config.altimeter_noise_variance_m2, config.ground_station.anchor_height_m
         )
@@ -151,38 +154,6 @@ class DynamicTetherEstimator(InputFeed):
         self._last_tick_s = math.nan
 
     # ------------------------------------------------------------------ setup
-    def _process_noise(self) -> FloatArray:
-        """The diagonal of the process noise spectral density (13,)."""
-        noise = self.dynamic.noise
-        q = np.zeros(state.N_STATES)
-        q[state.POSITION] = noise.position_m2ps
-        if self._inertial:  # the accelerometer's white noise drives the velocity
-            q[state.VELOCITY] = self.dynamic.accel_noise_std_mps2**2 * NOMINAL_IMU_STEP_S
-        else:
-            q[state.VELOCITY] = noise.acceleration_m2ps3
-        q[state.TENSION] = noise.tension_n2ps
-        q[state.SCALE] = noise.thrust_scale_per_s
-        q[state.BIAS] = noise.accel_bias_m2ps5
-        q[state.WIND] = noise.wind_m2ps3
-        return q
-
-    def _accel_measurement_std(self) -> float:
-        sensor = self.dynamic.accel_noise_std_mps2
-        if not self._inertial:
-            return sensor
-        # the force balance as the measurement carries the unmodelled forces; they are
-        # correlated over about a second, so their white equivalent per fused sample is large
-        interval_s = NOMINAL_IMU_STEP_S * self._ticks_per_fusion
-        unmodelled_sq = self.dynamic.noise.force_residual_m2ps3 / interval_s
-        return math.sqrt(sensor**2 + unmodelled_sq)
-
-    def _horizontal_pull_n(self, x: list[float]) -> float:
-        """The cable's horizontal pull at the drone, ``T_ch |p_ne| / |p|`` [N]."""
-        distance = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
-        if distance == 0.0:
-            return 0.0
-        return x[state.TENSION] * math.hypot(x[0], x[1]) / distance
-
     def _new_initialiser(self) -> Initialiser:
         return Initialiser(
             self.dynamic,
@@ -348,7 +319,7 @@ class DynamicTetherEstimator(InputFeed):
         assert isinstance(aligned, AlignedInputs)
         t, force, rotation, thrust = aligned
         self._initialiser.add_tick(t, force, rotation, thrust)
-        starts = self._hypotheses(t)
+        starts = self._initialiser.hypotheses(t, self.dynamic.initial, self.constants.length_m)
         if not starts:
             return self._estimate(False, False, False)
         c = self.constants
@@ -376,26 +347,6 @@ class DynamicTetherEstimator(InputFeed):
         if self._batch is not None:
             self._batch.clear()
         return self._estimate(False, False, False)
-
-    def _hypotheses(self, t: float) -> list[tuple[FloatArray, FloatArray]]:
-        """Starting states of the thrust-scale hypotheses (empty: not yet, reason kept)."""
-        init = self.dynamic.initial
-        n = init.thrust_scale_hypotheses
-        initialiser = self._initialiser
-        if not initialiser.window_full(t):
-            return []
-        if n == 1:
-            scales, member_std = [init.thrust_scale], init.thrust_scale_std
-        else:
-            spacing = 3.0 * init.thrust_scale_std / (n - 1)
-            scales = [init.thrust_scale + (i - (n - 1) / 2) * spacing for i in range(n)]
-            member_std = 0.5 * spacing
-        length = self.constants.length_m
-        results = [initialiser.solve(t, length, s, member_std) for s in scales]
-        starts = [(r.x, r.p) for r in results if r.x is not None and r.p is not None]
-        if not starts:
-            initialiser.restart(t, results[len(results) // 2].reason)
-        return starts
 
     def _step_batch(self) -> None:
         """Step the members over the IMU ticks summed since they last stepped (inertial)."""
@@ -489,17 +440,8 @@ class DynamicTetherEstimator(InputFeed):
             tension, tension_var = 0.0, UNKNOWN_VARIANCE
         else:
             x, p = self._moments(bank)
-            c = self.constants
             values = x.tolist()
-            tension, tension_var = max(values[state.TENSION], 0.0), float(p[6, 6])
-            if tension > 0.0:  # a chord tension <= 0 is a slack cable: no curve (its
-                # catenary overflowed to 1e98 N on the sagging circle)
-                try:
-                    (tension,), jac = c.models.tension(values, (), c.values())
-                    jac_row = np.array(jac)
-                    tension_var = float(jac_row @ (p @ jac_row))
-                except UNDEFINED:  # at the anchor: the chord term alone
-                    pass
+            tension, tension_var = self.constants.tension_at_drone(values, p)
         published_covariance = p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy()
         published_covariance[2, 2] += self.rangefinder.excess.variance
         if bank is not None:
@@ -518,7 +460,7 @@ class DynamicTetherEstimator(InputFeed):
             slack_tension_n=self.dynamic.slack_tension_n,
             position_covariance_m2=published_covariance[:3, :3],
             max_horizontal_std_m=self.dynamic.max_horizontal_std_m,
-            horizontal_pull_n=0.0 if bank is None else self._horizontal_pull_n(values),
+            horizontal_pull_n=0.0 if bank is None else horizontal_pull_n(values),
             min_horizontal_pull_n=min_horizontal_pull_n(
                 self._pull_per_wind_n_s_per_m,
                 self.dynamic.initial.wind_std_mps,

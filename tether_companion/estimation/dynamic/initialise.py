@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.dynamic import state
-from tether_companion.estimation.dynamic.config import DynamicFilterConfig
+from tether_companion.estimation.dynamic.config import DynamicFilterConfig, DynamicInitial
 
 FloatArray = NDArray[np.float64]
 
@@ -225,6 +225,29 @@ class Initialiser:
             )
         self.reason = ""
         return Initialisation(x, p, "")
+
+    def hypotheses(
+        self, time_s: float, initial: DynamicInitial, length_m: float
+    ) -> list[tuple[FloatArray, FloatArray]]:
+        """Starting ``(state, covariance)`` of the thrust-scale bank's members, spaced over
+        3 standard deviations of the thrust scale's prior, each with half the spacing as its
+        own standard deviation (one member: the prior itself); empty while the window is not
+        full or when no hypothesis places the drone (the reason kept, the window restarted).
+        ``length_m``: the paid-out cable length [m] (nan: unknown)."""
+        if not self.window_full(time_s):
+            return []
+        n = initial.thrust_scale_hypotheses
+        if n == 1:
+            scales, member_std = [initial.thrust_scale], initial.thrust_scale_std
+        else:
+            spacing = 3.0 * initial.thrust_scale_std / (n - 1)
+            scales = [initial.thrust_scale + (i - (n - 1) / 2) * spacing for i in range(n)]
+            member_std = 0.5 * spacing
+        results = [self.solve(time_s, length_m, s, member_std) for s in scales]
+        starts = [(r.x, r.p) for r in results if r.x is not None and r.p is not None]
+        if not starts:
+            self.restart(time_s, results[len(results) // 2].reason)
+        return starts
 
     def restart(self, time_s: float, reason: str) -> None:
         """Start the window again from ``time_s`` [s], remembering why."""

@@ -83,6 +83,11 @@ CATENARY = CableModels(
 level (a winch on the ground) where the free curve would dip below it."""
 
 
+UNDEFINED = (ZeroDivisionError, OverflowError, ValueError)
+"""What the generated arithmetic raises where a model is undefined (at the anchor, at zero
+tension, a catenary parameter so small that ``sinh`` overflows)."""
+
+
 @dataclass(slots=True)
 class ModelConstants:
     """Constants of the generated models (the tuple ``c``), SI units, and the winch's
@@ -103,10 +108,20 @@ class ModelConstants:
         """The tuple ``c``."""
         return (self.mass_kg, self.drag_per_s, self.weight_n_per_m)
 
-
-UNDEFINED = (ZeroDivisionError, OverflowError, ValueError)
-"""What the generated arithmetic raises where a model is undefined (at the anchor, at zero
-tension, a catenary parameter so small that ``sinh`` overflows)."""
+    def tension_at_drone(self, x: list[float], p: FloatArray) -> tuple[float, float]:
+        """The cable's tension at the drone [N] and its variance [N^2] (first order through
+        the model's Jacobian) at the state's values ``x`` with covariance ``p``; the chord
+        tension where the curve is undefined (at the anchor), 0 N for a chord tension <= 0
+        (a slack cable: no curve; its catenary overflowed to 1e98 N on the sagging circle)."""
+        tension, variance = max(x[state.TENSION], 0.0), float(p[state.TENSION, state.TENSION])
+        if tension > 0.0:
+            try:
+                (tension,), jac = self.models.tension(x, (), self.values())
+            except UNDEFINED:
+                return tension, variance
+            jac_row = np.array(jac)
+            variance = float(jac_row @ (p @ jac_row))
+        return tension, variance
 
 
 def evaluate(

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.output import (
     INITIALISING,
     LEARNING,
@@ -166,6 +167,15 @@ def unmodelled_position_covariance(
     return gain * gain * (horizontal_across @ horizontal_across.T) + length_std_m**2 * np.outer(
         u, u
     )
+
+
+def horizontal_pull_n(x: list[float]) -> float:
+    """The cable's horizontal pull at the drone, ``T_ch |p_ne| / |p|`` [N], from the state's
+    values ``x`` (position NED from the anchor [m], chord tension [N])."""
+    distance = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+    if distance == 0.0:
+        return 0.0
+    return x[state.TENSION] * math.hypot(x[0], x[1]) / distance
 
 
 def min_horizontal_pull_n(

@@ -51,9 +51,16 @@ VARIANTS = {
 }
 
 
-@pytest.mark.parametrize("name", sorted(VARIANTS))
+CALM = {
+    f"circle-calm-{t}-{v}": (tension_n, 1.0, bias)
+    for t, tension_n in (("1n", 1.0), ("0p5n", 0.5))
+    for v, bias in (("exact", 0.0), ("bias30", 0.3))
+}
+
+
+@pytest.mark.parametrize("name", sorted(VARIANTS) + sorted(CALM))
 def test_each_variant_changes_only_what_its_name_says(name: str) -> None:
-    tension_n, thrust_scale, bias = VARIANTS[name]
+    tension_n, thrust_scale, bias = {**VARIANTS, **CALM}[name]
     exact = _load("circle-exact")
     expected = replace(
         exact,
@@ -61,9 +68,15 @@ def test_each_variant_changes_only_what_its_name_says(name: str) -> None:
         propulsion=replace(exact.propulsion, thrust_scale=thrust_scale),
         sensors=replace(exact.sensors, accel_bias_mps2=(bias, bias, bias)),
     )
+    if name in CALM:
+        assert exact.wind.velocity_ned_m_s != (0.0, 0.0, 0.0) and exact.wind.turbulence_w20_mps > 0
+        expected = replace(
+            expected,
+            wind=replace(exact.wind, velocity_ned_m_s=(0.0, 0.0, 0.0), turbulence_w20_mps=0.0),
+        )
     assert _load(name) == expected
 
 
 def test_every_file_in_the_folder_is_checked() -> None:
     names = {p.stem for p in FOLDER.glob("*.yaml")}
-    assert names == set(VARIANTS) | {"circle-exact"}
+    assert names == set(VARIANTS) | set(CALM) | {"circle-exact"}

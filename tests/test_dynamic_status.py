@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tether_companion.estimation.dynamic.observability import HoverUnknowns, assess
+from tether_companion.estimation.dynamic.observability import HoverUnknowns, _explained_2x2, assess
 from tether_companion.estimation.dynamic.output import LEARNING, OK, WEAK_PULL
 
 
@@ -55,3 +55,20 @@ def test_a_range_unknown_only_through_thrust_scale_and_wind_is_learning() -> Non
     status, reason = _status(horizontal, _unknowns(np.zeros((2, 3)), hypotheses=4))
     assert status == LEARNING and "4 thrust hypotheses" in reason
     assert _status(np.diag([0.04, 0.04]), _unknowns(cross)) == (OK, "")
+
+
+def test_the_explained_part_equals_the_schur_complement_numpy_solves() -> None:
+    """``X C^-1 X^T`` by the scalar Cholesky equals numpy's solve on random covariances of
+    the thrust scale and the wind (scales 1e-4 to 4, as in flight); a covariance that is not
+    positive definite explains nothing."""
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        joint = rng.normal(size=(5, 8)) * np.array([1.0, 1.0, 0.015, 2.0, 2.0])[:, None]
+        full = joint @ joint.T / 8.0
+        covariance, cross = full[2:, 2:], full[:2, 2:]
+        expected = cross @ np.linalg.solve(covariance, cross.T)
+        got = _explained_2x2(covariance.tolist(), cross.tolist())
+        assert got is not None
+        assert np.allclose(got, [expected[0, 0], expected[0, 1], expected[1, 1]], rtol=1e-9)
+    indefinite = np.diag([1.0, -1.0, 1.0]).tolist()
+    assert _explained_2x2(indefinite, np.ones((2, 3)).tolist()) is None

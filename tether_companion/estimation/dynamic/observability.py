@@ -106,20 +106,21 @@ class HoverUnknowns:
         standard deviation within ``max_std_m`` [m]."""
         if self.hypotheses > 1:
             return True
-        try:
-            gain = np.linalg.solve(self.covariance, self.position_cross.T)
-        except np.linalg.LinAlgError:
+        (a, b), (_, c) = horizontal_covariance_m2.tolist()
+        explained = _explained_2x2(self.covariance.tolist(), self.position_cross.tolist())
+        if explained is None:
             return False
-        known = horizontal_covariance_m2 - self.position_cross @ gain
-        return _largest_std(known) <= max_std_m
+        return _largest_std_values(a - explained[0], b - explained[1], c - explained[2]) <= (
+            max_std_m
+        )
 
     def describe(self) -> str:
         """``thrust scale 1.041 +- 0.025, wind (-0.1, 0.5) +- 2.2 m/s`` and, while the bank
         runs, how many hypotheses are left."""
-        sd = np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
-        wind = ", ".join(f"{w:.1f}" for w in self.wind_ne_mps)
+        sd = [math.sqrt(max(v, 0.0)) for v in self.covariance.diagonal().tolist()]
+        north, east = self.wind_ne_mps.tolist()
         text = (
-            f"thrust scale {self.scale:.3f} +- {sd[0]:.3f}, wind ({wind}) +- "
+            f"thrust scale {self.scale:.3f} +- {sd[0]:.3f}, wind ({north:.1f}, {east:.1f}) +- "
             f"{max(sd[1], sd[2]):.1f} m/s"
         )
         return text + (f", {self.hypotheses} thrust hypotheses" if self.hypotheses > 1 else "")
@@ -157,15 +158,25 @@ def unmodelled_position_covariance(
     length_std_m
         Standard deviation kept along the cable [m].
     """
-    distance = float(np.linalg.norm(position_ned_m))
+    n, e, d = (float(v) for v in position_ned_m)
+    distance = math.sqrt(n * n + e * e + d * d)
     if distance == 0.0:
         return np.zeros((3, 3))
-    u = np.asarray(position_ned_m, dtype=float) / distance
-    across = np.eye(3) - np.outer(u, u)
-    horizontal_across = across[:, :2]  # the horizontal force's columns
+    u = (n / distance, e / distance, d / distance)
+    # the columns of I - u u^T a horizontal force acts through (north, east)
+    across_n = (1.0 - u[0] * u[0], -u[1] * u[0], -u[2] * u[0])
+    across_e = (-u[0] * u[1], 1.0 - u[1] * u[1], -u[2] * u[1])
     gain = distance * force_std_n / max(tension_n, MIN_TENSION_N)
-    return gain * gain * (horizontal_across @ horizontal_across.T) + length_std_m**2 * np.outer(
-        u, u
+    gain_sq, length_sq = gain * gain, length_std_m * length_std_m
+    return np.array(
+        [
+            [
+                gain_sq * (across_n[i] * across_n[j] + across_e[i] * across_e[j])
+                + length_sq * u[i] * u[j]
+                for j in range(3)
+            ]
+            for i in range(3)
+        ]
     )
 
 
@@ -262,5 +273,41 @@ def assess(
 def _largest_std(covariance_m2: FloatArray) -> float:
     """Square root of the larger eigenvalue of a symmetric 2x2 covariance [m]."""
     (a, b), (_, c) = covariance_m2.tolist()
+    return _largest_std_values(a, b, c)
+
+
+def _largest_std_values(a: float, b: float, c: float) -> float:
+    """Square root of the larger eigenvalue of the symmetric 2x2 ``[[a, b], [b, c]]``."""
     largest = 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
     return math.sqrt(max(largest, 0.0))
+
+
+def _explained_2x2(
+    covariance: list[list[float]], cross: list[list[float]]
+) -> tuple[float, float, float] | None:
+    """``X C^-1 X^T`` as its entries (11, 12, 22): the part of a 2x2 covariance that three
+    quantities of covariance ``C`` (3x3, symmetric positive definite) with cross-covariance
+    ``X`` (2x3) explain, through the Cholesky factor ``C = L L^T`` (``Y = L^-1 X^T``,
+    ``X C^-1 X^T = Y^T Y``). None when ``C`` is not positive definite."""
+    (c00, c01, c02), (_, c11, c12), (_, _, c22) = covariance
+    if c00 <= 0.0:
+        return None
+    l00 = math.sqrt(c00)
+    l10, l20 = c01 / l00, c02 / l00
+    d11 = c11 - l10 * l10
+    if d11 <= 0.0:
+        return None
+    l11 = math.sqrt(d11)
+    l21 = (c12 - l20 * l10) / l11
+    d22 = c22 - l20 * l20 - l21 * l21
+    if d22 <= 0.0:
+        return None
+    l22 = math.sqrt(d22)
+    ys = []
+    for x0, x1, x2 in cross:  # forward substitution L y = x, per row of X
+        y0 = x0 / l00
+        y1 = (x1 - l10 * y0) / l11
+        y2 = (x2 - l20 * y0 - l21 * y1) / l22
+        ys.append((y0, y1, y2))
+    (p0, p1, p2), (q0, q1, q2) = ys
+    return (p0 * p0 + p1 * p1 + p2 * p2, p0 * q0 + p1 * q1 + p2 * q2, q0 * q0 + q1 * q1 + q2 * q2)

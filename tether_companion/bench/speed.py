@@ -9,7 +9,8 @@
    accelerometer update + altimeter update) of each, their ratio, and the largest difference
    between the two filters' estimates (they compute the same thing; gating is off here).
 3. Replays the same 20 s synthetic hover, written as a .tlog and as an ArduPilot dataflash
-   .bin, through the service pipeline and prints each one's CPU real-time factor.
+   .bin, through the service pipeline with the service's default estimator (the dynamic
+   filter) and with the paper 4-state, and prints each one's CPU real-time factor.
 4. Replays the same 20 s of the realistic circle's samples through the paper 4-state
    estimator and the dynamic 13-state one (whole pipelines, ``bench dynamic``'s
    measurement, CPU time), with its default settings and its former, dearer ones, and prints
@@ -245,25 +246,35 @@ def _write_logs(directory: Path, seconds: float) -> tuple[Path, Path]:
     return writer.current_path, bin_path
 
 
-def _replay_cpu(repeat: int, seconds: float = 20.0) -> dict[str, float]:
+REPLAY_ESTIMATORS = ("dynamic", "four_state")
+"""Estimator kinds replay is timed with: the service's default, and the paper's 4-state."""
+
+
+def _replay_cpu(repeat: int, seconds: float = 20.0) -> dict[tuple[str, str], float]:
     """Least CPU time [s] of replaying ``seconds`` of a synthetic hover through the service
-    pipeline, from a .tlog (``tlog``) and from a dataflash .bin (``bin``)."""
+    pipeline, from a .tlog (``tlog``) and from a dataflash .bin (``bin``), with each of
+    :data:`REPLAY_ESTIMATORS`; keyed ``(estimator kind, log kind)``."""
     import io
     import tempfile
 
     from tether_companion.service.config import load_service_config, load_vehicle_for
     from tether_companion.service.replay import replay_log
 
-    config = load_service_config(None, {"recording": {"enabled": False}})
-    vehicle = load_vehicle_for(config)
-    best = {"tlog": math.inf, "bin": math.inf}
+    configs = {
+        kind: load_service_config(
+            None, {"recording": {"enabled": False}, "estimator": {"kind": kind}}
+        )
+        for kind in REPLAY_ESTIMATORS
+    }
+    vehicle = load_vehicle_for(configs[REPLAY_ESTIMATORS[0]])
+    best = {(kind, log): math.inf for kind in REPLAY_ESTIMATORS for log in ("tlog", "bin")}
     with tempfile.TemporaryDirectory() as directory:
-        paths = dict(zip(best, _write_logs(Path(directory), seconds), strict=True))
+        paths = dict(zip(("tlog", "bin"), _write_logs(Path(directory), seconds), strict=True))
         for _ in range(repeat):  # interleaved
-            for kind, path in paths.items():
+            for kind, log in best:
                 started = time.process_time()
-                replay_log(path, config, vehicle, io.StringIO())
-                best[kind] = min(best[kind], time.process_time() - started)
+                replay_log(paths[log], configs[kind], vehicle, io.StringIO())
+                best[kind, log] = min(best[kind, log], time.process_time() - started)
     return best
 
 
@@ -319,10 +330,11 @@ def run(args: argparse.Namespace) -> int:
         "max_state_difference": float(np.max(np.abs(ours_x - theirs_x))),
         "max_state_difference_scalar_vs_numpy": float(np.max(np.abs(ours_x - numpy_x))),
         "replay_flight_s": replay_flight_s,
-        "replay_tlog_cpu_s": replay_cpu_s["tlog"],
-        "replay_tlog_real_time_factor_cpu": replay_flight_s / replay_cpu_s["tlog"],
-        "replay_bin_cpu_s": replay_cpu_s["bin"],
-        "replay_bin_real_time_factor_cpu": replay_flight_s / replay_cpu_s["bin"],
+        **{
+            f"replay_{log}_{key}_{kind}": value
+            for (kind, log), cpu in replay_cpu_s.items()
+            for key, value in (("cpu_s", cpu), ("real_time_factor_cpu", replay_flight_s / cpu))
+        },
         "filter_step_us_paper_4s": filters["us_per_tick"]["paper_4s"],
         "filter_step_us_dynamic": filters["us_per_tick"]["dynamic"],
         "filter_step_ratio_dynamic_to_paper": filters["ratio_dynamic_to_paper"],
@@ -350,10 +362,10 @@ def run(args: argparse.Namespace) -> int:
     table.add_row(
         "max |x scalar - x numpy|", f"{results['max_state_difference_scalar_vs_numpy']:.1e}"
     )
-    for kind, name in (("tlog", ".tlog"), ("bin", "dataflash .bin")):
-        cpu = replay_cpu_s[kind]
+    for (kind, log), cpu in replay_cpu_s.items():
+        name = ".tlog" if log == "tlog" else "dataflash .bin"
         table.add_row(
-            f"replay of a {replay_flight_s:.0f} s {name}, CPU",
+            f"replay of a {replay_flight_s:.0f} s {name}, {kind} filter, CPU",
             f"{cpu:.2f} s = {replay_flight_s / cpu:.1f}x real time",
         )
     us = filters["us_per_tick"]

@@ -23,6 +23,7 @@ frames that every field of a record is bit for bit pymavlink's, and its header i
 
 from __future__ import annotations
 
+import functools
 import struct
 from collections import namedtuple
 from collections.abc import Iterable
@@ -162,6 +163,14 @@ def _record_builder(message_class: type[dialect.MAVLink_message], record: type[H
     return namespace["make"]
 
 
+@functools.cache
+def layout_of(name: str) -> MessageLayout:
+    """The :class:`MessageLayout` of the dialect's message ``name``, generated once per
+    process (its record class and builder are immutable and shared by every decoder: a parser
+    per link or per datagram costs no code generation)."""
+    return MessageLayout(dialect.mavlink_map[getattr(dialect, f"MAVLINK_MSG_ID_{name}")])
+
+
 class FastDecoder:
     """Decodes intact frames of the hot messages into :class:`HotRecord` s.
 
@@ -172,10 +181,9 @@ class FastDecoder:
     """
 
     def __init__(self, names: Iterable[str] = HOT_MESSAGES) -> None:
-        self.layouts: dict[int, MessageLayout] = {}
-        for name in names:
-            msg_id = getattr(dialect, f"MAVLINK_MSG_ID_{name}")
-            self.layouts[msg_id] = MessageLayout(dialect.mavlink_map[msg_id])
+        self.layouts: dict[int, MessageLayout] = {
+            getattr(dialect, f"MAVLINK_MSG_ID_{name}"): layout_of(name) for name in names
+        }
 
     def handles(self, msg_id: int) -> bool:
         """Whether frames of ``msg_id`` are decoded here."""

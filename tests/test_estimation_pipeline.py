@@ -254,7 +254,7 @@ def test_pwm_with_wrong_motor_count_is_refused_and_counted() -> None:
 def test_an_estimate_made_of_values_reads_as_arrays() -> None:
     """Estimate.of_values keeps Python floats and builds the arrays on first read; an estimate
     made of arrays gives the same values back as floats."""
-    from tether_companion.estimation.pipeline import Estimate
+    from tether_companion.estimation.estimate import Estimate
 
     state = [1.0, 2.0, -3.0, 4.5]
     covariance = np.diag([0.1, 0.2, 0.3, 0.4]).ravel().tolist()

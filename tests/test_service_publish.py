@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
+from tether_companion.estimation.estimate import Estimate, EstimatorHealth
 from tether_companion.estimation.observability import RANGEFINDER
-from tether_companion.estimation.pipeline import Estimate, EstimatorHealth
 from tether_companion.mavlink import estimates
 from tether_companion.mavlink.units import urt_to_covariance
 from tether_companion.samples import AttitudeSample

@@ -16,7 +16,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.config import EstimatorConfig
-from tether_companion.estimation.pipeline import EstimatorHealth, TetherEstimator
+from tether_companion.estimation.estimate import EstimatorHealth
+from tether_companion.estimation.pipeline import TetherEstimator
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.simulator import Simulator

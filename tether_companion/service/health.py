@@ -98,7 +98,7 @@ def health_text(health: str) -> str:
 
 class PositionEstimate(Protocol):
     """What the publisher reads from an estimate (the EKF's
-    :class:`~tether_companion.estimation.pipeline.Estimate` or a catenary one)."""
+    :class:`~tether_companion.estimation.estimate.Estimate` or a catenary one)."""
 
     @property
     def time_s(self) -> float:

@@ -42,12 +42,8 @@ from tether_companion.estimation.catenary_position import STALE_TENSION as CATEN
 from tether_companion.estimation.catenary_position import WEAK_PULL as CATENARY_WEAK_PULL
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.output import NavigationEstimate
-from tether_companion.estimation.pipeline import (
-    Estimate,
-    EstimatorHealth,
-    TetherEstimator,
-    default_thrust_input,
-)
+from tether_companion.estimation.estimate import Estimate, EstimatorHealth
+from tether_companion.estimation.pipeline import TetherEstimator, default_thrust_input
 from tether_companion.estimation.tension_kf import TensionEstimate
 from tether_companion.estimation.thrust_input import (
     MotorLagThrustInput,

@@ -5,7 +5,7 @@ One estimate per IMU tick: position and velocity of the drone relative to the te
 (NED), their joint 6x6 covariance, the cable tension at the drone, and an observability status
 with a human-readable reason, so the publisher can withhold or inflate with the reason shown.
 
-Compatibility with :class:`~tether_companion.estimation.pipeline.Estimate` (the paper's
+Compatibility with :class:`~tether_companion.estimation.estimate.Estimate` (the paper's
 filters) and the service's ``PositionEstimate`` protocol: ``time_s``, ``position_ned_m``,
 ``tension_n``, ``covariance`` (position block first, then the tension variance: shape (4, 4),
 the 4-state layout the publisher and its CSV read), ``position_covariance_m2``,
@@ -132,7 +132,7 @@ class NavigationEstimate:
     @property
     def covariance(self) -> FloatArray:
         """Position block then tension variance, shape (4, 4) [m^2, N^2]: the layout of the
-        paper's 4-state :class:`~tether_companion.estimation.pipeline.Estimate` that the
+        paper's 4-state :class:`~tether_companion.estimation.estimate.Estimate` that the
         publisher and its CSV read (position-tension cross terms left at zero)."""
         out = np.zeros((4, 4))
         out[:3, :3] = self.position_covariance_m2
@@ -151,7 +151,7 @@ class NavigationEstimate:
 class DynamicHealth:
     """Counters of what the dynamic filter did with its inputs (monotonic except ``last_*``).
 
-    Field names shared with :class:`~tether_companion.estimation.pipeline.EstimatorHealth`
+    Field names shared with :class:`~tether_companion.estimation.estimate.EstimatorHealth`
     mean the same (the service reads ``stale_attitude``, ``stale_pwm``, ``stale_tension``).
     """
 

@@ -47,7 +47,6 @@ from tether_companion.estimation.pipeline import TetherEstimator, default_thrust
 from tether_companion.estimation.tension_kf import TensionEstimate
 from tether_companion.estimation.thrust_input import (
     MotorLagThrustInput,
-    StaticThrustInput,
     ThrustInput,
 )
 from tether_companion.mavlink.battery import BATTERY_MESSAGES, battery_voltage_v
@@ -188,8 +187,6 @@ class EstimationSession:
         """The catenary estimator's latest output (None: not running, or nothing yet)."""
         self.attitude: AttitudeSample | None = None
         self.last_estimate: Estimate | NavigationEstimate | None = None
-        self._static_thrust = StaticThrustInput(vehicle)
-        self._static_thrust_n = math.nan
         self._idle_thrust_n = config.publish.idle_thrust_fraction * vehicle.mass_kg * GRAVITY_MPS2
         self.modes = self._new_modes()
         """Tension-following and landing, fed the same samples; acts only when enabled
@@ -327,12 +324,11 @@ class EstimationSession:
         return step
 
     def on_battery_voltage_v(self, voltage_v: float) -> None:
-        """The flight controller's battery voltage [V]: the thrust inputs scale each motor
+        """The flight controller's battery voltage [V]: the thrust input scales each motor
         command by it as the autopilot's compensation assumes (profile ``battery``)."""
-        for thrust in (self.aligner.thrust_input, self._static_thrust):
-            setter = getattr(thrust, "set_battery_voltage_v", None)
-            if setter is not None:
-                setter(voltage_v)
+        setter = getattr(self.aligner.thrust_input, "set_battery_voltage_v", None)
+        if setter is not None:
+            setter(voltage_v)
 
     def on_sample(self, sample: Sample) -> Step:
         """Process one checked sample (from :meth:`on_message` or a dataflash log).
@@ -368,7 +364,6 @@ class EstimationSession:
         if self._feeds_tension:
             self.modes.on_pwm(sample)
         self.estimator.on_pwm(sample)
-        self._static_thrust_n = self._static_thrust.total_thrust_n(sample.pwm_us, sample.time_s)
         return Step()
 
     def _on_range(self, sample: RangeSample) -> Step:
@@ -420,7 +415,8 @@ class EstimationSession:
         estimate = estimator.on_imu(sample)
         if estimate is not None:
             self.last_estimate = estimate
-        motors_idle = self._static_thrust_n < self._idle_thrust_n
+        # the estimators' own thrust input, converted once per PWM sample by the aligner
+        motors_idle = self.aligner.thrust_n < self._idle_thrust_n
         messages: list[MAVLinkMessage] = []
         publication = None
         if not self.catenary_source and estimate is not None:

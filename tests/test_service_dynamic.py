@@ -284,13 +284,19 @@ SETTLE_S = 5.0
 LATEST_START_S = 40.0
 
 
-def _closed_loop_hover(tmp_path, seed: int) -> dict:
+def _closed_loop_hover(tmp_path, seed: int, winch: bool = False) -> dict:
     """Take off into the gusty hover (the emulator's navigation on its truth until our first
     estimate, as a pilot would climb in ALT_HOLD), then fly on nothing but the published
-    estimate: the deviation from the hover point over ``HOLD_S`` after ``SETTLE_S``."""
+    estimate: the deviation from the hover point over ``HOLD_S`` after ``SETTLE_S``. With
+    ``winch`` the emulator's ground station sends WINCH_STATUS (10 Hz, 2 cm noise, 1 cm
+    steps) and the service reads it."""
     path = gusty_hover_takeoff_scenario(tmp_path, LATEST_START_S + SETTLE_S + HOLD_S, seed)
-    controller = build_controller(str(path), emulator={"navigation": "vision"})
-    lockstep = LockstepService(controller, {"estimator": {"kind": "dynamic"}})
+    emulator: dict = {"navigation": "vision"}
+    overrides: dict = {"estimator": {"kind": "dynamic"}}
+    if winch:
+        emulator["winch"] = overrides["winch"] = {"enabled": True}
+    controller = build_controller(str(path), emulator=emulator)
+    lockstep = LockstepService(controller, overrides)
     target = np.array(controller.scenario.trajectory.position_ned_m)
     start_s = None
     deviations = []
@@ -316,20 +322,29 @@ def _closed_loop_hover(tmp_path, seed: int) -> dict:
     }
 
 
+IMU_ONLY_XFAIL = pytest.mark.xfail(
+    strict=True,
+    reason="issue 10 target not met IMU-only (docs/estimation.md, 'In the service'): a steady "
+    "hover does not observe the range (thrust scale and wind); default dynamic_filter on "
+    "main dc72492, seeds 1-5: 1, 3, 4, 5 never publish in 40 s, 2 publishes 53 estimates, "
+    "withholds, and the autopilot lands in its failsafe 2.75 m off; seeds 6-10: 6, 7, 9, 10 "
+    "never publish, 8 publishes 34 and lands 2.52 m off",
+)
+
+
 @pytest.mark.slow
 @pytest.mark.integration
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 10 target not met (docs/estimation.md, 'In the service'): default "
-    "dynamic_filter, seeds 1-5, largest deviation in the 60 s hold with the filter of f14b592 "
-    "0.352, 0.304, 0.293, 0.254 m and seed 5 never published (the thrust scale is not "
-    "observable in a steady hover); with adc8176's, seeds 1, 3, 4 never publish and 2, 5 "
-    "start, withhold, and the autopilot lands in its failsafe 2.6-2.8 m off",
+@pytest.mark.parametrize(
+    "winch",
+    [pytest.param(False, marks=IMU_ONLY_XFAIL, id="imu-only"), pytest.param(True, id="winch")],
 )
-def test_closed_loop_gusty_hover_on_the_dynamic_filter_holds_within_0_3_m(tmp_path) -> None:
+def test_closed_loop_gusty_hover_on_the_dynamic_filter_holds_within_0_3_m(
+    tmp_path, winch: bool
+) -> None:
     """Issue 10: the emulator's navigation flying on the published estimate holds a 60 s
-    gusty hover within 0.3 m, 5 seeds, in lock-step (deterministic; real MAVLink frames)."""
-    results = {seed: _closed_loop_hover(tmp_path, seed) for seed in range(1, 6)}
+    gusty hover within 0.3 m, 5 seeds, in lock-step (deterministic; real MAVLink frames):
+    with the ground station's winch length (met), IMU-only (not met: strict xfail)."""
+    results = {seed: _closed_loop_hover(tmp_path, seed, winch) for seed in range(1, 6)}
     for seed, result in results.items():
         print(f"seed {seed}: {result}")  # the numbers the docs quote (pytest -s)
     for seed, result in results.items():

@@ -44,6 +44,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--no-status", action="store_true", help="no live view, only the final score"
     )
+    parser.add_argument(
+        "--winch",
+        action="store_true",
+        help="the emulator's ground station sends WINCH_STATUS and the service reads it "
+        "(winch.enabled; its paid-out length goes to the dynamic filter)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -68,7 +74,11 @@ def run(args: argparse.Namespace) -> int:
 
 async def _demo(args: argparse.Namespace, duration_s: float, scratch: Path) -> str:
     emulator = EmulatorProcess(
-        args.scenario, duration_s=duration_s, score_path=scratch / "score.json", speed=args.speed
+        args.scenario,
+        duration_s=duration_s,
+        score_path=scratch / "score.json",
+        speed=args.speed,
+        extra_args=("--winch",) if args.winch else (),
     )
     async with emulator:
         overrides: dict = {"link": {"connect": f"udpout:127.0.0.1:{emulator.port}"}}
@@ -80,6 +90,8 @@ async def _demo(args: argparse.Namespace, duration_s: float, scratch: Path) -> s
                 "servo_hz": sensors.pwm_rate_hz,
                 "rangefinder_hz": sensors.range_rate_hz,
             }
+        if args.winch:
+            overrides["winch"] = {"enabled": True}
         overrides["recording"] = (
             {"directory": args.record_dir} if args.record_dir else {"enabled": False}
         )

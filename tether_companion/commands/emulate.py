@@ -117,6 +117,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="START:DURATION",
         help="rangefinder out of range for a window [s]; repeatable",
     )
+    parser.add_argument(
+        "--winch",
+        action="store_true",
+        help="a ground-station winch sends WINCH_STATUS (system 255, component 169, 10 Hz; "
+        "the scenario's emulator.winch section sets the rest)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no periodic status line")
 
 
@@ -151,6 +157,8 @@ def emulator_config_from_args(args: argparse.Namespace, base: EmulatorConfig) ->
         data["parameters"][name] = value
     if args.score_start is not None:
         data["score_start_s"] = args.score_start
+    if args.winch:
+        data["winch"]["enabled"] = True
     for text in args.rate:
         name, value = _name_value(text, "--rate", "MSG=HZ, e.g. RAW_IMU=400")
         data["stream_rates_hz"][name] = value

@@ -46,12 +46,15 @@ from tether_companion.emulator.streams import (
     STREAMS,
     StreamSchedule,
 )
+from tether_companion.emulator.winch import EmulatedWinch
 from tether_companion.mavlink import geo
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.simulator import Simulator
 
-Outgoing = tuple[int | None, MAVLinkMessage]
+Outgoing = tuple[int | None, MAVLinkMessage | bytes]
+"""(link id or None for every link, message): a message is framed as the flight controller;
+bytes are a frame of another system routed unchanged (the ground station's winch)."""
 
 
 @dataclass
@@ -140,6 +143,12 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions, Fligh
         self._rangefinder_param_forced = False
         self._after_ack: list[Callable[[], None]] = []
         self._descent = [0.0, 0.0, 0.0]
+        self.winch = (
+            EmulatedWinch(config.winch, scenario, unix_time_at_start_s)
+            if config.winch.enabled
+            else None
+        )
+        """The ground station's winch (``emulator.winch``), or None."""
         self._boot()
         if scenario.initial.airborne:
             self.mode = CopterMode.AUTO if self.sim.follow_trajectory else CopterMode.GUIDED
@@ -256,7 +265,7 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions, Fligh
         out, self._outbox = self._outbox, []
         return out
 
-    def _send(self, msg: MAVLinkMessage | None, link_id: int | None = None) -> None:
+    def _send(self, msg: MAVLinkMessage | bytes | None, link_id: int | None = None) -> None:
         if msg is not None:
             self._outbox.append((link_id, msg))
 
@@ -291,6 +300,9 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions, Fligh
                 self._next_mode_tick_s = now + MODE_TICK_S
             if now >= self._next_due_s - tolerance:
                 self._emit_due(now, tolerance)
+            winch = self.winch
+            if winch is not None and now >= winch.next_s - tolerance:
+                self._outbox.append((None, winch.frame(sim)))
 
     def _emit_due(self, now: float, tolerance: float) -> None:
         for link_id, schedule in self._schedules.items():

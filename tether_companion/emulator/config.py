@@ -12,6 +12,7 @@ flags, which override the file. Example::
         drop_probability: 0.01
         outages: [{stream: ATTITUDE, start_s: 10, duration_s: 0.5}]
         reboots_s: [30]
+      winch: {enabled: true, rate_hz: 10}
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from pathlib import Path
 
 from tether_companion.config import ConfigError, from_mapping, read_yaml, spec
 from tether_companion.emulator.streams import STREAMS
+from tether_companion.emulator.winch import EmulatedWinchConfig
 from tether_companion.sim.scenario import Scenario, resolve_scenario_path, scenario_from_mapping
 
 NAVIGATION_SOURCES: tuple[str, ...] = ("truth", "vision")
@@ -119,6 +121,10 @@ class EmulatorConfig:
         0.0, minimum=0.0, doc="estimates stamped before this time are not scored (warm-up) [s]"
     )
     faults: FaultConfig = spec(default_factory=FaultConfig, doc="fault injection")
+    winch: EmulatedWinchConfig = spec(
+        default_factory=EmulatedWinchConfig,
+        doc="a ground-station winch whose WINCH_STATUS the autopilot routes to every link",
+    )
 
     def validate(self) -> None:
         """Stream names must be known."""

@@ -102,7 +102,7 @@ class LockstepPeer:
         for link_id, msg in self.controller.drain():
             for peer in peers:
                 if peer.collecting and (link_id is None or link_id == peer.link_id):
-                    frame = peer._controller_encoder.encode(msg)
+                    frame = msg if isinstance(msg, bytes) else peer._controller_encoder.encode(msg)
                     peer.received.extend(peer._from_controller.feed(frame))
         return self.received[before:]
 

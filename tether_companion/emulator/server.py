@@ -159,7 +159,7 @@ class EmulatorServer:
             targets = links.values() if link_id is None else (links[link_id],)
             for link in targets:
                 try:
-                    frame = link.encoder.encode(msg)
+                    frame = msg if isinstance(msg, bytes) else link.encoder.encode(msg)
                 except (struct.error, ValueError, TypeError):
                     self.counters.encode_errors += 1
                     continue

@@ -38,8 +38,10 @@ HOT_MESSAGES: tuple[str, ...] = (
     "ATTITUDE",
     "SERVO_OUTPUT_RAW",
     "DISTANCE_SENSOR",
+    "WINCH_STATUS",
 )
-"""Messages decoded by :class:`FastDecoder` (the estimators' input streams)."""
+"""Messages decoded by :class:`FastDecoder` (the estimators' input streams; the ground
+station's WINCH_STATUS arrives at only ~10 Hz, but takes the same path as the other inputs)."""
 
 _HEADER_LEN_V1 = dialect.HEADER_LEN_V1
 _HEADER_LEN_V2 = dialect.HEADER_LEN_V2

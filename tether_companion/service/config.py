@@ -34,6 +34,7 @@ from tether_companion.service.vehicle_fetch import (
     AutopilotVehicleConfig,
     require_mass,
 )
+from tether_companion.service.winch import WinchConfig
 
 
 @dataclass(frozen=True)
@@ -82,9 +83,10 @@ class TensionConfig:
 
     source: str = spec(
         "estimate",
-        choices=("estimate", "config", "message"),
+        choices=("estimate", "config", "message", "winch"),
         doc="estimate (4-state EKF), config (known_tension_n), "
-        "message (NAMED_VALUE_FLOAT from a load cell)",
+        "message (NAMED_VALUE_FLOAT from a load cell), winch (WINCH_STATUS tension, carried "
+        "from the winch to the drone by the cable's weight; needs winch.enabled)",
     )
     known_tension_n: float = spec(
         4.0, exclusive_minimum=0.0, maximum=500.0, doc="tension when source = config [N]"
@@ -324,6 +326,10 @@ class ServiceConfig:
         "ignored when estimator.thrust_model names an identified model",
     )
     tension: TensionConfig = spec(default_factory=TensionConfig)
+    winch: WinchConfig = spec(
+        default_factory=WinchConfig,
+        doc="the ground station's winch (WINCH_STATUS): paid-out length and tension",
+    )
     publish: PublishConfig = spec(default_factory=PublishConfig)
     tension_mode: TensionModeConfig = spec(
         default_factory=TensionModeConfig, doc="tension-following and landing by the tether"
@@ -393,7 +399,12 @@ class ServiceConfig:
                 "",
                 "tension.source",
                 self.tension.source,
-                "must be 'estimate' or 'message' (a load cell) with estimator.kind dynamic",
+                "must be 'estimate', 'message' (a load cell) or 'winch' with estimator.kind "
+                "dynamic",
+            )
+        if self.tension.source == "winch" and not self.winch.enabled:
+            raise ConfigError(
+                "", "tension.source", "winch", "needs winch.enabled: true (WINCH_STATUS read)"
             )
 
 

@@ -3,7 +3,8 @@
 Pure and synchronous (the live service and replay share it). For each message:
 
 1. wrong sender: only the configured flight controller's system/component id (and the
-   tension sensor's, for its NAMED_VALUE_FLOAT) are accepted;
+   tension sensor's, for its NAMED_VALUE_FLOAT, and the winch's, for its WINCH_STATUS) are
+   accepted;
 2. type: the flavour's IMU message (ArduPilot RAW_IMU in milli-g, PX4 HIGHRES_IMU in m/s^2),
    ATTITUDE, SERVO_OUTPUT_RAW, downward DISTANCE_SENSOR; anything else is not an input;
 3. values: NaN/inf is ``nonfinite``; outside the plausibility bounds is ``absurd``; a
@@ -12,7 +13,11 @@ Pure and synchronous (the live service and replay share it). For each message:
    flight controller's clock model is ``implausible``; one more than a second behind is
    ``out_of_order``, unless SYSTEM_TIME said the flight controller rebooted and the stamps
    agree: then :attr:`IngestCounters.reboots` counts it and the caller restarts;
-5. order: samples pass an adaptive reorder buffer (:mod:`~tether_companion.service.reorder`:
+5. the winch's WINCH_STATUS (``winch.enabled``) is checked by its own gate
+   (:class:`~tether_companion.service.winch.WinchGate`: values, the winch's clock mapped to the
+   flight controller's, speed; drops in its counters by reason) and bypasses the reorder
+   buffer (its stamp is the mapped one; the estimator fuses it at its own time);
+6. order: samples pass an adaptive reorder buffer (:mod:`~tether_companion.service.reorder`:
    no delay until the link is seen to reorder, then a window covering what it showed, at most
    ``inputs.reorder_window_s``) and leave it in stamp order; per message type the stamp must
    then increase: an equal stamp is a ``duplicate``, an older one (later than the window)
@@ -40,6 +45,7 @@ from tether_companion.service.config import InputLimitsConfig, TensionConfig
 from tether_companion.service.fc_time import BACKSTEP, IMPLAUSIBLE, REBOOT, FcTimeGate
 from tether_companion.service.link_config import LinkConfig
 from tether_companion.service.reorder import ReorderBuffer
+from tether_companion.service.winch import WinchConfig, WinchGate, WinchReading
 
 _UINT32_US = 1 << 32
 IMU = "imu"
@@ -50,7 +56,9 @@ TENSION = "tension"
 FC_POSITION = "fc_position"
 SYSTEM_TIME = "system_time"
 """The flight controller's SYSTEM_TIME: no sample, the evidence of its reboots."""
-INPUT_KINDS = (IMU, ATTITUDE, PWM, RANGE, TENSION, FC_POSITION, SYSTEM_TIME)
+WINCH = "winch"
+"""The ground station's WINCH_STATUS (service/winch.py)."""
+INPUT_KINDS = (IMU, ATTITUDE, PWM, RANGE, TENSION, FC_POSITION, SYSTEM_TIME, WINCH)
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,7 +80,15 @@ class FcPosition:
     position_ned_m: tuple[float, float, float]
 
 
-Sample = ImuSample | AttitudeSample | PwmSample | RangeSample | TensionReading | FcPosition
+Sample = (
+    ImuSample
+    | AttitudeSample
+    | PwmSample
+    | RangeSample
+    | TensionReading
+    | FcPosition
+    | WinchReading
+)
 
 
 @dataclass
@@ -129,6 +145,8 @@ class Ingest:
         What SERVO_OUTPUT_RAW carries (the profile's ``thrust_curve.command_unit``): outputs
         in ``pwm_us`` are checked against ``limits.pwm_min_us/max_us``, any other unit against
         the unit's own range (e.g. 0-65535 for ``raw``).
+    winch
+        The ``winch`` section (WINCH_STATUS is an input when it is enabled).
     """
 
     def __init__(
@@ -138,6 +156,7 @@ class Ingest:
         tension: TensionConfig,
         n_motors: int,
         command_unit: str = "pwm_us",
+        winch: WinchConfig | None = None,
     ) -> None:
         self.link = link
         self.limits = limits
@@ -167,6 +186,8 @@ class Ingest:
         self._tension_name = (
             tension.message_name.encode("ascii") if tension.source == "message" else None
         )
+        self.winch = WinchGate(winch) if winch is not None and winch.enabled else None
+        """Checks the winch's WINCH_STATUS (None: not an input)."""
         self.rebooted = False
         """True right after the message that confirmed a reboot (cleared on the next call)."""
 
@@ -193,6 +214,9 @@ class Ingest:
         if held is None:
             return []
         kind, sample = held
+        if kind is WINCH:  # checked and stamped by its gate, not reordered
+            self.counters.accepted[WINCH] += 1
+            return [sample]
         released = self.reorder.push(kind, sample.time_s, sample)
         if len(released) == 1:  # the clean link's path (one in, one out)
             kind, sample = released[0]
@@ -213,6 +237,13 @@ class Ingest:
         kind_name = msg.get_type()
         if kind_name == "NAMED_VALUE_FLOAT" and self._tension_name is not None:
             return self._timed(TENSION, self._tension(msg))
+        winch = self.winch
+        if kind_name == "WINCH_STATUS" and winch is not None:
+            if not winch.from_winch(msg):
+                counters.wrong_system += 1
+                return None
+            reading = winch.check(msg, self.clock.latest_fc_s)
+            return None if reading is None else (WINCH, reading)
         if not self.from_flight_controller(msg):
             counters.wrong_system += 1
             return None

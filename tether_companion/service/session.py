@@ -19,6 +19,9 @@ Estimators, all fed the same samples:
   filtered tension, when ``position.source`` is ``catenary`` (then its position is what
   VISION_POSITION_ESTIMATE carries) or ``position.catenary_beside`` is set. The paid-out length
   is ``catenary.default_length_m`` (case 2, ``known_length``), or none is needed (case 1).
+
+The ground station's winch (``winch.enabled``, :mod:`~tether_companion.service.winch`) feeds
+the EKF its paid-out length and, with ``tension.source: winch``, its tension.
 """
 
 from __future__ import annotations
@@ -67,6 +70,7 @@ from tether_companion.service.health import (
 from tether_companion.service.ingest import FcPosition, Ingest, Sample, TensionReading
 from tether_companion.service.publish import Publication, Publisher
 from tether_companion.service.security import command_refusal
+from tether_companion.service.winch import WinchFeed, WinchReading
 
 TENSION_MODE_COMMAND = dialect.MAV_CMD_USER_2
 """COMMAND_LONG a ground station sends to this component (our system and component id) to
@@ -168,6 +172,7 @@ class EstimationSession:
             config.tension,
             vehicle.n_motors,
             vehicle.thrust_curve.command_unit,
+            config.winch,
         )
         self.catenary_source = config.position.source == CATENARY
         """The published position is the catenary estimator's (else the EKF's)."""
@@ -182,6 +187,13 @@ class EstimationSession:
         """Time alignment shared by the EKF and the tension filter: each attitude and PWM
         sample is converted (rotation, thrust) once."""
         self.estimator = self._new_estimator()
+        self.winch = WinchFeed(
+            config.winch,
+            config.tension.source == "winch",
+            config.dynamic_filter.cable_weight_n_per_m,
+            uses_length=self.dynamic,
+        )
+        """Hands the winch's readings to the EKF."""
         self.catenary = self._new_catenary()
         self.last_catenary: CatenaryPosition | None = None
         """The catenary estimator's latest output (None: not running, or nothing yet)."""
@@ -209,6 +221,7 @@ class EstimationSession:
             RangeSample: self._on_range,
             TensionReading: self._on_tension_reading,
             FcPosition: self._on_fc_position,
+            WinchReading: self._on_winch,
         }
         """The handler of each sample type: one dict lookup per sample, not a chain of
         ``isinstance`` tests."""
@@ -341,6 +354,8 @@ class EstimationSession:
         return self._handlers[type(sample)](sample)
 
     def _on_imu(self, sample: ImuSample) -> Step:
+        if sample.time_s > self.winch.deadline_s:  # the winch fell silent
+            self.winch.expire(self.estimator)
         tension = None
         if self._feeds_tension:
             tension = self.modes.on_imu(sample)
@@ -375,6 +390,12 @@ class EstimationSession:
 
     def _on_tension_reading(self, sample: TensionReading) -> Step:
         self.estimator.set_known_tension_n(sample.tension_n, sample.time_s)
+        return Step()
+
+    def _on_winch(self, sample: WinchReading) -> Step:
+        last = self.last_estimate
+        height_m = -float(last.position_ned_m[2]) if last is not None else math.nan
+        self.winch.on_reading(sample, self.estimator, height_m)
         return Step()
 
     def _on_fc_position(self, sample: FcPosition) -> Step:

@@ -88,6 +88,13 @@ def render(service: CompanionService) -> Group:
         for name, count in trust.counters.as_dict().items():
             if name not in ("admitted", "repins") and count:
                 drops.add_row(name.replace("_", " "), str(count))
+    winch = session.ingest.winch
+    if winch is not None:  # the winch's WINCH_STATUS drops, by reason
+        for name, count in winch.counters.as_dict().items():
+            if name != "accepted" and count:
+                drops.add_row(f"winch: {name.replace('_', ' ')}", str(count))
+        if session.winch.timeouts:
+            drops.add_row("winch: timed out (stale)", str(session.winch.timeouts))
     for reason, count in sorted(session.commands_refused.items()):
         drops.add_row(f"commands denied: {reason.replace('_', ' ')}", str(count))
     drops.add_row("withheld estimates", str(publisher.counters.withheld))
@@ -123,6 +130,19 @@ def render(service: CompanionService) -> Group:
             *(f"{v:+.2f}" for v in tension.tension_ned_n),
             f"{tension.magnitude_n:.2f}",
         )
+    if winch is not None:
+        reading = session.winch.last
+        if reading is None:
+            estimate.add_row("winch", "stale" if session.winch.stale else "nothing yet", "", "", "")
+        else:
+            tension = "" if math.isnan(reading.tension_n) else f"{reading.tension_n:.2f}"
+            estimate.add_row(
+                escape("winch line [m], tension at winch [N]"),
+                f"{reading.length_m:.2f}",
+                "",
+                "",
+                tension,
+            )
     catenary = session.last_catenary
     if catenary is not None:
         source = " (published)" if session.catenary_source else ""

@@ -1,0 +1,360 @@
+"""The ground station's winch as an input: MAVLink WINCH_STATUS (common.xml, id 9005).
+
+What the message carries (pymavlink's dialect, ``common.xml``):
+
+* ``time_usec`` [us]: the winch's own clock (UNIX time or time since its boot), not the
+  flight controller's;
+* ``line_length`` [m]: line released (NaN: unknown); ``speed`` [m/s]: + paying out, - reeling
+  in (NaN: unknown);
+* ``tension`` [**kg**, kilogram-force] on the line at the winch (NaN: unknown); converted here
+  with standard gravity to newtons;
+* ``voltage``, ``current``, ``temperature``: not used;
+* ``status``: ``MAV_WINCH_STATUS_FLAG`` bits HEALTHY (1), FULLY_RETRACTED (2), MOVING (4),
+  CLUTCH_ENGAGED (8).
+
+:class:`WinchGate` (used by :class:`~tether_companion.service.ingest.Ingest`) turns an admitted
+frame into a :class:`WinchReading` or a drop counted by reason (:class:`WinchCounters`): only
+from the configured system/component id (the link's signing policy applies before, as to every
+frame), finite values inside the spool, the HEALTHY bit (when required), the winch's stamps
+increasing, not delayed beyond ``max_delay_s`` against the fastest delivery seen, and no
+length change faster than ``max_speed_mps`` allows. Its stamp is mapped to flight-controller
+time: the winch's time plus the smallest (arrival - winch time) offset seen, the arrival being
+the flight controller's newest believed stamp (live and in replay alike).
+
+:class:`WinchFeed` (used by :class:`~tether_companion.service.session.EstimationSession`)
+hands accepted readings to the estimator: the length to ``set_paid_out_length_m`` (the dynamic
+filter), the tension, when ``tension.source`` is ``winch``, to ``set_known_tension_n`` at the
+drone: on a cable of weight ``w`` per length the tension grows by ``w h`` from the winch to a
+drone ``h`` above it (catenary, or the part resting on the ground: the same sum). A winch
+silent for ``timeout_s`` is stale: its length is forgotten (a restarting filter does not
+initialise from it). The paper's 3-/4-state filters have no length input: the length is read,
+checked and counted, and :attr:`WinchFeed.note` says once that it is not used.
+
+Pure and synchronous.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from tether_companion.config import spec
+from tether_companion.mavlink.framing import MAVLinkMessage, dialect
+
+STANDARD_GRAVITY_MPS2 = 9.80665
+"""WINCH_STATUS.tension is in kilogram-force: newtons per kg [m/s^2]."""
+HEALTHY = dialect.MAV_WINCH_STATUS_HEALTHY
+FULLY_RETRACTED = dialect.MAV_WINCH_STATUS_FULLY_RETRACTED
+MOVING = dialect.MAV_WINCH_STATUS_MOVING
+CLUTCH_ENGAGED = dialect.MAV_WINCH_STATUS_CLUTCH_ENGAGED
+WINCH_COMPONENT_ID = dialect.MAV_COMP_ID_WINCH
+"""MAV_COMP_ID_WINCH (169)."""
+MAX_TENSION_KG = 1000.0
+"""A tension above this [kgf] is not a tether's: the reading's tension is dropped."""
+WINCH_REBOOT_S = 10.0
+"""The winch's clock going back more than this [s] is a restart of the winch (state reset)."""
+OFFSET_DRIFT = 1e-3
+"""How fast [s/s] the winch-to-FC clock offset may grow between readings (clock drift)."""
+
+
+@dataclass(frozen=True)
+class WinchConfig:
+    """The ground station's winch (WINCH_STATUS), an optional input of the dynamic filter."""
+
+    enabled: bool = spec(
+        False,
+        doc="read WINCH_STATUS: its line length goes to the dynamic filter (estimator.kind "
+        "dynamic; the paper filters ignore it), its tension with tension.source winch",
+    )
+    system_id: int = spec(
+        255,
+        minimum=1,
+        maximum=255,
+        doc="system id the winch sends from (the ground station's, or the vehicle's)",
+    )
+    component_id: int = spec(
+        WINCH_COMPONENT_ID,
+        minimum=0,
+        maximum=255,
+        doc="component id the winch sends from (MAV_COMP_ID_WINCH = 169)",
+    )
+    spool_length_m: float = spec(
+        100.0, exclusive_minimum=0.0, doc="line on the drum: a longer line_length is absurd [m]"
+    )
+    length_offset_m: float = spec(
+        0.0,
+        doc="subtracted from line_length: line between the winch's counter and the anchor "
+        "point (a fairlead, a pulley) the estimator measures from [m]",
+    )
+    max_speed_mps: float = spec(
+        5.0,
+        exclusive_minimum=0.0,
+        maximum=50.0,
+        doc="fastest the line can move: a larger speed, or a length change faster than this "
+        "(plus length_tolerance_m), is dropped [m/s]",
+    )
+    length_tolerance_m: float = spec(
+        0.1,
+        minimum=0.0,
+        doc="length noise and quantisation allowed on top of max_speed_mps between readings [m]",
+    )
+    max_delay_s: float = spec(
+        0.3,
+        exclusive_minimum=0.0,
+        maximum=5.0,
+        doc="a reading arriving this much later than the fastest delivery seen is dropped [s]",
+    )
+    timeout_s: float = spec(
+        1.0,
+        exclusive_minimum=0.0,
+        maximum=60.0,
+        doc="no reading accepted for this long (flight-controller time): the winch is stale, "
+        "its length forgotten, its checks restart [s]",
+    )
+    require_healthy: bool = spec(
+        True, doc="drop readings whose status lacks MAV_WINCH_STATUS_HEALTHY"
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class WinchReading:
+    """One accepted WINCH_STATUS, SI units.
+
+    Attributes
+    ----------
+    time_s
+        Flight-controller time [s] (the winch's stamp mapped, see :class:`WinchGate`).
+    length_m
+        Cable paid out from the anchor point (``line_length - length_offset_m``) [m].
+    tension_n
+        Line tension at the winch [N] (``nan`` when the winch does not know it).
+    speed_mps
+        Line speed, + paying out [m/s] (``nan``: unknown).
+    status
+        The MAV_WINCH_STATUS_FLAG bits.
+    """
+
+    time_s: float
+    length_m: float
+    tension_n: float
+    speed_mps: float
+    status: int
+
+
+@dataclass
+class WinchCounters:
+    """WINCH_STATUS received and dropped, by reason (monotonic counts; --status shows them)."""
+
+    accepted: int = 0
+    wrong_sender: int = 0
+    """From a system/component other than ``winch.system_id/component_id``."""
+    no_length: int = 0
+    """line_length NaN (the winch does not know it)."""
+    nonfinite: int = 0
+    """line_length or speed infinite."""
+    absurd: int = 0
+    """Negative line, longer than the spool, or a speed beyond ``max_speed_mps``."""
+    unhealthy: int = 0
+    """The HEALTHY bit clear (``require_healthy``)."""
+    duplicate: int = 0
+    out_of_order: int = 0
+    """The winch's stamp equal to / older than the last accepted one's."""
+    late: int = 0
+    """Delivered more than ``max_delay_s`` later than the fastest delivery seen."""
+    too_fast: int = 0
+    """A length change faster than ``max_speed_mps`` (plus the tolerance) allows."""
+    no_fc_time: int = 0
+    """Before the flight controller's first stamp (nothing to map the winch's time to)."""
+    bad_tension: int = 0
+    """Tension infinite, negative or beyond ``MAX_TENSION_KG``: the reading is kept without it."""
+
+    @property
+    def dropped(self) -> int:
+        """Readings from the winch refused for their content or time."""
+        return sum(
+            getattr(self, f.name)
+            for f in fields(self)
+            if f.name not in ("accepted", "wrong_sender", "bad_tension")
+        )
+
+    def as_dict(self) -> dict[str, int]:
+        """The counters as a plain mapping."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+class WinchGate:
+    """Checks WINCH_STATUS messages and maps their stamps (see the module docstring)."""
+
+    def __init__(self, config: WinchConfig) -> None:
+        self.config = config
+        self.counters = WinchCounters()
+        self.ids = (config.system_id, config.component_id)
+        self._offset_s = math.nan
+        self._last_winch_s = math.nan
+        self._last_length_m = math.nan
+        self._last_accepted_fc_s = -math.inf
+
+    def from_winch(self, msg: MAVLinkMessage) -> bool:
+        """Whether ``msg`` carries the configured winch's ids (counted otherwise)."""
+        if (msg.get_srcSystem(), msg.get_srcComponent()) == self.ids:
+            return True
+        self.counters.wrong_sender += 1
+        return False
+
+    def check(self, msg: MAVLinkMessage, arrival_fc_s: float) -> WinchReading | None:
+        """The reading of a WINCH_STATUS from the winch that arrived when the flight
+        controller's newest stamp was ``arrival_fc_s`` [s], or None (counted by reason)."""
+        counters = self.counters
+        config = self.config
+        if not math.isfinite(arrival_fc_s):
+            counters.no_fc_time += 1
+            return None
+        if arrival_fc_s - self._last_accepted_fc_s > config.timeout_s:
+            self._forget()  # stale: the clock offset and the speed check start afresh
+        line = float(msg.line_length)
+        speed = float(msg.speed)
+        if math.isnan(line):
+            counters.no_length += 1
+            return None
+        if math.isinf(line) or math.isinf(speed):
+            counters.nonfinite += 1
+            return None
+        if (
+            line < 0.0
+            or line > config.spool_length_m
+            or (not math.isnan(speed) and abs(speed) > config.max_speed_mps)
+        ):
+            counters.absurd += 1
+            return None
+        status = int(msg.status)
+        if config.require_healthy and not status & HEALTHY:
+            counters.unhealthy += 1
+            return None
+        time_s = self._fc_time(msg.time_usec * 1e-6, arrival_fc_s)
+        if time_s is None:
+            return None
+        winch_s = msg.time_usec * 1e-6
+        if not math.isnan(self._last_length_m):
+            allowed = config.max_speed_mps * (winch_s - self._last_winch_s)
+            if abs(line - self._last_length_m) > allowed + config.length_tolerance_m:
+                counters.too_fast += 1
+                return None
+        self._last_winch_s = winch_s
+        self._last_length_m = line
+        self._last_accepted_fc_s = arrival_fc_s
+        counters.accepted += 1
+        return WinchReading(
+            time_s, line - config.length_offset_m, self._tension_n(msg), speed, status
+        )
+
+    def _fc_time(self, winch_s: float, arrival_fc_s: float) -> float | None:
+        """The reading's flight-controller time [s], or None (duplicate, old or late)."""
+        counters = self.counters
+        previous = self._last_winch_s
+        if not math.isnan(previous):
+            if winch_s == previous:
+                counters.duplicate += 1
+                return None
+            if winch_s < previous:
+                if previous - winch_s <= WINCH_REBOOT_S:
+                    counters.out_of_order += 1
+                    return None
+                self._forget()  # the winch restarted its clock
+        offset = arrival_fc_s - winch_s
+        if math.isnan(self._offset_s) or offset < self._offset_s:
+            self._offset_s = offset
+        elif not math.isnan(self._last_winch_s):
+            self._offset_s = min(
+                offset, self._offset_s + OFFSET_DRIFT * (winch_s - self._last_winch_s)
+            )
+        if offset - self._offset_s > self.config.max_delay_s:
+            counters.late += 1
+            return None
+        return winch_s + self._offset_s
+
+    def _tension_n(self, msg: MAVLinkMessage) -> float:
+        tension_kg = float(msg.tension)
+        if math.isnan(tension_kg):
+            return math.nan
+        if math.isinf(tension_kg) or not 0.0 <= tension_kg <= MAX_TENSION_KG:
+            self.counters.bad_tension += 1
+            return math.nan
+        return tension_kg * STANDARD_GRAVITY_MPS2
+
+    def _forget(self) -> None:
+        self._offset_s = math.nan
+        self._last_winch_s = math.nan
+        self._last_length_m = math.nan
+        self._last_accepted_fc_s = -math.inf
+
+
+class WinchFeed:
+    """Hands accepted winch readings to an estimator (see the module docstring).
+
+    Parameters
+    ----------
+    config
+        The ``winch`` section.
+    use_tension
+        ``tension.source`` is ``winch``: the winch's tension, carried to the drone, is the
+        estimator's known tension.
+    cable_weight_n_per_m
+        The cable's weight per length [N/m] (``dynamic_filter.cable_weight_n_per_m``).
+    uses_length
+        Whether the estimator takes a paid-out length (the dynamic filter does, the paper's
+        filters do not: then :attr:`note` says so once).
+    """
+
+    def __init__(
+        self,
+        config: WinchConfig,
+        use_tension: bool,
+        cable_weight_n_per_m: float,
+        uses_length: bool,
+    ) -> None:
+        self.config = config
+        self.use_tension = use_tension
+        self.weight_n_per_m = cable_weight_n_per_m
+        self.uses_length = uses_length
+        self.deadline_s = math.inf
+        """Flight-controller time [s] after which the winch is stale (inf: not fed)."""
+        self.last: WinchReading | None = None
+        """The latest reading handed on (None: none yet, or stale)."""
+        self.timeouts = 0
+        """Times the winch went stale (nothing accepted for ``timeout_s``)."""
+        self.note = (
+            "winch: the paper's filters (estimator.kind three_state/four_state) have no "
+            "paid-out length input; WINCH_STATUS is read and counted, its length not used"
+            if config.enabled and not uses_length
+            else ""
+        )
+        """Said once at start (the service logs it): the estimator does not use the length."""
+
+    @property
+    def stale(self) -> bool:
+        """Whether the winch was fed before and has been silent for ``timeout_s`` since."""
+        return self.last is None and self.timeouts > 0
+
+    def on_reading(self, reading: WinchReading, estimator: object, height_m: float) -> None:
+        """Feed ``reading`` to ``estimator``; ``height_m`` is the drone's height above the
+        anchor [m] (from the latest estimate; nan when none) for the tension's conversion."""
+        self.last = reading
+        self.deadline_s = reading.time_s + self.config.timeout_s
+        if self.uses_length and reading.length_m > 0.0:  # fully retracted: no cable to model
+            estimator.set_paid_out_length_m(reading.length_m, reading.time_s)  # type: ignore[attr-defined]
+        if not (self.use_tension and math.isfinite(reading.tension_n)):
+            return
+        if self.weight_n_per_m > 0.0 and not math.isfinite(height_m):
+            return  # a heavy cable's tension at the drone needs the drone's height
+        hanging_n = self.weight_n_per_m * max(0.0, height_m) if self.weight_n_per_m > 0.0 else 0.0
+        estimator.set_known_tension_n(reading.tension_n + hanging_n, reading.time_s)  # type: ignore[attr-defined]
+
+    def expire(self, estimator: object) -> None:
+        """The winch fell silent (called once the flight-controller time passes
+        :attr:`deadline_s`): the estimator forgets its length."""
+        self.deadline_s = math.inf
+        self.last = None
+        self.timeouts += 1
+        constants = getattr(estimator, "constants", None)
+        if constants is not None:  # the dynamic filter's cable model: "no length known"
+            constants.length_m = math.nan

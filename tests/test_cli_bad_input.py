@@ -84,6 +84,13 @@ CONFIG_CASES = [
         [],
         ["dynamic_filter.anchor_height_m", "unknown key"],
     ),
+    (
+        "winch-speed",
+        "winch: {enabled: true, max_speed_mps: -1}\n",
+        [],
+        ["winch.max_speed_mps = -1", "> 0"],
+    ),
+    ("winch-tension", "tension: {source: winch}\n", [], ["tension.source = 'winch'", "winch"]),
     ("sysid-256", "link: {fc_system_id: 256}\n", [], ["link.fc_system_id = 256"]),
     ("sysid-text", "link: {fc_system_id: one}\n", [], ["link.fc_system_id", "integer"]),
     ("sysid-float", "link: {fc_system_id: 1.5}\n", [], ["link.fc_system_id", "integer"]),
@@ -304,8 +311,9 @@ def test_links_that_cannot_open_say_why_at_once_then_retry(tmp_path) -> None:
 def test_an_open_that_hangs_is_reported_within_two_seconds(capsys) -> None:
     """An open that never completes (an unanswered TCP connect, a name lookup that hangs)
     counts as failed after LINK_OPEN_TIMEOUT_S and is said on stderr."""
-    from tether_companion.service.app import LINK_OPEN_TIMEOUT_S, CompanionService
+    from tether_companion.service.app import CompanionService
     from tether_companion.service.config import load_service_config, load_vehicle_for
+    from tether_companion.service.link_supervisor import LINK_OPEN_TIMEOUT_S
     from tether_companion.service.systemd import SystemdNotifier
 
     started: list[float] = []

@@ -3,8 +3,9 @@
 Tasks (all named, all owned by :meth:`CompanionService.run`, all cancelled and awaited on the
 way out):
 
-* ``link``: opens the flight-controller link with exponential back-off (missing serial port,
-  refused TCP socket), then serves it until it closes: the receive loop records every frame,
+* ``link``: :class:`~tether_companion.service.link_supervisor.LinkSupervisor` opens the
+  flight-controller link with exponential back-off (missing serial port, refused TCP socket),
+  then this class serves it until it closes: the receive loop records every frame,
   hands every message to the session and sends what the session returns; the housekeeping
   loop sends our HEARTBEAT, TIMESYNC requests, stream requests (MAV_CMD_SET_MESSAGE_INTERVAL,
   then REQUEST_DATA_STREAM when that does not work), the EKF origin after every
@@ -25,8 +26,6 @@ import asyncio
 import contextlib
 import gc
 import math
-import socket
-import sys
 import time
 import traceback
 from collections.abc import Awaitable, Callable
@@ -34,12 +33,13 @@ from collections.abc import Awaitable, Callable
 from tether_companion.config import ConfigError
 from tether_companion.mavlink.endpoints import open_link, parse_endpoint
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
-from tether_companion.mavlink.link import Link, LinkClosed
+from tether_companion.mavlink.link import Link
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.service.clock import FcClock
 from tether_companion.service.config import ServiceConfig
 from tether_companion.service.health import NO_IMU, STALE
 from tether_companion.service.ingest import IMU
+from tether_companion.service.link_supervisor import LinkSupervisor, log, wait_or_stop
 from tether_companion.service.origin import OriginRequests
 from tether_companion.service.publish import Publication
 from tether_companion.service.recording_thread import RecorderThread, open_recorder
@@ -52,8 +52,6 @@ from tether_companion.service.vehicle_fetch import FROM_AUTOPILOT, VehicleFetch
 from tether_companion.vehicle_params.profile import profile_from_parameters
 
 HOUSEKEEPING_PERIOD_S = 0.05
-LINK_OPEN_TIMEOUT_S = 2.0
-"""An open (name lookup, TCP connect) taking longer than this [s] counts as failed."""
 
 
 class CompanionService:
@@ -112,7 +110,10 @@ class CompanionService:
         self._monotonic_s = monotonic_s
         self._on_publication = on_publication
         self._endpoint = parse_endpoint(config.link.connect, "connect", key="link.connect")
-        self._open_link_fn = open_link_fn or self._open_default_link
+        self.supervisor = LinkSupervisor(
+            self._endpoint, open_link_fn or self._open_default_link, config.link, self.state
+        )
+        """Opens the link, hands it to :meth:`_serve_opened`, re-opens it."""
         self.streams = StreamRequests(config.link, config.streams)
         """The inputs asked for and when to ask again."""
         self._timesync_pending: dict[int, float] = {}
@@ -138,11 +139,13 @@ class CompanionService:
             When the recording directory cannot be created or written.
         """
         self.recorder = open_recorder(self.config.recording)
+        if self.session.winch.note:
+            log(self.session.winch.note)
         gc.collect()
         gc.freeze()  # start-up objects leave the collector's view: shorter pauses on the hot path
         self.notifier.ready(status="started, connecting to the flight controller")
         tasks = [
-            asyncio.create_task(self._supervise_link(stop), name="link"),
+            asyncio.create_task(self.supervisor.run(stop, self._serve_opened), name="link"),
             asyncio.create_task(self._watchdog(stop), name="watchdog"),
         ]
         stopper = asyncio.create_task(stop.wait(), name="stop")
@@ -171,49 +174,13 @@ class CompanionService:
         )
 
     # ------------------------------------------------------------------ link supervision
-    async def _supervise_link(self, stop: asyncio.Event) -> None:
-        """Open the link, serve it, reopen it: a failure is said at once (within
-        ``LINK_OPEN_TIMEOUT_S``) on stderr, once per change of reason, then retried with
-        exponential back-off."""
-        cfg = self.config.link
-        delay = cfg.retry_initial_s
-        reported = ""
-        while not stop.is_set():
-            try:
-                link = await asyncio.wait_for(self._open_link_fn(), LINK_OPEN_TIMEOUT_S)
-            except OSError as exc:  # TimeoutError is one too
-                reason = _open_failure(exc).removeprefix(f"{self._endpoint}: ")
-                self.state.link_open_failures += 1
-                self.state.last_error = f"cannot open {self._endpoint}: {reason}"
-                self.state.link_text = f"cannot open {self._endpoint} (retry in {delay:.1f} s)"
-                if reason != reported:
-                    reported = reason
-                    _log(
-                        f"cannot open {self._endpoint}: {reason}; retrying with back-off "
-                        f"({cfg.retry_initial_s:g} s doubling up to {cfg.retry_max_s:g} s)"
-                    )
-                await _wait_or_stop(stop, delay)
-                delay = min(2.0 * delay, cfg.retry_max_s)
-                continue
-            if reported:
-                _log(f"opened {self._endpoint}")
-                reported = ""
-            delay = cfg.retry_initial_s
-            self.state.link_opens += 1
-            self.state.link_text = f"opened {self._endpoint}"
-            self.link = link
-            try:
-                await self._serve(link)
-            except LinkClosed:
-                self.state.last_error = f"{self._endpoint} closed"
-            finally:
-                self.link = None
-                self.state.link_up = False
-                await link.close()
-            self.state.link_text = f"{self._endpoint} closed (reopen in {delay:.1f} s)"
-            if not stop.is_set():
-                _log(f"{self._endpoint} closed; reopening in {delay:g} s")
-            await _wait_or_stop(stop, delay)
+    async def _serve_opened(self, link: Link) -> None:
+        """Serve one link the supervisor opened, until it closes."""
+        self.link = link
+        try:
+            await self._serve(link)
+        finally:
+            self.link = None
 
     async def _serve(self, link: Link) -> None:
         """Receive and housekeep on one open link until it closes (LinkClosed).
@@ -456,7 +423,7 @@ class CompanionService:
         if trust is None or not trust.events:
             return
         for event in trust.events:
-            _log(f"{link.endpoint}: {event}")
+            log(f"{link.endpoint}: {event}")
         self.state.last_error = trust.events[-1]
         trust.events.clear()
 
@@ -488,7 +455,7 @@ class CompanionService:
             if now >= next_status:
                 next_status = now + status_every_s
                 self.notifier.status(self.status_line())
-            await _wait_or_stop(stop, min(interval or status_every_s, status_every_s))
+            await wait_or_stop(stop, min(interval or status_every_s, status_every_s))
 
     def status_line(self) -> str:
         """One line for ``systemctl status`` and logs."""
@@ -497,22 +464,3 @@ class CompanionService:
             f"{self.state.link_text}; IMU {self.state.rates_hz[IMU]:.0f} Hz; "
             f"published {self.state.rates_hz['published']:.1f} Hz; health {pub.health}"
         )
-
-
-def _open_failure(exc: OSError) -> str:
-    """Why a link did not open, in words (no errno numbers)."""
-    if isinstance(exc, TimeoutError):
-        return f"no answer within {LINK_OPEN_TIMEOUT_S:g} s"
-    if isinstance(exc, socket.gaierror):
-        return f"cannot resolve the host ({exc.strerror})"
-    return exc.strerror or str(exc)
-
-
-def _log(line: str) -> None:
-    """One line for the journal (stderr)."""
-    print(f"tether-companion: {line}", file=sys.stderr, flush=True)
-
-
-async def _wait_or_stop(stop: asyncio.Event, timeout_s: float) -> None:
-    with contextlib.suppress(asyncio.TimeoutError):
-        await asyncio.wait_for(stop.wait(), timeout=timeout_s)

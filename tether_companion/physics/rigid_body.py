@@ -35,6 +35,7 @@ cable and any tug; horizontal forces on a landed drone are taken by friction.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 
@@ -82,6 +83,131 @@ def _no_force(
     return 0.0, 0.0, 0.0
 
 
+_STATE = ("pn", "pe", "pd", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")
+"""Names of the 12 rigid-body states in the generated code (the module's layout)."""
+_COEFFICIENTS = "bn, be, bd, c, im, wn, we, wd, gx, gy, gz, ix, iy, iz, rotor, ballistic"
+"""What the derivative reads besides the state and the wrench (``RigidBody._coefficients``)."""
+_DERIVATIVE = """\
+cr = cos(phi)
+sr = sin(phi)
+cp = cos(theta)
+sp = sin(theta)
+cy = cos(psi)
+sy = sin(psi)
+# rows of R_v^b (eq. 2)
+srsp = sr * sp
+crsp = cr * sp
+r00 = cp * cy
+r01 = cp * sy
+r10 = srsp * cy - cr * sy
+r11 = srsp * sy + cr * cy
+r12 = sr * cp
+r20 = crsp * cy + sr * sy
+r21 = crsp * sy - sr * cy
+r22 = cr * cp
+# eq. 3: NED velocity = R^T (u, v, w)
+vn = r00 * u + r10 * v + r20 * w
+ve = r01 * u + r11 * v + r21 * w
+vd = -sp * u + r12 * v + r22 * w
+fn, fe, fd = external_force(pn, pe, pd, vn, ve, vd)
+fn += bn - c * vn
+fe += be - c * ve
+fd += bd - c * vd
+ax = (r00 * fn + r01 * fe - sp * fd) * im
+ay = (r10 * fn + r11 * fe + r12 * fd) * im
+{drag}az = (r20 * fn + r21 * fe + r22 * fd - thrust_n) * im
+# eq. 4
+du = r * v - q * w + ax
+dv = p * w - r * u + ay
+dw = q * u - p * v + az
+# eq. 5
+s = sr * q + cr * r
+dphi = p + s * sp / cp
+dtheta = cr * q - sr * r
+dpsi = s / cp
+# eq. 6
+dp = gx * q * r + tau_l * ix
+dq = gy * p * r + tau_m * iy
+dr = gz * p * q + tau_n * iz
+"""
+"""Eqs. 3-6 at the state named by :data:`_STATE` for the wrench ``thrust_n, tau_l, tau_m,
+tau_n``, as straight-line code: written once, used by :meth:`RigidBody.derivative` and inlined
+four times into the RK4 step (no call, no tuple per stage)."""
+_DRAG = """\
+dax, day = drag_accel_body_mps2(
+    u - (r00 * wn + r01 * we - sp * wd), v - (r10 * wn + r11 * we + r12 * wd), rotor, ballistic
+)
+ax += dax
+ay += day
+"""
+_OUTPUTS = "vn, ve, vd, du, dv, dw, dphi, dtheta, dpsi, dp, dq, dr"
+_NO_SLOPE: tuple[float, ...] = ()
+
+
+def _indent(code: str) -> str:
+    return "".join(f"    {line}\n" for line in code.splitlines())
+
+
+@functools.cache
+def _generated(aero_drag: bool) -> tuple[Callable[..., tuple], Callable[..., list]]:
+    """``(derivative, rk4)`` compiled from :data:`_DERIVATIVE`, with the body-horizontal drag
+    of :mod:`~tether_companion.physics.aerodynamics` or without it.
+
+    ``derivative(x, wrench, slope, h, coefficients, external_force)`` is eqs. 3-6 at ``x``
+    (``x + h * slope`` unless ``slope`` is empty); ``rk4(x, w_start, w_half, w_full, h,
+    coefficients, external_force)`` returns the new state of one classical RK4 step with the
+    wrench at the stage times. The arithmetic is :data:`_DERIVATIVE`'s, operation for
+    operation, so both give the same floats as evaluating the stages one by one.
+    """
+    body = _DERIVATIVE.format(drag=_DRAG if aero_drag else "")
+    stage_in = ", ".join(_STATE)
+    x_names = [f"x{i}" for i in range(N_RIGID_STATES)]
+    derivative = (
+        "def derivative(x, wrench, slope, h, coefficients, external_force):\n"
+        f"    {_COEFFICIENTS} = coefficients\n"
+        "    thrust_n, tau_l, tau_m, tau_n = wrench\n"
+        "    if slope:\n"
+        f"        {', '.join(x_names)} = x\n"
+        f"        {', '.join(f's{i}' for i in range(N_RIGID_STATES))} = slope\n"
+        + "".join(f"        {name} = x{i} + h * s{i}\n" for i, name in enumerate(_STATE))
+        + "    else:\n"
+        f"        {stage_in} = x\n" + _indent(body) + f"    return ({_OUTPUTS})\n"
+    )
+    rk4 = [
+        "def rk4(x, w_start, w_half, w_full, h, coefficients, external_force):",
+        f"    {_COEFFICIENTS} = coefficients",
+        f"    {', '.join(x_names)} = x",
+        "    hh = 0.5 * h",
+    ]
+    stages = (
+        ("w_start", None, ""),
+        ("w_half", "k1", "hh"),
+        ("w_half", "k2", "hh"),
+        ("w_full", "k3", "h"),
+    )
+    for k, (wrench, previous, step) in enumerate(stages, start=1):
+        rk4.append(f"    thrust_n, tau_l, tau_m, tau_n = {wrench}")
+        for i, name in enumerate(_STATE):
+            value = f"x{i}" if previous is None else f"x{i} + {step} * {previous}_{i}"
+            rk4.append(f"    {name} = {value}")
+        rk4.append(_indent(body).rstrip("\n"))
+        outputs = ", ".join(f"k{k}_{i}" for i in range(N_RIGID_STATES))
+        rk4.append(f"    {outputs} = {_OUTPUTS}")
+    rk4.append("    h6 = h / 6.0")
+    rk4.append(
+        "    return ["
+        + ", ".join(
+            f"x{i} + h6 * (k1_{i} + k4_{i} + 2.0 * (k2_{i} + k3_{i}))"
+            for i in range(N_RIGID_STATES)
+        )
+        + "]"
+    )
+    namespace = {"cos": math.cos, "sin": math.sin, "drag_accel_body_mps2": drag_accel_body_mps2}
+    source = derivative + "\n".join(rk4) + "\n"
+    exec(compile(source, f"<generated rigid body, drag {aero_drag}>", "exec"), namespace)  # noqa: S102
+    return namespace["derivative"], namespace["rk4"]
+
+
 class RigidBody:
     """The quadcopter's state and its RK4 integration (see the module docstring).
 
@@ -126,7 +252,8 @@ class RigidBody:
         self._drag = float(vehicle.drag_coefficient_n_s_per_m)
         self._rotor_drag_per_s = float(vehicle.rotor_drag_per_s)
         self._ballistic_coefficient = float(vehicle.ballistic_coefficient_kg_per_m2)
-        self._has_aero_drag = self._rotor_drag_per_s > 0.0 or self._ballistic_coefficient > 0.0
+        has_aero_drag = self._rotor_drag_per_s > 0.0 or self._ballistic_coefficient > 0.0
+        self._derivative, self._rk4 = _generated(has_aero_drag)
         self.ground_down_m: Callable[[float, float], float] = _flat_ground
         """Down coordinate of the ground under (north, east) [m] (default: the anchor's level)."""
         self._lag = MotorLag(vehicle.motor_time_constant_s)
@@ -184,6 +311,8 @@ class RigidBody:
             *wind,
             *self._gyro,
             *self._inv_inertia,
+            self._rotor_drag_per_s,
+            self._ballistic_coefficient,
         )
 
     # ------------------------------------------------------------------ state access
@@ -242,71 +371,16 @@ class RigidBody:
         tau_l, tau_m, tau_n
             Body torques about FRD x, y, z [N m].
         slope, step_s
-            When given, the derivative is taken at ``x + step_s * slope`` (an RK4 stage),
-            formed here with scalars rather than as a new list.
+            When given, the derivative is taken at ``x + step_s * slope`` (an RK4 stage).
         """
-        if slope is None:
-            pn, pe, pd, u, v, w, phi, theta, psi, p, q, r = x
-        else:
-            x0, x1, x2, x3, x4, x5, x6, x7, x8, x9, x10, x11 = x
-            s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, s10, s11 = slope
-            h = step_s
-            pn, pe, pd = x0 + h * s0, x1 + h * s1, x2 + h * s2
-            u, v, w = x3 + h * s3, x4 + h * s4, x5 + h * s5
-            phi, theta, psi = x6 + h * s6, x7 + h * s7, x8 + h * s8
-            p, q, r = x9 + h * s9, x10 + h * s10, x11 + h * s11
-        bn, be, bd, c, im, wn, we, wd, gx, gy, gz, ix, iy, iz = self._coefficients
-        cr = math.cos(phi)
-        sr = math.sin(phi)
-        cp = math.cos(theta)
-        sp = math.sin(theta)
-        cy = math.cos(psi)
-        sy = math.sin(psi)
-        # rows of R_v^b (eq. 2)
-        srsp = sr * sp
-        crsp = cr * sp
-        r00 = cp * cy
-        r01 = cp * sy
-        r10 = srsp * cy - cr * sy
-        r11 = srsp * sy + cr * cy
-        r12 = sr * cp
-        r20 = crsp * cy + sr * sy
-        r21 = crsp * sy - sr * cy
-        r22 = cr * cp
-        # eq. 3: NED velocity = R^T (u, v, w)
-        vn = r00 * u + r10 * v + r20 * w
-        ve = r01 * u + r11 * v + r21 * w
-        vd = -sp * u + r12 * v + r22 * w
-        fn, fe, fd = self.external_force(pn, pe, pd, vn, ve, vd)
-        fn += bn - c * vn
-        fe += be - c * ve
-        fd += bd - c * vd
-        ax = (r00 * fn + r01 * fe - sp * fd) * im
-        ay = (r10 * fn + r11 * fe + r12 * fd) * im
-        if self._has_aero_drag:
-            dax, day = drag_accel_body_mps2(
-                u - (r00 * wn + r01 * we - sp * wd),
-                v - (r10 * wn + r11 * we + r12 * wd),
-                self._rotor_drag_per_s,
-                self._ballistic_coefficient,
-            )
-            ax += dax
-            ay += day
-        az = (r20 * fn + r21 * fe + r22 * fd - thrust_n) * im
-        # eq. 4
-        du = r * v - q * w + ax
-        dv = p * w - r * u + ay
-        dw = q * u - p * v + az
-        # eq. 5
-        s = sr * q + cr * r
-        dphi = p + s * sp / cp
-        dtheta = cr * q - sr * r
-        dpsi = s / cp
-        # eq. 6
-        dp = gx * q * r + tau_l * ix
-        dq = gy * p * r + tau_m * iy
-        dr = gz * p * q + tau_n * iz
-        return (vn, ve, vd, du, dv, dw, dphi, dtheta, dpsi, dp, dq, dr)
+        return self._derivative(
+            x,
+            (thrust_n, tau_l, tau_m, tau_n),
+            slope if slope is not None else _NO_SLOPE,
+            step_s,
+            self._coefficients,
+            self.external_force,
+        )
 
     def step(self, dt_s: float, steady_state_thrusts_n: Sequence[float]) -> None:
         """Advance the state by ``dt_s`` seconds with the motors' steady-state thrusts held.
@@ -325,10 +399,11 @@ class RigidBody:
             self._targets_wrench = self.wrench(fss)
         # the wrench at the stage times, in scalars (4 values: a comprehension costs more)
         st, sl, sm, sn = self._targets_wrench
-        t0, l0, m0, n0 = self._wrench
+        w_start = self._wrench
+        t0, l0, m0, n0 = w_start
         dh = self._decay_half
         df = self._decay_full
-        th, lh, mh, nh = (
+        w_half = (
             st + (t0 - st) * dh,
             sl + (l0 - sl) * dh,
             sm + (m0 - sm) * dh,
@@ -343,23 +418,13 @@ class RigidBody:
         self._wrench = w_full
         self._motor_n = [s + (z - s) * df for s, z in zip(fss, self._motor_n, strict=True)]
 
-        x = self.x
         if self.landed:
             if not self._lifts_off(t0):
                 return
             self.landed = False
-        h = dt_s
-        hh = 0.5 * h
-        deriv = self.derivative
-        k1 = deriv(x, t0, l0, m0, n0)
-        k2 = deriv(x, th, lh, mh, nh, k1, hh)
-        k3 = deriv(x, th, lh, mh, nh, k2, hh)
-        k4 = deriv(x, *w_full, k3, h)
-        h6 = h / 6.0
-        x = self.x = [
-            a + h6 * (b1 + b4 + 2.0 * (b2 + b3))
-            for a, b1, b2, b3, b4 in zip(x, k1, k2, k3, k4, strict=True)
-        ]
+        x = self.x = self._rk4(
+            self.x, w_start, w_half, w_full, dt_s, self._coefficients, self.external_force
+        )
         if x[POS_D] >= self.ground_down_m(x[POS_N], x[POS_E]):
             self._touch_ground()
 
@@ -418,7 +483,9 @@ class RigidBody:
         )
         if self.landed:
             return -grav_body[0], -grav_body[1], -grav_body[2]
-        d = self.derivative(x, *self._wrench)
+        d = self._derivative(
+            x, self._wrench, _NO_SLOPE, 0.0, self._coefficients, self.external_force
+        )
         u, v, w = x[VEL_U], x[VEL_V], x[VEL_W]
         p, q, r = x[RATE_P], x[RATE_Q], x[RATE_R]
         # kinematic acceleration (eq. 7-10): du/dt + Omega x eta; minus gravity (eq. 11)

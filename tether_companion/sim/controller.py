@@ -182,46 +182,51 @@ class CascadedController:
             target = self._hold_position
         else:
             target = None
-        if landed and (target is None or target[2] >= -c.landed_threshold_m):
+        landing = target is not None and target[2] >= -c.landed_threshold_m
+        if landed and (target is None or landing):
             return self.idle()
-        v_ff = sp.velocity_ned_m_s or (0.0, 0.0, 0.0)
+        vn_ff, ve_ff, vd_ff = sp.velocity_ned_m_s or (0.0, 0.0, 0.0)
         if target is None:
-            v_cmd = list(v_ff)
+            vn_cmd, ve_cmd, vd_cmd = vn_ff, ve_ff, vd_ff
         else:
             kxy, kz = c.position_gain_xy_per_s, c.position_gain_z_per_s
-            v_cmd = [
-                v_ff[0] + kxy * (target[0] - position_ned_m[0]),
-                v_ff[1] + kxy * (target[1] - position_ned_m[1]),
-                v_ff[2] + kz * (target[2] - position_ned_m[2]),
-            ]
-        speed_xy = math.hypot(v_cmd[0], v_cmd[1])
-        if speed_xy > c.max_speed_xy_mps:
-            v_cmd[0] *= c.max_speed_xy_mps / speed_xy
-            v_cmd[1] *= c.max_speed_xy_mps / speed_xy
-        if target is not None and target[2] >= -c.landed_threshold_m:
-            v_cmd[2] = max(v_cmd[2], c.landing_speed_mps)
-        v_cmd[2] = _clamp(v_cmd[2], c.max_speed_z_mps)
+            pn, pe, pd = position_ned_m
+            vn_cmd = vn_ff + kxy * (target[0] - pn)
+            ve_cmd = ve_ff + kxy * (target[1] - pe)
+            vd_cmd = vd_ff + kz * (target[2] - pd)
+        speed_xy = math.hypot(vn_cmd, ve_cmd)
+        max_xy = c.max_speed_xy_mps
+        if speed_xy > max_xy:
+            vn_cmd *= max_xy / speed_xy
+            ve_cmd *= max_xy / speed_xy
+        if landing:
+            vd_cmd = max(vd_cmd, c.landing_speed_mps)
+        max_z = c.max_speed_z_mps
+        vd_cmd = max(-max_z, min(max_z, vd_cmd))
 
         # velocity -> acceleration command (PI), anti-windup by clamping
-        a_ff = sp.acceleration_ned_mps2 or (0.0, 0.0, 0.0)
-        gains = (c.velocity_gain_xy_per_s, c.velocity_gain_xy_per_s, c.velocity_gain_z_per_s)
-        igains = (
-            c.velocity_integral_xy_per_s2,
-            c.velocity_integral_xy_per_s2,
-            c.velocity_integral_z_per_s2,
-        )
+        an_ff, ae_ff, ad_ff = sp.acceleration_ned_mps2 or (0.0, 0.0, 0.0)
+        kv_xy, kv_z = c.velocity_gain_xy_per_s, c.velocity_gain_z_per_s
+        vn, ve, vd = velocity_ned_m_s
+        en, ee, ed = vn_cmd - vn, ve_cmd - ve, vd_cmd - vd
         integral = self.integral_ned_mps2
-        a_cmd = [0.0, 0.0, 0.0]
-        for i in range(3):
-            error = v_cmd[i] - velocity_ned_m_s[i]
-            if not landed:
-                integral[i] = _clamp(integral[i] + igains[i] * error * dt_s, c.max_integral_mps2)
-            a_cmd[i] = a_ff[i] + gains[i] * error + integral[i]
+        i_n, i_e, i_d = integral
+        if not landed:
+            ki_xy, ki_z = c.velocity_integral_xy_per_s2, c.velocity_integral_z_per_s2
+            limit = c.max_integral_mps2
+            i_n = max(-limit, min(limit, i_n + ki_xy * en * dt_s))
+            i_e = max(-limit, min(limit, i_e + ki_xy * ee * dt_s))
+            i_d = max(-limit, min(limit, i_d + ki_z * ed * dt_s))
+            integral[0], integral[1], integral[2] = i_n, i_e, i_d
+        an_cmd = an_ff + kv_xy * en + i_n
+        ae_cmd = ae_ff + kv_xy * ee + i_e
+        ad_cmd = ad_ff + kv_z * ed + i_d
 
         # acceleration -> thrust vector -> attitude set-point
         g = self.gravity_mps2
-        fn, fe = self.mass_kg * a_cmd[0], self.mass_kg * a_cmd[1]
-        fd = min(self.mass_kg * (a_cmd[2] - g), -0.1 * self.mass_kg * g)
+        m = self.mass_kg
+        fn, fe = m * an_cmd, m * ae_cmd
+        fd = min(m * (ad_cmd - g), -0.1 * m * g)
         horizontal = math.hypot(fn, fe)
         limit = self._tan_max_tilt * -fd
         if horizontal > limit:
@@ -236,16 +241,18 @@ class CascadedController:
         cr, sr = math.cos(roll), math.sin(roll)
         cp, sp_ = math.cos(pitch), math.sin(pitch)
         # body z axis in NED: third row of R_v^b
-        zb = (cr * sp_ * cy + sr * sy, cr * sp_ * sy - sr * cy, cr * cp)
-        collective = max(-(fn * zb[0] + fe * zb[1] + fd * zb[2]), 0.0)
+        zb0, zb1, zb2 = cr * sp_ * cy + sr * sy, cr * sp_ * sy - sr * cy, cr * cp
+        collective = max(-(fn * zb0 + fe * zb1 + fd * zb2), 0.0)
 
         # attitude -> body rates (eq. 5 inverted) -> torques
+        max_rate, max_yaw_rate = c.max_rate_rad_s, c.max_yaw_rate_rad_s
         droll = c.attitude_gain_per_s * (roll_sp - roll)
         dpitch = c.attitude_gain_per_s * (pitch_sp - pitch)
-        dyaw = _clamp(c.yaw_gain_per_s * _wrap(yaw_sp - yaw), c.max_yaw_rate_rad_s)
-        p_cmd = _clamp(droll - sp_ * dyaw, c.max_rate_rad_s)
-        q_cmd = _clamp(cr * dpitch + sr * cp * dyaw, c.max_rate_rad_s)
-        r_cmd = _clamp(-sr * dpitch + cr * cp * dyaw, c.max_yaw_rate_rad_s)
+        dyaw = c.yaw_gain_per_s * _wrap(yaw_sp - yaw)
+        dyaw = max(-max_yaw_rate, min(max_yaw_rate, dyaw))
+        p_cmd = max(-max_rate, min(max_rate, droll - sp_ * dyaw))
+        q_cmd = max(-max_rate, min(max_rate, cr * dpitch + sr * cp * dyaw))
+        r_cmd = max(-max_yaw_rate, min(max_yaw_rate, -sr * dpitch + cr * cp * dyaw))
         p, q, r = body_rates_rad_s
         jx, jy, jz = self._inertia
         torque = (

@@ -58,8 +58,10 @@ class Ground:
 
     def elevation_m(self, north_m: float, east_m: float) -> float:
         """Terrain elevation above the mean ground at (north, east) [m]."""
-        return sum(a * math.sin(kn * north_m + ke * east_m + ph) for kn, ke, ph, a in self._waves)
+        return sum([a * math.sin(kn * north_m + ke * east_m + ph) for kn, ke, ph, a in self._waves])
 
     def down_m(self, north_m: float, east_m: float) -> float:
         """NED down coordinate of the ground surface at (north, east) [m]."""
+        if not self._waves:  # flat: the anchor's height (the elevation is 0)
+            return self.config.anchor_height_m
         return self.config.anchor_height_m - self.elevation_m(north_m, east_m)

@@ -10,7 +10,7 @@ ultrasound sigma^2 = 0.1 m^2 (sigma = 0.316 m), gyro and attitude sigma^2 = 0.01
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -133,23 +133,20 @@ class NormalStream:
     """Standard normal numbers drawn from a Generator in blocks (cheap per-sample draws).
 
     The sequence is a deterministic function of the Generator's state: the same seed gives the
-    same numbers.
+    same numbers. A block is drawn when the first number past the previous block is taken, so
+    other users of the Generator see it in the same state as with draws one by one at those
+    moments.
     """
 
     def __init__(self, rng: np.random.Generator, block: int = 4096) -> None:
         self._rng = rng
         self._block = block
-        self._buffer: list[float] = []
-        self._index = 0
+        self.take: Callable[[], float] = self._numbers().__next__
+        """The next standard normal number (a generator's ``__next__``: no method call)."""
 
-    def take(self) -> float:
-        """The next standard normal number."""
-        if self._index >= len(self._buffer):
-            self._buffer = self._rng.standard_normal(self._block).tolist()
-            self._index = 0
-        value = self._buffer[self._index]
-        self._index += 1
-        return value
+    def _numbers(self) -> Iterator[float]:
+        while True:
+            yield from self._rng.standard_normal(self._block).tolist()
 
 
 class SensorSuite:
@@ -201,25 +198,26 @@ class SensorSuite:
         _random_walk(self.gyro_bias_drift_rad_s, c.gyro_bias_random_walk_rad_s_per_sqrt_s, dt, take)
         sa, sg = c.accel_noise_std_mps2, c.gyro_noise_std_rad_s
         amp = c.accel_vibration_amplitude_mps2
-        accel = [
-            f + b + d + sa * take()
-            for f, b, d in zip(
-                specific_force_body_mps2, c.accel_bias_mps2, self.accel_bias_drift_mps2, strict=True
-            )
-        ]
+        # in scalars, each axis in turn (the noise stream's order: accel x, y, z, gyro x, y, z)
+        fx, fy, fz = specific_force_body_mps2
+        bx, by, bz = c.accel_bias_mps2
+        dx, dy, dz = self.accel_bias_drift_mps2
+        ax = fx + bx + dx + sa * take()
+        ay = fy + by + dy + sa * take()
+        az = fz + bz + dz + sa * take()
         if amp > 0.0:
             wt = self._vibration_omega_rad_s * time_s
-            accel = [
-                a + amp * math.sin(wt + ph)
-                for a, ph in zip(accel, self._vibration_phase_rad, strict=True)
-            ]
-        gyro = [
-            w + b + d + sg * take()
-            for w, b, d in zip(
-                body_rates_rad_s, c.gyro_bias_rad_s, self.gyro_bias_drift_rad_s, strict=True
-            )
-        ]
-        return ImuSample(time_s, np.array(accel), np.array(gyro))
+            px, py, pz = self._vibration_phase_rad
+            ax = ax + amp * math.sin(wt + px)
+            ay = ay + amp * math.sin(wt + py)
+            az = az + amp * math.sin(wt + pz)
+        wx, wy, wz = body_rates_rad_s
+        bx, by, bz = c.gyro_bias_rad_s
+        dx, dy, dz = self.gyro_bias_drift_rad_s
+        gx = wx + bx + dx + sg * take()
+        gy = wy + by + dy + sg * take()
+        gz = wz + bz + dz + sg * take()
+        return ImuSample(time_s, np.array((ax, ay, az)), np.array((gx, gy, gz)))
 
     def attitude(
         self, time_s: float, roll_rad: float, pitch_rad: float, yaw_rad: float

@@ -208,8 +208,8 @@ class Simulator:
 
     def step(self) -> None:
         """One physics step: events, controller (at its rate), RK4 with motor lag, cable, ground."""
-        t = self.time_s
         dt = self.physics_dt_s
+        t = self._steps * dt  # self.time_s
         if self._next_event_s <= t + 0.5 * dt:
             self._apply_due_events(t + 0.5 * dt)
         if t >= self._tug_end_s - 0.5 * dt:
@@ -239,7 +239,7 @@ class Simulator:
 
     def _check_flyable(self, t: float) -> None:
         """Fail on a non-finite state or a lasting saturation of every motor."""
-        if not all(math.isfinite(v) for v in self.body.x):
+        if not all(map(math.isfinite, self.body.x)):
             self._fail(f"t = {t:.2f} s: the vehicle's state is not finite")
         top = self.vehicle.thrust_curve.pwm_max_us
         if self.armed and all(p >= top - 0.5 for p in self._pwm_us):

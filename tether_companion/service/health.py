@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import output as dynamic_output
+from tether_companion.estimation.dynamic.published import Approximation
 from tether_companion.estimation.observability import RANGEFINDER
 from tether_companion.service.config import PublishConfig
 
@@ -141,7 +142,35 @@ def assess_health(
     ever_ok
         Whether this estimator run was healthy before: a too-large variance before the first
         healthy estimate is ``converging``, after it ``diverged``.
+
+    An estimate that offers its values approximately (the dynamic filter's ``approximate()``:
+    Python floats within a bound of their rounding, cheaper than its exact arrays) is judged
+    on them where every test is clear by more than that bound; otherwise, and for the other
+    estimates, on the exact values.
     """
+    verdict = None
+    approximate = getattr(estimate, "approximate", None)
+    if approximate is not None:
+        approx = approximate()
+        if approx is not None:
+            verdict = _approximate_verdict(approx, config, has_tension_state)
+    if verdict is None:
+        verdict = _exact_verdict(estimate, config, has_tension_state)
+    if verdict == _VARIANCE:
+        if getattr(estimate, "missing_input", None) == RANGEFINDER:
+            return NO_RANGE  # the variance grew because the height is not measured
+        return DIVERGED if ever_ok else CONVERGING
+    return verdict
+
+
+_VARIANCE = "variance"
+"""Verdict: a position variance not positive or beyond ``max_position_variance_m2``."""
+_APPROXIMATE_MARGIN = 1e-9
+"""Relative margin of an approximate value to a threshold (as the dynamic filter's own)."""
+
+
+def _exact_verdict(estimate: PositionEstimate, config: PublishConfig, has_tension: bool) -> str:
+    """DIVERGED (not finite), :data:`_VARIANCE`, SLACK or OK from the exact values."""
     # in scalars: this runs at every IMU tick, and numpy's per-call overhead on 3- and
     # 16-element arrays was most of the publisher's cost
     isfinite = math.isfinite
@@ -153,11 +182,34 @@ def assess_health(
         return DIVERGED
     variances = estimate.position_covariance_m2.diagonal().tolist()
     if min(variances) <= 0.0 or max(variances) >= config.max_position_variance_m2:
-        if getattr(estimate, "missing_input", None) == RANGEFINDER:
-            return NO_RANGE  # the variance grew because the height is not measured
-        return DIVERGED if ever_ok else CONVERGING
-    if has_tension_state and estimate.tension_n < config.slack_tension_n:
+        return _VARIANCE
+    if has_tension and estimate.tension_n < config.slack_tension_n:
         return SLACK
+    return OK
+
+
+def _approximate_verdict(
+    approx: Approximation, config: PublishConfig, has_tension: bool
+) -> str | None:
+    """:func:`_exact_verdict` from an approximation (its values within ``covariance_tol``,
+    its finiteness known or not), None when a test is not clear."""
+    if not approx.finite:
+        return None
+    north, _, east = approx.horizontal
+    variances = (north, east, approx.down_variance)
+    smallest, largest = min(variances), max(variances)
+    tol = approx.covariance_tol
+    bound = config.max_position_variance_m2
+    if not (smallest > tol and abs(largest - bound) > tol + _APPROXIMATE_MARGIN * bound):
+        return None
+    if largest >= bound:
+        return _VARIANCE
+    if has_tension:
+        tension, slack = approx.tension_n, config.slack_tension_n
+        if not abs(tension - slack) > _APPROXIMATE_MARGIN * (abs(tension) + abs(slack)):
+            return None
+        if tension < slack:
+            return SLACK
     return OK
 
 
@@ -179,8 +231,7 @@ def dynamic_health(
     if status == dynamic_output.OK or status == dynamic_output.STALE_INPUTS:
         return SHORT_CABLE if near_anchor else None
     if status in _DYNAMIC_WITHHELD:
-        distance = float(np.linalg.norm(estimate.position_ned_m))
-        if near_anchor or distance < short_cable_m:
+        if near_anchor or _closer_than(estimate, short_cable_m):
             return SHORT_CABLE
         return _DYNAMIC_WITHHELD[status]
     return _DYNAMIC_STATUS_HEALTH.get(status, DIVERGED)  # a status added later: withheld
@@ -197,3 +248,16 @@ _DYNAMIC_STATUS_HEALTH = {
     dynamic_output.ON_GROUND: MOTORS_IDLE,
     dynamic_output.RESET: DIVERGED,
 }
+
+
+def _closer_than(estimate: dynamic_output.NavigationEstimate, distance_m: float) -> bool:
+    """Whether the estimate's position is closer than ``distance_m`` [m] to the anchor: from
+    its approximate position where that is clear, else from the exact one."""
+    approx = estimate.approximate()
+    if approx is not None:
+        n, e, d = approx.position
+        distance = math.sqrt(n * n + e * e + d * d)
+        tol = 2.0 * approx.position_tol + _APPROXIMATE_MARGIN * (distance + distance_m)
+        if abs(distance - distance_m) > tol:
+            return distance < distance_m
+    return float(np.linalg.norm(estimate.position_ned_m)) < distance_m

@@ -303,9 +303,10 @@ class Publisher:
             self._ever_ok = False
             self._ok_since_s = math.inf
         self._estimator_resets = estimate.reset_counter
-        health = assess_health(estimate, self.config, self.has_tension_state, self._ever_ok)
-        if unavailable is not None:
+        if unavailable is not None:  # the estimator's own verdict: its values are not read
             health = unavailable
+        else:
+            health = assess_health(estimate, self.config, self.has_tension_state, self._ever_ok)
         if inputs_stale and health in (OK, CONVERGING):
             health = inputs_stale if isinstance(inputs_stale, str) else STALE
         if motors_idle and health != DIVERGED:
@@ -338,6 +339,9 @@ class Publisher:
         if t < self._next_due_s:
             return out, None
         self._next_due_s = _next_due(self._next_due_s, t, self._period_s)
+        if attitude is None or (health != OK and self.config.on_unhealthy != "inflate"):
+            self.counters.withheld += 1  # withheld whatever the position: not read
+            return out, None
         position = estimate.position_ned_m
         if health != OK and self._last_ok_position is not None:
             position = self._last_ok_position  # inflate holds the last healthy position

@@ -37,7 +37,7 @@ from tether_companion.estimation.alignment import (
     aligner_for,
 )
 from tether_companion.estimation.config import EstimatorConfig
-from tether_companion.estimation.dynamic import generated, state
+from tether_companion.estimation.dynamic import generated
 from tether_companion.estimation.dynamic.aid.accel import NEAR_ANCHOR, ON_GROUND, AccelAid
 from tether_companion.estimation.dynamic.aid.cable_angle import CableAngleAid
 from tether_companion.estimation.dynamic.aid.load_cell import LoadCellAid
@@ -53,14 +53,13 @@ from tether_companion.estimation.dynamic.noise import (
     accel_measurement_std_mps2,
     process_noise_density,
 )
-from tether_companion.estimation.dynamic.observability import (
-    HoverUnknowns,
-    assess,
-    horizontal_pull_n,
-    min_horizontal_pull_n,
-    unmodelled_position_covariance,
-)
 from tether_companion.estimation.dynamic.output import DynamicHealth, NavigationEstimate
+from tether_companion.estimation.dynamic.published import (
+    MixtureValues,
+    ProcessNoise,
+    StatusSettings,
+    TickSource,
+)
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
 from tether_companion.estimation.inputs import InputFeed, range_height_m, range_reading_ok
 from tether_companion.estimation.pipeline import default_thrust_input
@@ -74,10 +73,6 @@ DIVERGED_AFTER_S = 1.0
 """Accelerometer innovations gated this long in a row [s]: the filter has diverged."""
 MAX_DISTANCE_M = 1000.0
 """A position farther than this from the anchor [m] is a divergence."""
-UNKNOWN_VARIANCE = 1e6
-"""Variance reported for every component while there is no state [SI units^2]."""
-_HOVER_UNKNOWNS = [state.SCALE, state.WIND.start, state.WIND.start + 1]
-"""State indices of the thrust scale and the wind (what a steady hover does not observe)."""
 
 
 class DynamicTetherEstimator(InputFeed):
@@ -134,9 +129,19 @@ class DynamicTetherEstimator(InputFeed):
         """The inertial prediction summed over the ticks since the members last stepped."""
         self._q = process_noise_density(dynamic)
         self._q_matrix = np.diag(self._q)
-        self._pull_per_wind_n_s_per_m = (
-            dynamic.min_pull_over_wind_drag * vehicle.mass_kg * self.constants.drag_per_s
+        self._noise = ProcessNoise(self._q_matrix)
+        self._status_settings = StatusSettings(
+            slack_tension_n=dynamic.slack_tension_n,
+            max_horizontal_std_m=dynamic.max_horizontal_std_m,
+            unmodelled_force_std_n=dynamic.unmodelled_force_std_n,
+            winch_length_noise_std_m=dynamic.winch_length_noise_std_m,
+            pull_per_wind_n_s_per_m=(
+                dynamic.min_pull_over_wind_drag * vehicle.mass_kg * self.constants.drag_per_s
+            ),
+            wind_std_mps=dynamic.initial.wind_std_mps,
         )
+        self._mixture: MixtureValues | None = None
+        """The bank's latest mixture with its values as floats (kept while it is the same)."""
         self.accel = AccelAid(accel_measurement_std_mps2(dynamic), config.min_cable_length_m)
         self.rangefinder = RangefinderAid(
             config.altimeter_noise_variance_m2, config.ground_station.anchor_height_m
@@ -420,77 +425,37 @@ class DynamicTetherEstimator(InputFeed):
         self.health.resets = self._resets
         self._reset_reason = f"filter restarted: {reason}"
 
-    def _moments(self, bank: FilterBank) -> tuple[FloatArray, FloatArray]:
-        """The bank's mixture mean and covariance stepped over the IMU ticks the members have
-        not stepped over yet (the same step: the mixture of stepped members is the stepped
-        mixture, the step being affine)."""
-        x, p = bank.mixture()
-        batch = self._batch
-        if batch is None or batch.ticks == 0:
-            return x, p
-        q = self._q_matrix
-        return batch.step_state(x, q), batch.step_covariance(p, q)
-
     def _estimate(self, accel_fused: bool, stale: bool, on_ground: bool) -> NavigationEstimate:
+        """The tick's estimate: what its values are computed from, kept (they are computed
+        when read: :mod:`~tether_companion.estimation.dynamic.published`)."""
         bank = self.bank
         reset_reason, self._reset_reason = self._reset_reason, None
-        if bank is None:  # no state: zeros with a covariance that says "unknown"
-            x = np.zeros(state.N_STATES)
-            p = np.eye(state.N_STATES) * UNKNOWN_VARIANCE
-            tension, tension_var = 0.0, UNKNOWN_VARIANCE
-        else:
-            x, p = self._moments(bank)
-            values = x.tolist()
-            tension, tension_var = self.constants.tension_at_drone(values, p)
-        published_covariance = p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy()
-        published_covariance[2, 2] += self.rangefinder.excess.variance
+        mixture = None
         if bank is not None:
-            published_covariance[:3, :3] += unmodelled_position_covariance(
-                x[state.POSITION],
-                tension,
-                self.dynamic.unmodelled_force_std_n,
-                self.dynamic.winch_length_noise_std_m if self.health.winch_fused else 0.0,
-            )
-        status, reason = assess(
-            initialised_reason=None if bank is not None else self._initialiser.reason,
-            reset_reason=reset_reason,
-            on_ground=on_ground,
-            inputs_stale=stale,
-            tension_n=tension,
-            slack_tension_n=self.dynamic.slack_tension_n,
-            position_covariance_m2=published_covariance[:3, :3],
-            max_horizontal_std_m=self.dynamic.max_horizontal_std_m,
-            horizontal_pull_n=0.0 if bank is None else horizontal_pull_n(values),
-            min_horizontal_pull_n=min_horizontal_pull_n(
-                self._pull_per_wind_n_s_per_m,
-                self.dynamic.initial.wind_std_mps,
-                float(x[state.WIND][0]),
-                float(x[state.WIND][1]),
-            ),
-            hover_unknowns=None
-            if bank is None
-            else HoverUnknowns(
-                float(x[state.SCALE]),
-                x[state.WIND].copy(),
-                p[_HOVER_UNKNOWNS][:, _HOVER_UNKNOWNS],
-                p[:2][:, _HOVER_UNKNOWNS],
-                len(bank.filters),
-            ),
+            x, p = bank.mixture()
+            mixture = self._mixture
+            if mixture is None or mixture.x is not x or mixture.p is not p:
+                mixture = self._mixture = MixtureValues(x, p)
+        batch = self._batch
+        source = TickSource(
+            mixture,
+            None if batch is None or bank is None else batch.step(),
+            self._noise,
+            self.constants,
+            self._status_settings,
+            self.rangefinder.excess.variance,
+            bool(self.health.winch_fused),
+            0 if bank is None else len(bank.filters),
+            None if bank is not None else self._initialiser.reason,
+            reset_reason,
+            on_ground,
+            stale,
         )
-        return NavigationEstimate(
-            time_s=self._time_s,
-            position_ned_m=x[state.POSITION].copy(),
-            velocity_ned_mps=x[state.VELOCITY].copy(),
-            position_velocity_covariance=published_covariance,
-            tension_n=float(tension),
-            tension_variance_n2=tension_var,
-            reset_counter=self._resets,
-            status=status,
-            reason=reason,
-            accel_fused=accel_fused,
-            thrust_scale=float(x[state.SCALE]),
-            accel_bias_body_mps2=x[state.BIAS].copy(),
-            wind_ne_mps=x[state.WIND].copy(),
-            health_values=self.health.values(),
-            health_type=DynamicHealth,
+        return NavigationEstimate.of_tick(
+            self._time_s,
+            self._resets,
+            accel_fused,
+            self.health.values(),
+            DynamicHealth,
+            source,
         )

@@ -47,17 +47,23 @@ _TRANSITION_ENTRIES = np.array(
 )
 """Flat positions in ``Phi`` of ``T`` (position rows, velocity columns), ``B_p`` and ``B_v``
 (position and velocity rows, bias columns)."""
+_POSITION_ROW_ENTRIES = np.array(
+    [0 * _N + 0, 1 * _N + 1, 2 * _N + 2, 0 * _N + 3, 1 * _N + 4, 2 * _N + 5]
+    + [row * _N + col for row in range(3) for col in range(8, 11)]
+)
+"""Flat positions in ``Phi``'s position rows (3, 13) of the identity, ``T`` and ``B_p``."""
 
 
-class ImuBatch:
-    """The summed inertial step of the IMU ticks since the last :meth:`clear`."""
+class BatchStep:
+    """The step of one batch, fixed: its sums as they were when it was taken, with the
+    transition built from them on first use (an estimate read later steps with the batch of
+    its own tick). Read-only."""
 
     __slots__ = (
-        "_offset",
         "_phi",
         "_q",
         "_q_step",
-        "_stale",
+        "_rows",
         "b_p",
         "b_v",
         "d_p",
@@ -66,11 +72,88 @@ class ImuBatch:
         "ticks",
     )
 
-    def __init__(self) -> None:
-        self._phi = np.eye(_N)
-        self._offset = np.zeros(_N)
+    def __init__(
+        self,
+        ticks: int,
+        duration_s: float,
+        d_p: list[float],
+        d_v: list[float],
+        b_p: list[float],
+        b_v: list[float],
+    ) -> None:
+        self.ticks = ticks
+        self.duration_s = duration_s
+        """``T`` [s]."""
+        self.d_p = d_p
+        """``D_p`` [m]."""
+        self.d_v = d_v
+        """``D_v`` [m/s]."""
+        self.b_p = b_p
+        """``B_p`` [s^2], 3x3 row-major (NED position row, body bias column)."""
+        self.b_v = b_v
+        """``B_v`` [s], 3x3 row-major."""
+        self._phi: FloatArray | None = None
+        self._rows: FloatArray | None = None
         self._q: FloatArray | None = None
-        self._q_step = np.zeros((_N, _N))
+        self._q_step = _NO_ARRAY
+
+    @property
+    def phi(self) -> FloatArray:
+        """``Phi`` (13, 13) (made once; do not change it)."""
+        phi = self._phi
+        if phi is None:
+            t = self.duration_s
+            phi = np.eye(_N)
+            phi.flat[_TRANSITION_ENTRIES] = (t, t, t, *self.b_p, *self.b_v)
+            self._phi = phi
+        return phi
+
+    @property
+    def position_rows(self) -> FloatArray:
+        """The position rows of ``Phi`` (3, 13) (made once; do not change them)."""
+        rows = self._rows
+        if rows is None:
+            t = self.duration_s
+            rows = np.zeros((3, _N))
+            rows.flat[_POSITION_ROW_ENTRIES] = (1.0, 1.0, 1.0, t, t, t, *self.b_p)
+            self._rows = rows
+        return rows
+
+    def noise(self, q: FloatArray) -> FloatArray:
+        """``T q`` (13, 13) for the process noise spectral density ``q`` (do not change it)."""
+        if self._q is not q:
+            self._q_step = q * self.duration_s
+            self._q = q
+        return self._q_step
+
+    def step_state(self, x: FloatArray) -> FloatArray:
+        """States (..., 13) stepped over the batch (new array): ``Phi x + (D_p, D_v, 0...)``."""
+        out = x @ self.phi.T
+        offset = np.zeros(_N)
+        offset[:6] = (*self.d_p, *self.d_v)
+        out += offset
+        return out
+
+    def step_covariance(self, p: FloatArray, q: FloatArray) -> FloatArray:
+        """``Phi P Phi^T + T Q`` (new array, exactly symmetric) for covariances ``p`` (..., 13,
+        13) and the process noise spectral density ``q`` (13, 13)."""
+        phi = self.phi
+        out = phi @ p @ phi.T
+        out += out.swapaxes(-1, -2)
+        out *= 0.5
+        out += self.noise(q)
+        return out
+
+
+_NO_ARRAY = np.zeros((0, 0))
+
+
+class ImuBatch:
+    """The summed inertial step of the IMU ticks since the last :meth:`clear`."""
+
+    __slots__ = ("_step", "b_p", "b_v", "d_p", "d_v", "duration_s", "ticks")
+
+    def __init__(self) -> None:
         self.clear()
 
     def clear(self) -> None:
@@ -86,7 +169,7 @@ class ImuBatch:
         """``B_p`` [s^2], 3x3 row-major (NED position row, body bias column)."""
         self.b_v = [0.0] * 9
         """``B_v`` [s], 3x3 row-major."""
-        self._stale = True
+        self._step: BatchStep | None = None
 
     def add(self, dt_s: float, u: Sequence[float], c: Sequence[float]) -> bool:
         """One IMU tick of ``dt_s`` [s] with the inputs ``u = (R_v^b row-major, f_x, f_y,
@@ -97,43 +180,33 @@ class ImuBatch:
         xdot, jac = generated.inertial(_ZERO_STATE, u, c)
         d_p, d_v, b_p, b_v = self.d_p, self.d_v, self.b_p, self.b_v
         v0, v1, v2 = d_v
+        # new lists every tick (never changed in place): a BatchStep keeps them as they were
         self.d_p = [d_p[0] + dt_s * v0, d_p[1] + dt_s * v1, d_p[2] + dt_s * v2]
         self.d_v = [v0 + dt_s * xdot[3], v1 + dt_s * xdot[4], v2 + dt_s * xdot[5]]
         self.b_p = [b + dt_s * v for b, v in zip(b_p, b_v, strict=True)]
         self.b_v = [b + dt_s * jac[k] for b, k in zip(b_v, _BIAS_COLUMNS, strict=True)]
         self.duration_s += dt_s
         self.ticks += 1
-        self._stale = True
+        self._step = None
         return True
 
-    def transition(self, q: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """``Phi`` (13, 13), the offset ``(D_p, D_v, 0...)`` (13,) and ``T q`` (13, 13) for
-        the process noise spectral density ``q``: the batch's own arrays, filled again when
-        ticks were added since (read them at once, do not keep or change them)."""
-        phi, offset = self._phi, self._offset
-        if self._stale or self._q is not q:
-            t = self.duration_s
-            phi.flat[_TRANSITION_ENTRIES] = (t, t, t, *self.b_p, *self.b_v)
-            offset[:6] = (*self.d_p, *self.d_v)
-            self._q_step = q * t
-            self._q = q
-            self._stale = False
-        return phi, offset, self._q_step
+    def step(self) -> BatchStep:
+        """The batch's step as it is now (the same object until a tick is added or the batch
+        cleared)."""
+        step = self._step
+        if step is None:
+            step = self._step = BatchStep(
+                self.ticks, self.duration_s, self.d_p, self.d_v, self.b_p, self.b_v
+            )
+        return step
 
     def step_state(self, x: FloatArray, q: FloatArray) -> FloatArray:
         """States (..., 13) stepped over the batch (new array): ``Phi x + (D_p, D_v, 0...)``
-        (``q`` as for :meth:`transition`)."""
-        phi, offset, _ = self.transition(q)
-        out = x @ phi.T
-        out += offset
-        return out
+        (``q`` unused: the state's step has no noise; kept for symmetry with
+        :meth:`step_covariance`)."""
+        return self.step().step_state(x)
 
     def step_covariance(self, p: FloatArray, q: FloatArray) -> FloatArray:
         """``Phi P Phi^T + T Q`` (new array, exactly symmetric) for covariances ``p`` (..., 13,
         13) and the process noise spectral density ``q`` (13, 13)."""
-        phi, _, q_step = self.transition(q)
-        out = phi @ p @ phi.T
-        out += out.swapaxes(-1, -2)
-        out *= 0.5
-        out += q_step
-        return out
+        return self.step().step_covariance(p, q)

@@ -21,6 +21,7 @@ standard deviation of 0.3 m).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -159,25 +160,41 @@ def unmodelled_position_covariance(
         Standard deviation kept along the cable [m].
     """
     n, e, d = (float(v) for v in position_ned_m)
+    return np.array(unmodelled_position_rows(n, e, d, tension_n, force_std_n, length_std_m))
+
+
+def unmodelled_position_rows(
+    n: float, e: float, d: float, tension_n: float, force_std_n: float, length_std_m: float
+) -> list[list[float]]:
+    """:func:`unmodelled_position_covariance` as rows of Python floats, for the position
+    ``(n, e, d)`` NED [m] (the same arithmetic: the array is made from these)."""
     distance = math.sqrt(n * n + e * e + d * d)
     if distance == 0.0:
-        return np.zeros((3, 3))
-    u = (n / distance, e / distance, d / distance)
+        return [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+    u0, u1, u2 = n / distance, e / distance, d / distance
     # the columns of I - u u^T a horizontal force acts through (north, east)
-    across_n = (1.0 - u[0] * u[0], -u[1] * u[0], -u[2] * u[0])
-    across_e = (-u[0] * u[1], 1.0 - u[1] * u[1], -u[2] * u[1])
+    an0, an1, an2 = 1.0 - u0 * u0, -u1 * u0, -u2 * u0
+    ae0, ae1, ae2 = -u0 * u1, 1.0 - u1 * u1, -u2 * u1
     gain = distance * force_std_n / max(tension_n, MIN_TENSION_N)
-    gain_sq, length_sq = gain * gain, length_std_m * length_std_m
-    return np.array(
+    g, w = gain * gain, length_std_m * length_std_m
+    # entry (i, j): g (an_i an_j + ae_i ae_j) + w u_i u_j, written out (runs every IMU tick)
+    return [
         [
-            [
-                gain_sq * (across_n[i] * across_n[j] + across_e[i] * across_e[j])
-                + length_sq * u[i] * u[j]
-                for j in range(3)
-            ]
-            for i in range(3)
-        ]
-    )
+            g * (an0 * an0 + ae0 * ae0) + w * u0 * u0,
+            g * (an0 * an1 + ae0 * ae1) + w * u0 * u1,
+            g * (an0 * an2 + ae0 * ae2) + w * u0 * u2,
+        ],
+        [
+            g * (an1 * an0 + ae1 * ae0) + w * u1 * u0,
+            g * (an1 * an1 + ae1 * ae1) + w * u1 * u1,
+            g * (an1 * an2 + ae1 * ae2) + w * u1 * u2,
+        ],
+        [
+            g * (an2 * an0 + ae2 * ae0) + w * u2 * u0,
+            g * (an2 * an1 + ae2 * ae1) + w * u2 * u1,
+            g * (an2 * an2 + ae2 * ae2) + w * u2 * u2,
+        ],
+    ]
 
 
 def horizontal_pull_n(x: list[float]) -> float:
@@ -216,7 +233,8 @@ def assess(
     min_horizontal_pull_n: float = 0.0,
     hover_unknowns: HoverUnknowns | None = None,
 ) -> tuple[str, str]:
-    """``(status, reason)`` of one tick (reason empty when ``ok``).
+    """``(status, reason)`` of one tick (reason empty when ``ok``): :func:`decide` on these
+    values, in words.
 
     Parameters
     ----------
@@ -239,26 +257,44 @@ def assess(
         What the filter knows of the thrust scale and the wind (None: not told; then never
         ``learning``).
     """
-    if reset_reason is not None:
-        return RESET, reset_reason
-    if initialised_reason is not None:
-        return INITIALISING, initialised_reason
-    if on_ground:
+    horizontal = position_covariance_m2[:2, :2]
+    (a, b), (_, c) = horizontal.tolist()
+    status = decide(
+        initialised=initialised_reason is None,
+        reset=reset_reason is not None,
+        on_ground=on_ground,
+        inputs_stale=inputs_stale,
+        tension_n=tension_n,
+        slack_tension_n=slack_tension_n,
+        horizontal_m2=(a, b, c),
+        max_horizontal_std_m=max_horizontal_std_m,
+        horizontal_pull_n=horizontal_pull_n,
+        min_horizontal_pull_n=min_horizontal_pull_n,
+        explained=None
+        if hover_unknowns is None
+        else lambda: hover_unknowns.explains(horizontal, max_horizontal_std_m),
+    )
+    assert status is not None  # no margin: always decided
+    if status == OK:
+        return OK, ""
+    if status == RESET:
+        return RESET, reset_reason or ""
+    if status == INITIALISING:
+        return INITIALISING, initialised_reason or ""
+    if status == ON_GROUND:
         return ON_GROUND, "thrust far below the weight: on the ground"
-    if inputs_stale:
+    if status == STALE_INPUTS:
         return STALE_INPUTS, "attitude or motor outputs stale: prediction only"
-    if tension_n < slack_tension_n:
+    if status == SLACK:
         return SLACK, f"cable slack ({tension_n:.2f} N < {slack_tension_n:g} N)"
     if horizontal_pull_n < min_horizontal_pull_n:
         return WEAK_PULL, (
             f"horizontal pull {horizontal_pull_n:.2f} N < {min_horizontal_pull_n:.2f} N: the"
             " wind's drag could turn the bearing"
         )
-    horizontal = position_covariance_m2[:2, :2]
-    std = _largest_std(horizontal)
-    if std <= max_horizontal_std_m:
-        return OK, ""
-    if hover_unknowns is not None and hover_unknowns.explains(horizontal, max_horizontal_std_m):
+    std = _largest_std_values(a, b, c)
+    if status == LEARNING:
+        assert hover_unknowns is not None
         return LEARNING, (
             f"learning the thrust scale and the wind ({hover_unknowns.describe()}): horizontal"
             f" std {std:.2f} m > {max_horizontal_std_m:g} m; a steady hover does not tell"
@@ -270,16 +306,126 @@ def assess(
     )
 
 
-def _largest_std(covariance_m2: FloatArray) -> float:
-    """Square root of the larger eigenvalue of a symmetric 2x2 covariance [m]."""
-    (a, b), (_, c) = covariance_m2.tolist()
-    return _largest_std_values(a, b, c)
+def decide(
+    *,
+    initialised: bool,
+    reset: bool,
+    on_ground: bool,
+    inputs_stale: bool,
+    tension_n: float,
+    slack_tension_n: float,
+    horizontal_m2: tuple[float, float, float],
+    max_horizontal_std_m: float,
+    horizontal_pull_n: float,
+    min_horizontal_pull_n: float,
+    explained: Callable[[], bool | None] | None,
+    margin: float = 0.0,
+    variance_tol: float = 0.0,
+) -> str | None:
+    """The status of one tick (the order of the module's docstring), or None when ``margin``
+    > 0 and a comparison it needs is within ``margin`` (relative) of its threshold or not a
+    number, or ``explained`` says it cannot tell: then only the exact values decide.
+
+    Parameters
+    ----------
+    horizontal_m2
+        The horizontal position covariance's entries (north-north, north-east, east-east)
+        [m^2].
+    explained
+        Whether the horizontal covariance waits only for the thrust scale and the wind
+        (:meth:`HoverUnknowns.explains`; None from it: cannot tell), asked only when the
+        standard deviation is beyond the bound; None: never ``learning``.
+    margin
+        Relative margin of approximate values (0: the values are exact).
+    variance_tol
+        Bound of the approximate ``horizontal_m2`` entries' rounding [m^2] (0: exact).
+    Other parameters as for :func:`assess`.
+    """
+    if reset:
+        return RESET
+    if not initialised:
+        return INITIALISING
+    if on_ground:
+        return ON_GROUND
+    if inputs_stale:
+        return STALE_INPUTS
+    slack = _less(tension_n, slack_tension_n, margin)
+    if slack is None or slack:
+        return None if slack is None else SLACK
+    weak = _less(horizontal_pull_n, min_horizontal_pull_n, margin)
+    if weak is None or weak:
+        return None if weak is None else WEAK_PULL
+    std = _largest_std_values(*horizontal_m2)
+    if margin > 0.0 or variance_tol > 0.0:  # the larger eigenvalue moves by <= 2 tol
+        bound_sq = max_horizontal_std_m * max_horizontal_std_m
+        if not abs(std * std - bound_sq) > 4.0 * variance_tol + margin * (std * std + bound_sq):
+            return None
+    if std <= max_horizontal_std_m:
+        return OK
+    if explained is None:
+        return WEAK_PULL
+    learning = explained()
+    if learning is None:
+        return None
+    return LEARNING if learning else WEAK_PULL
+
+
+def _less(a: float, b: float, margin: float) -> bool | None:
+    """``a < b``; None when ``margin`` > 0 and ``a`` is within ``margin`` (relative) of ``b``
+    or either is not a number."""
+    if margin > 0.0 and not abs(a - b) > margin * (abs(a) + abs(b)):
+        return None
+    return a < b
 
 
 def _largest_std_values(a: float, b: float, c: float) -> float:
     """Square root of the larger eigenvalue of the symmetric 2x2 ``[[a, b], [b, c]]``."""
     largest = 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
     return math.sqrt(max(largest, 0.0))
+
+
+def explains_approximately(
+    horizontal_m2: tuple[float, float, float],
+    covariance: list[list[float]],
+    cross: list[list[float]],
+    max_std_m: float,
+    *,
+    horizontal_tol: float,
+    covariance_tol: float,
+    cross_tol: float,
+    margin: float,
+) -> bool | None:
+    """:meth:`HoverUnknowns.explains` (one hypothesis) on approximate values: the horizontal
+    covariance's entries (north-north, north-east, east-east) [m^2], the unknowns' covariance
+    (3x3) and their cross-covariance with the horizontal position (2x3), each entry within
+    ``*_tol`` of the exact one. The exact values' answer, or None when they could give
+    another (the bound through ``C``'s smallest eigenvalue, at least ``4 det C / tr(C)^2``).
+    """
+    (c00, c01, c02), (_, c11, c12), (_, _, c22) = covariance
+    trace = c00 + c11 + c22
+    det = c00 * (c11 * c22 - c12 * c12) - c01 * (c01 * c22 - c12 * c02)
+    det += c02 * (c01 * c12 - c11 * c02)
+    smallest = 4.0 * det / (trace * trace) if trace > 0.0 else 0.0
+    if not smallest > 1e3 * (3.0 * covariance_tol + 1e-12 * trace):  # det's own rounding
+        return None  # C nearly singular: the rounding's effect is not bounded
+    explained = _explained_2x2(covariance, cross)
+    if explained is None:
+        return None
+    a, b, c = horizontal_m2
+    e0, e1, e2 = explained
+    y_sq = max(e0 + e2, 0.0)  # |Y|^2 <= tr(Y^T Y), Y = L^-1 X^T
+    # first order: |d(X C^-1 X^T)| <= 2 |dX| |Y| / sqrt(l_min) + |Y|^2 |dC| / l_min (doubled)
+    moved = 2.0 * (
+        2.0 * math.sqrt(6.0) * cross_tol * math.sqrt(y_sq / smallest)
+        + y_sq * 3.0 * covariance_tol / smallest
+    )
+    std = _largest_std_values(a - e0, b - e1, c - e2)
+    bound_sq = max_std_m * max_std_m
+    tol = 2.0 * (moved + 2.0 * horizontal_tol)
+    tol += margin * (abs(a) + abs(b) + abs(c) + y_sq + bound_sq)
+    if not abs(std * std - bound_sq) > tol:
+        return None
+    return std <= max_std_m
 
 
 def _explained_2x2(

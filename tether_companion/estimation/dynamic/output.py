@@ -14,7 +14,8 @@ the 4-state layout the publisher and its CSV read), ``position_covariance_m2``,
 ``status``, ``reason``, ``observable``, ``thrust_scale``, ``accel_bias_body_mps2``,
 ``wind_ne_mps``.
 
-Pure data; no behaviour beyond views of the stored arrays.
+Pure data; its values are computed when first read (see
+:mod:`~tether_companion.estimation.dynamic.published`), nothing else.
 """
 
 from __future__ import annotations
@@ -22,10 +23,14 @@ from __future__ import annotations
 import dataclasses
 import math
 import operator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from tether_companion.estimation.dynamic.published import Approximation, TickSource
 
 FloatArray = NDArray[np.float64]
 
@@ -57,9 +62,46 @@ VELOCITY_BLOCK = slice(3, 6)
 """Rows/columns of the velocity in :attr:`NavigationEstimate.position_velocity_covariance`."""
 
 
-@dataclass(frozen=True, slots=True)
+class ExactValues:
+    """Every field of one tick's estimate (the arithmetic of the former per-tick
+    computation)."""
+
+    __slots__ = (
+        "bias",
+        "covariance",
+        "position",
+        "reason",
+        "scale",
+        "status",
+        "tension",
+        "tension_variance",
+        "velocity",
+        "wind",
+    )
+
+    def __init__(self, *values) -> None:  # noqa: ANN002 - the slots in order
+        (
+            self.position,
+            self.velocity,
+            self.covariance,
+            self.tension,
+            self.tension_variance,
+            self.status,
+            self.reason,
+            self.scale,
+            self.bias,
+            self.wind,
+        ) = values
+
+
 class NavigationEstimate:
     """The dynamic filter's output at one IMU tick (SI units, NED from the tether anchor).
+
+    Made by the filter from what the tick's values are computed from (a ``source``:
+    :class:`~tether_companion.estimation.dynamic.published.TickSource`), they are computed
+    when first read and kept: the status alone cheaply, every other field exactly (the same
+    values whenever read); or made from the values themselves (keyword arguments, as below).
+    Read-only.
 
     Attributes
     ----------
@@ -98,21 +140,137 @@ class NavigationEstimate:
         The class that names ``health_values`` (set by the filter).
     """
 
-    time_s: float
-    position_ned_m: FloatArray
-    velocity_ned_mps: FloatArray
-    position_velocity_covariance: FloatArray
-    tension_n: float
-    tension_variance_n2: float
-    reset_counter: int
-    status: str
-    reason: str
-    accel_fused: bool
-    thrust_scale: float
-    accel_bias_body_mps2: FloatArray
-    wind_ne_mps: FloatArray
-    health_values: tuple = field(repr=False)
-    health_type: type | None = field(default=None, repr=False)
+    __slots__ = (
+        "_covariance4",
+        "_source",
+        "_status",
+        "_values",
+        "accel_fused",
+        "health_type",
+        "health_values",
+        "reset_counter",
+        "time_s",
+    )
+
+    def __init__(
+        self,
+        *,
+        time_s: float,
+        position_ned_m: FloatArray,
+        velocity_ned_mps: FloatArray,
+        position_velocity_covariance: FloatArray,
+        tension_n: float,
+        tension_variance_n2: float,
+        reset_counter: int,
+        status: str,
+        reason: str,
+        accel_fused: bool,
+        thrust_scale: float,
+        accel_bias_body_mps2: FloatArray,
+        wind_ne_mps: FloatArray,
+        health_values: tuple,
+        health_type: type | None = None,
+    ) -> None:
+        self.time_s = time_s
+        self.reset_counter = reset_counter
+        self.accel_fused = accel_fused
+        self.health_values = health_values
+        self.health_type = health_type
+        self._source = None
+        self._status = status
+        self._values = ExactValues(
+            position_ned_m,
+            velocity_ned_mps,
+            position_velocity_covariance,
+            tension_n,
+            tension_variance_n2,
+            status,
+            reason,
+            thrust_scale,
+            accel_bias_body_mps2,
+            wind_ne_mps,
+        )
+        self._covariance4: FloatArray | None = None
+
+    @classmethod
+    def of_tick(
+        cls,
+        time_s: float,
+        reset_counter: int,
+        accel_fused: bool,
+        health_values: tuple,
+        health_type: type | None,
+        source: TickSource,
+    ) -> NavigationEstimate:
+        """The estimate whose values ``source`` computes when they are read."""
+        estimate = cls.__new__(cls)
+        estimate.time_s = time_s
+        estimate.reset_counter = reset_counter
+        estimate.accel_fused = accel_fused
+        estimate.health_values = health_values
+        estimate.health_type = health_type
+        estimate._source = source
+        estimate._status = None
+        estimate._values = None
+        estimate._covariance4 = None
+        return estimate
+
+    def _exact(self) -> ExactValues:
+        values = self._values
+        if values is None:
+            assert self._source is not None
+            values = self._values = self._source.values()
+        return values
+
+    @property
+    def status(self) -> str:
+        """One of :data:`STATUSES`."""
+        status = self._status
+        if status is None:
+            assert self._source is not None
+            status = self._status = self._source.status()
+        return status
+
+    def approximate(self) -> Approximation | None:
+        """The published position, covariance and tension as Python floats with bounds of
+        their rounding (None: none cheaper than the exact values; read those)."""
+        return None if self._source is None else self._source.approximate()
+
+    @property
+    def position_ned_m(self) -> FloatArray:
+        return self._exact().position
+
+    @property
+    def velocity_ned_mps(self) -> FloatArray:
+        return self._exact().velocity
+
+    @property
+    def position_velocity_covariance(self) -> FloatArray:
+        return self._exact().covariance
+
+    @property
+    def tension_n(self) -> float:
+        return self._exact().tension
+
+    @property
+    def tension_variance_n2(self) -> float:
+        return self._exact().tension_variance
+
+    @property
+    def reason(self) -> str:
+        return self._exact().reason
+
+    @property
+    def thrust_scale(self) -> float:
+        return self._exact().scale
+
+    @property
+    def accel_bias_body_mps2(self) -> FloatArray:
+        return self._exact().bias
+
+    @property
+    def wind_ne_mps(self) -> FloatArray:
+        return self._exact().wind
 
     @property
     def observable(self) -> bool:
@@ -133,10 +291,13 @@ class NavigationEstimate:
     def covariance(self) -> FloatArray:
         """Position block then tension variance, shape (4, 4) [m^2, N^2]: the layout of the
         paper's 4-state :class:`~tether_companion.estimation.estimate.Estimate` that the
-        publisher and its CSV read (position-tension cross terms left at zero)."""
-        out = np.zeros((4, 4))
-        out[:3, :3] = self.position_covariance_m2
-        out[3, 3] = self.tension_variance_n2
+        publisher and its CSV read (position-tension cross terms left at zero; made once)."""
+        out = self._covariance4
+        if out is None:
+            out = np.zeros((4, 4))
+            out[:3, :3] = self.position_covariance_m2
+            out[3, 3] = self.tension_variance_n2
+            self._covariance4 = out
         return out
 
     @property
@@ -145,6 +306,11 @@ class NavigationEstimate:
         if self.health_type is None:
             return self.health_values
         return self.health_type(*self.health_values)
+
+    def __repr__(self) -> str:
+        fields = ("time_s", "status", "position_ned_m", "tension_n", "reset_counter")
+        text = ", ".join(f"{name}={getattr(self, name)!r}" for name in fields)
+        return f"NavigationEstimate({text})"
 
 
 @dataclass(slots=True)

@@ -1,0 +1,286 @@
+"""The dynamic filter's estimate computed when read (estimation/dynamic/published.py): every
+field read at the tick, read long after, or never read but the status, is the former per-tick
+computation's bit for bit; the cheap status and the publisher's cheap checks decide as the
+exact values do, and say "unsure" near a threshold instead of guessing."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from tether_companion.bench.dynamic import record
+from tether_companion.estimation.config import EstimatorConfig
+from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
+from tether_companion.estimation.dynamic.observability import (
+    HoverUnknowns,
+    assess,
+    decide,
+    explains_approximately,
+    horizontal_pull_n,
+    min_horizontal_pull_n,
+    unmodelled_position_covariance,
+)
+from tether_companion.estimation.dynamic.output import (
+    LEARNING,
+    OK,
+    SLACK,
+    WEAK_PULL,
+    NavigationEstimate,
+)
+from tether_companion.estimation.dynamic.published import UNKNOWN_VARIANCE
+from tether_companion.estimation.runner import _ATTITUDE, _PWM, _RANGE
+from tether_companion.physics.vehicle import load_vehicle
+from tether_companion.service.config import load_service_config, load_vehicle_for
+from tether_companion.service.session import EstimationSession
+from tether_companion.sim.scenario import load_scenario
+
+FLIGHTS = [("realistic-takeoff-figure8", 9.0), ("realistic-sagging-circle", 5.0)]
+"""On the ground, initialising, the bank, learning, weak pull, slack; the straight cable and
+the catenary."""
+_HOVER = [state.SCALE, state.WIND.start, state.WIND.start + 1]
+
+
+@pytest.fixture(scope="module", params=FLIGHTS, ids=[name for name, _ in FLIGHTS])
+def flight(request):
+    name, seconds = request.param
+    return name, record(name, seconds)
+
+
+def _former_estimate(est: DynamicTetherEstimator, source) -> tuple:  # noqa: ANN001
+    """The estimate's fields as the filter computed them at every tick before they became
+    lazy (its arithmetic, from the filter's state right after the tick; the tick's flags are
+    inputs, taken from the tick)."""
+    bank, dyn = est.bank, est.dynamic
+    if bank is None:
+        x = np.zeros(state.N_STATES)
+        p = np.eye(state.N_STATES) * UNKNOWN_VARIANCE
+        tension, tension_var = 0.0, UNKNOWN_VARIANCE
+    else:
+        x, p = bank.mixture()
+        batch = est._batch
+        if batch is not None and batch.ticks:
+            x, p = batch.step_state(x, est._q_matrix), batch.step_covariance(p, est._q_matrix)
+        values = x.tolist()
+        tension, tension_var = est.constants.tension_at_drone(values, p)
+    published = p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy()
+    published[2, 2] += est.rangefinder.excess.variance
+    if bank is not None:
+        published[:3, :3] += unmodelled_position_covariance(
+            x[state.POSITION],
+            tension,
+            dyn.unmodelled_force_std_n,
+            dyn.winch_length_noise_std_m if est.health.winch_fused else 0.0,
+        )
+    status, reason = assess(
+        initialised_reason=None if bank is not None else est._initialiser.reason,
+        reset_reason=source.reset_reason,
+        on_ground=source.on_ground,
+        inputs_stale=source.inputs_stale,
+        tension_n=tension,
+        slack_tension_n=dyn.slack_tension_n,
+        position_covariance_m2=published[:3, :3],
+        max_horizontal_std_m=dyn.max_horizontal_std_m,
+        horizontal_pull_n=0.0 if bank is None else horizontal_pull_n(values),
+        min_horizontal_pull_n=min_horizontal_pull_n(
+            est._status_settings.pull_per_wind_n_s_per_m,
+            dyn.initial.wind_std_mps,
+            float(x[state.WIND][0]),
+            float(x[state.WIND][1]),
+        ),
+        hover_unknowns=None
+        if bank is None
+        else HoverUnknowns(
+            float(x[state.SCALE]),
+            x[state.WIND].copy(),
+            p[_HOVER][:, _HOVER],
+            p[:2][:, _HOVER],
+            len(bank.filters),
+        ),
+    )
+    return _fields(
+        x[state.POSITION],
+        x[state.VELOCITY],
+        published,
+        float(tension),
+        tension_var,
+        status,
+        reason,
+        float(x[state.SCALE]),
+        x[state.BIAS],
+        x[state.WIND],
+    )
+
+
+def _check_approximation(approx, former: tuple) -> None:  # noqa: ANN001
+    position, _, covariance, tension = former[:4]
+    assert approx.finite
+    for a, b in zip(approx.position, position, strict=True):
+        assert abs(a - b) <= approx.position_tol
+    north, north_east, east = approx.horizontal
+    tol = approx.covariance_tol
+    assert abs(north - covariance[0][0]) <= tol and abs(east - covariance[1][1]) <= tol
+    assert abs(north_east - covariance[0][1]) <= tol
+    assert abs(approx.down_variance - covariance[2][2]) <= tol
+    assert abs(approx.tension_n - tension) <= 1e-12 * abs(tension)
+    assert tol <= 1e-9  # and the bound is small: the decisions it leaves open are rare
+
+
+def _fields(*values) -> tuple:  # noqa: ANN002
+    return tuple(v.tolist() if isinstance(v, np.ndarray) else v for v in values)
+
+
+def _read(e) -> tuple:  # noqa: ANN001
+    return _fields(
+        e.position_ned_m,
+        e.velocity_ned_mps,
+        e.position_velocity_covariance,
+        e.tension_n,
+        e.tension_variance_n2,
+        e.status,
+        e.reason,
+        e.thrust_scale,
+        e.accel_bias_body_mps2,
+        e.wind_ne_mps,
+    )
+
+
+def _feed(est, kind, sample):  # noqa: ANN001, ANN202
+    if kind == _ATTITUDE:
+        return est.on_attitude(sample)
+    if kind == _PWM:
+        return est.on_pwm(sample)
+    if kind == _RANGE:
+        return est.on_range(sample)
+    return est.on_imu(sample)
+
+
+def test_every_field_is_the_former_per_tick_value_whenever_it_is_read(flight) -> None:
+    name, samples = flight
+    vehicle = load_vehicle(load_scenario(name).vehicle)
+    est = DynamicTetherEstimator(EstimatorConfig(), vehicle)
+    later = DynamicTetherEstimator(EstimatorConfig(), vehicle)  # read after the flight
+    expected, kept, statuses = [], [], set()
+    for kind, sample in samples:
+        e = _feed(est, kind, sample)
+        e_later = _feed(later, kind, sample)
+        if kind in (_ATTITUDE, _PWM, _RANGE):
+            continue
+        former = _former_estimate(est, e._source)
+        approx = e.approximate()
+        status = e.status  # first the cheap status alone, as the service reads it
+        assert status == former[5]
+        assert _read(e) == former
+        if approx is not None:  # within the rounding it claims
+            _check_approximation(approx, former)
+        expected.append(former)
+        kept.append(e_later)
+        statuses.add(status)
+    assert [_read(e) for e in kept] == expected  # bit for bit, read after 1000s of ticks
+    assert {LEARNING, WEAK_PULL} & statuses  # the flights reach the numeric tests
+
+
+def _session_output(samples, eager: bool, monkeypatch) -> list:  # noqa: ANN001
+    """Every message and publication of a service session (messages on) and its counters;
+    ``eager``: each estimate's exact values computed at its tick (the former behaviour) and
+    read by the publisher (no approximation offered)."""
+    if eager:
+        former = DynamicTetherEstimator._estimate
+
+        def estimate(self, *args):  # noqa: ANN001, ANN002, ANN202
+            out = former(self, *args)
+            out._source.values()
+            return out
+
+        monkeypatch.setattr(DynamicTetherEstimator, "_estimate", estimate)
+        monkeypatch.setattr(NavigationEstimate, "approximate", lambda self: None)
+    config = load_service_config(None, {"recording": {"enabled": False}})
+    session = EstimationSession(config, load_vehicle_for(config), messages=True)
+    lines: list = []
+    for _, sample in samples:
+        step = session.on_sample(sample)
+        lines += [sorted(m.to_dict().items()) for m in step.messages]
+        if step.publication is not None:
+            lines.append(step.publication.csv_row())
+    counters = session.publisher.counters
+    lines.append(dataclasses.asdict(counters))
+    monkeypatch.undo()
+    return lines
+
+
+def test_the_service_sends_and_counts_the_same_as_with_every_value_computed(
+    flight, monkeypatch
+) -> None:
+    _, samples = flight
+    lazy = _session_output(samples, False, monkeypatch)
+    eager = _session_output(samples, True, monkeypatch)
+    assert lazy == eager
+    assert lazy[-1]["estimates"] >= 1000
+
+
+def test_an_approximate_decision_near_a_threshold_is_left_to_the_exact_values() -> None:
+    common = dict(
+        initialised=True,
+        reset=False,
+        on_ground=False,
+        inputs_stale=False,
+        slack_tension_n=0.5,
+        horizontal_m2=(0.01, 0.0, 0.01),
+        max_horizontal_std_m=0.3,
+        horizontal_pull_n=3.0,
+        min_horizontal_pull_n=1.0,
+        explained=None,
+    )
+    assert decide(tension_n=4.0, margin=1e-9, **common) == OK
+    assert decide(tension_n=0.2, margin=1e-9, **common) == SLACK
+    assert decide(tension_n=0.5 * (1 + 1e-12), margin=1e-9, **common) is None
+    assert decide(tension_n=math.nan, margin=1e-9, **common) is None
+    assert decide(tension_n=math.nan, **common) == OK  # exact: as assess always did
+    near = dict(common, horizontal_m2=(0.09 + 1e-13, 0.0, 0.01))
+    assert decide(tension_n=4.0, margin=1e-9, variance_tol=1e-12, **near) is None
+    assert decide(tension_n=4.0, **near) == WEAK_PULL  # exact: std 0.3 + 2e-13 m > 0.3 m
+
+
+def test_the_approximate_learning_test_agrees_with_the_exact_one_or_abstains() -> None:
+    rng = np.random.default_rng(4)
+    decided = 0
+    for _ in range(300):
+        a = rng.normal(size=(5, 5)) * rng.uniform(0.05, 1.0, size=5)
+        joint = a @ a.T + np.eye(5) * 1e-6
+        horizontal, cross, unknowns = joint[:2, :2], joint[:2, 2:], joint[2:, 2:]
+        max_std = float(rng.uniform(0.05, 1.5))
+        exact = HoverUnknowns(1.0, np.zeros(2), unknowns, cross, 1).explains(horizontal, max_std)
+        tol = 1e-12
+        noisy = [v * (1 + rng.uniform(-1e-15, 1e-15)) for v in joint.ravel()]
+        j = np.array(noisy).reshape(5, 5)
+        approx = explains_approximately(
+            (float(j[0, 0]), float(j[0, 1]), float(j[1, 1])),
+            j[2:, 2:].tolist(),
+            j[:2, 2:].tolist(),
+            max_std,
+            horizontal_tol=tol,
+            covariance_tol=tol,
+            cross_tol=tol,
+            margin=1e-9,
+        )
+        if approx is not None:
+            decided += 1
+            assert approx == exact
+    assert decided > 250
+    singular = [[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    assert (
+        explains_approximately(
+            (1.0, 0.0, 1.0),
+            singular,
+            [[0.1, 0.1, 0.0], [0.0, 0.0, 0.1]],
+            0.5,
+            horizontal_tol=1e-12,
+            covariance_tol=1e-12,
+            cross_tol=1e-12,
+            margin=1e-9,
+        )
+        is None
+    )

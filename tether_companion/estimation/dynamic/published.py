@@ -1,0 +1,534 @@
+"""One IMU tick's published estimate, computed when it is read: :class:`TickSource`.
+
+The dynamic filter's members step and fuse once per IMU batch (``imu_ticks_per_fusion``
+ticks), but the estimate is per tick: the bank's mixture stepped over the ticks the members
+have not stepped yet (a 13x13 ``Phi P Phi^T``), the tension at the drone with its variance,
+the unmodelled-force position covariance, the observability status. The service reads the
+status at every tick and the numbers at its publication rate (30 Hz of 200), replay the same,
+``bench dynamic`` nothing. So each tick keeps only what it is computed from (references to the
+mixture's arrays, which the members replace and never change in place, and to the batch's
+fixed step), and computes
+
+* the **exact values** (:meth:`TickSource.values`: every field, with the same arithmetic as
+  when they were computed at every tick, so bit for bit the same) only when a field is read;
+* the **status** (:meth:`TickSource.status`) from approximate scalars: the position stepped in
+  Python floats, the published position block ``A P A^T`` from the three position rows ``A``
+  of ``Phi`` only, the tension from the generated model; each comparison with a threshold
+  (slack tension, the pull against the wind's drag, the horizontal standard deviation) is
+  decided on them only when it is clearly on one side (:data:`MARGIN` relative, and for the
+  covariance an absolute bound of its rounding, :meth:`Approximation.covariance_tol`); when it
+  is not, or the ``learning`` test needs the thrust scale and wind's Schur complement, the
+  exact values decide. So the status is always the exact values' status;
+* the same approximation for the publisher's checks (:meth:`TickSource.approximate`: finite,
+  variances within the bound, tension above slack; ``service.health`` decides with the same
+  margins and reads the exact values when unsure).
+
+Pure.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.imu_batch import BatchStep
+from tether_companion.estimation.dynamic.models import UNDEFINED, ModelConstants
+from tether_companion.estimation.dynamic.observability import (
+    HoverUnknowns,
+    assess,
+    decide,
+    explains_approximately,
+    horizontal_pull_n,
+    min_horizontal_pull_n,
+    unmodelled_position_covariance,
+    unmodelled_position_rows,
+)
+from tether_companion.estimation.dynamic.output import ExactValues
+
+FloatArray = NDArray[np.float64]
+
+MARGIN = 1e-9
+"""Relative margin within which an approximate value is too close to its threshold to
+decide (their rounding differs from the exact values' by ~1e-16 relative)."""
+FINITE_BOUND = 1e150
+"""Approximate magnitudes below this are the rounding of finite exact values."""
+ROUNDING = 1e-12
+"""Bound on the approximate covariance's rounding, relative to its terms' magnitude (the
+products of 13 terms differ from the exact ones by a few 1e-16 of it)."""
+UNKNOWN_VARIANCE = 1e6
+"""Variance reported for every component while there is no state [SI units^2]."""
+_HOVER_UNKNOWNS = (state.SCALE, state.WIND.start, state.WIND.start + 1)
+"""State indices of the thrust scale and the wind (what a steady hover does not observe)."""
+_HOVER_LIST = list(_HOVER_UNKNOWNS)
+_NO_ROWS = np.zeros((0, 0))
+
+
+@dataclass(frozen=True, slots=True)
+class StatusSettings:
+    """The dynamic filter's settings the published estimate needs (SI units)."""
+
+    slack_tension_n: float
+    max_horizontal_std_m: float
+    unmodelled_force_std_n: float
+    winch_length_noise_std_m: float
+    pull_per_wind_n_s_per_m: float
+    wind_std_mps: float
+
+
+class MixtureValues:
+    """The mixture's mean and covariance with what every tick between two member steps reads
+    of them as Python floats (made once per mixture: the members replace their arrays when
+    they step)."""
+
+    __slots__ = ("_rows", "finite", "largest_sd", "p", "sd", "x", "x_values")
+
+    def __init__(self, x: FloatArray, p: FloatArray) -> None:
+        self.x = x
+        self.p = p
+        self.x_values: list[float] = x.tolist()
+        diagonal = p.diagonal().tolist()
+        self.finite = (
+            math.isfinite(sum(self.x_values))
+            and bool(np.isfinite(p).all())
+            and min(diagonal) >= 0.0
+        )
+        """Whether the arrays are finite with a diagonal >= 0 (else: no approximation)."""
+        self.sd = [math.sqrt(v) if v >= 0.0 else math.nan for v in diagonal]
+        """Standard deviations [SI units]: ``|P_ij| <= sd_i sd_j`` bounds the terms."""
+        self.largest_sd = max(self.sd)
+        self._rows: list[list[float]] | None = None
+
+    @property
+    def rows(self) -> list[list[float]]:
+        """The covariance's rows as floats (made on first use)."""
+        rows = self._rows
+        if rows is None:
+            rows = self._rows = self.p.tolist()
+        return rows
+
+
+class Approximation:
+    """A tick's published values in Python floats, to within their rounding.
+
+    Attributes
+    ----------
+    state
+        The state's values (13).
+    duration_s
+        The step's duration ``T`` [s] (0 without a step).
+    position
+        Position NED [m] (3).
+    horizontal
+        Published horizontal position covariance: north-north, north-east, east-east [m^2].
+    down_variance
+        Published down variance [m^2].
+    tension_n
+        Tension at the drone [N].
+    finite
+        Whether every published value (position, covariance, tension and its variance) is
+        finite for sure (False: not known).
+    position_tol, covariance_tol
+        Absolute bounds of the position's [m] and the covariance entries' [m^2] rounding.
+    """
+
+    __slots__ = (
+        "covariance_tol",
+        "down_variance",
+        "duration_s",
+        "finite",
+        "horizontal",
+        "position",
+        "position_tol",
+        "state",
+        "tension_n",
+    )
+
+    def __init__(
+        self,
+        state: list[float],
+        duration_s: float,
+        horizontal: tuple[float, float, float],
+        down_variance: float,
+        tension_n: float,
+        finite: bool,
+        position_tol: float,
+        covariance_tol: float,
+    ) -> None:
+        self.state = state
+        self.duration_s = duration_s
+        self.position = state[:3]
+        self.horizontal = horizontal
+        self.down_variance = down_variance
+        self.tension_n = tension_n
+        self.finite = finite
+        self.position_tol = position_tol
+        self.covariance_tol = covariance_tol
+
+
+class TickSource:
+    """What one tick's estimate is computed from, and the computations (cached).
+
+    Parameters
+    ----------
+    mixture
+        The bank's mixture at the tick (None: no state yet).
+    step
+        The batch's step of the ticks the members have not stepped over (None or no ticks:
+        the mixture is the estimate).
+    noise
+        The process noise.
+    constants
+        The cable models' constants.
+    settings
+        The filter's status settings.
+    height_excess_m2
+        The rangefinder innovations' excess variance at the tick [m^2].
+    winch_fused
+        Whether a winch length was fused so far (its noise then stays along the cable).
+    hypotheses
+        Members of the thrust-scale bank running.
+    initialised_reason, reset_reason, on_ground, inputs_stale
+        As for :func:`~tether_companion.estimation.dynamic.observability.assess`.
+    """
+
+    __slots__ = (
+        "_approximation",
+        "_exact",
+        "_magnitudes",
+        "_rows_p",
+        "_status",
+        "constants",
+        "height_excess_m2",
+        "hypotheses",
+        "initialised_reason",
+        "inputs_stale",
+        "mixture",
+        "on_ground",
+        "noise",
+        "reset_reason",
+        "settings",
+        "step",
+        "winch_fused",
+    )
+
+    def __init__(
+        self,
+        mixture: MixtureValues | None,
+        step: BatchStep | None,
+        noise: ProcessNoise,
+        constants: ModelConstants,
+        settings: StatusSettings,
+        height_excess_m2: float,
+        winch_fused: bool,
+        hypotheses: int,
+        initialised_reason: str | None,
+        reset_reason: str | None,
+        on_ground: bool,
+        inputs_stale: bool,
+    ) -> None:
+        self.mixture = mixture
+        self.step = step if step is not None and step.ticks else None
+        self.noise = noise
+        self.constants = constants
+        self.settings = settings
+        self.height_excess_m2 = height_excess_m2
+        self.winch_fused = winch_fused
+        self.hypotheses = hypotheses
+        self.initialised_reason = initialised_reason
+        self.reset_reason = reset_reason
+        self.on_ground = on_ground
+        self.inputs_stale = inputs_stale
+        self._exact: ExactValues | None = None
+        self._status: str | None = None
+        self._approximation: Approximation | None = None
+        self._rows_p: FloatArray = _NO_ROWS
+        """The position rows of ``Phi P`` (3, 13) (of ``P`` without a step)."""
+        self._magnitudes: list[float] = []
+        """Per position row of ``Phi``: ``sum_k |Phi_ik| sd_k`` (bounds the terms)."""
+
+    # ------------------------------------------------------------------ exact
+    def values(self) -> ExactValues:
+        """Every field, exactly (computed on the first call)."""
+        exact = self._exact
+        if exact is None:
+            exact = self._exact = self._compute()
+            self._status = exact.status
+        return exact
+
+    def _compute(self) -> ExactValues:
+        mixture, settings = self.mixture, self.settings
+        if mixture is None:  # no state: zeros with a covariance that says "unknown"
+            x = np.zeros(state.N_STATES)
+            p = np.eye(state.N_STATES) * UNKNOWN_VARIANCE
+            tension, tension_var = 0.0, UNKNOWN_VARIANCE
+        else:
+            x, p = mixture.x, mixture.p
+            if self.step is not None:
+                x, p = self.step.step_state(x), self.step.step_covariance(p, self.noise.matrix)
+            values = x.tolist()
+            tension, tension_var = self.constants.tension_at_drone(values, p)
+        published = p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy()
+        published[2, 2] += self.height_excess_m2
+        if mixture is not None:
+            published[:3, :3] += unmodelled_position_covariance(
+                x[state.POSITION],
+                tension,
+                settings.unmodelled_force_std_n,
+                settings.winch_length_noise_std_m if self.winch_fused else 0.0,
+            )
+        status, reason = assess(
+            initialised_reason=self.initialised_reason,
+            reset_reason=self.reset_reason,
+            on_ground=self.on_ground,
+            inputs_stale=self.inputs_stale,
+            tension_n=tension,
+            slack_tension_n=settings.slack_tension_n,
+            position_covariance_m2=published[:3, :3],
+            max_horizontal_std_m=settings.max_horizontal_std_m,
+            horizontal_pull_n=0.0 if mixture is None else horizontal_pull_n(values),
+            min_horizontal_pull_n=min_horizontal_pull_n(
+                settings.pull_per_wind_n_s_per_m,
+                settings.wind_std_mps,
+                float(x[state.WIND][0]),
+                float(x[state.WIND][1]),
+            ),
+            hover_unknowns=None
+            if mixture is None
+            else HoverUnknowns(
+                float(x[state.SCALE]),
+                x[state.WIND].copy(),
+                p[_HOVER_LIST][:, _HOVER_LIST],
+                p[:2][:, _HOVER_LIST],
+                self.hypotheses,
+            ),
+        )
+        return ExactValues(
+            x[state.POSITION].copy(),
+            x[state.VELOCITY].copy(),
+            published,
+            float(tension),
+            tension_var,
+            status,
+            reason,
+            float(x[state.SCALE]),
+            x[state.BIAS].copy(),
+            x[state.WIND].copy(),
+        )
+
+    # ------------------------------------------------------------------ status
+    def status(self) -> str:
+        """The exact values' status, from the approximation where it is clear."""
+        status = self._status
+        if status is None:
+            status = self._quick_status()
+            if status is None:
+                status = self.values().status
+            self._status = status
+        return status
+
+    def _quick_status(self) -> str | None:
+        settings = self.settings
+        decided_early = (
+            self.reset_reason is not None
+            or self.initialised_reason is not None
+            or self.on_ground
+            or self.inputs_stale
+        )
+        tension = pull = min_pull = tol = 0.0
+        horizontal = (0.0, 0.0, 0.0)
+        if not decided_early:  # the numbers are needed
+            approx = self.approximate()
+            if approx is None:
+                return None
+            x = approx.state
+            tension, tol = approx.tension_n, approx.covariance_tol
+            horizontal = approx.horizontal
+            pull = horizontal_pull_n(x)
+            min_pull = min_horizontal_pull_n(
+                settings.pull_per_wind_n_s_per_m, settings.wind_std_mps, x[11], x[12]
+            )
+        return decide(
+            initialised=self.initialised_reason is None,
+            reset=self.reset_reason is not None,
+            on_ground=self.on_ground,
+            inputs_stale=self.inputs_stale,
+            tension_n=tension,
+            slack_tension_n=settings.slack_tension_n,
+            horizontal_m2=horizontal,
+            max_horizontal_std_m=settings.max_horizontal_std_m,
+            horizontal_pull_n=pull,
+            min_horizontal_pull_n=min_pull,
+            explained=self._explained,
+            margin=MARGIN,
+            variance_tol=tol,
+        )
+
+    def _explained(self) -> bool | None:
+        """Whether the thrust scale and the wind explain the horizontal covariance
+        (:meth:`~tether_companion.estimation.dynamic.observability.HoverUnknowns.explains`):
+        without numbers while several thrust-scale hypotheses run, else from the
+        approximation (None: only the exact values tell)."""
+        if self.hypotheses > 1:
+            return True
+        approx = self._approximation
+        mixture = self.mixture
+        assert approx is not None and mixture is not None
+        sd, magnitudes, t = mixture.sd, self._magnitudes, approx.duration_s
+        p = mixture.rows
+        q = self.noise.diagonal
+        s, n, e = _HOVER_UNKNOWNS
+        unknowns = [
+            [p[s][s] + t * q[s], p[s][n], p[s][e]],
+            [p[n][s], p[n][n] + t * q[n], p[n][e]],
+            [p[e][s], p[e][n], p[e][e] + t * q[e]],
+        ]
+        rows = self._rows_p[:2].tolist()
+        cross = [[row[s], row[n], row[e]] for row in rows]
+        sd_unknowns = max(sd[s], sd[n], sd[e])
+        noise = self.noise
+        return explains_approximately(
+            approx.horizontal,
+            unknowns,
+            cross,
+            self.settings.max_horizontal_std_m,
+            horizontal_tol=approx.covariance_tol,
+            covariance_tol=ROUNDING * (sd_unknowns * sd_unknowns + t * noise.largest),
+            cross_tol=ROUNDING * max(magnitudes[0], magnitudes[1]) * sd_unknowns,
+            margin=MARGIN,
+        )
+
+    # ------------------------------------------------------------------ approximation
+    def _stepped(self) -> list[float]:
+        """The state's values stepped over the batch, in Python floats."""
+        mixture = self.mixture
+        assert mixture is not None
+        x = mixture.x_values
+        step = self.step
+        if step is None:
+            return x
+        t, d_p, d_v, b_p, b_v = step.duration_s, step.d_p, step.d_v, step.b_p, step.b_v
+        b0, b1, b2 = x[8], x[9], x[10]
+        out = list(x)
+        for i in range(3):
+            k = 3 * i
+            bias_p = b_p[k] * b0 + b_p[k + 1] * b1 + b_p[k + 2] * b2
+            bias_v = b_v[k] * b0 + b_v[k + 1] * b1 + b_v[k + 2] * b2
+            out[i] = x[i] + t * x[3 + i] + d_p[i] + bias_p
+            out[3 + i] = x[3 + i] + d_v[i] + bias_v
+        return out
+
+    def approximate(self) -> Approximation | None:
+        """The published position, its covariance and the tension in Python floats, with
+        bounds of their rounding; None without a state or with non-finite arrays (then only
+        the exact values tell)."""
+        approx = self._approximation
+        if approx is not None:
+            return approx
+        mixture = self.mixture
+        if mixture is None or not mixture.finite:
+            return None
+        x = self._stepped()
+        tension, jac = _tension_and_jacobian(self.constants, x)
+        p, step, sd, noise = mixture.p, self.step, mixture.sd, self.noise
+        if step is None:
+            t = 0.0
+            self._rows_p = p[:3]
+            block = p[:3, :3].tolist()
+            magnitudes = [sd[0], sd[1], sd[2]]
+            position_scale = max(abs(x[0]), abs(x[1]), abs(x[2]))
+            largest = mixture.largest_sd
+        else:
+            t, b_p, b_v = step.duration_s, step.b_p, step.b_v
+            rows = step.position_rows
+            ap = self._rows_p = rows @ p
+            block = (ap @ rows.T).tolist()
+            q = noise.diagonal
+            block[0][0] += t * q[0]
+            block[1][1] += t * q[1]
+            block[2][2] += t * q[2]
+            sd_b0, sd_b1, sd_b2 = sd[8], sd[9], sd[10]
+            p0, p1, p2, p3, p4, p5, p6, p7, p8 = (abs(v) for v in b_p)
+            magnitudes = [
+                sd[0] + t * sd[3] + p0 * sd_b0 + p1 * sd_b1 + p2 * sd_b2,
+                sd[1] + t * sd[4] + p3 * sd_b0 + p4 * sd_b1 + p5 * sd_b2,
+                sd[2] + t * sd[5] + p6 * sd_b0 + p7 * sd_b1 + p8 * sd_b2,
+            ]
+            xv, d_p = mixture.x_values, step.d_p
+            x0, x1, x2 = abs(xv[8]), abs(xv[9]), abs(xv[10])
+            position_scale = max(
+                abs(xv[0]) + t * abs(xv[3]) + abs(d_p[0]) + p0 * x0 + p1 * x1 + p2 * x2,
+                abs(xv[1]) + t * abs(xv[4]) + abs(d_p[1]) + p3 * x0 + p4 * x1 + p5 * x2,
+                abs(xv[2]) + t * abs(xv[5]) + abs(d_p[2]) + p6 * x0 + p7 * x1 + p8 * x2,
+            )
+            # every row of Phi: sum_k |Phi_ik| sd_k <= max(sd) (1 + T + sum |B_p| + sum |B_v|)
+            largest = mixture.largest_sd * (1.0 + t + p0 + p1 + p2 + p3 + p4 + p5 + p6 + p7 + p8)
+            largest += mixture.largest_sd * sum(map(abs, b_v))
+        settings = self.settings
+        unmodelled = unmodelled_position_rows(
+            x[0],
+            x[1],
+            x[2],
+            tension,
+            settings.unmodelled_force_std_n,
+            settings.winch_length_noise_std_m if self.winch_fused else 0.0,
+        )
+        excess = self.height_excess_m2
+        north = block[0][0] + unmodelled[0][0]
+        north_east = block[0][1] + unmodelled[0][1]
+        east = block[1][1] + unmodelled[1][1]
+        down = block[2][2] + excess + unmodelled[2][2]
+        self._magnitudes = magnitudes
+        # |(A P A^T)_ij| terms <= (sum_k |A_ik| sd_k)(sum_k |A_jk| sd_k) (Cauchy-Schwarz)
+        scale = max(magnitudes) ** 2 + t * noise.largest
+        scale += unmodelled[0][0] + unmodelled[1][1] + unmodelled[2][2] + excess
+        # the tension's variance j^T (Phi P Phi^T + T Q) j, bounded the same way
+        if jac is None:
+            tension_bound = largest * largest + t * noise.largest
+        else:
+            jac_sum = sum(map(abs, jac))
+            tension_bound = (jac_sum * largest) ** 2 + t * noise.largest * jac_sum * jac_sum
+        bounds = (scale, tension_bound, position_scale, abs(tension))
+        finite = all(b < FINITE_BOUND for b in bounds)  # nan fails
+        approx = self._approximation = Approximation(
+            x,
+            t,
+            (north, north_east, east),
+            down,
+            tension,
+            finite,
+            ROUNDING * position_scale,
+            ROUNDING * scale if finite else math.inf,
+        )
+        return approx
+
+
+class ProcessNoise:
+    """The process noise spectral density ``q`` (13, 13, diagonal) with its diagonal as
+    floats and their largest (made once per filter)."""
+
+    __slots__ = ("diagonal", "largest", "matrix")
+
+    def __init__(self, matrix: FloatArray) -> None:
+        self.matrix = matrix
+        self.diagonal: list[float] = np.diagonal(matrix).tolist()
+        self.largest = max(map(abs, self.diagonal))
+
+
+def _tension_and_jacobian(
+    constants: ModelConstants, x: list[float]
+) -> tuple[float, list[float] | None]:
+    """The tension at the drone [N] and its Jacobian row as
+    :meth:`~tether_companion.estimation.dynamic.models.ModelConstants.tension_at_drone`
+    takes them (None: the chord tension's own variance)."""
+    tension = max(x[state.TENSION], 0.0)
+    if tension > 0.0:
+        try:
+            (tension,), jac = constants.models.tension(x, (), constants.values())
+        except UNDEFINED:
+            return tension, None
+        return tension, list(jac)
+    return tension, None

@@ -20,8 +20,15 @@ from pathlib import Path
 from tether_companion.sim.scenario import load_scenario
 from tether_companion.sim.simulator import Simulator
 
-SCENARIOS = ("paper-circle", "realistic-circle", "realistic-sagging-circle", "elastic-hover")
-"""The paper's circle; every error source with gusts; a sagging catenary cable; an elastic line."""
+SCENARIOS = (
+    "paper-circle",
+    "realistic-circle",
+    "realistic-sagging-circle",
+    "catenary-hover",
+    "elastic-hover",
+)
+"""The paper's circle; every error source with gusts; a catenary lying on the ground and a
+catenary stretched by its tension (the two ways its force is solved); an elastic line."""
 SECONDS = 2.0
 EVERY = 25
 PATH = Path(__file__).parent / "data" / "simulator_reference.json"

@@ -36,7 +36,6 @@ Models
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -45,8 +44,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from tether_companion.config import ConfigError, spec
 from tether_companion.constants import GRAVITY_MPS2
-from tether_companion.physics.catenary import solve_known_length, solve_lowest_point_at_anchor
+from tether_companion.physics.catenary import (
+    CatenaryCurve,
+    lowest_point_at_anchor,
+    solve_known_length,
+    solve_lowest_point_at_anchor,
+)
 from tether_companion.physics.catenary_forces import end_tensions
+from tether_companion.physics.roots import bracketed_root
 
 FloatArray = NDArray[np.float64]
 
@@ -280,40 +285,6 @@ class ElasticCable(_CableBase):
         return scale * pn, scale * pe, scale * pd
 
 
-def _bracketed_root(
-    func: Callable[[float], float], low: float, high: float, tolerance: float
-) -> float:
-    """Root of an increasing ``func`` on [low, high] (func(low) <= 0 <= func(high)).
-
-    Regula falsi with the Illinois modification (superlinear, never leaves the bracket),
-    stopping when the bracket is narrower than ``tolerance`` or ``func`` is exactly zero.
-    """
-    f_low, f_high = func(low), func(high)
-    side = 0
-    for _ in range(100):
-        if f_high - f_low <= 0.0:
-            break
-        x = high - f_high * (high - low) / (f_high - f_low)
-        if not low < x < high:
-            x = 0.5 * (low + high)
-        fx = func(x)
-        if fx == 0.0:
-            return x
-        if fx < 0.0:
-            low, f_low = x, fx
-            if side == -1:
-                f_high *= 0.5
-            side = -1
-        else:
-            high, f_high = x, fx
-            if side == 1:
-                f_low *= 0.5
-            side = 1
-        if high - low < tolerance:
-            break
-    return low if abs(f_low) < abs(f_high) else high
-
-
 class CatenaryCable(_CableBase):
     """A heavy elastic cable hanging as a catenary (see the module docstring, model (c)).
 
@@ -347,6 +318,8 @@ class CatenaryCable(_CableBase):
         self.elastic = elastic
         self.weight_per_length_n_per_m = elastic.weight_per_length_n_per_m
         self.stretch_m = 0.0
+        self._grounded_key: tuple[float, ...] = ()
+        self._grounded_value = (0.0, 0.0, 0.0)
 
     def advance(self, dt_s: float) -> None:
         """Reel the winch (see :meth:`_CableBase.advance`); the line follows."""
@@ -366,32 +339,56 @@ class CatenaryCable(_CableBase):
         ends = end_tensions(curve, self.weight_per_length_n_per_m)
         return ends.horizontal_n, -ends.on_drone_vertical_n, ends.drone_n
 
-    def _grounded_force(self, horizontal_m: float, height_m: float) -> tuple[float, float, float]:
-        """As :meth:`_free_force` for a cable partly lying on the ground."""
+    def _grounded_force(
+        self, horizontal_m: float, height_m: float, anchor_curve: CatenaryCurve
+    ) -> tuple[float, float, float]:
+        """As :meth:`_free_force` for a cable partly lying on the ground; ``anchor_curve`` is
+        the case-1 catenary from the anchor to the drone (touchdown at the anchor), no longer
+        than the cable. The same position and length give the same force: the last one is
+        kept and given again (the IMU's specific force, the truth's tension and the next RK4
+        step's first stage all ask at the same state)."""
         w = self.weight_per_length_n_per_m
         length = self.paid_out_m
-        if length >= horizontal_m + height_m:
-            return 0.0, w * height_m, w * height_m
+        key = (horizontal_m, height_m, length, w)
+        if key == self._grounded_key:
+            return self._grounded_value
+        curves = {0.0: anchor_curve}  # touchdown -> case-1 curve beyond it, as evaluated
 
         def excess(touchdown_m: float) -> float:
-            rise = solve_lowest_point_at_anchor(horizontal_m - touchdown_m, height_m)
+            rise = lowest_point_at_anchor(horizontal_m - touchdown_m, height_m)
+            curves[touchdown_m] = rise
             return touchdown_m + rise.length_m - length
 
-        touchdown = _bracketed_root(excess, 0.0, horizontal_m, 1e-10)
-        curve = solve_lowest_point_at_anchor(horizontal_m - touchdown, height_m)
-        ends = end_tensions(curve, w)
-        return ends.horizontal_n, -ends.on_drone_vertical_n, ends.drone_n
+        touchdown = bracketed_root(
+            excess, 0.0, horizontal_m, 1e-10, f_low=0.0 + anchor_curve.length_m - length
+        )
+        ends = end_tensions(curves[touchdown], w)
+        value = (ends.horizontal_n, -ends.on_drone_vertical_n, ends.drone_n)
+        self._grounded_key, self._grounded_value = key, value
+        return value
 
     def _stretched_force(
         self, horizontal_m: float, height_m: float, chord_m: float
     ) -> tuple[float, float, float]:
-        """As :meth:`_free_force` with the cable stretched by its own tension."""
+        """As :meth:`_free_force` with the cable stretched by its own tension.
+
+        Each stretch's free catenary is solved once per call (the warm start's bracket, the
+        root search's end points and the answer are points already evaluated)."""
         k = self.elastic.stiffness_n_per_m
         length = self.paid_out_m
         low = max(0.0, chord_m - length) + 1e-9 * max(chord_m, 1.0)
+        forces: dict[float, tuple[float, float, float]] = {}
+
+        def free(stretch_m: float) -> tuple[float, float, float]:
+            force = forces.get(stretch_m)
+            if force is None:
+                force = forces[stretch_m] = self._free_force(
+                    horizontal_m, height_m, length + stretch_m
+                )
+            return force
 
         def balance(stretch_m: float) -> float:
-            return k * stretch_m - self._free_force(horizontal_m, height_m, length + stretch_m)[2]
+            return k * stretch_m - free(stretch_m)[2]
 
         previous = self.stretch_m
         near = (max(low, 0.99 * previous), 1.01 * previous)
@@ -401,8 +398,8 @@ class CatenaryCable(_CableBase):
             high = max(2.0 * previous, 2.0 * low, 1e-6)
             while balance(high) < 0.0:
                 low, high = high, 2.0 * high
-        self.stretch_m = _bracketed_root(balance, low, high, 1e-12)
-        return self._free_force(horizontal_m, height_m, length + self.stretch_m)
+        self.stretch_m = bracketed_root(balance, low, high, 1e-12)
+        return free(self.stretch_m)
 
     def force_components(
         self, pn: float, pe: float, pd: float, vn: float, ve: float, vd: float
@@ -423,8 +420,12 @@ class CatenaryCable(_CableBase):
             self.tension_n = spring
             scale = -spring / chord
             return scale * pn, scale * pe, scale * pd
-        if length >= solve_lowest_point_at_anchor(horizontal, height).length_m:
-            pull_n, down_n, tension = self._grounded_force(horizontal, height)
+        if length >= horizontal + height:  # hangs straight down from the touchdown point
+            pull_n, down_n = 0.0, self.weight_per_length_n_per_m * height
+            tension = down_n
+        elif length >= (anchor_curve := solve_lowest_point_at_anchor(horizontal, height)).length_m:
+            # (a case-1 catenary is shorter than horizontal + height: the test above first)
+            pull_n, down_n, tension = self._grounded_force(horizontal, height, anchor_curve)
         else:
             pull_n, down_n, tension = self._stretched_force(horizontal, height, chord)
         fn = fe = 0.0

@@ -207,13 +207,19 @@ def _newton_in_bracket(residual: Callable[[float], tuple[float, float]], a_guess
     dominates and a plain Newton step in ``a`` advances only by about ``a^2/x`` per iteration).
     """
     t = math.log(a_guess_m) if (math.isfinite(a_guess_m) and a_guess_m > 0.0) else 0.0
+    g, dg = residual(t)  # evaluated once at the start: both bracket tests and step 1 use it
     lo = hi = t
-    while residual(lo)[0] > 0.0:
+    g_end = g
+    while g_end > 0.0:
         lo -= _LN4
-    while residual(hi)[0] < 0.0:
+        g_end = residual(lo)[0]
+    g_end = g
+    while g_end < 0.0:
         hi += _LN4
-    for _ in range(_MAX_ITERATIONS):
-        g, dg = residual(t)
+        g_end = residual(hi)[0]
+    for iteration in range(_MAX_ITERATIONS):
+        if iteration:
+            g, dg = residual(t)
         if g == 0.0:
             break
         if g < 0.0:
@@ -303,6 +309,13 @@ def solve_lowest_point_at_anchor(horizontal_m: float, height_m: float) -> Catena
             f"height_m must be > 0 when the lowest point is at the anchor, got {dy!r} "
             "(the drone must be above the anchor)"
         )
+    return lowest_point_at_anchor(x, dy)
+
+
+def lowest_point_at_anchor(x: float, dy: float) -> CatenaryCurve:
+    """:func:`solve_lowest_point_at_anchor` without its input checks, for callers whose
+    horizontal distance ``x >= 0`` [m] and height ``dy > 0`` [m] are finite floats by
+    construction (a root search over the touchdown point calls it a dozen times a force)."""
     if x <= VERTICAL_RELATIVE_SPAN * dy:
         return CatenaryCurve(a_m=0.0, x0_m=0.0, c_m=0.0, s1_m=0.0, s2_m=dy)
 
@@ -332,8 +345,14 @@ def initial_guess_known_length(horizontal_m: float, height_m: float, length_m: f
     horizontal span. ``A > 0`` and ``C < 0``, so exactly one root ``alpha = a^2`` is positive;
     ``a = sqrt(alpha)`` (eq. 39).
     """
-    half_span = 0.5 * horizontal_m
-    a_coef = 0.5 * _excess_over_span(horizontal_m, height_m, length_m)
+    excess = _excess_over_span(horizontal_m, height_m, length_m)
+    return _guess_known_length(0.5 * horizontal_m, excess)
+
+
+def _guess_known_length(half_span: float, excess_m: float) -> float:
+    """:func:`initial_guess_known_length` from half the span [m] and ``sqrt(L^2 - dY^2) -
+    span`` [m] (:func:`_excess_over_span`)."""
+    a_coef = 0.5 * excess_m
     b_coef = -(half_span**3) / 6.0
     c_coef = -(half_span**5) / 120.0
     disc = b_coef * b_coef - 4.0 * a_coef * c_coef
@@ -419,7 +438,7 @@ def solve_known_length(horizontal_m: float, height_m: float, length_m: float) ->
             dg = k / math.tanh(k) - 1.0
         return log_ratio - log_sinhc, dg
 
-    a = _newton_in_bracket(residual, initial_guess_known_length(x, dy, length))
+    a = _newton_in_bracket(residual, _guess_known_length(half_span, excess))
     # eq. 33; atanh(dY/L) = ln((L + dY)/(L - dY))/2 keeps L - |dY| exact for steep cables
     x0 = half_span - 0.5 * a * math.log((length + dy) / (length - dy))
     u1 = -x0 / a

@@ -267,3 +267,64 @@ def test_scalar_filter_equals_the_numpy_filter(cfg, rng):
         assert np.array_equal(fast.P, fast.P.T)
         assert fast.variance_n2 == pytest.approx(ref.P[-1, -1], abs=1e-9)
         np.testing.assert_allclose(fast.tension_ned_n, ref.x[-1], rtol=0, atol=1e-9)
+
+
+def test_estimates_read_late_equal_the_tick_they_were_made_at(rng):
+    """An estimate keeps the filter's floats and makes its arrays, counters and ``G`` when
+    read: read after the run (the estimator long moved on), every one equals what the tick
+    had: the filter's tension, this tick's observation, the counters, and ``G`` of the last
+    fused tick as :meth:`TensionErrorBudget.factor` gives it from that tick's rotation,
+    thrust and tension. Stale, fused and not-yet-started ticks alike."""
+    est = TensionEstimator(TensionFilterConfig(model="derivative"), VEHICLE)
+    budget = est.budget
+    kept, expected = [], []
+    factor = np.zeros((3, 6))
+    cable = np.array([-2.0, 1.5, 3.0])
+    for k in range(300):
+        imu, att, pwm = _hover_samples(k * 0.005, cable, rng, 0.2)
+        if k % 7 != 3:  # some ticks with a stale attitude (none at all before the first)
+            est.on_attitude(att) if k > 2 else None
+        est.on_pwm(pwm)
+        out = est.on_imu(imu)
+        assert out is not None
+        started = est.filter.started
+        tension = est.filter.tension_values() if started else [math.nan] * 3
+        if out.updated:
+            rows, thrust = est.aligner.rotation_rows, est.aligner.thrust_n
+            factor = np.array(budget.factor(rows, thrust, tension)).reshape(3, 6)
+        health = est.health.copy()
+        kept.append(out)
+        expected.append((tension, out.variance_n2, out.updated, health, factor))
+    assert any(e[2] for e in expected) and not all(e[2] for e in expected)
+    for out, (tension, variance, updated, health, factor) in zip(kept, expected, strict=True):
+        np.testing.assert_array_equal(out.tension_ned_n, tension)
+        assert out.variance_n2 == variance and out.updated == updated
+        assert out.health == health
+        np.testing.assert_array_equal(out.consider_factor_n, factor)
+        assert np.isnan(out.observation_ned_n).all() != updated
+        assert out.valid == (math.isfinite(sum(tension)) and math.isfinite(variance))
+
+
+def test_an_estimate_built_from_arrays_keeps_them():
+    """Tests and other makers build an estimate from arrays, as before (G zeros by default)."""
+    from tether_companion.estimation.tension_kf import TensionEstimate, TensionHealth
+
+    tension, observation = np.array([1.0, -2.0, 3.0]), np.array([1.5, -2.5, 2.0])
+    factor = np.arange(18.0).reshape(3, 6)
+    out = TensionEstimate(
+        time_s=2.0,
+        tension_ned_n=tension,
+        variance_n2=0.5,
+        last_update_s=1.5,
+        observation_ned_n=observation,
+        updated=True,
+        health=TensionHealth(updates=3),
+        consider_factor_n=factor,
+        consider_variance_n2=0.25,
+    )
+    assert out.tension_ned_n is tension and out.observation_ned_n is observation
+    assert out.consider_factor_n is factor and out.health == TensionHealth(updates=3)
+    np.testing.assert_allclose(out.covariance_ned_n2, 0.75 * np.eye(3) + factor @ factor.T)
+    plain = TensionEstimate(2.0, tension, 0.5, 1.5, observation, True, TensionHealth())
+    np.testing.assert_array_equal(plain.consider_factor_n, np.zeros((3, 6)))
+    assert plain.valid and plain.age_s(2.5) == 1.0

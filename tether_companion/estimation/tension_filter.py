@@ -136,6 +136,10 @@ class TensionKalmanFilter:
         """Current tension estimate, NED [N], shape (3,)."""
         return np.array(self._x[-3:])
 
+    def tension_values(self) -> list[float]:
+        """Current tension estimate, NED [N], as a new list of 3 floats (no array)."""
+        return self._x[-3:]
+
     @property
     def variance_n2(self) -> float:
         """Variance of the current estimate on each axis [N^2]."""

@@ -38,8 +38,6 @@ synchronous.
 from __future__ import annotations
 
 import math
-import operator
-from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,6 +50,12 @@ from tether_companion.estimation.tension_config import (  # noqa: F401 (also imp
     DERIVATIVE,
     TensionFilterConfig,
     load_tension_filter_config,
+)
+from tether_companion.estimation.tension_estimate import (  # noqa: F401 (also imported from here)
+    TENSION_HEALTH_VALUES,
+    ConsiderFactor,
+    TensionEstimate,
+    TensionHealth,
 )
 from tether_companion.estimation.tension_filter import TensionKalmanFilter
 from tether_companion.estimation.thrust_input import StaticThrustInput, ThrustInput
@@ -110,143 +114,7 @@ def observe_tension_ned_n(
 # the sample-driven estimator
 
 
-@dataclass(slots=True)
-class TensionHealth:
-    """Counters of what the tension estimator did with its inputs (monotonic).
-
-    Attributes
-    ----------
-    updates
-        Observations fused.
-    stale_attitude, stale_pwm
-        IMU ticks without an observation because attitude / PWM was missing or stale.
-    nonfinite_rejected
-        Samples or observations containing NaN/inf.
-    absurd_rejected
-        Observations larger than ``max_observed_tension_n``.
-    out_of_order
-        IMU samples older than the last one.
-    restarts
-        Filter restarts (first observation, long gap).
-    """
-
-    updates: int = 0
-    stale_attitude: int = 0
-    stale_pwm: int = 0
-    nonfinite_rejected: int = 0
-    absurd_rejected: int = 0
-    out_of_order: int = 0
-    restarts: int = 0
-
-    def copy(self) -> TensionHealth:
-        """A snapshot."""
-        return TensionHealth(*_TENSION_HEALTH_VALUES(self))
-
-
-_TENSION_HEALTH_VALUES = operator.attrgetter(*TensionHealth.__slots__)
-
-
-@dataclass(frozen=True, slots=True)
-class TensionEstimate:
-    """Filtered tension at one IMU tick.
-
-    Attributes
-    ----------
-    time_s
-        Flight-controller time of the tick [s].
-    tension_ned_n
-        Force of the cable ON the drone, NED, shape (3,) [N]; ``nan`` before the first fused
-        observation.
-    variance_n2
-        The filter's variance of each component [N^2] (white noise only).
-    last_update_s
-        Time of the last fused observation [s] (``nan`` if none): ``time_s - last_update_s``
-        is the estimate's age.
-    observation_ned_n
-        This tick's raw observation (eq. 50) [N], ``nan`` when none was made.
-    updated
-        Whether this tick fused an observation.
-    health
-        Snapshot of the counters.
-    consider_factor_n
-        ``G``, shape (3, :data:`~tether_companion.estimation.tension_budget.BUDGET_COLUMNS`)
-        [N]: the unmodelled terms of eq. 50 (thrust map, drag, attitude), one standard
-        deviation per column, NED (:mod:`~tether_companion.estimation.tension_budget`).
-    consider_variance_n2
-        The isotropic unmodelled term (accelerometer bias times mass, squared) [N^2].
-    """
-
-    time_s: float
-    tension_ned_n: FloatArray
-    variance_n2: float
-    last_update_s: float
-    observation_ned_n: FloatArray
-    updated: bool
-    health: TensionHealth = field(repr=False)
-    consider_factor_n: FloatArray = field(
-        default_factory=lambda: np.zeros((3, BUDGET_COLUMNS)), repr=False
-    )
-    consider_variance_n2: float = 0.0
-
-    @property
-    def isotropic_variance_n2(self) -> float:
-        """The filter's variance plus the accelerometer bias's, per axis [N^2]."""
-        return self.variance_n2 + self.consider_variance_n2
-
-    @property
-    def covariance_ned_n2(self) -> FloatArray:
-        """Covariance of :attr:`tension_ned_n`, shape (3, 3) [N^2]: ``(s_kf^2 + (m s_b)^2) I +
-        G G^T`` (white noise and the consider budget)."""
-        g = self.consider_factor_n
-        return self.isotropic_variance_n2 * np.eye(3) + g @ g.T
-
-    @property
-    def magnitude_variance_n2(self) -> float:
-        """Variance of :attr:`magnitude_n` [N^2] (along the force; the isotropic variance when
-        there is no force)."""
-        magnitude = self.magnitude_n
-        if not magnitude > 0.0:
-            return self.isotropic_variance_n2
-        u = self.tension_ned_n / magnitude
-        along = self.consider_factor_n.T @ u
-        return self.isotropic_variance_n2 + float(along @ along)
-
-    @property
-    def magnitude_n(self) -> float:
-        """Tension magnitude [N]."""
-        return float(np.linalg.norm(self.tension_ned_n))
-
-    @property
-    def horizontal_n(self) -> float:
-        """Magnitude of the horizontal part of the force on the drone [N]."""
-        return math.hypot(float(self.tension_ned_n[0]), float(self.tension_ned_n[1]))
-
-    @property
-    def down_n(self) -> float:
-        """Downward component of the force on the drone [N] (NED ``d``)."""
-        return float(self.tension_ned_n[2])
-
-    @property
-    def pull_direction_rad(self) -> float:
-        """Bearing of the horizontal pull on the drone from north, toward east [rad].
-
-        The direction the cable drags the drone (toward the anchor for a free-hanging cable,
-        along the tug for a pull). ``nan`` when there is no horizontal force.
-        """
-        n, e = float(self.tension_ned_n[0]), float(self.tension_ned_n[1])
-        return math.atan2(e, n) if (n != 0.0 or e != 0.0) else math.nan
-
-    @property
-    def valid(self) -> bool:
-        """Whether an estimate exists and is finite."""
-        return bool(np.isfinite(self.tension_ned_n).all()) and math.isfinite(self.variance_n2)
-
-    def age_s(self, now_s: float) -> float:
-        """Time since the last fused observation at ``now_s`` [s] (``inf`` if none)."""
-        return now_s - self.last_update_s if math.isfinite(self.last_update_s) else math.inf
-
-
-_NAN3 = np.full(3, math.nan)
+_NAN_VALUES = (math.nan, math.nan, math.nan)
 
 
 class TensionEstimator:
@@ -292,7 +160,8 @@ class TensionEstimator:
         )
         self.budget = config.error_budget(vehicle)
         self._consider_variance_n2 = self.budget.bias_force_std_n**2
-        self._consider_factor = np.zeros((3, BUDGET_COLUMNS))
+        self._consider_factor = ConsiderFactor(np.zeros((3, BUDGET_COLUMNS)))
+        """``G`` of the last fused tick (zeros before the first), made when first read."""
         self.health = TensionHealth()
         self._time_s = math.nan
         self._last_update_s = math.nan
@@ -342,22 +211,22 @@ class TensionEstimator:
             self._last_update_s = t
             health.updates += 1
             updated = True
-            tension = kf.tension_ned_n
-            self._consider_factor = np.array(
-                self.budget.factor(self.aligner.rotation_rows, aligned.thrust_n, tension.tolist())
-            ).reshape(3, BUDGET_COLUMNS)
+            tension = kf.tension_values()
+            self._consider_factor = ConsiderFactor(
+                inputs=(self.budget, self.aligner.rotation_rows, aligned.thrust_n, tension)
+            )
         else:
-            tension = kf.tension_ned_n if kf.started else _NAN3.copy()
-        return TensionEstimate(
-            time_s=t,
-            tension_ned_n=tension,
-            variance_n2=kf.variance_n2 if kf.started else math.inf,
-            last_update_s=self._last_update_s,
-            observation_ned_n=np.array(observation) if observation is not None else _NAN3.copy(),
-            updated=updated,
-            health=health.copy(),
-            consider_factor_n=self._consider_factor,
-            consider_variance_n2=self._consider_variance_n2,
+            tension = kf.tension_values() if kf.started else _NAN_VALUES
+        return TensionEstimate.of_values(
+            t,
+            tension,
+            kf.variance_n2 if kf.started else math.inf,
+            self._last_update_s,
+            observation,
+            updated,
+            TENSION_HEALTH_VALUES(health),
+            self._consider_factor,
+            self._consider_variance_n2,
         )
 
     def _observe(self, aligned: AlignedInputs | str) -> tuple[float, float, float] | None:

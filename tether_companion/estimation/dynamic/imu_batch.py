@@ -109,6 +109,16 @@ class BatchStep:
         return phi
 
     @property
+    def row_sum(self) -> float:
+        """A bound of every row's ``sum_k |Phi_ik|``: ``1 + T + sum |B_p| + sum |B_v|``."""
+        return 1.0 + self.duration_s + sum(map(abs, self.b_p)) + sum(map(abs, self.b_v))
+
+    @property
+    def offset_size(self) -> float:
+        """The largest ``|D_p|`` or ``|D_v|`` component [m, m/s]."""
+        return max(map(abs, (*self.d_p, *self.d_v)))
+
+    @property
     def position_rows(self) -> FloatArray:
         """The position rows of ``Phi`` (3, 13) (made once; do not change them)."""
         rows = self._rows

@@ -64,7 +64,6 @@ UNKNOWN_VARIANCE = 1e6
 _HOVER_UNKNOWNS = (state.SCALE, state.WIND.start, state.WIND.start + 1)
 """State indices of the thrust scale and the wind (what a steady hover does not observe)."""
 _HOVER_LIST = list(_HOVER_UNKNOWNS)
-_NO_ROWS = np.zeros((0, 0))
 
 
 @dataclass(frozen=True, slots=True)
@@ -84,7 +83,7 @@ class MixtureValues:
     of them as Python floats (made once per mixture: the members replace their arrays when
     they step)."""
 
-    __slots__ = ("_rows", "finite", "largest_sd", "p", "sd", "x", "x_values")
+    __slots__ = ("_rows", "finite", "largest_sd", "largest_value", "p", "sd", "x", "x_values")
 
     def __init__(self, x: FloatArray, p: FloatArray) -> None:
         self.x = x
@@ -100,6 +99,8 @@ class MixtureValues:
         self.sd = [math.sqrt(v) if v >= 0.0 else math.nan for v in diagonal]
         """Standard deviations [SI units]: ``|P_ij| <= sd_i sd_j`` bounds the terms."""
         self.largest_sd = max(self.sd)
+        self.largest_value = max(max(self.x_values), -min(self.x_values))
+        """The largest ``|x_i|`` [SI units]."""
         self._rows: list[list[float]] | None = None
 
     @property
@@ -198,7 +199,7 @@ class TickSource:
     __slots__ = (
         "_approximation",
         "_exact",
-        "_magnitudes",
+        "_largest",
         "_rows_p",
         "_status",
         "constants",
@@ -245,10 +246,10 @@ class TickSource:
         self._exact: ExactValues | None = None
         self._status: str | None = None
         self._approximation: Approximation | None = None
-        self._rows_p: FloatArray = _NO_ROWS
-        """The position rows of ``Phi P`` (3, 13) (of ``P`` without a step)."""
-        self._magnitudes: list[float] = []
-        """Per position row of ``Phi``: ``sum_k |Phi_ik| sd_k`` (bounds the terms)."""
+        self._rows_p: list[list[float]] = []
+        """The position rows of ``Phi P`` (3x13) (of ``P`` without a step)."""
+        self._largest = 0.0
+        """A bound of ``sum_k |Phi_ik| sd_k`` over the rows ``i`` of ``Phi`` [SI units]."""
 
     # ------------------------------------------------------------------ exact
     def values(self) -> ExactValues:
@@ -377,7 +378,7 @@ class TickSource:
         approx = self._approximation
         mixture = self.mixture
         assert approx is not None and mixture is not None
-        sd, magnitudes, t = mixture.sd, self._magnitudes, approx.duration_s
+        sd, t = mixture.sd, approx.duration_s
         p = mixture.rows
         q = self.noise.diagonal
         s, n, e = _HOVER_UNKNOWNS
@@ -386,8 +387,8 @@ class TickSource:
             [p[n][s], p[n][n] + t * q[n], p[n][e]],
             [p[e][s], p[e][n], p[e][e] + t * q[e]],
         ]
-        rows = self._rows_p[:2].tolist()
-        cross = [[row[s], row[n], row[e]] for row in rows]
+        rows = self._rows_p
+        cross = [[rows[0][s], rows[0][n], rows[0][e]], [rows[1][s], rows[1][n], rows[1][e]]]
         sd_unknowns = max(sd[s], sd[n], sd[e])
         noise = self.noise
         return explains_approximately(
@@ -397,7 +398,7 @@ class TickSource:
             self.settings.max_horizontal_std_m,
             horizontal_tol=approx.covariance_tol,
             covariance_tol=ROUNDING * (sd_unknowns * sd_unknowns + t * noise.largest),
-            cross_tol=ROUNDING * max(magnitudes[0], magnitudes[1]) * sd_unknowns,
+            cross_tol=ROUNDING * self._largest * sd_unknowns,
             margin=MARGIN,
         )
 
@@ -433,40 +434,28 @@ class TickSource:
             return None
         x = self._stepped()
         tension, jac = _tension_and_jacobian(self.constants, x)
-        p, step, sd, noise = mixture.p, self.step, mixture.sd, self.noise
+        p, step, noise = mixture.p, self.step, self.noise
         if step is None:
-            t = 0.0
-            self._rows_p = p[:3]
-            block = p[:3, :3].tolist()
-            magnitudes = [sd[0], sd[1], sd[2]]
-            position_scale = max(abs(x[0]), abs(x[1]), abs(x[2]))
-            largest = mixture.largest_sd
+            t, row_sum, offset = 0.0, 1.0, 0.0
+            ap = self._rows_p = p[:3].tolist()
+            north, north_east = ap[0][0], ap[0][1]
+            east, down = ap[1][1], ap[2][2]
         else:
-            t, b_p, b_v = step.duration_s, step.b_p, step.b_v
-            rows = step.position_rows
-            ap = self._rows_p = rows @ p
-            block = (ap @ rows.T).tolist()
+            t, row_sum, offset = step.duration_s, step.row_sum, step.offset_size
+            ap = self._rows_p = (step.position_rows @ p).tolist()  # rows of Phi P
+            b = step.b_p
             q = noise.diagonal
-            block[0][0] += t * q[0]
-            block[1][1] += t * q[1]
-            block[2][2] += t * q[2]
-            sd_b0, sd_b1, sd_b2 = sd[8], sd[9], sd[10]
-            p0, p1, p2, p3, p4, p5, p6, p7, p8 = (abs(v) for v in b_p)
-            magnitudes = [
-                sd[0] + t * sd[3] + p0 * sd_b0 + p1 * sd_b1 + p2 * sd_b2,
-                sd[1] + t * sd[4] + p3 * sd_b0 + p4 * sd_b1 + p5 * sd_b2,
-                sd[2] + t * sd[5] + p6 * sd_b0 + p7 * sd_b1 + p8 * sd_b2,
-            ]
-            xv, d_p = mixture.x_values, step.d_p
-            x0, x1, x2 = abs(xv[8]), abs(xv[9]), abs(xv[10])
-            position_scale = max(
-                abs(xv[0]) + t * abs(xv[3]) + abs(d_p[0]) + p0 * x0 + p1 * x1 + p2 * x2,
-                abs(xv[1]) + t * abs(xv[4]) + abs(d_p[1]) + p3 * x0 + p4 * x1 + p5 * x2,
-                abs(xv[2]) + t * abs(xv[5]) + abs(d_p[2]) + p6 * x0 + p7 * x1 + p8 * x2,
-            )
-            # every row of Phi: sum_k |Phi_ik| sd_k <= max(sd) (1 + T + sum |B_p| + sum |B_v|)
-            largest = mixture.largest_sd * (1.0 + t + p0 + p1 + p2 + p3 + p4 + p5 + p6 + p7 + p8)
-            largest += mixture.largest_sd * sum(map(abs, b_v))
+            # (Phi P Phi^T)_ij = (Phi P)_i . Phi_j, Phi_j = e_j + T e_(3+j) + B_p,j on the bias
+            a0, a1, a2 = ap
+            north = a0[0] + t * a0[3] + b[0] * a0[8] + b[1] * a0[9] + b[2] * a0[10] + t * q[0]
+            north_east = a0[1] + t * a0[4] + b[3] * a0[8] + b[4] * a0[9] + b[5] * a0[10]
+            east = a1[1] + t * a1[4] + b[3] * a1[8] + b[4] * a1[9] + b[5] * a1[10] + t * q[1]
+            down = a2[2] + t * a2[5] + b[6] * a2[8] + b[7] * a2[9] + b[8] * a2[10] + t * q[2]
+        # every row of Phi has sum_k |Phi_ik| <= row_sum, so with |P_kl| <= sd_k sd_l
+        # (Cauchy-Schwarz) the terms of (Phi P Phi^T)_ij are below (row_sum max sd)^2, and those
+        # of the stepped state below row_sum max |x| + |(D_p, D_v)|
+        largest = mixture.largest_sd * row_sum
+        position_scale = mixture.largest_value * row_sum + offset
         settings = self.settings
         unmodelled = unmodelled_position_rows(
             x[0],
@@ -477,13 +466,12 @@ class TickSource:
             settings.winch_length_noise_std_m if self.winch_fused else 0.0,
         )
         excess = self.height_excess_m2
-        north = block[0][0] + unmodelled[0][0]
-        north_east = block[0][1] + unmodelled[0][1]
-        east = block[1][1] + unmodelled[1][1]
-        down = block[2][2] + excess + unmodelled[2][2]
-        self._magnitudes = magnitudes
-        # |(A P A^T)_ij| terms <= (sum_k |A_ik| sd_k)(sum_k |A_jk| sd_k) (Cauchy-Schwarz)
-        scale = max(magnitudes) ** 2 + t * noise.largest
+        north += unmodelled[0][0]
+        north_east += unmodelled[0][1]
+        east += unmodelled[1][1]
+        down += excess + unmodelled[2][2]
+        self._largest = largest
+        scale = largest * largest + t * noise.largest
         scale += unmodelled[0][0] + unmodelled[1][1] + unmodelled[2][2] + excess
         # the tension's variance j^T (Phi P Phi^T + T Q) j, bounded the same way
         if jac is None:

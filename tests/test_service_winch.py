@@ -19,9 +19,10 @@ from test_service_emulator import _fly
 from tether_companion.config import ConfigError
 from tether_companion.emulator.lockstep import build_controller
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
-from tether_companion.service.config import load_service_config
+from tether_companion.service.config import load_service_config, load_vehicle_for
 from tether_companion.service.emulator_process import EmulatorProcess
 from tether_companion.service.ingest import WINCH, Ingest
+from tether_companion.service.session import EstimationSession
 from tether_companion.service.status import render
 from tether_companion.service.winch import (
     HEALTHY,
@@ -187,20 +188,23 @@ def test_feed_carries_the_tension_to_the_drone_and_forgets_a_silent_winch() -> N
     estimator = _Estimator()
     feed = WinchFeed(config, use_tension=True, cable_weight_n_per_m=0.2, uses_length=True)
     assert feed.note == "" and feed.deadline_s == math.inf
-    feed.on_reading(WinchReading(20.0, 6.0, 3.0, 0.0, HEALTHY), estimator, height_m=2.5)
+    feed.on_reading(WinchReading(20.0, 6.0, 3.0, 0.0, HEALTHY), estimator, (5.0, 0.0, -2.5))
     assert estimator.lengths == [(6.0, 20.0)]
     # 3 N at the winch, 2.5 m of climb on a 0.2 N/m cable: 3.5 N at the drone
     assert estimator.tensions == [(pytest.approx(3.5), 20.0)]
     assert feed.deadline_s == 21.0 and not feed.stale
-    # no height yet: a heavy cable's tension at the drone is unknown, not guessed
-    feed.on_reading(WinchReading(20.1, 6.0, 3.0, 0.0, HEALTHY), estimator, height_m=math.nan)
+    # no estimate yet: a heavy cable's tension at the drone is unknown, not guessed
+    feed.on_reading(WinchReading(20.1, 6.0, 3.0, 0.0, HEALTHY), estimator, None)
     assert len(estimator.tensions) == 1 and len(estimator.lengths) == 2
+    # near the vertical (span 1 m of 6.1 m < 0.5): the length is not fused, and counted
+    feed.on_reading(WinchReading(20.2, 6.1, 3.0, 0.0, HEALTHY), estimator, (1.0, 0.0, -6.0))
+    assert len(estimator.lengths) == 2 and feed.near_vertical == 1
     feed.expire(estimator)
     assert math.isnan(estimator.constants.length_m) and feed.stale and feed.timeouts == 1
     # without tension.source winch the tension is not used
     plain = WinchFeed(config, use_tension=False, cable_weight_n_per_m=0.0, uses_length=True)
     other = _Estimator()
-    plain.on_reading(WinchReading(1.0, 4.0, 3.0, 0.0, HEALTHY), other, height_m=1.0)
+    plain.on_reading(WinchReading(1.0, 4.0, 3.0, 0.0, HEALTHY), other, (3.9, 0.0, -1.0))
     assert other.tensions == [] and other.lengths == [(4.0, 1.0)]
 
 
@@ -209,7 +213,7 @@ def test_the_paper_filters_say_once_that_they_do_not_use_the_length() -> None:
         WinchConfig(enabled=True), use_tension=False, cable_weight_n_per_m=0.0, uses_length=False
     )
     estimator = _Estimator()
-    feed.on_reading(WinchReading(1.0, 4.0, 3.0, 0.0, HEALTHY), estimator, height_m=1.0)
+    feed.on_reading(WinchReading(1.0, 4.0, 3.0, 0.0, HEALTHY), estimator, (3.9, 0.0, -1.0))
     assert estimator.lengths == [] and "paid-out length" in feed.note
 
 
@@ -299,3 +303,22 @@ def test_winch_over_udp_from_the_emulator_process(tmp_path) -> None:
     assert gate.counters.dropped <= 2, gate.counters  # a late first frame or two at most
     assert session.estimator.health.winch_fused >= 30
     assert session.winch.last is not None and 1.0 < session.winch.last.length_m < 20.0
+
+
+def test_three_state_takes_the_winch_tension_as_its_known_tension() -> None:
+    """The paper's 3-state filter with ``tension.source: winch``: the winch's tension (a
+    weightless cable: unchanged) is its known tension; the length is not used (said once)."""
+    config = load_service_config(
+        None,
+        {
+            "estimator": {"kind": "three_state"},
+            "tension": {"source": "winch"},
+            "winch": {"enabled": True},
+            "recording": {"enabled": False},
+        },
+    )
+    session = EstimationSession(config, load_vehicle_for(config))
+    assert "paid-out length" in session.winch.note
+    session.on_sample(WinchReading(3.0, 5.0, 4.5, 0.0, HEALTHY))
+    assert session.estimator._known_tension_n == 4.5
+    assert session.estimator._tension_time_s == 3.0

@@ -53,6 +53,25 @@ KINDS = [
     ),
 ]
 """The paper's filter, which holds these flights, and the service's default."""
+WINCH_TANGENTIAL = (
+    "with the ground station's winch (WINCH_STATUS, the stiff tether's length) the range is "
+    "known (sd 0.08 m) but not the bearing: at the taut hold the tangential sd is 0.4-0.5 m "
+    "(the wind's drag on SITL's '+' quad, 0.63 N per m/s, trades against the cable's "
+    "sideways pull; the filter invented ~1 m/s of wind in SITL's calm air), so the position "
+    "is withheld (learning) 10-90 % of each 10 s and sent inflated; measured once (winch10, "
+    "main 5aa6af7): hold truth-to-target max 1.13 m, RMS 0.36 m (bound 0.3 m), ours 0.33 m "
+    "RMS off; the circle and the landing completed without failsafe"
+)
+"""Why the taut hold fails with the default filter and the winch (strict: passes once fixed)."""
+TAUT_KINDS = [
+    *KINDS,
+    pytest.param(
+        "dynamic-winch",
+        id="dynamic-winch",
+        marks=pytest.mark.xfail(strict=True, reason=WINCH_TANGENTIAL),
+    ),
+]
+"""The taut hold also with the winch: the ground station sends WINCH_STATUS."""
 
 
 @pytest.fixture
@@ -209,7 +228,7 @@ def test_a_binary_that_dies_at_start_fails_with_its_output(tmp_path, monkeypatch
 
 @pytest.mark.slow
 @pytest.mark.timeout(900)
-@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("kind", TAUT_KINDS)
 def test_gps_to_external_navigation_switch_at_a_taut_hover(sitl_available, tmp_path, kind) -> None:
     """Issue 14's flight: take off on GPS, fly out until SITL's tether is taut, switch EKF3 to
     our position (source set 2), hold 60 s, fly a 1 m/s circle about the anchor, land.
@@ -221,9 +240,10 @@ def test_gps_to_external_navigation_switch_at_a_taut_hover(sitl_available, tmp_p
     """
     from tether_companion.ardupilot_sitl.flights import FlightOptions, gps_to_external_nav
 
-    overrides = {"estimator": {"kind": kind}}
+    winch = kind == "dynamic-winch"
+    overrides = {"estimator": {"kind": "dynamic" if winch else kind}}
     result = gps_to_external_nav(
-        FlightOptions(workdir=tmp_path, companion_overrides=overrides), log=print
+        FlightOptions(workdir=tmp_path, companion_overrides=overrides, winch=winch), log=print
     )
     for phase in result.phases:
         print(phase)

@@ -90,6 +90,9 @@ class FlightOptions:
     ``reel_in_mps``) with the service's tension-following mode switched on from the ground
     station after the hold (MAV_CMD_USER_2), instead of LAND."""
     reel_in_mps: float = 0.3
+    winch: bool = False
+    """The ground station is also the tether's winch: WINCH_STATUS at 10 Hz
+    (:meth:`GroundStation.start_winch`) and the companion reads it (``winch.enabled``)."""
     companion_overrides: dict = field(default_factory=dict)
     workdir: Path | None = None
     """Kept after the flight when given (SITL's logs, the companion's config, log and .tlog)."""
@@ -221,6 +224,9 @@ def _run(
             )
             gcs.set_param("SIM_SPEEDUP", options.speedup)
             overrides = {"publish": {"on_unhealthy": "inflate"}, **options.companion_overrides}
+            if options.winch:
+                gcs.start_winch(TETHER_LINE_LENGTH_M)
+                overrides["winch"] = {"enabled": True}
             config = companion_config(workdir, sitl_opts.home, overrides)
             companion = CompanionProcess(config, sitl.ports["serial1"], workdir / "companion.log")
             with companion:
@@ -374,6 +380,7 @@ def _reel_in(flight: _Flight, result: FlightResult) -> None:
             raise FlightError("tether landing: still armed 120 s after the reel-in began")
         length = max(REEL_END_M, length - opts.reel_in_mps * REEL_STEP_S)
         gcs.set_param("SIM_TETH_LINELEN", length)
+        gcs.line_length_m = length  # the winch reels with it
         flight.wait(REEL_STEP_S)
     result.phases.append(
         score_phase(

@@ -4,6 +4,14 @@ commands (mode, arm, takeoff, position targets, EKF source set) and what the aut
 
 A reader thread keeps the latest of each and a history; every wait is bounded in wall time.
 Positions are NED [m] from the SITL home, which is the tether's anchor.
+
+With :meth:`GroundStation.start_winch` it is also the tether's winch: WINCH_STATUS at 10 Hz from
+(255, 169), which the autopilot routes to the companion. SITL's tether (SIM_Tether.cpp) is a
+straight spring of rest length SIM_TETH_LINELEN (8 N/m in tether.parm, stretching 1.5-2.7 m at
+12-22 N), not a stiff tether on a drum: the winch reported here is that of a stiff tether of
+the same geometry, whose paid-out line is the cable's length ``max(LINELEN, |p|)`` (the
+anchor-to-drone distance while taut, from SITL's SIM_STATE truth), with 2 cm of noise and 1 cm
+steps like the emulator's winch; its tension is reported unknown (NaN).
 """
 
 from __future__ import annotations
@@ -23,6 +31,11 @@ FC_SYSTEM, FC_COMPONENT = 1, 1
 COMPANION_COMPONENT = 191
 """The service's component id (link.component_id in configs/companion.yaml)."""
 GCS_SYSTEM = 255
+WINCH_COMPONENT = 169
+"""MAV_COMP_ID_WINCH: the ground station's winch sends as (GCS_SYSTEM, WINCH_COMPONENT)."""
+WINCH_RATE_HZ = 10.0
+WINCH_NOISE_STD_M = 0.02
+WINCH_RESOLUTION_M = 0.01
 MAV_CMD_SET_EKF_SOURCE_SET = 42007
 COPTER_MODES = {"STABILIZE": 0, "ALT_HOLD": 2, "AUTO": 3, "GUIDED": 4, "LOITER": 5, "RTL": 6,
                 "CIRCLE": 7, "LAND": 9}  # fmt: skip
@@ -98,6 +111,11 @@ class GroundStation:
         self.master = _connect(port, connect_timeout_s)
         self._thread = threading.Thread(target=self._read_loop, name="sitl-gcs", daemon=True)
         self._thread.start()
+        self.line_length_m = math.nan
+        """The tether's rest length (SIM_TETH_LINELEN) the winch knows [m]; nan: no winch."""
+        self.winch_sent = 0
+        self._winch: threading.Thread | None = None
+        self._write_lock = threading.Lock()
 
     def __enter__(self) -> GroundStation:
         return self
@@ -106,10 +124,46 @@ class GroundStation:
         self.close()
 
     def close(self) -> None:
-        """Stop the reader and close the socket."""
+        """Stop the reader (and the winch) and close the socket."""
         self._stop.set()
         self._thread.join(timeout=5.0)
+        if self._winch is not None:
+            self._winch.join(timeout=5.0)
         self.master.close()
+
+    # ------------------------------------------------------------------ the winch
+    def start_winch(self, line_length_m: float, seed: int = 9005) -> None:
+        """Send WINCH_STATUS at ``WINCH_RATE_HZ`` (wall time) from now on, for a tether of
+        rest length ``line_length_m`` [m] (update :attr:`line_length_m` as it is reeled)."""
+        self.line_length_m = line_length_m
+        rng = np.random.default_rng(seed)
+        write = self.master.write
+
+        def locked_write(data: bytes) -> None:  # commands (this thread) and the winch's frames
+            with self._write_lock:
+                write(data)
+
+        self.master.write = locked_write  # pymavlink's senders call master.write
+        packer = mavutil.mavlink.MAVLink(None, srcSystem=GCS_SYSTEM, srcComponent=WINCH_COMPONENT)
+
+        def send_loop() -> None:
+            while not self._stop.wait(1.0 / WINCH_RATE_HZ):
+                with self.telemetry.lock:
+                    truth = self.telemetry.truth_ned_m
+                if truth is None:
+                    continue
+                length = max(self.line_length_m, float(np.linalg.norm(truth)))
+                length += WINCH_NOISE_STD_M * rng.standard_normal()
+                length = round(length / WINCH_RESOLUTION_M) * WINCH_RESOLUTION_M
+                msg = mavutil.mavlink.MAVLink_winch_status_message(
+                    int(time.time() * 1e6), length, math.nan, math.nan, math.nan, math.nan,
+                    32767, mavutil.mavlink.MAV_WINCH_STATUS_HEALTHY,
+                )  # fmt: skip
+                locked_write(msg.pack(packer))
+                self.winch_sent += 1
+
+        self._winch = threading.Thread(target=send_loop, name="sitl-winch", daemon=True)
+        self._winch.start()
 
     # ------------------------------------------------------------------ reading
     def _read_loop(self) -> None:

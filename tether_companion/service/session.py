@@ -394,8 +394,7 @@ class EstimationSession:
 
     def _on_winch(self, sample: WinchReading) -> Step:
         last = self.last_estimate
-        height_m = -float(last.position_ned_m[2]) if last is not None else math.nan
-        self.winch.on_reading(sample, self.estimator, height_m)
+        self.winch.on_reading(sample, self.estimator, None if last is None else last.position_ned_m)
         return Step()
 
     def _on_fc_position(self, sample: FcPosition) -> Step:

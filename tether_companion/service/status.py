@@ -95,6 +95,8 @@ def render(service: CompanionService) -> Group:
                 drops.add_row(f"winch: {name.replace('_', ' ')}", str(count))
         if session.winch.timeouts:
             drops.add_row("winch: timed out (stale)", str(session.winch.timeouts))
+        if session.winch.near_vertical:
+            drops.add_row("winch: near vertical, not fused", str(session.winch.near_vertical))
     for reason, count in sorted(session.commands_refused.items()):
         drops.add_row(f"commands denied: {reason.replace('_', ' ')}", str(count))
     drops.add_row("withheld estimates", str(publisher.counters.withheld))

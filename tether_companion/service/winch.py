@@ -23,8 +23,11 @@ the flight controller's newest believed stamp (live and in replay alike).
 
 :class:`WinchFeed` (used by :class:`~tether_companion.service.session.EstimationSession`)
 hands accepted readings to the estimator: the length to ``set_paid_out_length_m`` (the dynamic
-filter), the tension, when ``tension.source`` is ``winch``, to ``set_known_tension_n`` at the
-drone: on a cable of weight ``w`` per length the tension grows by ``w h`` from the winch to a
+filter) while the cable is not steeper than ``min_span_ratio`` (near the vertical the span
+``a = sqrt(L^2 - h^2)`` from length and height is ill-conditioned: a length error ``e`` moves
+it by ``e L/a``; measured in ArduPilot SITL above the anchor, docs/ardupilot.md), the
+tension, when ``tension.source`` is ``winch``, to ``set_known_tension_n`` at the drone: on a
+cable of weight ``w`` per length the tension grows by ``w h`` from the winch to a
 drone ``h`` above it (catenary, or the part resting on the ground: the same sum). A winch
 silent for ``timeout_s`` is stale: its length is forgotten (a restarting filter does not
 initialise from it). The paper's 3-/4-state filters have no length input: the length is read,
@@ -36,6 +39,7 @@ Pure and synchronous.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
 
 from tether_companion.config import spec
@@ -113,6 +117,14 @@ class WinchConfig:
     )
     require_healthy: bool = spec(
         True, doc="drop readings whose status lacks MAV_WINCH_STATUS_HEALTHY"
+    )
+    min_span_ratio: float = spec(
+        0.5,
+        minimum=0.0,
+        maximum=1.0,
+        doc="the length is fused only while the estimate's horizontal span over its distance "
+        "from the anchor is at least this: nearer the vertical a length error e moves the "
+        "horizontal position by e L/a (2x at 0.5), and the rangefinder gives the height [1]",
     )
 
 
@@ -322,6 +334,8 @@ class WinchFeed:
         """The latest reading handed on (None: none yet, or stale)."""
         self.timeouts = 0
         """Times the winch went stale (nothing accepted for ``timeout_s``)."""
+        self.near_vertical = 0
+        """Lengths not fused because the cable was nearer the vertical than ``min_span_ratio``."""
         self.note = (
             "winch: the paper's filters (estimator.kind three_state/four_state) have no "
             "paid-out length input; WINCH_STATUS is read and counted, its length not used"
@@ -335,19 +349,34 @@ class WinchFeed:
         """Whether the winch was fed before and has been silent for ``timeout_s`` since."""
         return self.last is None and self.timeouts > 0
 
-    def on_reading(self, reading: WinchReading, estimator: object, height_m: float) -> None:
-        """Feed ``reading`` to ``estimator``; ``height_m`` is the drone's height above the
-        anchor [m] (from the latest estimate; nan when none) for the tension's conversion."""
+    def on_reading(
+        self, reading: WinchReading, estimator: object, position_ned_m: Sequence[float] | None
+    ) -> None:
+        """Feed ``reading`` to ``estimator``; ``position_ned_m`` is the latest estimate's
+        position from the anchor [m] (None before the first): the cable's steepness for the
+        length, the drone's height for the tension."""
         self.last = reading
         self.deadline_s = reading.time_s + self.config.timeout_s
+        height_m = math.nan if position_ned_m is None else -float(position_ned_m[2])
         if self.uses_length and reading.length_m > 0.0:  # fully retracted: no cable to model
-            estimator.set_paid_out_length_m(reading.length_m, reading.time_s)  # type: ignore[attr-defined]
+            if self._steep(position_ned_m):
+                self.near_vertical += 1
+            else:
+                estimator.set_paid_out_length_m(reading.length_m, reading.time_s)  # type: ignore[attr-defined]
         if not (self.use_tension and math.isfinite(reading.tension_n)):
             return
         if self.weight_n_per_m > 0.0 and not math.isfinite(height_m):
             return  # a heavy cable's tension at the drone needs the drone's height
         hanging_n = self.weight_n_per_m * max(0.0, height_m) if self.weight_n_per_m > 0.0 else 0.0
         estimator.set_known_tension_n(reading.tension_n + hanging_n, reading.time_s)  # type: ignore[attr-defined]
+
+    def _steep(self, position_ned_m: Sequence[float] | None) -> bool:
+        """Whether the estimate puts the cable nearer the vertical than ``min_span_ratio``."""
+        if position_ned_m is None:
+            return False
+        north, east, down = (float(v) for v in position_ned_m)
+        distance = math.sqrt(north * north + east * east + down * down)
+        return distance > 0.0 and math.hypot(north, east) < self.config.min_span_ratio * distance
 
     def expire(self, estimator: object) -> None:
         """The winch fell silent (called once the flight-controller time passes

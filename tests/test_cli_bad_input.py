@@ -338,7 +338,9 @@ def test_an_open_that_hangs_is_reported_within_two_seconds(capsys) -> None:
         return elapsed
 
     elapsed = asyncio.run(scenario())
-    assert LINK_OPEN_TIMEOUT_S <= elapsed < LINK_OPEN_TIMEOUT_S + 1.0
+    # ``started`` is stamped inside the open, which a loaded loop runs a little after the
+    # timeout's clock began (measured 12 ms under the full suite at load 10)
+    assert LINK_OPEN_TIMEOUT_S - 0.1 <= elapsed < LINK_OPEN_TIMEOUT_S + 1.0
     err = capsys.readouterr().err
     assert err.count("cannot open") == 1 and "no answer within 2 s" in err, err
 

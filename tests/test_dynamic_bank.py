@@ -36,7 +36,7 @@ def test_the_member_the_data_favour_is_kept() -> None:
     for k in range(400):
         bank.update_others("x", np.array((2.5,)), _direct, np.array([[0.01]]))
         result = bank.best.update("x", np.array((2.5,)), _direct, np.array([[0.01]]))
-        bank.add_best_nis(result.nis)
+        bank.add_best_nis(result.nis, 0.0)
         bank.maybe_decide(0.1 * k)
     assert bank.decided
     assert bank.best.x[0] > 2.4

@@ -19,9 +19,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic.bank import (
-    LIKELIHOOD_TEMPERING,
     FilterBank,
     RowsFunction,
+    log_det_innovation,
 )
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.ekf import (
@@ -143,18 +143,17 @@ def _record_bank(
     r_variance: float,
     time_s: float,
 ) -> bool:
-    """Add the members' ``-NIS/2`` of a sample fused into every member (``best`` the best
-    member before it) and record the best member's outcome in ``status``; whether it was
-    fused into the best member."""
+    """Add the members' log-likelihoods of a sample fused into every member (``best`` the
+    best member before it) and record the best member's outcome in ``status``; whether it
+    was fused into the best member."""
     best_index = 0
+    decided = bank.decided
     for i, (kf, result) in enumerate(zip(bank.filters, results, strict=True)):
         if kf is best:
             best_index = i
-        elif math.isfinite(result.nis):
-            bank.log_likelihood[i] -= 0.5 * result.nis / LIKELIHOOD_TEMPERING
+        if not decided:
+            bank.add_evidence(i, result.nis, kf.last_log_det_s)
     best_result = results[best_index]
-    if not bank.decided:
-        bank.add_best_nis(best_result.nis)
     if math.isfinite(best_result.nis):
         m = len(best.sensors[name].innovation)
         status.last_innovation = best.sensors[name].last_innovation
@@ -206,8 +205,8 @@ def fuse(
         return value, h_jac
 
     result = kf.update(name, z, measure_and_keep, r)
-    if not bank.decided:
-        bank.add_best_nis(result.nis)
+    if not bank.decided and jacobians:
+        bank.add_best_nis(result.nis, log_det_innovation(priors[0], jacobians[0], r))
     if math.isfinite(result.nis):
         status.last_innovation = kf.sensors[name].last_innovation
         status._last_jacobian, status._last_prior, status._last_noise = jacobians[0], priors[0], r

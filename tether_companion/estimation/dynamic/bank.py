@@ -5,8 +5,10 @@ vertical pull, so a 10 % error moves the first position fix by metres; one EKF s
 ``s = 1 +- 0.1`` linearises far from the truth and can converge to a wrong, over-confident
 state. Each member starts from the same window with a narrow prior around its own ``s``
 (spaced so that the truth is within about one prior standard deviation of one member), the
-members run side by side on the same measurements, and each accumulates the log-likelihood
-``-NIS/2`` of its innovations (tempered: :data:`LIKELIHOOD_TEMPERING`). The published state
+members run side by side on the same measurements, and each accumulates the Gaussian
+log-likelihood ``-(NIS + log det S)/2`` of its innovations (tempered:
+:data:`LIKELIHOOD_TEMPERING`; without ``log det S`` a member whose covariance is metres wide
+was never penalised for it: every innovation is small against it). The published state
 is the mixture's mean and covariance (weights from the log-likelihoods; the covariance
 includes the spread between members, so it stays honest while they disagree). When one
 member's weight passes ``SELECT_WEIGHT`` after ``MIN_BANK_S`` the others are dropped; after
@@ -62,8 +64,9 @@ class FilterBank:
 
     def __init__(self, filters: list[MemberFilter], start_s: float, max_bank_s: float) -> None:
         self.filters = filters
-        self.log_likelihood = [0.0] * len(filters)
-        """Each member's tempered log-likelihood so far (Python floats: read every tick)."""
+        self.log_weight = [0.0] * len(filters)
+        """Each member's tempered log-likelihood so far (unnormalised; Python floats: read
+        every tick)."""
         self.start_s = start_s
         self.max_bank_s = max_bank_s
         self._mixture_cache: tuple[list[FloatArray], list[float], tuple[FloatArray, FloatArray]]
@@ -86,12 +89,12 @@ class FilterBank:
         return filters[self._best_index()]
 
     def _best_index(self) -> int:
-        ll = self.log_likelihood
+        ll = self.log_weight
         return ll.index(max(ll))
 
     def weights(self) -> FloatArray:
         """Normalised posterior weights, shape (members,)."""
-        ll = self.log_likelihood
+        ll = self.log_weight
         top = max(ll)
         w = [math.exp(v - top) for v in ll]
         total = sum(w)
@@ -100,7 +103,7 @@ class FilterBank:
     def keep(self, indices: list[int]) -> None:
         """Keep only the members at ``indices`` (with their log-likelihoods)."""
         self.filters = [self.filters[i] for i in indices]
-        self.log_likelihood = [self.log_likelihood[i] for i in indices]
+        self.log_weight = [self.log_weight[i] for i in indices]
 
     def predict(self, dt_s: float, u: list[float]) -> None:
         """Predict every member over ``dt_s`` [s] (``u`` the inputs as floats)."""
@@ -211,18 +214,25 @@ class FilterBank:
         self, name: str, z: FloatArray, measure: MeasurementFunction, r: FloatArray
     ) -> None:
         """Fuse into every member but the best (the caller fuses the best with its status
-        record) and add each member's ``-NIS/2``."""
+        record) and add each member's log-likelihood of the sample."""
         best = self.best
         for i, kf in enumerate(self.filters):
             if kf is not best:
+                log_det_s = log_det_innovation(kf.P, measure(kf.x)[1], r)
                 result = kf.update(name, z, measure, r)
-                if math.isfinite(result.nis):
-                    self.log_likelihood[i] -= 0.5 * result.nis / LIKELIHOOD_TEMPERING
+                self.add_evidence(i, result.nis, log_det_s)
 
-    def add_best_nis(self, nis: float) -> None:
-        """The best member's NIS of the sample just fused."""
-        if math.isfinite(nis):
-            self.log_likelihood[self._best_index()] -= 0.5 * nis / LIKELIHOOD_TEMPERING
+    def add_best_nis(self, nis: float, log_det_s: float) -> None:
+        """The best member's NIS and ``log det S`` of the sample just fused."""
+        self.add_evidence(self._best_index(), nis, log_det_s)
+
+    def add_evidence(self, index: int, nis: float, log_det_s: float) -> None:
+        """Add member ``index``'s tempered Gaussian log-likelihood of one sample,
+        ``-(NIS + log det S) / 2`` over :data:`LIKELIHOOD_TEMPERING` (the ``2 pi`` term is
+        the same for every member); nothing when either is not finite (rejected sample)."""
+        value = nis + log_det_s
+        if math.isfinite(value):
+            self.log_weight[index] -= 0.5 * value / LIKELIHOOD_TEMPERING
 
     def drop_unhealthy(self, max_distance_m: float) -> None:
         """Drop members whose state is not finite or farther than ``max_distance_m``."""
@@ -247,7 +257,7 @@ class FilterBank:
         arrays = [a for kf in self.filters for a in (kf.x, kf.P)]
         cached_arrays, cached_ll, moments = self._mixture_cache
         if (
-            cached_ll == self.log_likelihood
+            cached_ll == self.log_weight
             and len(cached_arrays) == len(arrays)
             and all(a is b for a, b in zip(arrays, cached_arrays, strict=True))
         ):
@@ -261,7 +271,7 @@ class FilterBank:
         cov += (spread.T * w) @ spread
         cov += cov.T
         cov *= 0.5
-        self._mixture_cache = (arrays, list(self.log_likelihood), (mean, cov))
+        self._mixture_cache = (arrays, list(self.log_weight), (mean, cov))
         return mean, cov
 
     def maybe_decide(self, time_s: float) -> None:
@@ -283,7 +293,18 @@ class FilterBank:
             kf.reset(mean, cov)
             kf.resets = resets  # a collapse is not a restart
             self.filters = [kf]
-            self.log_likelihood = [0.0]
+            self.log_weight = [0.0]
+
+
+def log_det_innovation(p: FloatArray, h_jac: FloatArray, r: FloatArray) -> float:
+    """``log det (H P H^T + R)`` (``nan`` when not positive definite or not finite)."""
+    s = h_jac @ p @ h_jac.T + r
+    if not np.all(np.isfinite(s)):
+        return math.nan
+    chol, info = dpotrf(s, lower=1, clean=0)
+    if info != 0:
+        return math.nan
+    return 2.0 * float(np.log(np.diag(chol)).sum())
 
 
 def _stack(arrays: list[FloatArray]) -> FloatArray:

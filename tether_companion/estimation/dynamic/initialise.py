@@ -217,8 +217,9 @@ class Initialiser:
             return Initialisation(None, None, NO_COVARIANCE)
         motion = self._fitted_motion(time_s, scale, length_m)
         if motion is not None:  # the window's motion: position now and velocity
-            position, velocity, velocity_se = motion
+            position, position_se, velocity, velocity_se = motion
             x[state.POSITION] = position
+            p[state.POSITION, state.POSITION] += np.diag(position_se**2)
             x[state.VELOCITY] = velocity
             p[state.VELOCITY, state.VELOCITY] = np.eye(3) * max(
                 velocity_se**2, cfg.initial.velocity_std_mps**2 * 0.25
@@ -314,26 +315,37 @@ class Initialiser:
 
     def _fitted_motion(
         self, time_s: float, scale: float, length_m: float
-    ) -> tuple[FloatArray, FloatArray, float] | None:
-        """Position [m] and velocity [m/s] at ``time_s`` from a quadratic fit of the
-        window's per-tick positions (thrust scale ``scale``), and the velocity's standard
-        error [m/s]."""
-        times, positions = [], []
+    ) -> tuple[FloatArray, FloatArray, FloatArray, float] | None:
+        """Position [m] at ``time_s`` from a straight-line fit of the window's per-tick
+        positions (thrust scale ``scale``) with its standard error per axis [m], and the
+        velocity [m/s] with its standard error [m/s].
+
+        The standard errors count the rangefinder's readings, not the IMU ticks, as the
+        independent samples (every tick between two readings repeats the same height, and the
+        height sets the span): the fit's value at the window's end has several times the
+        variance of the window's mean, which the construction's covariance holds. A line,
+        not a parabola: over a one-second window the curvature of a flight (``a T^2 / 12``,
+        a few centimetres) is below what the parabola's end point adds in noise."""
+        times, positions, heights = [], [], set()
         for t, accel_force, thrust_vector, height in self._snapshots:
             placed = self._place(accel_force + scale * thrust_vector, height, length_m)
             if placed is not None:
                 times.append(t)
                 positions.append(placed[:3])
+                heights.add(height)
         if len(times) < 10:
             return None
         t = np.asarray(times) - time_s
-        design = np.stack((np.ones_like(t), t, t * t), axis=1)
+        design = np.stack((np.ones_like(t), t), axis=1)
         coef, *_ = np.linalg.lstsq(design, np.asarray(positions), rcond=None)
         residual = np.asarray(positions) - design @ coef
+        repeats = len(times) / max(len(heights), 1)
+        inverse = np.linalg.inv(design.T @ design) * repeats
+        sigma_axis = np.sqrt(np.mean(residual**2, axis=0))
         sigma = float(np.sqrt(np.mean(residual**2)))
-        # standard error of the slope at t = 0 (the window's end), per axis
-        slope_se = float(sigma * np.sqrt(np.linalg.inv(design.T @ design)[1, 1]))
-        return coef[0], coef[1], slope_se
+        # standard errors of the value and the slope at t = 0 (the window's end)
+        slope_se = float(sigma * np.sqrt(inverse[1, 1]))
+        return coef[0], sigma_axis * np.sqrt(inverse[0, 0]), coef[1], slope_se
 
     def _state_and_covariance(
         self, theta: FloatArray, y: FloatArray, n: int, scale_std: float

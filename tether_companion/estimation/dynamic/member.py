@@ -105,6 +105,9 @@ class MemberFilter(ExtendedKalmanFilter):
         self._q = np.diag(q_diagonal).copy()
         self._fp = np.zeros((_N, _N))
         """``F P``, rows 0-5 rewritten each prediction, the rest stay zero."""
+        self.last_log_det_s = math.nan
+        """``log det S`` of the last sample :meth:`test_force_balance` or :meth:`test_scalar`
+        tested (the Gaussian likelihood's normalisation, for the bank's weights)."""
 
     def predict(self, dt_s: float, u: Sequence[float] | None = None) -> bool:  # type: ignore[override]
         """One Euler step of the state and the covariance over ``dt_s`` [s] with the inputs
@@ -154,7 +157,9 @@ class MemberFilter(ExtendedKalmanFilter):
         if status is None:
             status = self.sensors[sensor] = SensorStatus()
         if not s_value > 0.0:
+            self.last_log_det_s = math.nan
             return self._rejected(status, s_value)
+        self.last_log_det_s = math.log(s_value)
         nis = innovation * innovation / s_value
         status.last_nis = nis
         status.innovation = (innovation,)
@@ -185,7 +190,9 @@ class MemberFilter(ExtendedKalmanFilter):
         c0, c1, c2 = s11 * s22 - s12 * s12, s02 * s12 - s01 * s22, s01 * s12 - s02 * s11
         det = s00 * c0 + s01 * c1 + s02 * c2
         if not (s00 > 0.0 and m01 > 0.0 and det > 0.0):
+            self.last_log_det_s = math.nan
             return self._rejected(status, s00 + s11 + s22 + s01 + s02 + s12), ()
+        self.last_log_det_s = math.log(det)
         inv = 1.0 / det
         i00, i01, i02 = c0 * inv, c1 * inv, c2 * inv
         i11 = (s00 * s22 - s02 * s02) * inv

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from tether_companion.estimation.dynamic import state
-from tether_companion.estimation.dynamic.bank import FilterBank
+from tether_companion.estimation.dynamic.bank import FilterBank, log_det_innovation
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
 
 N = state.N_STATES
@@ -61,3 +61,19 @@ def test_members_far_away_or_not_finite_are_dropped() -> None:
     bank = FilterBank([_member(0.0), far, nan_member], start_s=0.0, max_bank_s=30.0)
     bank.drop_unhealthy(1000.0)
     assert bank.decided and bank.best.x[0] == 2.0
+
+
+def test_a_wide_member_pays_for_its_width() -> None:
+    """Same mean, same innovations: the member whose covariance is metres wide explains them
+    no better and loses weight through ``log det S`` (its NIS alone is the smaller)."""
+    narrow, wide = _member(0.0), _member(0.0)
+    wide.P = np.eye(N) * 25.0
+    bank = FilterBank([narrow, wide], start_s=0.0, max_bank_s=30.0)
+    for _ in range(20):
+        bank.update_others("x", np.array((2.05,)), _direct, np.array([[0.01]]))
+        result = bank.best.update("x", np.array((2.05,)), _direct, np.array([[0.01]]))
+        bank.add_best_nis(
+            result.nis, log_det_innovation(bank.best.P, _direct(bank.best.x)[1], np.array([[0.01]]))
+        )
+    weights = bank.weights()
+    assert weights[0] > weights[1]

@@ -80,8 +80,8 @@ def test_a_filter_pushed_far_out_is_found_lost_and_restarts(
 ) -> None:
     """At 7 s every member is moved to three times its horizontal distance with a 0.1 m
     covariance: a far, consistent-looking state. The windows' own fixes disagree; the filter
-    restarts with the reason and is back within 0.5 m; nothing published meanwhile lies
-    beyond 3 sigma."""
+    restarts with the reason and is back within 1 m (it was 15 m off); nothing published
+    meanwhile lies beyond 3 sigma."""
     moved: list[float] = []
     reasons: list[str] = []
     restart = DynamicTetherEstimator._restart
@@ -112,7 +112,7 @@ def test_a_filter_pushed_far_out_is_found_lost_and_restarts(
     assert reasons[0].startswith("lost: ")
     error = run.position_ned_m - run.truth_position_ned_m
     horizontal = np.hypot(error[:, 0], error[:, 1])
-    assert float(horizontal[-1]) < 0.5
+    assert float(np.sqrt(np.mean(horizontal[run.time_s > 12.0] ** 2))) < 1.0
     published = run.published & (run.time_s > moved[0])
     cov = run.covariance[published][:, :2, :2]
     nees = np.einsum("ni,nij,nj->n", error[published, :2], np.linalg.inv(cov), error[published, :2])

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic.bank import (
+    LIKELIHOOD_TEMPERING,
     FilterBank,
     RowsFunction,
     log_det_innovation,
@@ -129,7 +130,18 @@ def fuse_force_balance(
     ``(h(x) (3,), H (39, row-major))`` at the state as a list ``x``."""
     best = bank.best
     results, jacobians, priors = bank.update_force_balance(name, z, measure, r_variance)
-    return _record_bank(bank, best, name, status, results, jacobians, priors, r_variance, time_s)
+    return _record_bank(
+        bank,
+        best,
+        name,
+        status,
+        results,
+        jacobians,
+        priors,
+        r_variance,
+        time_s,
+        bank.force_balance_tempering,
+    )
 
 
 def _record_bank(
@@ -142,17 +154,18 @@ def _record_bank(
     priors: list[FloatArray],
     r_variance: float,
     time_s: float,
+    tempering: float = LIKELIHOOD_TEMPERING,
 ) -> bool:
     """Add the members' log-likelihoods of a sample fused into every member (``best`` the
-    best member before it) and record the best member's outcome in ``status``; whether it
-    was fused into the best member."""
+    best member before it; divided by ``tempering``) and record the best member's outcome
+    in ``status``; whether it was fused into the best member."""
     best_index = 0
     decided = bank.decided
     for i, (kf, result) in enumerate(zip(bank.filters, results, strict=True)):
         if kf is best:
             best_index = i
         if not decided:
-            bank.add_evidence(i, result.nis, kf.last_log_det_s)
+            bank.add_evidence(i, result.nis, kf.last_log_det_s, tempering)
     best_result = results[best_index]
     if math.isfinite(best_result.nis):
         m = len(best.sensors[name].innovation)

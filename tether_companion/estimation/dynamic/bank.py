@@ -44,11 +44,16 @@ SELECT_WEIGHT = 0.99
 MIN_BANK_S = 3.0
 """Shortest time the members run side by side [s]."""
 LIKELIHOOD_TEMPERING = 20.0
-"""Each sample's ``-NIS/2`` is divided by this: the innovations of consecutive IMU ticks are
-not independent (motor lag, unmodelled forces and the FC's attitude error last tens of
+"""Each sample's log-likelihood is divided by this: the innovations of consecutive IMU ticks
+are not independent (motor lag, unmodelled forces and the FC's attitude error last tens of
 milliseconds to seconds), and counting 200 of them per second as independent evidence made
 the bank pick a member within seconds in a steady hover, where the thrust scale is not
-observable at all (a member 1.6-2 m off published at 3.2 sigma in the service's closed loop)."""
+observable at all (a member 1.6-2 m off published at 3.2 sigma in the service's closed loop).
+A force-balance sample that sums ``k`` IMU ticks (``imu_ticks_per_fusion``) carries the
+evidence of ``k`` ticks, so it is divided by ``LIKELIHOOD_TEMPERING / k``
+(:attr:`FilterBank.force_balance_tempering`): the evidence per second does not depend on how
+the ticks are batched (with ``k = 4`` and the full 20 the bank saw a quarter of it and
+collapsed by time, undecided, with a member far off still weighing 20-50 %)."""
 
 
 class FilterBank:
@@ -60,10 +65,22 @@ class FilterBank:
         The members, one per hypothesis (at least one).
     start_s
         Time the bank started [s].
+    max_bank_s
+        Longest time the members run side by side [s] (:meth:`maybe_decide`).
+    ticks_per_force_balance
+        IMU ticks summed in one force-balance sample (see :data:`LIKELIHOOD_TEMPERING`).
     """
 
-    def __init__(self, filters: list[MemberFilter], start_s: float, max_bank_s: float) -> None:
+    def __init__(
+        self,
+        filters: list[MemberFilter],
+        start_s: float,
+        max_bank_s: float,
+        ticks_per_force_balance: int = 1,
+    ) -> None:
         self.filters = filters
+        self.force_balance_tempering = LIKELIHOOD_TEMPERING / ticks_per_force_balance
+        """What a force-balance sample's log-likelihood is divided by."""
         self.log_weight = [0.0] * len(filters)
         """Each member's tempered log-likelihood so far (unnormalised; Python floats: read
         every tick)."""
@@ -226,13 +243,19 @@ class FilterBank:
         """The best member's NIS and ``log det S`` of the sample just fused."""
         self.add_evidence(self._best_index(), nis, log_det_s)
 
-    def add_evidence(self, index: int, nis: float, log_det_s: float) -> None:
+    def add_evidence(
+        self,
+        index: int,
+        nis: float,
+        log_det_s: float,
+        tempering: float = LIKELIHOOD_TEMPERING,
+    ) -> None:
         """Add member ``index``'s tempered Gaussian log-likelihood of one sample,
-        ``-(NIS + log det S) / 2`` over :data:`LIKELIHOOD_TEMPERING` (the ``2 pi`` term is
-        the same for every member); nothing when either is not finite (rejected sample)."""
+        ``-(NIS + log det S) / 2`` over ``tempering`` (the ``2 pi`` term is the same for
+        every member); nothing when either is not finite (rejected sample)."""
         value = nis + log_det_s
         if math.isfinite(value):
-            self.log_weight[index] -= 0.5 * value / LIKELIHOOD_TEMPERING
+            self.log_weight[index] -= 0.5 * value / tempering
 
     def drop_unhealthy(self, max_distance_m: float) -> None:
         """Drop members whose state is not finite or farther than ``max_distance_m``."""

@@ -349,7 +349,9 @@ class DynamicTetherEstimator(InputFeed):
             )
             for x0, p0 in starts
         ]
-        self.bank = FilterBank(members, t, self.dynamic.initial.thrust_scale_bank_max_s)
+        self.bank = FilterBank(
+            members, t, self.dynamic.initial.thrust_scale_bank_max_s, self._ticks_per_fusion
+        )
         self._lost_check = LostCheck(self._new_initialiser)
         self.health.initialisations += 1
         inputs = [*rotation.ravel().tolist(), thrust]

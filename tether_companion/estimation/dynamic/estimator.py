@@ -423,7 +423,7 @@ class DynamicTetherEstimator(InputFeed):
             return
         bank.drop_unhealthy(MAX_DISTANCE_M)
         bank.maybe_decide(t)
-        lost = self._lost_check.test(t, lambda: self._moments(bank), self.constants.length_m)
+        lost = self._lost_check.test(t, bank.mixture, self.constants.length_m)
         if lost is not None:
             self._restart(lost)
             return

@@ -217,9 +217,8 @@ class Initialiser:
             return Initialisation(None, None, NO_COVARIANCE)
         motion = self._fitted_motion(time_s, scale, length_m)
         if motion is not None:  # the window's motion: position now and velocity
-            position, position_se, velocity, velocity_se = motion
+            position, velocity, velocity_se = motion
             x[state.POSITION] = position
-            p[state.POSITION, state.POSITION] += np.diag(position_se**2)
             x[state.VELOCITY] = velocity
             p[state.VELOCITY, state.VELOCITY] = np.eye(3) * max(
                 velocity_se**2, cfg.initial.velocity_std_mps**2 * 0.25
@@ -315,44 +314,26 @@ class Initialiser:
 
     def _fitted_motion(
         self, time_s: float, scale: float, length_m: float
-    ) -> tuple[FloatArray, FloatArray, FloatArray, float] | None:
-        """Position [m] at ``time_s`` from a straight-line fit of the window's per-tick
-        positions (thrust scale ``scale``) with its standard error per axis [m], and the
-        velocity [m/s] from a quadratic fit's slope at ``time_s`` with its standard error
-        [m/s].
-
-        The position's standard error counts the rangefinder's readings, not the IMU ticks,
-        as the independent samples (every tick between two readings repeats the same height,
-        and the height sets the span): the fit's value at the window's end has several times
-        the variance of the window's mean, which the construction's covariance holds. A line
-        for the position, not the parabola: over a one-second window the curvature of a
-        flight (``a T^2 / 12``, a few centimetres) is below what the parabola's end point adds
-        in noise (it put the biased circle's seeds 1 and 8 0.3-0.45 m high). The velocity
-        stays the parabola's end slope (the line's mean slope, with the counted standard
-        error, started the gusty hover's winch flights more over-confident: 43 -> 51-54 % of
-        the published ticks beyond 3 sigma, seeds 1-5)."""
-        times, positions, heights = [], [], set()
+    ) -> tuple[FloatArray, FloatArray, float] | None:
+        """Position [m] and velocity [m/s] at ``time_s`` from a quadratic fit of the
+        window's per-tick positions (thrust scale ``scale``), and the velocity's standard
+        error [m/s]."""
+        times, positions = [], []
         for t, accel_force, thrust_vector, height in self._snapshots:
             placed = self._place(accel_force + scale * thrust_vector, height, length_m)
             if placed is not None:
                 times.append(t)
                 positions.append(placed[:3])
-                heights.add(height)
         if len(times) < 10:
             return None
         t = np.asarray(times) - time_s
-        points = np.asarray(positions)
-        line = np.stack((np.ones_like(t), t), axis=1)
-        line_coef, *_ = np.linalg.lstsq(line, points, rcond=None)
-        repeats = len(times) / max(len(heights), 1)
-        line_sigma = np.sqrt(np.mean((points - line @ line_coef) ** 2, axis=0))
-        position_se = line_sigma * np.sqrt(np.linalg.inv(line.T @ line)[0, 0] * repeats)
         design = np.stack((np.ones_like(t), t, t * t), axis=1)
-        coef, *_ = np.linalg.lstsq(design, points, rcond=None)
-        sigma = float(np.sqrt(np.mean((points - design @ coef) ** 2)))
-        # standard error of the slope at t = 0 (the window's end)
+        coef, *_ = np.linalg.lstsq(design, np.asarray(positions), rcond=None)
+        residual = np.asarray(positions) - design @ coef
+        sigma = float(np.sqrt(np.mean(residual**2)))
+        # standard error of the slope at t = 0 (the window's end), per axis
         slope_se = float(sigma * np.sqrt(np.linalg.inv(design.T @ design)[1, 1]))
-        return line_coef[0], position_se, coef[1], slope_se
+        return coef[0], coef[1], slope_se
 
     def _state_and_covariance(
         self, theta: FloatArray, y: FloatArray, n: int, scale_std: float

@@ -212,7 +212,9 @@ def test_dynamic_filter_over_udp_on_the_paper_circle(tmp_path) -> None:
     # >= 1 s of 30 Hz after converging (~16 s in lock-step; on this loaded machine an IMU gap
     # can restart the filter and cost ~15 s more)
     assert received["VISION_POSITION_ESTIMATE"] >= 30
-    assert received["ODOMETRY"] == received["VISION_POSITION_ESTIMATE"]
+    # one of each per publication; the flight's end may fall between the two of the last one
+    # (measured once under load: ODOMETRY 595, VISION_POSITION_ESTIMATE 596)
+    assert abs(received["ODOMETRY"] - received["VISION_POSITION_ESTIMATE"]) <= 1
     # Horizontal RMSE over 4 alternated runs at load 8 (23:20 UTC, 2026-11-25), main b3d5450
     # and dc72492 alike: 0.054-0.208 m, NEES 0.11-0.33. Under load the socket's jitter moves
     # the first publication earlier or later, and the first seconds after learning carry the

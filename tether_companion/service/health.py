@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import output as dynamic_output
-from tether_companion.estimation.dynamic.published import Approximation
+from tether_companion.estimation.dynamic.output import Approximation
 from tether_companion.estimation.observability import RANGEFINDER
 from tether_companion.service.config import PublishConfig
 

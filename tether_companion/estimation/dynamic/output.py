@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
-    from tether_companion.estimation.dynamic.published import Approximation, TickSource
+    from tether_companion.estimation.dynamic.published import TickSource
 
 FloatArray = NDArray[np.float64]
 
@@ -60,6 +60,64 @@ POSITION_BLOCK = slice(0, 3)
 """Rows/columns of the position in :attr:`NavigationEstimate.position_velocity_covariance`."""
 VELOCITY_BLOCK = slice(3, 6)
 """Rows/columns of the velocity in :attr:`NavigationEstimate.position_velocity_covariance`."""
+
+
+class Approximation:
+    """A tick's published values in Python floats, to within their rounding.
+
+    Attributes
+    ----------
+    state
+        The state's values (13).
+    duration_s
+        The step's duration ``T`` [s] (0 without a step).
+    position
+        Position NED [m] (3).
+    horizontal
+        Published horizontal position covariance: north-north, north-east, east-east [m^2].
+    down_variance
+        Published down variance [m^2].
+    tension_n
+        Tension at the drone [N].
+    finite
+        Whether every published value (position, covariance, tension and its variance) is
+        finite for sure (False: not known).
+    position_tol, covariance_tol
+        Absolute bounds of the position's [m] and the covariance entries' [m^2] rounding.
+    """
+
+    __slots__ = (
+        "covariance_tol",
+        "down_variance",
+        "duration_s",
+        "finite",
+        "horizontal",
+        "position",
+        "position_tol",
+        "state",
+        "tension_n",
+    )
+
+    def __init__(
+        self,
+        state: list[float],
+        duration_s: float,
+        horizontal: tuple[float, float, float],
+        down_variance: float,
+        tension_n: float,
+        finite: bool,
+        position_tol: float,
+        covariance_tol: float,
+    ) -> None:
+        self.state = state
+        self.duration_s = duration_s
+        self.position = state[:3]
+        self.horizontal = horizontal
+        self.down_variance = down_variance
+        self.tension_n = tension_n
+        self.finite = finite
+        self.position_tol = position_tol
+        self.covariance_tol = covariance_tol
 
 
 class ExactValues:

@@ -47,7 +47,7 @@ from tether_companion.estimation.dynamic.observability import (
     unmodelled_position_covariance,
     unmodelled_position_rows,
 )
-from tether_companion.estimation.dynamic.output import ExactValues
+from tether_companion.estimation.dynamic.output import Approximation, ExactValues
 
 FloatArray = NDArray[np.float64]
 
@@ -110,64 +110,6 @@ class MixtureValues:
         if rows is None:
             rows = self._rows = self.p.tolist()
         return rows
-
-
-class Approximation:
-    """A tick's published values in Python floats, to within their rounding.
-
-    Attributes
-    ----------
-    state
-        The state's values (13).
-    duration_s
-        The step's duration ``T`` [s] (0 without a step).
-    position
-        Position NED [m] (3).
-    horizontal
-        Published horizontal position covariance: north-north, north-east, east-east [m^2].
-    down_variance
-        Published down variance [m^2].
-    tension_n
-        Tension at the drone [N].
-    finite
-        Whether every published value (position, covariance, tension and its variance) is
-        finite for sure (False: not known).
-    position_tol, covariance_tol
-        Absolute bounds of the position's [m] and the covariance entries' [m^2] rounding.
-    """
-
-    __slots__ = (
-        "covariance_tol",
-        "down_variance",
-        "duration_s",
-        "finite",
-        "horizontal",
-        "position",
-        "position_tol",
-        "state",
-        "tension_n",
-    )
-
-    def __init__(
-        self,
-        state: list[float],
-        duration_s: float,
-        horizontal: tuple[float, float, float],
-        down_variance: float,
-        tension_n: float,
-        finite: bool,
-        position_tol: float,
-        covariance_tol: float,
-    ) -> None:
-        self.state = state
-        self.duration_s = duration_s
-        self.position = state[:3]
-        self.horizontal = horizontal
-        self.down_variance = down_variance
-        self.tension_n = tension_n
-        self.finite = finite
-        self.position_tol = position_tol
-        self.covariance_tol = covariance_tol
 
 
 class TickSource:

@@ -45,7 +45,6 @@ from tether_companion.estimation.dynamic.aid.rangefinder import RangefinderAid
 from tether_companion.estimation.dynamic.aid.winch import WinchAid
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterConfig, drag_per_s
-from tether_companion.estimation.dynamic.consistency import LostCheck
 from tether_companion.estimation.dynamic.imu_batch import ImuBatch
 from tether_companion.estimation.dynamic.initialise import Initialiser
 from tether_companion.estimation.dynamic.member import MemberFilter
@@ -152,8 +151,6 @@ class DynamicTetherEstimator(InputFeed):
         self.cable_angle = CableAngleAid(dynamic.cable_angle_noise_std_rad, dynamic.slack_tension_n)
         self.bank: FilterBank | None = None
         self._initialiser = self._new_initialiser()
-        self._lost_check = LostCheck(self._new_initialiser)
-        """The running filter against each window's own fix (fed on fusion ticks)."""
         self._time_s = math.nan
         self._inputs: list[float] | None = None
         self._resets = 0
@@ -243,7 +240,6 @@ class DynamicTetherEstimator(InputFeed):
         if self.bank is None:
             self._initialiser.add_height(height_above_anchor_m)
             return
-        self._lost_check.add_height(height_above_anchor_m)
         if not self._fresh(sample.time_s, self.config.staleness.range_s):
             health.range_stale += 1
             return
@@ -310,8 +306,6 @@ class DynamicTetherEstimator(InputFeed):
             if fusion_tick:
                 accel_fused = self._fuse_accel(inputs, force, on_ground, t)
                 self._ticks_since_fusion = 0
-                _, force_array, rotation, thrust = aligned
-                self._lost_check.add_tick(t, force_array, rotation, thrust)
             self._inputs = [*inputs[:9], *force] if self._inertial else inputs
         self._check_divergence(t, fusion_tick)
         return self._estimate(accel_fused, stale, on_ground)
@@ -352,7 +346,6 @@ class DynamicTetherEstimator(InputFeed):
         self.bank = FilterBank(
             members, t, self.dynamic.initial.thrust_scale_bank_max_s, self._ticks_per_fusion
         )
-        self._lost_check = LostCheck(self._new_initialiser)
         self.health.initialisations += 1
         inputs = [*rotation.ravel().tolist(), thrust]
         self._inputs = [*inputs[:9], *force.tolist()] if self._inertial else inputs
@@ -423,10 +416,6 @@ class DynamicTetherEstimator(InputFeed):
             return
         bank.drop_unhealthy(MAX_DISTANCE_M)
         bank.maybe_decide(t)
-        lost = self._lost_check.test(t, bank.mixture, self.constants.length_m)
-        if lost is not None:
-            self._restart(lost)
-            return
         x = bank.best.x_values()
         if x[0] * x[0] + x[1] * x[1] + x[2] * x[2] > MAX_DISTANCE_M**2:
             self._restart(f"position beyond {MAX_DISTANCE_M:g} m")

@@ -10,7 +10,6 @@ Pure and synchronous (the simulator's randomness comes from the scenario seed or
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -100,15 +99,12 @@ def run_dynamic(
     rng: np.random.Generator | None = None,
     thrust_input: ThrustInput | None = None,
     vehicle: VehicleProfile | None = None,
-    before_imu: Callable[[DynamicTetherEstimator, float], None] | None = None,
 ) -> DynamicRun:
     """Fly ``scenario``; run the dynamic filter and the paper's 4-state filter on its sensors.
 
     ``thrust_input``: the PWM-to-thrust map both filters use (default: the vehicle profile's
     static curve; a :class:`ScaledThrustInput` makes it wrong on purpose). ``vehicle``: the
     simulated vehicle when not the scenario's profile (both filters are given it too).
-    ``before_imu(estimator, time_s)``: called before each IMU sample reaches the dynamic
-    filter (tests use it to disturb the filter mid-flight).
     """
     sim = Simulator(scenario, vehicle, rng=rng)
     vehicle = sim.vehicle
@@ -152,8 +148,6 @@ def run_dynamic(
             e4 = paper.on_imu(imu)
             if e4 is not None:
                 pp[tick], pv[tick] = e4.position_ned_m, e4.covariance.diagonal()[:3]
-            if before_imu is not None:
-                before_imu(est, imu.time_s)
             e = est.on_imu(imu)
             if e is not None:
                 pos[tick], vel[tick], ten[tick] = e.position_ned_m, e.velocity_ned_mps, e.tension_n

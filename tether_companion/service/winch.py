@@ -18,8 +18,9 @@ from the configured system/component id (the link's signing policy applies befor
 frame), finite values inside the spool, the HEALTHY bit (when required), the winch's stamps
 increasing, not delayed beyond ``max_delay_s`` against the fastest delivery seen, and no
 length change faster than ``max_speed_mps`` allows. Its stamp is mapped to flight-controller
-time: the winch's time plus the smallest (arrival - winch time) offset seen, the arrival being
-the flight controller's newest believed stamp (live and in replay alike).
+time by the same least-delay offset model as the flight controller's own clock
+(:class:`~tether_companion.service.clock.FcClock`, the winch's stamps against their arrival),
+the arrival being the flight controller's newest believed stamp (live and in replay alike).
 
 :class:`WinchFeed` (used by :class:`~tether_companion.service.session.EstimationSession`)
 hands accepted readings to the estimator: the length to ``set_paid_out_length_m`` (the dynamic
@@ -44,6 +45,7 @@ from dataclasses import dataclass, fields
 
 from tether_companion.config import spec
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
+from tether_companion.service.clock import FcClock
 
 STANDARD_GRAVITY_MPS2 = 9.80665
 """WINCH_STATUS.tension is in kilogram-force: newtons per kg [m/s^2]."""
@@ -58,7 +60,7 @@ MAX_TENSION_KG = 1000.0
 WINCH_REBOOT_S = 10.0
 """The winch's clock going back more than this [s] is a restart of the winch (state reset)."""
 OFFSET_DRIFT = 1e-3
-"""How fast [s/s] the winch-to-FC clock offset may grow between readings (clock drift)."""
+"""How fast [s/s] the winch-to-FC clock offset may drift (FcClock's drift allowance)."""
 
 
 @dataclass(frozen=True)
@@ -201,7 +203,8 @@ class WinchGate:
         self.config = config
         self.counters = WinchCounters()
         self.ids = (config.system_id, config.component_id)
-        self._offset_s = math.nan
+        self._clock = FcClock(OFFSET_DRIFT)
+        """The winch's clock against the arrivals' flight-controller time."""
         self._last_winch_s = math.nan
         self._last_length_m = math.nan
         self._last_accepted_fc_s = -math.inf
@@ -272,17 +275,14 @@ class WinchGate:
                     counters.out_of_order += 1
                     return None
                 self._forget()  # the winch restarted its clock
-        offset = arrival_fc_s - winch_s
-        if math.isnan(self._offset_s) or offset < self._offset_s:
-            self._offset_s = offset
-        elif not math.isnan(self._last_winch_s):
-            self._offset_s = min(
-                offset, self._offset_s + OFFSET_DRIFT * (winch_s - self._last_winch_s)
-            )
-        if offset - self._offset_s > self.config.max_delay_s:
+        clock = self._clock
+        clock.observe(winch_s, arrival_fc_s)
+        offset = clock.offset_s(arrival_fc_s)  # winch - FC time of the least-delayed reading
+        assert offset is not None  # just observed
+        if offset - (winch_s - arrival_fc_s) > self.config.max_delay_s:
             counters.late += 1
             return None
-        return winch_s + self._offset_s
+        return winch_s - offset
 
     def _tension_n(self, msg: MAVLinkMessage) -> float:
         tension_kg = float(msg.tension)
@@ -294,7 +294,7 @@ class WinchGate:
         return tension_kg * STANDARD_GRAVITY_MPS2
 
     def _forget(self) -> None:
-        self._offset_s = math.nan
+        self._clock.reset()
         self._last_winch_s = math.nan
         self._last_length_m = math.nan
         self._last_accepted_fc_s = -math.inf

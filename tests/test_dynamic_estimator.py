@@ -115,7 +115,7 @@ def test_bad_samples_are_counted_and_never_reach_the_output() -> None:
     run_est.on_range(RangeSample(0.0, nan))
     run_est.set_known_tension_n(nan, 0.0)
     run_est.set_paid_out_length_m(-1.0, 0.0)
-    run_est.on_cable_angle(2.0, 0.0, 0.0)
+    run_est.on_cable_angle(2.0, 0.0, 0.0, 0.02)
     health = run_est.health
     assert health.nonfinite_rejected == 7 and health.pwm_invalid == 1
 
@@ -155,7 +155,7 @@ def test_optional_sensors_shrink_the_uncertainty_they_measure() -> None:
     assert est.winch.status.fused == 1
     elevation = math.atan2(-truth_p[2], math.hypot(truth_p[0], truth_p[1]))
     azimuth = math.atan2(truth_p[1], truth_p[0])
-    est.on_cable_angle(elevation, azimuth + 2 * math.pi, t)  # a whole turn must not matter
+    est.on_cable_angle(elevation, azimuth + 2 * math.pi, t, 0.02)  # a whole turn must not matter
     status = est.cable_angle.status
     assert status.fused == 1 and abs(status.last_innovation[1]) < 0.5
     assert status.last_test_ratio >= 0.0 and status.last_fused_time_s == est.time_s

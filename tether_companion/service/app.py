@@ -139,8 +139,9 @@ class CompanionService:
             When the recording directory cannot be created or written.
         """
         self.recorder = open_recorder(self.config.recording)
-        if self.session.winch.note:
-            log(self.session.winch.note)
+        for note in (self.session.winch.note, self.session.cable_angle.note):
+            if note:
+                log(note)
         gc.collect()
         gc.freeze()  # start-up objects leave the collector's view: shorter pauses on the hot path
         self.notifier.ready(status="started, connecting to the flight controller")

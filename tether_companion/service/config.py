@@ -23,6 +23,7 @@ from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.tension_kf import TensionFilterConfig
 from tether_companion.modes.config import TensionModeConfig
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
+from tether_companion.service.cable_angle import CableAngleConfig
 from tether_companion.service.link_config import (
     LinkConfig,
     OriginConfig,
@@ -330,6 +331,11 @@ class ServiceConfig:
         default_factory=WinchConfig,
         doc="the ground station's winch (WINCH_STATUS): paid-out length and tension",
     )
+    cable_angle: CableAngleConfig = spec(
+        default_factory=CableAngleConfig,
+        doc="the ground station's cable-angle sensor (DEBUG_VECT): azimuth and elevation of "
+        "the cable at the anchor",
+    )
     publish: PublishConfig = spec(default_factory=PublishConfig)
     tension_mode: TensionModeConfig = spec(
         default_factory=TensionModeConfig, doc="tension-following and landing by the tether"
@@ -405,6 +411,13 @@ class ServiceConfig:
         if self.tension.source == "winch" and not self.winch.enabled:
             raise ConfigError(
                 "", "tension.source", "winch", "needs winch.enabled: true (WINCH_STATUS read)"
+            )
+        if self.cable_angle.max_age_s > self.estimator.staleness.tension_s:
+            raise ConfigError(
+                "",
+                "cable_angle.max_age_s",
+                self.cable_angle.max_age_s,
+                f"must be at most estimator.staleness.tension_s ({stale.tension_s} s)",
             )
 
 

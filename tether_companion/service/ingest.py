@@ -13,10 +13,12 @@ Pure and synchronous (the live service and replay share it). For each message:
    flight controller's clock model is ``implausible``; one more than a second behind is
    ``out_of_order``, unless SYSTEM_TIME said the flight controller rebooted and the stamps
    agree: then :attr:`IngestCounters.reboots` counts it and the caller restarts;
-5. the winch's WINCH_STATUS (``winch.enabled``) is checked by its own gate
-   (:class:`~tether_companion.service.winch.WinchGate`: values, the winch's clock mapped to the
-   flight controller's, speed; drops in its counters by reason) and bypasses the reorder
-   buffer (its stamp is the mapped one; the estimator fuses it at its own time);
+5. the ground station's sensors, the winch's WINCH_STATUS (``winch.enabled``) and the cable
+   angle's DEBUG_VECT (``cable_angle.enabled``), are checked by their own gates
+   (:class:`~tether_companion.service.winch.WinchGate`,
+   :class:`~tether_companion.service.cable_angle.CableAngleGate`: sender, values, the sensor's
+   clock mapped to the flight controller's; drops in their counters by reason) and bypass the
+   reorder buffer (their stamp is the mapped one; the estimator fuses them at its own time);
 6. order: samples pass an adaptive reorder buffer (:mod:`~tether_companion.service.reorder`:
    no delay until the link is seen to reorder, then a window covering what it showed, at most
    ``inputs.reorder_window_s``) and leave it in stamp order; per message type the stamp must
@@ -41,6 +43,12 @@ from tether_companion.mavlink.units import (
 )
 from tether_companion.physics.thrust import COMMAND_UNITS
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
+from tether_companion.service.cable_angle import (
+    MESSAGE,
+    CableAngleConfig,
+    CableAngleGate,
+    CableAngleReading,
+)
 from tether_companion.service.config import InputLimitsConfig, TensionConfig
 from tether_companion.service.fc_time import BACKSTEP, IMPLAUSIBLE, REBOOT, FcTimeGate
 from tether_companion.service.link_config import LinkConfig
@@ -58,7 +66,9 @@ SYSTEM_TIME = "system_time"
 """The flight controller's SYSTEM_TIME: no sample, the evidence of its reboots."""
 WINCH = "winch"
 """The ground station's WINCH_STATUS (service/winch.py)."""
-INPUT_KINDS = (IMU, ATTITUDE, PWM, RANGE, TENSION, FC_POSITION, SYSTEM_TIME, WINCH)
+CABLE_ANGLE = "cable_angle"
+"""The ground station's cable angle, DEBUG_VECT (service/cable_angle.py)."""
+INPUT_KINDS = (IMU, ATTITUDE, PWM, RANGE, TENSION, FC_POSITION, SYSTEM_TIME, WINCH, CABLE_ANGLE)
 
 
 @dataclass(frozen=True, slots=True)
@@ -88,6 +98,7 @@ Sample = (
     | TensionReading
     | FcPosition
     | WinchReading
+    | CableAngleReading
 )
 
 
@@ -147,6 +158,8 @@ class Ingest:
         the unit's own range (e.g. 0-65535 for ``raw``).
     winch
         The ``winch`` section (WINCH_STATUS is an input when it is enabled).
+    cable_angle
+        The ``cable_angle`` section (its DEBUG_VECT is an input when it is enabled).
     """
 
     def __init__(
@@ -157,6 +170,7 @@ class Ingest:
         n_motors: int,
         command_unit: str = "pwm_us",
         winch: WinchConfig | None = None,
+        cable_angle: CableAngleConfig | None = None,
     ) -> None:
         self.link = link
         self.limits = limits
@@ -188,6 +202,16 @@ class Ingest:
         )
         self.winch = WinchGate(winch) if winch is not None and winch.enabled else None
         """Checks the winch's WINCH_STATUS (None: not an input)."""
+        self.cable_angle = (
+            CableAngleGate(cable_angle) if cable_angle is not None and cable_angle.enabled else None
+        )
+        """Checks the cable-angle sensor's DEBUG_VECT (None: not an input)."""
+        self._ground: dict[str, tuple[str, WinchGate | CableAngleGate]] = {}
+        """The ground station's sensors by message name: (kind, gate)."""
+        if self.winch is not None:
+            self._ground["WINCH_STATUS"] = (WINCH, self.winch)
+        if self.cable_angle is not None:
+            self._ground[MESSAGE] = (CABLE_ANGLE, self.cable_angle)
         self.rebooted = False
         """True right after the message that confirmed a reboot (cleared on the next call)."""
 
@@ -214,8 +238,8 @@ class Ingest:
         if held is None:
             return []
         kind, sample = held
-        if kind is WINCH:  # checked and stamped by its gate, not reordered
-            self.counters.accepted[WINCH] += 1
+        if kind is WINCH or kind is CABLE_ANGLE:  # checked and stamped by its gate, not reordered
+            self.counters.accepted[kind] += 1
             return [sample]
         released = self.reorder.push(kind, sample.time_s, sample)
         if len(released) == 1:  # the clean link's path (one in, one out)
@@ -237,13 +261,14 @@ class Ingest:
         kind_name = msg.get_type()
         if kind_name == "NAMED_VALUE_FLOAT" and self._tension_name is not None:
             return self._timed(TENSION, self._tension(msg))
-        winch = self.winch
-        if kind_name == "WINCH_STATUS" and winch is not None:
-            if not winch.from_winch(msg):
+        ground = self._ground.get(kind_name) if self._ground else None
+        if ground is not None:
+            kind, gate = ground
+            if not gate.ours(msg):
                 counters.wrong_system += 1
                 return None
-            reading = winch.check(msg, self.clock.latest_fc_s)
-            return None if reading is None else (WINCH, reading)
+            reading = gate.check(msg, self.clock.latest_fc_s)
+            return None if reading is None else (kind, reading)
         if not self.from_flight_controller(msg):
             counters.wrong_system += 1
             return None

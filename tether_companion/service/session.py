@@ -21,7 +21,9 @@ Estimators, all fed the same samples:
   is ``catenary.default_length_m`` (case 2, ``known_length``), or none is needed (case 1).
 
 The ground station's winch (``winch.enabled``, :mod:`~tether_companion.service.winch`) feeds
-the EKF its paid-out length and, with ``tension.source: winch``, its tension.
+the EKF its paid-out length and, with ``tension.source: winch``, its tension; its cable-angle
+sensor (``cable_angle.enabled``, :mod:`~tether_companion.service.cable_angle`) the cable's
+direction at the anchor.
 """
 
 from __future__ import annotations
@@ -57,6 +59,7 @@ from tether_companion.mavlink.framing import MAVLinkMessage, dialect
 from tether_companion.modes.session import TensionModeSession
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
+from tether_companion.service.cable_angle import CableAngleFeed, CableAngleReading
 from tether_companion.service.config import CATENARY, DYNAMIC, ServiceConfig
 from tether_companion.service.health import (
     SLACK,
@@ -173,6 +176,7 @@ class EstimationSession:
             vehicle.n_motors,
             vehicle.thrust_curve.command_unit,
             config.winch,
+            config.cable_angle,
         )
         self.catenary_source = config.position.source == CATENARY
         """The published position is the catenary estimator's (else the EKF's)."""
@@ -194,6 +198,8 @@ class EstimationSession:
             uses_length=self.dynamic,
         )
         """Hands the winch's readings to the EKF."""
+        self.cable_angle = CableAngleFeed(config.cable_angle, uses_angle=self.dynamic)
+        """Hands the cable-angle sensor's readings to the EKF."""
         self.catenary = self._new_catenary()
         self.last_catenary: CatenaryPosition | None = None
         """The catenary estimator's latest output (None: not running, or nothing yet)."""
@@ -222,6 +228,7 @@ class EstimationSession:
             TensionReading: self._on_tension_reading,
             FcPosition: self._on_fc_position,
             WinchReading: self._on_winch,
+            CableAngleReading: self._on_cable_angle,
         }
         """The handler of each sample type: one dict lookup per sample, not a chain of
         ``isinstance`` tests."""
@@ -395,6 +402,10 @@ class EstimationSession:
     def _on_winch(self, sample: WinchReading) -> Step:
         last = self.last_estimate
         self.winch.on_reading(sample, self.estimator, None if last is None else last.position_ned_m)
+        return Step()
+
+    def _on_cable_angle(self, sample: CableAngleReading) -> Step:
+        self.cable_angle.on_reading(sample, self.estimator)
         return Step()
 
     def _on_fc_position(self, sample: FcPosition) -> Step:

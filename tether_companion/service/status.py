@@ -97,6 +97,19 @@ def render(service: CompanionService) -> Group:
             drops.add_row("winch: timed out (stale)", str(session.winch.timeouts))
         if session.winch.near_vertical:
             drops.add_row("winch: near vertical, not fused", str(session.winch.near_vertical))
+    angle = session.ingest.cable_angle
+    if angle is not None:  # the cable-angle sensor's DEBUG_VECT drops, by reason
+        for name, count in angle.counters.as_dict().items():
+            if name != "accepted" and count:
+                drops.add_row(f"cable angle: {name.replace('_', ' ')}", str(count))
+        feed = session.cable_angle
+        for label, count in (
+            ("timed out (stale)", feed.timeouts),
+            ("stale for the filter, not fused", feed.stale_readings),
+            ("near vertical, not fused", feed.near_vertical),
+        ):
+            if count:
+                drops.add_row(f"cable angle: {label}", str(count))
     for reason, count in sorted(session.commands_refused.items()):
         drops.add_row(f"commands denied: {reason.replace('_', ' ')}", str(count))
     drops.add_row("withheld estimates", str(publisher.counters.withheld))
@@ -144,6 +157,19 @@ def render(service: CompanionService) -> Group:
                 "",
                 "",
                 tension,
+            )
+    if angle is not None:
+        reading = session.cable_angle.last
+        if reading is None:
+            state_text = "stale" if session.cable_angle.stale else "nothing yet"
+            estimate.add_row("cable angle", state_text, "", "", "")
+        else:
+            estimate.add_row(
+                escape("cable angle at anchor: azimuth, elevation [deg]"),
+                f"{math.degrees(reading.azimuth_rad):+.1f}",
+                f"{math.degrees(reading.elevation_rad):+.1f}",
+                "",
+                "",
             )
     catenary = session.last_catenary
     if catenary is not None:

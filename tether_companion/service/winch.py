@@ -13,14 +13,12 @@ What the message carries (pymavlink's dialect, ``common.xml``):
   CLUTCH_ENGAGED (8).
 
 :class:`WinchGate` (used by :class:`~tether_companion.service.ingest.Ingest`) turns an admitted
-frame into a :class:`WinchReading` or a drop counted by reason (:class:`WinchCounters`): only
-from the configured system/component id (the link's signing policy applies before, as to every
-frame), finite values inside the spool, the HEALTHY bit (when required), the winch's stamps
-increasing, not delayed beyond ``max_delay_s`` against the fastest delivery seen, and no
-length change faster than ``max_speed_mps`` allows. Its stamp is mapped to flight-controller
-time by the same least-delay offset model as the flight controller's own clock
-(:class:`~tether_companion.service.clock.FcClock`, the winch's stamps against their arrival),
-the arrival being the flight controller's newest believed stamp (live and in replay alike).
+frame into a :class:`WinchReading` or a drop counted by reason (:class:`WinchCounters`): the
+sender, clock and silence checks every ground sensor shares
+(:mod:`~tether_companion.service.ground_sensor`: the configured system/component id, the
+winch's stamps mapped to flight-controller time, duplicates, order, delay), and its own: finite
+values inside the spool, the HEALTHY bit (when required), and no length change faster than
+``max_speed_mps`` allows.
 
 :class:`WinchFeed` (used by :class:`~tether_companion.service.session.EstimationSession`)
 hands accepted readings to the estimator: the length to ``set_paid_out_length_m`` (the dynamic
@@ -41,11 +39,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
+from typing import ClassVar
 
 from tether_companion.config import spec
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
-from tether_companion.service.clock import FcClock
+from tether_companion.service.ground_sensor import GroundCounters, GroundFeed, GroundGate
 
 STANDARD_GRAVITY_MPS2 = 9.80665
 """WINCH_STATUS.tension is in kilogram-force: newtons per kg [m/s^2]."""
@@ -57,10 +56,6 @@ WINCH_COMPONENT_ID = dialect.MAV_COMP_ID_WINCH
 """MAV_COMP_ID_WINCH (169)."""
 MAX_TENSION_KG = 1000.0
 """A tension above this [kgf] is not a tether's: the reading's tension is dropped."""
-WINCH_REBOOT_S = 10.0
-"""The winch's clock going back more than this [s] is a restart of the winch (state reset)."""
-OFFSET_DRIFT = 1e-3
-"""How fast [s/s] the winch-to-FC clock offset may drift (FcClock's drift allowance)."""
 
 
 @dataclass(frozen=True)
@@ -156,12 +151,12 @@ class WinchReading:
 
 
 @dataclass
-class WinchCounters:
-    """WINCH_STATUS received and dropped, by reason (monotonic counts; --status shows them)."""
+class WinchCounters(GroundCounters):
+    """WINCH_STATUS received and dropped, by reason (monotonic counts; --status shows them);
+    the sender and clock reasons are :class:`GroundCounters`'."""
 
-    accepted: int = 0
-    wrong_sender: int = 0
-    """From a system/component other than ``winch.system_id/component_id``."""
+    NOT_DROPPED: ClassVar[tuple[str, ...]] = ("accepted", "wrong_sender", "bad_tension")
+
     no_length: int = 0
     """line_length NaN (the winch does not know it)."""
     nonfinite: int = 0
@@ -170,62 +165,29 @@ class WinchCounters:
     """Negative line, longer than the spool, or a speed beyond ``max_speed_mps``."""
     unhealthy: int = 0
     """The HEALTHY bit clear (``require_healthy``)."""
-    duplicate: int = 0
-    out_of_order: int = 0
-    """The winch's stamp equal to / older than the last accepted one's."""
-    late: int = 0
-    """Delivered more than ``max_delay_s`` later than the fastest delivery seen."""
     too_fast: int = 0
     """A length change faster than ``max_speed_mps`` (plus the tolerance) allows."""
-    no_fc_time: int = 0
-    """Before the flight controller's first stamp (nothing to map the winch's time to)."""
     bad_tension: int = 0
     """Tension infinite, negative or beyond ``MAX_TENSION_KG``: the reading is kept without it."""
 
-    @property
-    def dropped(self) -> int:
-        """Readings from the winch refused for their content or time."""
-        return sum(
-            getattr(self, f.name)
-            for f in fields(self)
-            if f.name not in ("accepted", "wrong_sender", "bad_tension")
-        )
 
-    def as_dict(self) -> dict[str, int]:
-        """The counters as a plain mapping."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
-
-
-class WinchGate:
+class WinchGate(GroundGate):
     """Checks WINCH_STATUS messages and maps their stamps (see the module docstring)."""
 
-    def __init__(self, config: WinchConfig) -> None:
-        self.config = config
-        self.counters = WinchCounters()
-        self.ids = (config.system_id, config.component_id)
-        self._clock = FcClock(OFFSET_DRIFT)
-        """The winch's clock against the arrivals' flight-controller time."""
-        self._last_winch_s = math.nan
-        self._last_length_m = math.nan
-        self._last_accepted_fc_s = -math.inf
+    counters: WinchCounters
 
-    def from_winch(self, msg: MAVLinkMessage) -> bool:
-        """Whether ``msg`` carries the configured winch's ids (counted otherwise)."""
-        if (msg.get_srcSystem(), msg.get_srcComponent()) == self.ids:
-            return True
-        self.counters.wrong_sender += 1
-        return False
+    def __init__(self, config: WinchConfig) -> None:
+        super().__init__(config, WinchCounters())
+        self.config = config
+        self._last_length_m = math.nan
 
     def check(self, msg: MAVLinkMessage, arrival_fc_s: float) -> WinchReading | None:
         """The reading of a WINCH_STATUS from the winch that arrived when the flight
         controller's newest stamp was ``arrival_fc_s`` [s], or None (counted by reason)."""
         counters = self.counters
         config = self.config
-        if not math.isfinite(arrival_fc_s):
-            counters.no_fc_time += 1
+        if not self.begin(arrival_fc_s):
             return None
-        if arrival_fc_s - self._last_accepted_fc_s > config.timeout_s:
-            self._forget()  # stale: the clock offset and the speed check start afresh
         line = float(msg.line_length)
         speed = float(msg.speed)
         if math.isnan(line):
@@ -245,44 +207,21 @@ class WinchGate:
         if config.require_healthy and not status & HEALTHY:
             counters.unhealthy += 1
             return None
-        time_s = self._fc_time(msg.time_usec * 1e-6, arrival_fc_s)
+        winch_s = msg.time_usec * 1e-6
+        time_s = self.fc_time(winch_s, arrival_fc_s)
         if time_s is None:
             return None
-        winch_s = msg.time_usec * 1e-6
-        if not math.isnan(self._last_length_m):
-            allowed = config.max_speed_mps * (winch_s - self._last_winch_s)
+        previous_s = self.last_sensor_s  # nan after a silence or a restart: no speed check
+        if not math.isnan(previous_s):
+            allowed = config.max_speed_mps * (winch_s - previous_s)
             if abs(line - self._last_length_m) > allowed + config.length_tolerance_m:
                 counters.too_fast += 1
                 return None
-        self._last_winch_s = winch_s
         self._last_length_m = line
-        self._last_accepted_fc_s = arrival_fc_s
-        counters.accepted += 1
+        self.accept(winch_s, arrival_fc_s)
         return WinchReading(
             time_s, line - config.length_offset_m, self._tension_n(msg), speed, status
         )
-
-    def _fc_time(self, winch_s: float, arrival_fc_s: float) -> float | None:
-        """The reading's flight-controller time [s], or None (duplicate, old or late)."""
-        counters = self.counters
-        previous = self._last_winch_s
-        if not math.isnan(previous):
-            if winch_s == previous:
-                counters.duplicate += 1
-                return None
-            if winch_s < previous:
-                if previous - winch_s <= WINCH_REBOOT_S:
-                    counters.out_of_order += 1
-                    return None
-                self._forget()  # the winch restarted its clock
-        clock = self._clock
-        clock.observe(winch_s, arrival_fc_s)
-        offset = clock.offset_s(arrival_fc_s)  # winch - FC time of the least-delayed reading
-        assert offset is not None  # just observed
-        if offset - (winch_s - arrival_fc_s) > self.config.max_delay_s:
-            counters.late += 1
-            return None
-        return winch_s - offset
 
     def _tension_n(self, msg: MAVLinkMessage) -> float:
         tension_kg = float(msg.tension)
@@ -293,14 +232,8 @@ class WinchGate:
             return math.nan
         return tension_kg * STANDARD_GRAVITY_MPS2
 
-    def _forget(self) -> None:
-        self._clock.reset()
-        self._last_winch_s = math.nan
-        self._last_length_m = math.nan
-        self._last_accepted_fc_s = -math.inf
 
-
-class WinchFeed:
+class WinchFeed(GroundFeed[WinchReading]):
     """Hands accepted winch readings to an estimator (see the module docstring).
 
     Parameters
@@ -324,16 +257,11 @@ class WinchFeed:
         cable_weight_n_per_m: float,
         uses_length: bool,
     ) -> None:
+        super().__init__(config.timeout_s)
         self.config = config
         self.use_tension = use_tension
         self.weight_n_per_m = cable_weight_n_per_m
         self.uses_length = uses_length
-        self.deadline_s = math.inf
-        """Flight-controller time [s] after which the winch is stale (inf: not fed)."""
-        self.last: WinchReading | None = None
-        """The latest reading handed on (None: none yet, or stale)."""
-        self.timeouts = 0
-        """Times the winch went stale (nothing accepted for ``timeout_s``)."""
         self.near_vertical = 0
         """Lengths not fused because the cable was nearer the vertical than ``min_span_ratio``."""
         self.note = (
@@ -344,19 +272,13 @@ class WinchFeed:
         )
         """Said once at start (the service logs it): the estimator does not use the length."""
 
-    @property
-    def stale(self) -> bool:
-        """Whether the winch was fed before and has been silent for ``timeout_s`` since."""
-        return self.last is None and self.timeouts > 0
-
     def on_reading(
         self, reading: WinchReading, estimator: object, position_ned_m: Sequence[float] | None
     ) -> None:
         """Feed ``reading`` to ``estimator``; ``position_ned_m`` is the latest estimate's
         position from the anchor [m] (None before the first): the cable's steepness for the
         length, the drone's height for the tension."""
-        self.last = reading
-        self.deadline_s = reading.time_s + self.config.timeout_s
+        self.received(reading, reading.time_s)
         height_m = math.nan if position_ned_m is None else -float(position_ned_m[2])
         if self.uses_length and reading.length_m > 0.0:  # fully retracted: no cable to model
             if self._steep(position_ned_m):
@@ -381,9 +303,7 @@ class WinchFeed:
     def expire(self, estimator: object) -> None:
         """The winch fell silent (called once the flight-controller time passes
         :attr:`deadline_s`): the estimator forgets its length."""
-        self.deadline_s = math.inf
-        self.last = None
-        self.timeouts += 1
+        self.silence()
         constants = getattr(estimator, "constants", None)
         if constants is not None:  # the dynamic filter's cable model: "no length known"
             constants.length_m = math.nan

@@ -108,9 +108,6 @@ class DynamicFilterConfig:
     )
     load_cell_noise_std_n: float = spec(0.1, exclusive_minimum=0.0, doc="load cell [N]")
     winch_length_noise_std_m: float = spec(0.05, exclusive_minimum=0.0, doc="winch length [m]")
-    cable_angle_noise_std_rad: float = spec(
-        0.02, exclusive_minimum=0.0, doc="ground-station cable angle [rad]"
-    )
     slack_tension_n: float = spec(
         0.2, minimum=0.0, doc="below this tension the cable is reported slack [N]"
     )

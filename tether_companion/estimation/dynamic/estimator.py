@@ -21,6 +21,7 @@ initialisation; ``reset_counter`` counts it and the tick's status is ``reset`` w
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 
@@ -73,6 +74,9 @@ DIVERGED_AFTER_S = 1.0
 """Accelerometer innovations gated this long in a row [s]: the filter has diverged."""
 MAX_DISTANCE_M = 1000.0
 """A position farther than this from the anchor [m] is a divergence."""
+ANGLE_FRESH_S = 1.0
+"""A ground-station cable angle fused within this [s] measures the bearing: the rule that
+withholds a pull too weak against the wind's drag (observability.py) is waived meanwhile."""
 
 
 class DynamicTetherEstimator(InputFeed):
@@ -140,6 +144,10 @@ class DynamicTetherEstimator(InputFeed):
             ),
             wind_std_mps=dynamic.initial.wind_std_mps,
         )
+        self._angle_status_settings = dataclasses.replace(
+            self._status_settings, pull_per_wind_n_s_per_m=0.0
+        )
+        """The status settings while a cable angle measures the bearing (ANGLE_FRESH_S)."""
         self._mixture: MixtureValues | None = None
         """The bank's latest mixture with its values as floats (kept while it is the same)."""
         self.accel = AccelAid(accel_measurement_std_mps2(dynamic), config.min_cable_length_m)
@@ -148,7 +156,7 @@ class DynamicTetherEstimator(InputFeed):
         )
         self.load_cell = LoadCellAid(dynamic.load_cell_noise_std_n)
         self.winch = WinchAid(dynamic.winch_length_noise_std_m, dynamic.slack_tension_n)
-        self.cable_angle = CableAngleAid(dynamic.cable_angle_noise_std_rad, dynamic.slack_tension_n)
+        self.cable_angle = CableAngleAid(dynamic.slack_tension_n)
         self.bank: FilterBank | None = None
         self._initialiser = self._new_initialiser()
         self._time_s = math.nan
@@ -211,16 +219,23 @@ class DynamicTetherEstimator(InputFeed):
             if self.winch.fuse(self.bank, self.constants, length_m, self._time_s):
                 self.health.winch_fused += 1
 
-    def on_cable_angle(self, elevation_rad: float, azimuth_rad: float, time_s: float) -> None:
-        """Ground-station cable angle at the anchor [rad]: elevation up, azimuth from north."""
-        values = (elevation_rad, azimuth_rad, time_s)
-        if not all(math.isfinite(v) for v in values) or abs(elevation_rad) > math.pi / 2:
+    def on_cable_angle(
+        self, elevation_rad: float, azimuth_rad: float, time_s: float, noise_std_rad: float
+    ) -> None:
+        """Ground-station cable angle at the anchor [rad]: elevation up, azimuth from north,
+        the sensor's direction noise ``noise_std_rad`` [rad] (aid/cable_angle.py)."""
+        values = (elevation_rad, azimuth_rad, time_s, noise_std_rad)
+        if (
+            not all(math.isfinite(v) for v in values)
+            or abs(elevation_rad) > math.pi / 2
+            or noise_std_rad <= 0.0
+        ):
             self.health.nonfinite_rejected += 1
             return
         if self.bank is not None and self._fresh(time_s, self.config.staleness.tension_s):
             self._step_batch()
-            if self.cable_angle.fuse(
-                self.bank, self.constants, elevation_rad, azimuth_rad, self._time_s
+            if self.bank is not None and self.cable_angle.fuse(
+                self.bank, self.constants, elevation_rad, azimuth_rad, self._time_s, noise_std_rad
             ):
                 self.health.cable_angle_fused += 1
 
@@ -445,7 +460,9 @@ class DynamicTetherEstimator(InputFeed):
             None if batch is None or bank is None else batch.step(),
             self._noise,
             self.constants,
-            self._status_settings,
+            self._angle_status_settings
+            if self._time_s - self.cable_angle.status.last_fused_time_s <= ANGLE_FRESH_S
+            else self._status_settings,
             self.rangefinder.excess.variance,
             bool(self.health.winch_fused),
             0 if bank is None else len(bank.filters),

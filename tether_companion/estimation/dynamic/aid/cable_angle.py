@@ -1,6 +1,9 @@
 """Optional ground-station cable angle: elevation (up from horizontal) and azimuth (from
-north) of the cable where it leaves the anchor [rad] (generated ``cable_angle_*``). The
-azimuth innovation is wrapped to [-pi, pi). Skipped while the cable is slack."""
+north) of the cable where it leaves the anchor [rad] (generated ``cable_angle_*``: the
+catenary's tangent there, flat where the cable rests on the ground). The azimuth innovation is
+wrapped to [-pi, pi). The sensor's noise is a direction noise ``sigma`` per axis [rad]: the
+elevation's is ``sigma``, the azimuth's ``sigma / cos(elevation)`` (a direction error across
+a steep cable turns its azimuth by more). Skipped while the cable is slack."""
 
 from __future__ import annotations
 
@@ -20,11 +23,15 @@ SLACK = "slack"
 
 
 class CableAngleAid:
-    """Fuses (elevation, azimuth) [rad] with noise ``noise_std_rad`` each."""
+    """Fuses (elevation, azimuth) [rad] while the chord tension is above ``slack_tension_n``
+    [N]."""
 
-    def __init__(self, noise_std_rad: float, slack_tension_n: float) -> None:
+    MIN_COS_ELEVATION = 0.05
+    """The azimuth's noise is at most ``sigma / MIN_COS_ELEVATION`` (a cable within 3 degrees
+    of the vertical)."""
+
+    def __init__(self, slack_tension_n: float) -> None:
         self.status = AidStatus()
-        self._r = np.eye(2) * noise_std_rad**2
         self._slack_n = slack_tension_n
 
     def fuse(
@@ -34,8 +41,9 @@ class CableAngleAid:
         elevation_rad: float,
         azimuth_rad: float,
         time_s: float,
+        noise_std_rad: float,
     ) -> bool:
-        """Fuse one reading [rad]."""
+        """Fuse one reading [rad] of direction noise ``noise_std_rad`` [rad]."""
         if bank.best.x[state.TENSION] < self._slack_n:
             self.status.skip(SLACK)
             return False
@@ -49,4 +57,6 @@ class CableAngleAid:
             return np.array((elevation, azimuth)), np.array(jac).reshape(2, state.N_STATES)
 
         z = np.array((elevation_rad, azimuth_rad))
-        return fuse(bank, NAME, self.status, z, measure, self._r, time_s)
+        cos_elevation = max(np.cos(elevation_rad), self.MIN_COS_ELEVATION)
+        r = np.diag((noise_std_rad**2, (noise_std_rad / cos_elevation) ** 2))
+        return fuse(bank, NAME, self.status, z, measure, r, time_s)

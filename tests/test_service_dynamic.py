@@ -290,17 +290,20 @@ SETTLE_S = 5.0
 LATEST_START_S = 40.0
 
 
-def _closed_loop_hover(tmp_path, seed: int, winch: bool = False) -> dict:
+def _closed_loop_hover(tmp_path, seed: int, winch: bool = False, cable_angle: bool = False) -> dict:
     """Take off into the gusty hover (the emulator's navigation on its truth until our first
     estimate, as a pilot would climb in ALT_HOLD), then fly on nothing but the published
     estimate: the deviation from the hover point over ``HOLD_S`` after ``SETTLE_S``. With
     ``winch`` the emulator's ground station sends WINCH_STATUS (10 Hz, 2 cm noise, 1 cm
-    steps) and the service reads it."""
+    steps), with ``cable_angle`` the cable's direction at the anchor (DEBUG_VECT, 10 Hz,
+    0.01 rad per axis), and the service reads them."""
     path = gusty_hover_takeoff_scenario(tmp_path, LATEST_START_S + SETTLE_S + HOLD_S, seed)
     emulator: dict = {"navigation": "vision"}
     overrides: dict = {"estimator": {"kind": "dynamic"}}
     if winch:
         emulator["winch"] = overrides["winch"] = {"enabled": True}
+    if cable_angle:
+        emulator["cable_angle"] = overrides["cable_angle"] = {"enabled": True}
     controller = build_controller(str(path), emulator=emulator)
     lockstep = LockstepService(controller, overrides)
     target = np.array(controller.scenario.trajectory.position_ned_m)
@@ -341,16 +344,22 @@ IMU_ONLY_XFAIL = pytest.mark.xfail(
 @pytest.mark.slow
 @pytest.mark.integration
 @pytest.mark.parametrize(
-    "winch",
-    [pytest.param(False, marks=IMU_ONLY_XFAIL, id="imu-only"), pytest.param(True, id="winch")],
+    ("winch", "cable_angle"),
+    [
+        pytest.param(False, False, marks=IMU_ONLY_XFAIL, id="imu-only"),
+        pytest.param(True, False, id="winch"),
+        pytest.param(False, True, id="cable-angle"),
+        pytest.param(True, True, id="winch-cable-angle"),
+    ],
 )
 def test_closed_loop_gusty_hover_on_the_dynamic_filter_holds_within_0_3_m(
-    tmp_path, winch: bool
+    tmp_path, winch: bool, cable_angle: bool
 ) -> None:
     """Issue 10: the emulator's navigation flying on the published estimate holds a 60 s
     gusty hover within 0.3 m, 5 seeds, in lock-step (deterministic; real MAVLink frames):
-    with the ground station's winch length (met), IMU-only (not met: strict xfail)."""
-    results = {seed: _closed_loop_hover(tmp_path, seed, winch) for seed in range(1, 6)}
+    with the ground station's winch length, its cable angle, or both (met), IMU-only (not
+    met: strict xfail)."""
+    results = {seed: _closed_loop_hover(tmp_path, seed, winch, cable_angle) for seed in range(1, 6)}
     for seed, result in results.items():
         print(f"seed {seed}: {result}")  # the numbers the docs quote (pytest -s)
     for seed, result in results.items():

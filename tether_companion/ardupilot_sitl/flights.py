@@ -93,6 +93,10 @@ class FlightOptions:
     winch: bool = False
     """The ground station is also the tether's winch: WINCH_STATUS at 10 Hz
     (:meth:`GroundStation.start_winch`) and the companion reads it (``winch.enabled``)."""
+    cable_angle: bool = False
+    """The ground station has a cable-angle sensor at the anchor: DEBUG_VECT at 10 Hz
+    (:meth:`GroundStation.start_cable_angle`) and the companion reads it
+    (``cable_angle.enabled``)."""
     companion_overrides: dict = field(default_factory=dict)
     workdir: Path | None = None
     """Kept after the flight when given (SITL's logs, the companion's config, log and .tlog)."""
@@ -227,6 +231,9 @@ def _run(
             if options.winch:
                 gcs.start_winch(TETHER_LINE_LENGTH_M)
                 overrides["winch"] = {"enabled": True}
+            if options.cable_angle:
+                gcs.start_cable_angle()
+                overrides["cable_angle"] = {"enabled": True}
             config = companion_config(workdir, sitl_opts.home, overrides)
             companion = CompanionProcess(config, sitl.ports["serial1"], workdir / "companion.log")
             with companion:

@@ -12,6 +12,13 @@ straight spring of rest length SIM_TETH_LINELEN (8 N/m in tether.parm, stretchin
 the same geometry, whose paid-out line is the cable's length ``max(LINELEN, |p|)`` (the
 anchor-to-drone distance while taut, from SITL's SIM_STATE truth), with 2 cm of noise and 1 cm
 steps like the emulator's winch; its tension is reported unknown (NaN).
+
+With :meth:`GroundStation.start_cable_angle` it also has a cable-angle sensor at the anchor:
+DEBUG_VECT ``CABLE_ANG`` at 10 Hz from (255, 158) (the service's convention,
+:mod:`tether_companion.service.cable_angle`: ``x`` azimuth from true north toward east, ``y``
+elevation up [rad], ``time_usec`` the sensor's UNIX time) with the direction from the anchor to
+SITL's truth (SITL's tether is a straight line), turned by ``noise_std_rad`` per axis
+(:func:`tether_companion.emulator.cable_angle.noisy_angles`, the emulator's noise model).
 """
 
 from __future__ import annotations
@@ -25,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pymavlink import mavutil
 
+from tether_companion.emulator.cable_angle import noisy_angles
 from tether_companion.mavlink.geo import Geodetic, geodetic_to_ned
 
 FC_SYSTEM, FC_COMPONENT = 1, 1
@@ -36,6 +44,10 @@ WINCH_COMPONENT = 169
 WINCH_RATE_HZ = 10.0
 WINCH_NOISE_STD_M = 0.02
 WINCH_RESOLUTION_M = 0.01
+ANGLE_COMPONENT = 158
+"""MAV_COMP_ID_PERIPHERAL: the cable-angle sensor sends as (GCS_SYSTEM, ANGLE_COMPONENT)."""
+ANGLE_RATE_HZ = 10.0
+ANGLE_NAME = b"CABLE_ANG"
 MAV_CMD_SET_EKF_SOURCE_SET = 42007
 COPTER_MODES = {"STABILIZE": 0, "ALT_HOLD": 2, "AUTO": 3, "GUIDED": 4, "LOITER": 5, "RTL": 6,
                 "CIRCLE": 7, "LAND": 9}  # fmt: skip
@@ -114,8 +126,11 @@ class GroundStation:
         self.line_length_m = math.nan
         """The tether's rest length (SIM_TETH_LINELEN) the winch knows [m]; nan: no winch."""
         self.winch_sent = 0
-        self._winch: threading.Thread | None = None
+        self.angle_sent = 0
+        self._senders: list[threading.Thread] = []
+        """The ground station's sensors' threads (winch, cable angle)."""
         self._write_lock = threading.Lock()
+        self._locked = False
 
     def __enter__(self) -> GroundStation:
         return self
@@ -127,8 +142,8 @@ class GroundStation:
         """Stop the reader (and the winch) and close the socket."""
         self._stop.set()
         self._thread.join(timeout=5.0)
-        if self._winch is not None:
-            self._winch.join(timeout=5.0)
+        for sender in self._senders:
+            sender.join(timeout=5.0)
         self.master.close()
 
     # ------------------------------------------------------------------ the winch
@@ -137,33 +152,68 @@ class GroundStation:
         rest length ``line_length_m`` [m] (update :attr:`line_length_m` as it is reeled)."""
         self.line_length_m = line_length_m
         rng = np.random.default_rng(seed)
-        write = self.master.write
-
-        def locked_write(data: bytes) -> None:  # commands (this thread) and the winch's frames
-            with self._write_lock:
-                write(data)
-
-        self.master.write = locked_write  # pymavlink's senders call master.write
         packer = mavutil.mavlink.MAVLink(None, srcSystem=GCS_SYSTEM, srcComponent=WINCH_COMPONENT)
 
+        def frame(truth: np.ndarray) -> bytes:
+            length = max(self.line_length_m, float(np.linalg.norm(truth)))
+            length += WINCH_NOISE_STD_M * rng.standard_normal()
+            length = round(length / WINCH_RESOLUTION_M) * WINCH_RESOLUTION_M
+            self.winch_sent += 1
+            return mavutil.mavlink.MAVLink_winch_status_message(
+                int(time.time() * 1e6), length, math.nan, math.nan, math.nan, math.nan,
+                32767, mavutil.mavlink.MAV_WINCH_STATUS_HEALTHY,
+            ).pack(packer)  # fmt: skip
+
+        self._start_sender("sitl-winch", WINCH_RATE_HZ, frame)
+
+    def start_cable_angle(self, noise_std_rad: float = 0.01, seed: int = 250) -> None:
+        """Send the cable's azimuth and elevation at the anchor (DEBUG_VECT ``CABLE_ANG``) at
+        ``ANGLE_RATE_HZ`` (wall time) from now on, with ``noise_std_rad`` [rad] per axis."""
+        rng = np.random.default_rng(seed)
+        packer = mavutil.mavlink.MAVLink(None, srcSystem=GCS_SYSTEM, srcComponent=ANGLE_COMPONENT)
+
+        def frame(truth: np.ndarray) -> bytes | None:
+            distance = float(np.linalg.norm(truth))
+            if distance <= 0.0:
+                return None
+            direction = tuple(float(v) / distance for v in truth)
+            azimuth, elevation = noisy_angles(direction, noise_std_rad, rng)  # type: ignore[arg-type]
+            self.angle_sent += 1
+            return mavutil.mavlink.MAVLink_debug_vect_message(
+                ANGLE_NAME, int(time.time() * 1e6), azimuth, elevation, 0.0
+            ).pack(packer)
+
+        self._start_sender("sitl-cable-angle", ANGLE_RATE_HZ, frame)
+
+    def _start_sender(
+        self, name: str, rate_hz: float, frame: Callable[[np.ndarray], bytes | None]
+    ) -> None:
+        """A thread writing ``frame(SITL's truth NED [m])`` at ``rate_hz`` (wall time) once a
+        truth has arrived (None: nothing to send this time)."""
+        write = self.master.write
+        if not self._locked:  # commands (this thread) and the sensors' frames share the socket
+            self._locked = True
+
+            def locked_write(data: bytes) -> None:
+                with self._write_lock:
+                    write(data)
+
+            self.master.write = locked_write  # pymavlink's senders call master.write
+        send = self.master.write
+
         def send_loop() -> None:
-            while not self._stop.wait(1.0 / WINCH_RATE_HZ):
+            while not self._stop.wait(1.0 / rate_hz):
                 with self.telemetry.lock:
                     truth = self.telemetry.truth_ned_m
                 if truth is None:
                     continue
-                length = max(self.line_length_m, float(np.linalg.norm(truth)))
-                length += WINCH_NOISE_STD_M * rng.standard_normal()
-                length = round(length / WINCH_RESOLUTION_M) * WINCH_RESOLUTION_M
-                msg = mavutil.mavlink.MAVLink_winch_status_message(
-                    int(time.time() * 1e6), length, math.nan, math.nan, math.nan, math.nan,
-                    32767, mavutil.mavlink.MAV_WINCH_STATUS_HEALTHY,
-                )  # fmt: skip
-                locked_write(msg.pack(packer))
-                self.winch_sent += 1
+                data = frame(truth)
+                if data is not None:
+                    send(data)
 
-        self._winch = threading.Thread(target=send_loop, name="sitl-winch", daemon=True)
-        self._winch.start()
+        sender = threading.Thread(target=send_loop, name=name, daemon=True)
+        self._senders.append(sender)
+        sender.start()
 
     # ------------------------------------------------------------------ reading
     def _read_loop(self) -> None:

@@ -50,6 +50,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the emulator's ground station sends WINCH_STATUS and the service reads it "
         "(winch.enabled; its paid-out length goes to the dynamic filter)",
     )
+    parser.add_argument(
+        "--cable-angle",
+        action="store_true",
+        help="the emulator's ground station sends the cable's direction at the anchor "
+        "(DEBUG_VECT CABLE_ANG) and the service reads it (cable_angle.enabled; fused by the "
+        "dynamic filter)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -78,7 +85,11 @@ async def _demo(args: argparse.Namespace, duration_s: float, scratch: Path) -> s
         duration_s=duration_s,
         score_path=scratch / "score.json",
         speed=args.speed,
-        extra_args=("--winch",) if args.winch else (),
+        extra_args=tuple(
+            flag
+            for flag, wanted in (("--winch", args.winch), ("--cable-angle", args.cable_angle))
+            if wanted
+        ),
     )
     async with emulator:
         overrides: dict = {"link": {"connect": f"udpout:127.0.0.1:{emulator.port}"}}
@@ -92,6 +103,8 @@ async def _demo(args: argparse.Namespace, duration_s: float, scratch: Path) -> s
             }
         if args.winch:
             overrides["winch"] = {"enabled": True}
+        if args.cable_angle:
+            overrides["cable_angle"] = {"enabled": True}
         overrides["recording"] = (
             {"directory": args.record_dir} if args.record_dir else {"enabled": False}
         )

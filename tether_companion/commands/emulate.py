@@ -123,6 +123,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="a ground-station winch sends WINCH_STATUS (system 255, component 169, 10 Hz; "
         "the scenario's emulator.winch section sets the rest)",
     )
+    parser.add_argument(
+        "--cable-angle",
+        action="store_true",
+        help="a ground-station cable-angle sensor sends the cable's direction at the anchor as "
+        "DEBUG_VECT CABLE_ANG (system 255, component 158, 10 Hz, x azimuth, y elevation [rad]; "
+        "the scenario's emulator.cable_angle section sets the rest)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no periodic status line")
 
 
@@ -159,6 +166,8 @@ def emulator_config_from_args(args: argparse.Namespace, base: EmulatorConfig) ->
         data["score_start_s"] = args.score_start
     if args.winch:
         data["winch"]["enabled"] = True
+    if args.cable_angle:
+        data["cable_angle"]["enabled"] = True
     for text in args.rate:
         name, value = _name_value(text, "--rate", "MSG=HZ, e.g. RAW_IMU=400")
         data["stream_rates_hz"][name] = value

@@ -25,6 +25,7 @@ import numpy as np
 
 from tether_companion.config import ConfigError
 from tether_companion.emulator import telemetry
+from tether_companion.emulator.cable_angle import EmulatedCableAngle
 from tether_companion.emulator.command_handlers import CommandHandlers
 from tether_companion.emulator.config import EmulatorConfig
 from tether_companion.emulator.faults import LinkFaultSettings
@@ -149,6 +150,14 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions, Fligh
             else None
         )
         """The ground station's winch (``emulator.winch``), or None."""
+        self.cable_angle = (
+            EmulatedCableAngle(config.cable_angle, scenario, unix_time_at_start_s)
+            if config.cable_angle.enabled
+            else None
+        )
+        """The ground station's cable-angle sensor (``emulator.cable_angle``), or None."""
+        self._ground_sensors = tuple(s for s in (self.winch, self.cable_angle) if s is not None)
+        """The ground station's sensors: their frames are routed unchanged to every link."""
         self._boot()
         if scenario.initial.airborne:
             self.mode = CopterMode.AUTO if self.sim.follow_trajectory else CopterMode.GUIDED
@@ -300,9 +309,11 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions, Fligh
                 self._next_mode_tick_s = now + MODE_TICK_S
             if now >= self._next_due_s - tolerance:
                 self._emit_due(now, tolerance)
-            winch = self.winch
-            if winch is not None and now >= winch.next_s - tolerance:
-                self._outbox.append((None, winch.frame(sim)))
+            for sensor in self._ground_sensors:
+                if now >= sensor.next_s - tolerance:
+                    frame = sensor.frame(sim)
+                    if frame is not None:
+                        self._outbox.append((None, frame))
 
     def _emit_due(self, now: float, tolerance: float) -> None:
         for link_id, schedule in self._schedules.items():

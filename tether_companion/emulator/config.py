@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from tether_companion.config import ConfigError, from_mapping, read_yaml, spec
+from tether_companion.emulator.cable_angle import EmulatedCableAngleConfig
 from tether_companion.emulator.streams import STREAMS
 from tether_companion.emulator.winch import EmulatedWinchConfig
 from tether_companion.sim.scenario import Scenario, resolve_scenario_path, scenario_from_mapping
@@ -124,6 +125,11 @@ class EmulatorConfig:
     winch: EmulatedWinchConfig = spec(
         default_factory=EmulatedWinchConfig,
         doc="a ground-station winch whose WINCH_STATUS the autopilot routes to every link",
+    )
+    cable_angle: EmulatedCableAngleConfig = spec(
+        default_factory=EmulatedCableAngleConfig,
+        doc="a ground-station cable-angle sensor whose DEBUG_VECT the autopilot routes to "
+        "every link",
     )
 
     def validate(self) -> None:

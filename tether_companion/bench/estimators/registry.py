@@ -61,13 +61,20 @@ class GroundStation:
         Load-cell reading of the cable tension at the drone end [N] (the simulator's truth).
     paid_out_m
         Cable length paid out by the winch [m].
+    anchor_direction_ned
+        Unit vector along which the cable leaves the anchor, NED (the truth a cable-angle
+        sensor measures, :func:`~tether_companion.physics.cable_anchor.anchor_direction_ned`),
+        at the sensor's :data:`ANGLE_RATE_HZ`; None between its reports or when undefined.
     """
 
     time_s: float
     tension_n: float
     paid_out_m: float
+    anchor_direction_ned: tuple[float, float, float] | None = None
 
 
+ANGLE_RATE_HZ = 10.0
+"""The ground station's cable-angle sensor reports this often [Hz] (as the emulator's)."""
 _NAN3 = np.full(3, math.nan)
 _NAN33 = np.full((3, 3), math.nan)
 

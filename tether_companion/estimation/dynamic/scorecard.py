@@ -5,7 +5,12 @@
   simulated cable's weight per length (:func:`simulated_cable_weight_n_per_m`) and anchor
   height above the ground (ground-station facts), default :class:`DynamicFilterConfig` otherwise;
 * ``dynamic-winch``: the same, also given the winch's paid-out length each tick (the ground
-  station's report; the cable model then uses that length and the length is fused).
+  station's report; the cable model then uses that length and the length is fused);
+* ``dynamic-angle``, ``dynamic-winch-angle``: ``dynamic`` / ``dynamic-winch`` also given the
+  ground station's cable angle at the anchor (10 Hz, the simulated cable's direction turned by
+  :data:`ANGLE_SENSOR_NOISE_RAD` per axis from its own generator, fused with the service's
+  default :data:`ANGLE_CONFIGURED_NOISE_RAD`; the emulator's sensor and the service's
+  ``cable_angle`` section).
 
 Published: the estimate's status is ``ok`` (:attr:`NavigationEstimate.observable`).
 """
@@ -13,6 +18,8 @@ Published: the estimate's status is ``ok`` (:attr:`NavigationEstimate.observable
 from __future__ import annotations
 
 import dataclasses
+
+import numpy as np
 
 from tether_companion.bench.estimators.registry import (
     UNKNOWN_TENSION,
@@ -22,11 +29,19 @@ from tether_companion.bench.estimators.registry import (
     TickOutput,
     register,
 )
+from tether_companion.emulator.cable_angle import EmulatedCableAngleConfig, noisy_angles
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
+from tether_companion.service.cable_angle import CableAngleConfig
 
+ANGLE_SENSOR_NOISE_RAD = EmulatedCableAngleConfig().noise_std_rad
+"""The simulated cable-angle sensor's direction noise per axis [rad] (the emulator's)."""
+ANGLE_CONFIGURED_NOISE_RAD = CableAngleConfig().noise_std_rad
+"""The noise the filter is told [rad] (the service's default ``cable_angle.noise_std_rad``)."""
+ANGLE_SEED_SALT = 250
+"""Mixed into the scenario's seed for the sensor's noise (the emulator's salt)."""
 HEAVY_CABLE_MODELS = ("elastic", "catenary")
 """The simulator's cable models that have weight (``physics/cable.py``); its constant-tension
 winch is the paper's weightless straight line whatever ``linear_density_kg_per_m`` says."""
@@ -52,15 +67,20 @@ class DynamicKind:
         The scenario (cable weight per length) and the nominal vehicle profile.
     use_winch
         Whether the ground station's paid-out length is given to the filter.
+    use_angle
+        Whether the ground station's cable angle is given to the filter.
     """
 
-    def __init__(self, context: FlightContext, use_winch: bool) -> None:
+    def __init__(self, context: FlightContext, use_winch: bool, use_angle: bool = False) -> None:
         dynamic = dataclasses.replace(
             DynamicFilterConfig(), cable_weight_n_per_m=simulated_cable_weight_n_per_m(context)
         )
         config = context.estimator_config(EstimatorConfig())  # anchor height, rangefinder mounting
         self._estimator = DynamicTetherEstimator(config, context.vehicle, dynamic)
         self._use_winch = use_winch
+        self._angle_rng = (
+            np.random.default_rng([context.scenario.seed, ANGLE_SEED_SALT]) if use_angle else None
+        )
 
     def on_attitude(self, sample: AttitudeSample) -> None:
         self._estimator.on_attitude(sample)
@@ -74,6 +94,12 @@ class DynamicKind:
     def on_ground_station(self, station: GroundStation) -> None:
         if self._use_winch:
             self._estimator.set_paid_out_length_m(station.paid_out_m, station.time_s)
+        direction = station.anchor_direction_ned
+        if self._angle_rng is not None and direction is not None:
+            azimuth, elevation = noisy_angles(direction, ANGLE_SENSOR_NOISE_RAD, self._angle_rng)
+            self._estimator.on_cable_angle(
+                elevation, azimuth, station.time_s, ANGLE_CONFIGURED_NOISE_RAD
+            )
 
     def on_imu(self, sample: ImuSample) -> TickOutput | None:
         estimate = self._estimator.on_imu(sample)
@@ -112,3 +138,19 @@ register(
         description="the dynamic EKF also given the winch's paid-out length",
     )
 )
+for _name, _label, _winch in (
+    ("dynamic-angle", "dynamic+angle", False),
+    ("dynamic-winch-angle", "dynamic+winch+angle", True),
+):
+    register(
+        EstimatorKind(
+            name=_name,
+            label=_label,
+            build=lambda context, w=_winch: DynamicKind(context, use_winch=w, use_angle=True),
+            crlb_model=UNKNOWN_TENSION,
+            has_velocity=True,
+            has_tension=True,
+            description=f"the {_label.replace('+angle', '')} kind also given the ground "
+            "station's cable angle at the anchor (10 Hz)",
+        )
+    )

@@ -106,6 +106,10 @@ def test_beyond_3_sigma_is_0_8_percent_for_consistent_errors_and_counts_publishe
         tension_n=np.zeros(n),
         thrust_n=np.zeros(n),
         range_seen=np.zeros(n, dtype=bool),
+        cable_force_ned_n=zeros,
+        wind_ned_mps=zeros,
+        specific_force_body_mps2=zeros,
+        angle_seen=np.zeros(n, dtype=bool),
         traces={},
     )
 
@@ -183,6 +187,16 @@ def test_tiny_scorecard_on_a_local_cluster(local_card):
         assert (cell["velocity_rmse_mps"] is None) == (not has_velocity), name
     assert card["ekf-3s"]["tension_rmse_n"] is None
     assert card["ekf-4s"]["tension_rmse_n"] < 0.5
+    # the own-model bound: the dynamic kinds have one (the winch's length adds information),
+    # the paper filters none (null in JSON)
+    assert card["ekf-4s"]["own_bound_horizontal_m"] is None
+    imu_only, winch = card["dynamic"], card["dynamic-winch"]
+    assert 0.0 < winch["own_bound_horizontal_m"] < imu_only["own_bound_horizontal_m"]
+    angle = card["dynamic-angle"]["own_bound_horizontal_m"]
+    assert 0.0 < angle < imu_only["own_bound_horizontal_m"]
+    assert imu_only["horizontal_rmse_over_own_bound"] == pytest.approx(
+        imu_only["horizontal_rmse_m"] / imu_only["own_bound_horizontal_m"]
+    )
 
 
 def test_unknown_estimator_and_empty_window_exit_2(capsys):

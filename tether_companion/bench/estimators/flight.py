@@ -68,6 +68,12 @@ class FlightRecord:
         True cable tension at the drone and total rotor thrust, shapes (N,) [N].
     range_seen
         Whether a rangefinder sample was produced since the previous tick, shape (N,).
+    cable_force_ned_n, wind_ned_mps
+        The cable's force on the drone [N] and the wind at the drone [m/s], NED, (N, 3).
+    specific_force_body_mps2
+        The accelerometer's true specific force without noise or bias, FRD, (N, 3) [m/s^2].
+    angle_seen
+        Whether the ground station's cable-angle sensor reported at the tick, shape (N,).
     traces
         Kind name -> :class:`KindTrace`.
     """
@@ -79,6 +85,10 @@ class FlightRecord:
     tension_n: FloatArray
     thrust_n: FloatArray
     range_seen: NDArray[np.bool_]
+    cable_force_ned_n: FloatArray
+    wind_ned_mps: FloatArray
+    specific_force_body_mps2: FloatArray
+    angle_seen: NDArray[np.bool_]
     traces: dict[str, KindTrace]
 
 
@@ -111,9 +121,13 @@ def fly(
     schedule = _schedule(scenario)
     n = sum(1 for _, what in schedule if what == _IMU)
     time_s = np.empty(n)
-    truth = {name: np.empty((n, 3)) for name in ("position", "velocity", "euler")}
+    truth = {
+        name: np.empty((n, 3))
+        for name in ("position", "velocity", "euler", "cable", "wind", "force")
+    }
     tension, thrust = np.empty(n), np.empty(n)
     range_seen = np.zeros(n, dtype=bool)
+    angle_seen = np.zeros(n, dtype=bool)
     outputs = [_empty_trace(n) for _ in kinds]
     tick = 0
     seen = False
@@ -143,10 +157,14 @@ def fly(
                 next_angle_s = imu.time_s + 1.0 / ANGLE_RATE_HZ
                 direction = anchor_direction_ned(sim.cable, tuple(state.position_ned_m))
             station = GroundStation(imu.time_s, state.tension_n, sim.cable.paid_out_m, direction)
+            angle_seen[tick] = direction is not None
             time_s[tick] = imu.time_s
             truth["position"][tick] = state.position_ned_m
             truth["velocity"][tick] = state.velocity_ned_m_s
             truth["euler"][tick] = state.euler_rad
+            truth["cable"][tick] = state.cable_force_ned_n
+            truth["wind"][tick] = state.wind_ned_m_s
+            truth["force"][tick] = state.specific_force_body_mps2
             tension[tick] = state.tension_n
             thrust[tick] = float(state.motor_thrust_n.sum())
             range_seen[tick] = seen
@@ -170,6 +188,10 @@ def fly(
         tension_n=tension,
         thrust_n=thrust,
         range_seen=range_seen,
+        cable_force_ned_n=truth["cable"],
+        wind_ned_mps=truth["wind"],
+        specific_force_body_mps2=truth["force"],
+        angle_seen=angle_seen,
         traces={
             kind.name: KindTrace(
                 position_ned_m=out["position"],

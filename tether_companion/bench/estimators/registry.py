@@ -24,7 +24,7 @@ import importlib
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -169,6 +169,10 @@ class EstimatorKind:
         Whether its velocity / tension is scored.
     description
         One sentence for ``--help`` and the docs.
+    own_bound
+        The posterior CRLB of the kind's own model along a flight (``(context, record)`` to
+        the bound's diagonal at every IMU tick, shape (N, >= 3), position [m^2] first), shown
+        beside the random-walk bound; ``None``: none.
     """
 
     name: str
@@ -178,6 +182,7 @@ class EstimatorKind:
     has_velocity: bool
     has_tension: bool
     description: str
+    own_bound: Callable[[FlightContext, Any], FloatArray] | None = None
 
     def __post_init__(self) -> None:
         if self.crlb_model not in CRLB_MODELS:

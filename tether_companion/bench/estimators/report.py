@@ -74,6 +74,10 @@ ROWS = (
     ("CRLB vertical [m]", lambda c: _f(c["crlb_vertical_m"])),
     ("RMSE / CRLB horizontal", lambda c: _f(c["horizontal_rmse_over_crlb"], 2)),
     ("RMSE / CRLB vertical", lambda c: _f(c["vertical_rmse_over_crlb"], 2)),
+    ("own-model CRLB horizontal [m]", lambda c: _f(c["own_bound_horizontal_m"])),
+    ("own-model CRLB vertical [m]", lambda c: _f(c["own_bound_vertical_m"])),
+    ("RMSE / own CRLB horizontal", lambda c: _f(c["horizontal_rmse_over_own_bound"], 2)),
+    ("RMSE / own CRLB vertical", lambda c: _f(c["vertical_rmse_over_own_bound"], 2)),
 )
 """The table's rows: label and how a pooled cell is shown."""
 
@@ -109,7 +113,8 @@ def print_tables(
     caption = (
         f"{seeds} seed(s), scored from {settle_s:g} s; converge: error < {converged_m:g} m to "
         f"the end (median over seeds); CRLB: posterior bound for the paper's random-walk "
-        f"model (estimation/crlb.py)"
+        f"model (estimation/crlb.py); own-model CRLB: the bound of the kind's own model and "
+        f"measurements (the dynamic kinds: estimation/dynamic/crlb.py; n/a: none)"
     )
     for name, cells in card.items():
         console.print(scenario_table(name, cells, selected, caption))

@@ -119,6 +119,10 @@ class KindRunScore:
     converge_s: float
     crlb_horizontal_m2: float
     crlb_vertical_m2: float
+    own_bound_horizontal_m2: float
+    """Sum of the kind's own-model bound (horizontal variance) over the scored ticks [m^2];
+    ``nan`` for a kind without one."""
+    own_bound_vertical_m2: float
     nees: NDArray[np.float32]
     """Per tick of the window, nan where none."""
     series: dict[str, NDArray[np.float32]] = field(default_factory=dict)
@@ -132,8 +136,11 @@ def score_kind(
     crlb_diagonal: FloatArray,
     settle_s: float,
     converged_m: float,
+    own_bound_diagonal: FloatArray | None = None,
 ) -> KindRunScore:
-    """Score ``trace`` against ``record``'s truth over ticks at or after ``settle_s``."""
+    """Score ``trace`` against ``record``'s truth over ticks at or after ``settle_s``;
+    ``crlb_diagonal`` and ``own_bound_diagonal`` (the kind's own model's bound, optional) are
+    bounds' diagonals per tick, position [m^2] first."""
     window = record.time_s >= settle_s
     error = trace.position_ned_m - record.position_ned_m
     error_norm = np.linalg.norm(error, axis=1)
@@ -145,6 +152,7 @@ def score_kind(
     velocity_error = velocity_error[np.isfinite(velocity_error).all(axis=1)]
     nees_all = nees(error, trace.position_covariance_m2)
     crlb = crlb_diagonal[estimated]
+    own = own_bound_diagonal[estimated] if own_bound_diagonal is not None else None
     step = max(1, int(round(1.0 / (SERIES_RATE_HZ * np.median(np.diff(record.time_s))))))
     var = np.diagonal(trace.position_covariance_m2, axis1=1, axis2=2)
     with np.errstate(invalid="ignore"):
@@ -174,6 +182,10 @@ def score_kind(
         converge_s=converge_time_s(record.time_s, error_norm, converged_m),
         crlb_horizontal_m2=float(np.sum(crlb[:, 0] + crlb[:, 1])),
         crlb_vertical_m2=float(np.sum(crlb[:, 2])),
+        own_bound_horizontal_m2=float(np.sum(own[:, 0] + own[:, 1]))
+        if own is not None
+        else math.nan,
+        own_bound_vertical_m2=float(np.sum(own[:, 2])) if own is not None else math.nan,
         nees=nees_all[window].astype(np.float32),
         series={k: v[::step].astype(np.float32) for k, v in series.items()},
     )
@@ -195,6 +207,8 @@ def pool(runs: list[KindRunScore], has_tension: bool, has_velocity: bool) -> dic
     vertical = _root_mean(sum(r.sq_vertical_m2 for r in runs), estimated)
     crlb_h = _root_mean(sum(r.crlb_horizontal_m2 for r in runs), estimated)
     crlb_v = _root_mean(sum(r.crlb_vertical_m2 for r in runs), estimated)
+    own_h = _root_mean(sum(r.own_bound_horizontal_m2 for r in runs), estimated)
+    own_v = _root_mean(sum(r.own_bound_vertical_m2 for r in runs), estimated)
     lengths = {r.nees.size for r in runs}
     nees_matrix = np.vstack([r.nees for r in runs]).astype(float) if len(lengths) == 1 else None
     all_nees = np.concatenate([r.nees for r in runs]).astype(float)
@@ -239,4 +253,8 @@ def pool(runs: list[KindRunScore], has_tension: bool, has_velocity: bool) -> dic
         "crlb_vertical_m": crlb_v,
         "horizontal_rmse_over_crlb": horizontal / crlb_h if crlb_h > 0 else math.nan,
         "vertical_rmse_over_crlb": vertical / crlb_v if crlb_v > 0 else math.nan,
+        "own_bound_horizontal_m": own_h,
+        "own_bound_vertical_m": own_v,
+        "horizontal_rmse_over_own_bound": horizontal / own_h if own_h > 0 else math.nan,
+        "vertical_rmse_over_own_bound": vertical / own_v if own_v > 0 else math.nan,
     }

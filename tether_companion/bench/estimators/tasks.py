@@ -10,8 +10,9 @@ import dataclasses
 from dataclasses import dataclass
 
 from tether_companion.bench.estimators.flight import fly
-from tether_companion.bench.estimators.registry import KNOWN_TENSION, kinds
+from tether_companion.bench.estimators.registry import KNOWN_TENSION, FlightContext, kinds
 from tether_companion.bench.estimators.scores import KindRunScore, score_kind
+from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.config import load_estimator_config
 from tether_companion.estimation.crlb import posterior_crlb
 from tether_companion.physics.vehicle import load_vehicle
@@ -86,6 +87,7 @@ def score_flight(task: FlightTask) -> FlightScore:
     registry = kinds()
     selected = [registry[name] for name in task.kind_names]
     record = fly(task.scenario, selected, task.simulator)
+    context = FlightContext(task.scenario, load_vehicle(task.scenario.vehicle), GRAVITY_MPS2)
     bounds = {
         model: crlb_for(record, task.scenario, model)
         for model in {kind.crlb_model for kind in selected}
@@ -100,6 +102,7 @@ def score_flight(task: FlightTask) -> FlightScore:
                 bounds[kind.crlb_model],
                 task.settle_s,
                 task.converged_m,
+                kind.own_bound(context, record) if kind.own_bound is not None else None,
             )
             for kind in selected
         },

@@ -13,13 +13,19 @@
   ``cable_angle`` section).
 
 Published: the estimate's status is ``ok`` (:attr:`NavigationEstimate.observable`).
+
+Each is compared with the posterior CRLB of its own model and measurement set
+(:func:`own_model_bound`: IMU force balance and rangefinder; with the winch length too) beside
+the paper's random-walk bound.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import NDArray
 
 from tether_companion.bench.estimators.registry import (
     UNKNOWN_TENSION,
@@ -31,10 +37,27 @@ from tether_companion.bench.estimators.registry import (
 )
 from tether_companion.emulator.cable_angle import EmulatedCableAngleConfig, noisy_angles
 from tether_companion.estimation.config import EstimatorConfig
-from tether_companion.estimation.dynamic.config import DynamicFilterConfig
+from tether_companion.estimation.dynamic.config import DynamicFilterConfig, drag_per_s
+from tether_companion.estimation.dynamic.crlb import (
+    TrueTrack,
+    force_balance_at_truth,
+    posterior_bound,
+)
+from tether_companion.estimation.dynamic.crlb_noise import (
+    bound_noise,
+    filter_gating,
+    residual_density_m2ps3,
+)
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
+from tether_companion.estimation.dynamic.models import ModelConstants
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.cable_angle import CableAngleConfig
+
+if TYPE_CHECKING:  # flight.py imports the registry, which imports this provider
+    from tether_companion.bench.estimators.flight import FlightRecord
+
+FloatArray = NDArray[np.float64]
+
 
 ANGLE_SENSOR_NOISE_RAD = EmulatedCableAngleConfig().noise_std_rad
 """The simulated cable-angle sensor's direction noise per axis [rad] (the emulator's)."""
@@ -58,6 +81,50 @@ def simulated_cable_weight_n_per_m(context: FlightContext) -> float:
     return cable.linear_density_kg_per_m * context.gravity_mps2
 
 
+def filter_config(context: FlightContext) -> DynamicFilterConfig:
+    """The dynamic filter's settings for the scenario: the defaults and the cable's weight."""
+    return dataclasses.replace(
+        DynamicFilterConfig(), cable_weight_n_per_m=simulated_cable_weight_n_per_m(context)
+    )
+
+
+def own_model_bound(
+    context: FlightContext, record: FlightRecord, *, winch: bool, angle: bool
+) -> FloatArray:
+    """The posterior CRLB of the filter's 13-state model along ``record``'s truth with the
+    kind's measurements (:mod:`~tether_companion.estimation.dynamic.crlb`: force balance and
+    rangefinder; ``winch``: the paid-out length; ``angle``: the cable angle with the simulated
+    sensor's noise, :data:`ANGLE_SENSOR_NOISE_RAD`), diagonal (N, 13)."""
+    dynamic = filter_config(context)
+    vehicle = context.vehicle
+    constants = ModelConstants(
+        vehicle.mass_kg, drag_per_s(dynamic, vehicle), dynamic.cable_weight_n_per_m
+    )
+    track = TrueTrack(
+        specific_force_body_mps2=record.specific_force_body_mps2,
+        angle_seen=record.angle_seen,
+        time_s=record.time_s,
+        position_ned_m=record.position_ned_m,
+        velocity_ned_mps=record.velocity_ned_mps,
+        euler_rad=record.euler_rad,
+        thrust_n=record.thrust_n,
+        cable_force_ned_n=record.cable_force_ned_n,
+        wind_ned_mps=record.wind_ned_mps,
+        range_seen=record.range_seen,
+    )
+    gating = filter_gating(dynamic, context.estimator_config(EstimatorConfig()), vehicle)
+    force_balance = force_balance_at_truth(track, constants, gating)
+    interval_s = dynamic.imu_ticks_per_fusion / context.scenario.sensors.imu_rate_hz
+    residual = residual_density_m2ps3(
+        force_balance.residuals_mps2, interval_s, dynamic.noise.force_residual_m2ps3
+    )
+    angle_std = ANGLE_SENSOR_NOISE_RAD if angle else None
+    noise = bound_noise(
+        context.scenario, dynamic, residual, winch=winch, cable_angle_std_rad=angle_std
+    )
+    return posterior_bound(track, constants, noise, gating, force_balance)
+
+
 class DynamicKind:
     """:class:`DynamicTetherEstimator` as a :class:`FlightEstimator`.
 
@@ -72,9 +139,7 @@ class DynamicKind:
     """
 
     def __init__(self, context: FlightContext, use_winch: bool, use_angle: bool = False) -> None:
-        dynamic = dataclasses.replace(
-            DynamicFilterConfig(), cable_weight_n_per_m=simulated_cable_weight_n_per_m(context)
-        )
+        dynamic = filter_config(context)
         config = context.estimator_config(EstimatorConfig())  # anchor height, rangefinder mounting
         self._estimator = DynamicTetherEstimator(config, context.vehicle, dynamic)
         self._use_winch = use_winch
@@ -125,6 +190,9 @@ register(
         has_velocity=True,
         has_tension=True,
         description="issue-10 dynamic EKF (velocity, thrust scale, bias, wind), IMU+PWM+range",
+        own_bound=lambda context, record: own_model_bound(
+            context, record, winch=False, angle=False
+        ),
     )
 )
 register(
@@ -136,6 +204,7 @@ register(
         has_velocity=True,
         has_tension=True,
         description="the dynamic EKF also given the winch's paid-out length",
+        own_bound=lambda context, record: own_model_bound(context, record, winch=True, angle=False),
     )
 )
 for _name, _label, _winch in (
@@ -147,6 +216,9 @@ for _name, _label, _winch in (
             name=_name,
             label=_label,
             build=lambda context, w=_winch: DynamicKind(context, use_winch=w, use_angle=True),
+            own_bound=lambda context, record, w=_winch: own_model_bound(
+                context, record, winch=w, angle=True
+            ),
             crlb_model=UNKNOWN_TENSION,
             has_velocity=True,
             has_tension=True,

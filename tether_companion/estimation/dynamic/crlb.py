@@ -1,0 +1,324 @@
+"""Posterior Cramer-Rao bound of the dynamic filter's own 13-state model along a true flight.
+
+Tichavsky, Muravchik & Nehorai (1998): for ``x_{k+1} = f_k(x_k) + w_k``, ``w_k ~ N(0, Q_k)``,
+and measurements ``z = h(x) + v``, ``v ~ N(0, R)``, the Fisher information of the state obeys
+
+    J_{k+1} = D22 - D21 (J_k + D11)^-1 D12,
+    D11 = F^T Q^-1 F,  D12 = D21^T = -F^T Q^-1,  D22 = Q^-1 + sum H^T R^-1 H,
+
+with ``F``, ``H`` the Jacobians at the true state (the "along the true trajectory" bound: the
+expectations replaced by one flight's values). With the noise additive and Gaussian the matrix
+inversion lemma turns ``Q^-1 - Q^-1 F (J_k + F^T Q^-1 F)^-1 F^T Q^-1`` into
+``(F J_k^-1 F^T + Q)^-1``, so
+
+    J_{k+1} = (F J_k^-1 F^T + Q)^-1 + sum H^T R^-1 H,
+
+the information form of the EKF's covariance recursion evaluated at the truth. That form is what
+:func:`information_step` computes: it needs no ``Q^-1`` (the thrust scale's and the bias's
+``Q`` per step are 1e-7..1e-6, whose inverses the ``D`` form would subtract from each other).
+
+The model is the filter's (``state.py``; inertial formulation): ``p' = v``,
+``v' = R^T (f_meas - b) + g``, tension, thrust scale, bias and wind random walks; the
+force balance ``f_meas = f(x, u) + b`` fused once every ``imu_ticks_per_fusion`` IMU ticks, the
+rangefinder's height, and, by measurement set, the winch's paid-out length and the
+ground-station cable angle, every Jacobian from the filter's own generated code
+(``generated.py`` through :class:`~tether_companion.estimation.dynamic.models.CableModels`, the
+straight, catenary or grounded variant the true state calls for). Units SI, NED from the
+anchor, FRD body. The noise is mapped from the simulated error sources in :mod:`.crlb_noise`.
+
+Timing: the prediction steps every IMU tick; the information of every sample (rangefinder at
+20 Hz, winch every tick and the cable angle at its reports while the true chord tension is
+positive, force balance at the fusion ticks) is added at the
+next fusion tick (at most ``imu_ticks_per_fusion - 1`` ticks, 15 ms, late), each with its
+Jacobian at its own tick's truth.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.estimation.dynamic import generated, state
+from tether_companion.estimation.dynamic.models import UNDEFINED, Generated, ModelConstants
+from tether_companion.frames import rotation_ned_to_body_rows
+
+FloatArray = NDArray[np.float64]
+
+_N = state.N_STATES
+_NO_CONSTANTS = (0.0, 0.0, 0.0)
+_ANCHOR_LEVEL = (0.0,)
+"""The height model's input (the anchor's height: its Jacobian does not depend on it)."""
+
+
+@dataclass(frozen=True)
+class TrueTrack:
+    """A flight's truth at its IMU ticks (SI, NED from the anchor).
+
+    Attributes
+    ----------
+    time_s
+        Tick times, shape (N,) [s].
+    position_ned_m, velocity_ned_mps, euler_rad
+        Shapes (N, 3) [m], [m/s], (roll, pitch, yaw) [rad].
+    thrust_n
+        Total rotor thrust, shape (N,) [N].
+    cable_force_ned_n
+        The cable's force on the drone, shape (N, 3) [N].
+    wind_ned_mps
+        Wind at the drone, shape (N, 3) [m/s].
+    range_seen
+        A rangefinder sample since the previous tick, shape (N,).
+    specific_force_body_mps2
+        The accelerometer's true specific force without noise or bias, FRD, shape (N, 3)
+        [m/s^2].
+    angle_seen
+        A ground-station cable-angle report at the tick, shape (N,); ``None``: none in the
+        flight.
+    """
+
+    time_s: FloatArray
+    position_ned_m: FloatArray
+    velocity_ned_mps: FloatArray
+    euler_rad: FloatArray
+    thrust_n: FloatArray
+    cable_force_ned_n: FloatArray
+    wind_ned_mps: FloatArray
+    range_seen: NDArray[np.bool_]
+    specific_force_body_mps2: FloatArray
+    angle_seen: NDArray[np.bool_] | None = None
+
+    def state_at(self, k: int) -> list[float]:
+        """The model's state at tick ``k``: position, velocity, chord tension
+        ``|F_ne| |p| / |p_ne|`` (the cable's horizontal pull is ``T_ch p_ne / |p|`` in every
+        cable variant; ``|F|`` right above the anchor), thrust scale 1 (the true thrust is the
+        input), bias 0 (the Jacobians do not depend on it), the horizontal wind."""
+        p = self.position_ned_m[k]
+        force = self.cable_force_ned_n[k]
+        span = math.hypot(p[0], p[1])
+        distance = math.sqrt(span * span + p[2] * p[2])
+        pull = math.hypot(force[0], force[1])
+        tension = pull * distance / span if span > 1e-6 else math.sqrt(float(force @ force))
+        wind = self.wind_ned_mps[k]
+        v = self.velocity_ned_mps[k]
+        return [*map(float, p), *map(float, v), tension, 1.0, 0.0, 0.0, 0.0, *map(float, wind[:2])]
+
+
+@dataclass(frozen=True)
+class BoundNoise:
+    """What the bound assumes about the noise (SI units).
+
+    Attributes
+    ----------
+    process_density
+        Diagonal of the process noise spectral density, shape (13,) [state units^2 / s].
+    prior_std
+        Standard deviation of the prior at the flight's start, shape (13,) [state units].
+    force_balance_var_mps2
+        Variance of one fused force-balance sample, body x, y, z [(m/s^2)^2].
+    range_var_m2
+        Variance of one tilt-corrected height [m^2].
+    winch_var_m2
+        Variance of one paid-out length [m^2]; ``None``: not measured.
+    cable_angle_var_rad2
+        Variance of the cable direction's turn per axis in one angle report [rad^2]: the
+        elevation's, the azimuth's over ``cos^2(elevation)``; ``None``: not measured.
+    """
+
+    process_density: FloatArray
+    prior_std: FloatArray
+    force_balance_var_mps2: tuple[float, float, float]
+    range_var_m2: float
+    winch_var_m2: float | None = None
+    cable_angle_var_rad2: float | None = None
+
+
+@dataclass(frozen=True)
+class Gating:
+    """When the force balance is fused (the filter's rules, applied to the truth). The winch
+    length and the cable angle count wherever the true chord tension is positive: the filter
+    skips them below its ``slack_tension_n`` by its own tension estimate, which may be above the
+    truth's (the sagging hovers' cables rest on the ground at 0.13 N of chord tension), and a
+    bound must not leave out samples the filter may use.
+
+    Attributes
+    ----------
+    ticks_per_fusion
+        IMU ticks per prediction batch and force-balance sample.
+    min_distance_m
+        No force balance closer to the anchor [m].
+    min_thrust_n
+        No force balance below this thrust (on the ground) [N].
+    """
+
+    ticks_per_fusion: int
+    min_distance_m: float
+    min_thrust_n: float
+
+
+def information_step(
+    covariance: FloatArray,
+    transition: FloatArray,
+    process_noise: FloatArray,
+    measurement_information: FloatArray | None,
+) -> FloatArray:
+    """One step of the posterior-CRLB recursion in covariance form: ``J_k^-1`` (n, n) to
+    ``J_{k+1}^-1`` with ``J_{k+1} = (F J_k^-1 F^T + Q)^-1 + M``, ``M = sum H^T R^-1 H`` of the
+    samples at ``k+1`` (``None``: no sample, the prediction alone)."""
+    predicted = transition @ covariance @ transition.T + process_noise
+    if measurement_information is None:
+        return 0.5 * (predicted + predicted.T)
+    information = np.linalg.inv(predicted) + measurement_information
+    bound = np.linalg.inv(information)
+    return 0.5 * (bound + bound.T)
+
+
+@dataclass(frozen=True)
+class ForceBalanceAtTruth:
+    """The force-balance samples the filter would fuse, evaluated at the truth.
+
+    Attributes
+    ----------
+    ticks
+        Tick indices of the samples, shape (M,).
+    jacobians
+        ``H`` of the generated ``accel_*`` model, shape (M, 3, 13).
+    residuals_mps2
+        True specific force minus the model's value at the true state, FRD body, shape (M, 3)
+        [m/s^2]: what the model leaves out (quadratic body drag, vertical gusts, the cable's
+        drag, rotor-drag model error), without the sensor's noise.
+    """
+
+    ticks: NDArray[np.int64]
+    jacobians: FloatArray
+    residuals_mps2: FloatArray
+
+
+def force_balance_at_truth(
+    track: TrueTrack, constants: ModelConstants, gating: Gating
+) -> ForceBalanceAtTruth:
+    """The force balance at every ``gating.ticks_per_fusion``-th tick, skipped as the filter
+    skips it (thrust below ``min_thrust_n``: on the ground; closer than ``min_distance_m`` to
+    the anchor) and where the model is undefined."""
+    model = constants.models.accel
+    c = constants.values()
+    ticks, jacobians, residuals = [], [], []
+    step = gating.ticks_per_fusion
+    for k in range(step - 1, len(track.time_s), step):
+        x = track.state_at(k)
+        thrust_n = float(track.thrust_n[k])
+        if thrust_n < gating.min_thrust_n or math.dist(x[0:3], (0, 0, 0)) < gating.min_distance_m:
+            continue
+        rows = rotation_ned_to_body_rows(*track.euler_rad[k])
+        try:
+            value, jac = model(x, (*rows[0], *rows[1], *rows[2], thrust_n), c)
+        except UNDEFINED:
+            continue
+        if not (math.isfinite(sum(jac)) and math.isfinite(sum(value))):
+            continue
+        ticks.append(k)
+        jacobians.append(jac)
+        residuals.append(track.specific_force_body_mps2[k] - np.array(value))
+    return ForceBalanceAtTruth(
+        np.array(ticks, dtype=np.int64),
+        np.reshape(np.array(jacobians, dtype=float), (len(ticks), 3, _N)),
+        np.reshape(np.array(residuals, dtype=float), (len(ticks), 3)),
+    )
+
+
+def posterior_bound(
+    track: TrueTrack,
+    constants: ModelConstants,
+    noise: BoundNoise,
+    gating: Gating,
+    force_balance: ForceBalanceAtTruth | None = None,
+) -> FloatArray:
+    """Diagonal of the bound ``J_k^-1`` at every tick, shape (N, 13), in the state's units
+    squared (position [m^2] first). The prior ``diag(prior_std^2)`` holds before the first
+    tick. ``force_balance``: the samples of :func:`force_balance_at_truth` when already made."""
+    if force_balance is None:
+        force_balance = force_balance_at_truth(track, constants, gating)
+    accel_weight = 1.0 / np.asarray(noise.force_balance_var_mps2, dtype=float)
+    accel_information = {
+        int(k): jac.T @ (accel_weight[:, None] * jac)
+        for k, jac in zip(force_balance.ticks, force_balance.jacobians, strict=True)
+    }
+    n_ticks = len(track.time_s)
+    out = np.empty((n_ticks, _N))
+    covariance = np.diag(noise.prior_std**2)
+    models = constants.models
+    c = constants.values()
+    density = noise.process_density
+    transition = np.eye(_N)
+    gathered = np.zeros((_N, _N))
+    samples = 0
+    previous_s = track.time_s[0]
+    zero_force = (0.0, 0.0, 0.0)
+    for k in range(n_ticks):
+        x = track.state_at(k)
+        rows = rotation_ned_to_body_rows(*track.euler_rad[k])
+        dt = float(track.time_s[k] - previous_s)
+        previous_s = track.time_s[k]
+        _, dv = generated.inertial(x, (*rows[0], *rows[1], *rows[2], *zero_force), c)
+        transition[0:3, 3:6] = dt * np.eye(3)
+        transition[3:6, :] = dt * np.reshape(dv, (3, _N))
+        transition[3:6, 3:6] += np.eye(3)
+        if k in accel_information:
+            gathered += accel_information[k]
+            samples += 1
+        if track.range_seen[k]:
+            samples += _add(
+                gathered,
+                generated.height_above_ground,
+                x,
+                _NO_CONSTANTS,
+                1,
+                noise.range_var_m2,
+                _ANCHOR_LEVEL,
+            )
+        taut = x[state.TENSION] > 0.0
+        if noise.winch_var_m2 is not None and taut:
+            samples += _add(gathered, models.winch_length, x, c, 1, noise.winch_var_m2)
+        angle_var = noise.cable_angle_var_rad2
+        if angle_var is not None and taut and track.angle_seen is not None and track.angle_seen[k]:
+            samples += _add(gathered, models.cable_angle, x, c, 2, angle_var, per_cos=True)
+        apply = (k + 1) % gating.ticks_per_fusion == 0 and samples > 0
+        covariance = information_step(
+            covariance, transition, np.diag(density * dt), gathered if apply else None
+        )
+        if apply:
+            gathered[:] = 0.0
+            samples = 0
+        out[k] = np.diag(covariance)
+    return out
+
+
+def _add(
+    gathered: FloatArray,
+    model: Generated,
+    x: list[float],
+    c: tuple[float, float, float],
+    rows: int,
+    variance: float,
+    u: tuple[float, ...] = (),
+    *,
+    per_cos: bool = False,
+) -> int:
+    """``gathered += H^T R^-1 H`` for the generated ``model`` at ``x`` with ``R = variance I``
+    (``per_cos``, the cable angle: the second row's, the azimuth's, over the cosine squared of
+    the first, the elevation); 0 where the model is undefined there (at the anchor, zero
+    tension), else 1."""
+    try:
+        value, jac = model(x, u, c)
+    except UNDEFINED:
+        return 0
+    jacobian = np.reshape(jac, (rows, _N))
+    if not np.isfinite(jacobian).all():
+        return 0
+    weight = np.full(rows, 1.0 / variance)
+    if per_cos:
+        weight[1] *= math.cos(value[0]) ** 2
+    gathered += jacobian.T @ (weight[:, None] * jacobian)
+    return 1

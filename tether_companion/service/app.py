@@ -190,6 +190,7 @@ class CompanionService:
         no queue and no task switch between a datagram and its estimate.
         """
         self._reset_link_state()
+        self._send_now_to(link)
         housekeeping = asyncio.create_task(self._housekeeping(link), name="housekeeping")
         fatal = asyncio.get_running_loop().create_future()
 
@@ -210,11 +211,23 @@ class CompanionService:
                 receive([getter.result()])  # raises LinkClosed once closed
         finally:
             link.set_receiver(None)
+            self.session.send_now = None
             if getter is not None:
                 getter.cancel()
             housekeeping.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await housekeeping
+
+    def _send_now_to(self, link: Link) -> None:
+        """The session hands its messages to ``link`` the moment they exist: an estimate goes
+        out before the book-keeping of its tick (:attr:`EstimationSession.send_now`)."""
+        send = self._send
+
+        def send_now(messages: list[MAVLinkMessage]) -> None:
+            for out in messages:
+                send(link, out)
+
+        self.session.send_now = send_now
 
     def _handle_guarded(self, link: Link, msg: MAVLinkMessage) -> None:
         """One message; an unexpected error is counted and reported, never fatal in flight."""
@@ -324,6 +337,7 @@ class CompanionService:
         self._vehicle_ready = True
         self.vehicle = profile
         self.session = EstimationSession(self.config, profile)
+        self._send_now_to(link)
         self._send_text(link, dialect.MAV_SEVERITY_INFO, f"vehicle {profile.frame} from FC params")
         return True
 

@@ -54,7 +54,6 @@ from tether_companion.mavlink.estimates import (
     PoseEstimate,
     VelocityEstimate,
     odometry_message,
-    vision_position_estimate_message,
     vision_speed_estimate_message,
 )
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
@@ -62,7 +61,9 @@ from tether_companion.mavlink.units import (
     MAV_FRAME_LOCAL_FRD,
     MAV_FRAME_LOCAL_NED,
     POSE_DIM,
+    covariance_to_urt,
     seconds_to_boot_ms,
+    seconds_to_usec,
 )
 from tether_companion.samples import AttitudeSample
 from tether_companion.service.config import PublishConfig
@@ -388,23 +389,71 @@ class Publisher:
         inflated: bool,
     ) -> list[MAVLinkMessage]:
         """VISION_POSITION_ESTIMATE (and ODOMETRY, VISION_SPEED_ESTIMATE when configured) for
-        ``position`` (NED [m]) at the estimate's time."""
+        ``position`` (NED [m]) at the estimate's time.
+
+        VISION_POSITION_ESTIMATE is built from Python floats (:meth:`_pose_urt`): it is what
+        the flight controller waits for, so no numpy on its way out."""
         t = estimate.time_s
-        pose = PoseEstimate(
-            time_s=t,
-            position_ned_m=position,
-            euler_rad=(attitude.roll_rad, attitude.pitch_rad, attitude.yaw_rad),
-            covariance=self._pose_covariance(estimate, inflated=inflated),
-            reset_counter=self.reset_counter,
-        )
-        out = [vision_position_estimate_message(pose)]
+        euler = (attitude.roll_rad, attitude.pitch_rad, attitude.yaw_rad)
+        out = [
+            dialect.MAVLink_vision_position_estimate_message(
+                seconds_to_usec(t),
+                float(position[0]),
+                float(position[1]),
+                float(position[2]),
+                *(float(a) for a in euler),
+                self._pose_urt(estimate, inflated),
+                self.reset_counter & 0xFF,
+            )
+        ]
+        config = self.config
+        if not (config.odometry or config.speed_estimate):
+            return out
         velocity = None if inflated else velocity_of(estimate, t, self.reset_counter)
-        if self.config.odometry:
-            frame = _ODOMETRY_FRAMES[self.config.odometry_frame]
+        if config.odometry:
+            pose = PoseEstimate(
+                time_s=t,
+                position_ned_m=position,
+                euler_rad=euler,
+                covariance=self._pose_covariance(estimate, inflated=inflated),
+                reset_counter=self.reset_counter,
+            )
+            frame = _ODOMETRY_FRAMES[config.odometry_frame]
             out.append(odometry_message(pose, velocity, frame_id=frame))
-        if self.config.speed_estimate and velocity is not None:
+        if config.speed_estimate and velocity is not None:
             out.append(vision_speed_estimate_message(velocity))
         return out
+
+    def _pose_urt(self, estimate: PositionEstimate, inflated: bool) -> list[float]:
+        """:meth:`_pose_covariance` as MAVLink's 21-entry upper right triangle, in Python
+        floats (the same values as ``covariance_to_urt(self._pose_covariance(...))``).
+
+        Raises
+        ------
+        ValueError
+            When an entry is not finite (as ``covariance_to_urt``).
+        """
+        config = self.config
+        if config.covariance == "unknown":
+            return covariance_to_urt(None)
+        if inflated:
+            nn = ee = dd = config.inflated_variance_m2
+            ne = nd = ed = 0.0
+        else:
+            (a, b, c), (d, e, f), (g, h, i) = estimate.position_covariance_m2.tolist()
+            nn, ne, nd = 0.5 * (a + a), 0.5 * (b + d), 0.5 * (c + g)
+            ee, ed, dd = 0.5 * (e + e), 0.5 * (f + h), 0.5 * (i + i)
+        att = config.attitude_variance_rad2
+        if not all(map(math.isfinite, (nn, ne, nd, ee, ed, dd, att))):
+            raise ValueError("pose covariance holds non-finite values")
+        return [
+            nn, ne, nd, 0.0, 0.0, 0.0,
+            ee, ed, 0.0, 0.0, 0.0,
+            dd, 0.0, 0.0, 0.0,
+            att, 0.0, 0.0,
+            att, 0.0,
+            att,
+        ]  # fmt: skip
 
     def _pose_covariance(self, estimate: PositionEstimate, *, inflated: bool) -> FloatArray | None:
         if self.config.covariance == "unknown":

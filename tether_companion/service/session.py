@@ -232,6 +232,15 @@ class EstimationSession:
         }
         """The handler of each sample type: one dict lookup per sample, not a chain of
         ``isinstance`` tests."""
+        self.send_now: Callable[[list[MAVLinkMessage]], None] | None = None
+        """Where the live service wants messages the moment they exist (None: in each
+        :class:`Step`, as replay reads them). Set, every sample's messages go there in the
+        order they are made and the steps carry none; an IMU tick's estimate goes out before
+        the tension filter and the modes run (they do not change it), so the flight
+        controller's latency does not wait for the book-keeping."""
+        self._tension_first = self.catenary_source
+        """The published position needs this tick's tension (the catenary estimator's): the
+        tension filter runs before the EKF's tick, not after the estimate is sent."""
 
     def restart(self) -> None:
         """Start a fresh estimator run (after a flight-controller reboot)."""
@@ -358,22 +367,40 @@ class EstimationSession:
         tension modes' filter is fed each sample first (when it runs: with messages, or for
         the catenary estimator), then the EKF; then the modes' logic (with messages).
         """
-        return self._handlers[type(sample)](sample)
+        step = self._handlers[type(sample)](sample)
+        send_now = self.send_now
+        if send_now is not None and step.messages:
+            send_now(step.messages)
+            step.messages = []
+        return step
 
     def _on_imu(self, sample: ImuSample) -> Step:
         if sample.time_s > self.winch.deadline_s:  # the winch fell silent
             self.winch.expire(self.estimator)
-        tension = None
-        if self._feeds_tension:
-            tension = self.modes.on_imu(sample)
-            if tension is not None and self.catenary is not None:
-                self.last_catenary = self.catenary.on_tension(tension)
-        step = self._tick(sample, tension)
+        if self._tension_first:
+            tension = self._tension_tick(sample)
+            step = self._tick(sample, tension)
+        else:  # the estimate first (sent at once with send_now), then the tension filter
+            step = self._tick(sample, None)
+            send_now = self.send_now
+            if send_now is not None and step.messages:
+                send_now(step.messages)
+                step.messages = []
+            tension = self._tension_tick(sample)
         if self.messages:
             if tension is not None:
                 step.messages += self.publisher.on_filtered(tension, self.last_catenary)
             step.messages += self._mode_tick(sample.time_s)
         return step
+
+    def _tension_tick(self, sample: ImuSample) -> TensionEstimate | None:
+        """The tension filter's IMU tick (when it runs) and the catenary position on it."""
+        if not self._feeds_tension:
+            return None
+        tension = self.modes.on_imu(sample)
+        if tension is not None and self.catenary is not None:
+            self.last_catenary = self.catenary.on_tension(tension)
+        return tension
 
     def _on_attitude(self, sample: AttitudeSample) -> Step:
         if self._feeds_tension:

@@ -43,6 +43,7 @@ Choices, with the reasons:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -275,6 +276,7 @@ class Publisher:
         inputs_stale: bool | str = False,
         motors_idle: bool = False,
         unavailable: str | None = None,
+        send_now: Callable[[list[MAVLinkMessage]], None] | None = None,
     ) -> tuple[list[MAVLinkMessage], Publication | None]:
         """Messages to send for this estimate (often none: decimation) and the CSV record.
 
@@ -295,6 +297,9 @@ class Publisher:
         unavailable
             Why the estimator has no position this tick, when it says so (``stale`` or
             ``slack``; the catenary estimator): the health shown instead of ``diverged``.
+        send_now
+            Given, a published estimate's messages are handed to it before the CSV record is
+            built (and not returned): the flight controller does not wait for the record.
         """
         self.counters.estimates += 1
         out: list[MAVLinkMessage] = []
@@ -364,6 +369,9 @@ class Publisher:
             self._last_ok_position = position.copy()
         if self.messages:
             out += self._position_messages(estimate, position, attitude, send_inflated)
+            if send_now is not None:
+                send_now(out)
+                out = []
         self.counters.published += 1
         self.counters.inflated += int(send_inflated)
         variances = np.diag(estimate.covariance).copy()

@@ -236,8 +236,9 @@ class EstimationSession:
         """Where the live service wants messages the moment they exist (None: in each
         :class:`Step`, as replay reads them). Set, every sample's messages go there in the
         order they are made and the steps carry none; an IMU tick's estimate goes out before
-        the tension filter and the modes run (they do not change it), so the flight
-        controller's latency does not wait for the book-keeping."""
+        its publication record is made and before the tension filter and the modes run (they
+        do not change it), so the flight controller's latency does not wait for the
+        book-keeping."""
         self._tension_first = self.catenary_source
         """The published position needs this tick's tension (the catenary estimator's): the
         tension filter runs before the EKF's tick, not after the estimate is sent."""
@@ -491,6 +492,7 @@ class EstimationSession:
                 inputs_stale=stale,
                 motors_idle=motors_idle,
                 unavailable=unavailable,
+                send_now=self.send_now,
             )
         elif self.catenary_source and tension is not None and self.last_catenary is not None:
             catenary = self.last_catenary
@@ -500,6 +502,7 @@ class EstimationSession:
                 inputs_stale=not tension.updated,
                 motors_idle=motors_idle,
                 unavailable=_CATENARY_UNAVAILABLE.get(catenary.status),
+                send_now=self.send_now,
             )
         return Step(messages=messages, publication=publication, estimate=estimate)
 

@@ -38,13 +38,9 @@ import numpy as np
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.alignment import InputAligner
 from tether_companion.estimation.catenary_position import (
-    NO_TENSION,
-    UNOBSERVABLE,
     CatenaryPosition,
     CatenaryPositionEstimator,
 )
-from tether_companion.estimation.catenary_position import STALE_TENSION as CATENARY_STALE_TENSION
-from tether_companion.estimation.catenary_position import WEAK_PULL as CATENARY_WEAK_PULL
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.output import NavigationEstimate
 from tether_companion.estimation.estimate import Estimate, EstimatorHealth
@@ -60,14 +56,12 @@ from tether_companion.modes.session import TensionModeSession
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.cable_angle import CableAngleFeed, CableAngleReading
+from tether_companion.service.catenary_source import CATENARY_UNAVAILABLE, CatenaryEstimate
 from tether_companion.service.config import CATENARY, DYNAMIC, ServiceConfig
 from tether_companion.service.health import (
-    SLACK,
-    STALE,
     STALE_ATTITUDE,
     STALE_PWM,
     STALE_TENSION,
-    WEAK_PULL,
     dynamic_health,
 )
 from tether_companion.service.ingest import FcPosition, Ingest, Sample, TensionReading
@@ -84,59 +78,6 @@ MODE_TICK_S = 0.02
 """Period of the tension modes' logic [s of flight-controller time] (50 Hz)."""
 HEIGHT_STALE_S = 0.5
 """A rangefinder height or FC position older than this [s] is not handed to the modes."""
-_CATENARY_UNAVAILABLE = {
-    NO_TENSION: STALE,
-    CATENARY_STALE_TENSION: STALE,
-    UNOBSERVABLE: SLACK,
-    CATENARY_WEAK_PULL: WEAK_PULL,
-}
-"""Publisher health for the catenary estimator's reasons to have no position (the others,
-``inconsistent`` and ``no_length``, show as ``diverged``)."""
-
-
-@dataclass(frozen=True, slots=True)
-class CatenaryEstimate:
-    """A catenary position with the tension it came from, as the publisher reads it.
-
-    Attributes
-    ----------
-    time_s
-        Flight-controller time [s].
-    position_ned_m
-        Position from the anchor, NED, shape (3,) [m] (``nan`` when invalid).
-    tension_n
-        Filtered tension magnitude [N].
-    covariance
-        Shape (4, 4): the catenary position covariance [m^2], then the variance of the
-        filtered tension's magnitude, its error budget included [N^2].
-    reset_counter
-        Restarts of the tension filter (each one can step the position).
-    """
-
-    time_s: float
-    position_ned_m: np.ndarray
-    tension_n: float
-    covariance: np.ndarray
-    reset_counter: int
-
-    @property
-    def position_covariance_m2(self) -> np.ndarray:
-        """Position block of the covariance, shape (3, 3) [m^2]."""
-        return self.covariance[:3, :3]
-
-    @classmethod
-    def of(cls, position: CatenaryPosition, tension: TensionEstimate) -> CatenaryEstimate:
-        """The estimate for ``position``, computed from ``tension``."""
-        covariance = np.zeros((4, 4))
-        covariance[:3, :3] = position.covariance_m2
-        covariance[3, 3] = tension.magnitude_variance_n2
-        return cls(
-            position.time_s,
-            position.position_ned_m,
-            tension.magnitude_n,
-            covariance,
-            tension.health.restarts,
-        )
 
 
 @dataclass(slots=True)
@@ -365,8 +306,10 @@ class EstimationSession:
 
         Every sample goes to the estimators as it arrives: the pipeline aligns the streams (its
         clock moves only with the IMU; a rangefinder sample is fused at the filter's time). The
-        tension modes' filter is fed each sample first (when it runs: with messages, or for
-        the catenary estimator), then the EKF; then the modes' logic (with messages).
+        tension modes' filter (when it runs: with messages, or for the catenary estimator) is
+        fed each attitude and PWM sample before the EKF, each IMU sample after the EKF's tick
+        and its publication (before them when the published position is the catenary
+        estimator's, which needs the tick's tension); then the modes' logic (with messages).
         """
         step = self._handlers[type(sample)](sample)
         send_now = self.send_now
@@ -501,7 +444,7 @@ class EstimationSession:
                 self.attitude,
                 inputs_stale=not tension.updated,
                 motors_idle=motors_idle,
-                unavailable=_CATENARY_UNAVAILABLE.get(catenary.status),
+                unavailable=CATENARY_UNAVAILABLE.get(catenary.status),
                 send_now=self.send_now,
             )
         return Step(messages=messages, publication=publication, estimate=estimate)

@@ -1,0 +1,109 @@
+"""CPU of the live service's receive path per flight-controller tick, and from an IMU message to
+its VISION_POSITION_ESTIMATE (a measuring tool, not a test).
+
+The bench's default streams (``bench latency``: RAW_IMU, ATTITUDE and SERVO_OUTPUT_RAW at
+200 Hz, DISTANCE_SENSOR at 20 Hz, SYSTEM_TIME at 5 Hz; ``tests/hot_path_cost.py``'s
+generator) go through what the service's read callback runs: the frame parser, then
+:meth:`CompanionService._handle_guarded` per message with the service's ``send_now`` wiring
+(``publish.on_unhealthy: inflate``, as the bench, so the hovering dynamic filter publishes at
+30 Hz), into a link that only counts frames. No sockets, no event loop.
+
+Ticks are handed over ``--batch`` at a time with a sleep of ``--sleep-ms`` per tick in the
+batch before each batch (as the live service sleeps between wake-ups; 0: no sleep, warm), and
+the thread's CPU time (``CLOCK_THREAD_CPUTIME_ID``, so other processes' time is not counted)
+is read around each batch and from the start of each published tick's RAW_IMU to its
+VISION_POSITION_ESTIMATE's frame. The first fifth of the flight (start-up, the filter's
+initialisation) is left out.
+
+Run: ``python tests/service_path_cost.py [--seconds 20] [--sleep-ms 0] [--batch 1]
+[--repeat 2]``; with ``PYTHONPATH=TREE`` to measure another tree's code (one that has no
+``send_now`` is measured without it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+from hot_path_cost import SOURCE, _datagrams  # type: ignore[import-not-found]
+
+from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
+from tether_companion.service.app import CompanionService
+from tether_companion.service.config import load_service_config, load_vehicle_for
+
+_VPE = dialect.MAVLINK_MSG_ID_VISION_POSITION_ESTIMATE
+
+
+class _CountingLink:
+    """The service's link, reduced to framing and the CPU time of the last estimate sent."""
+
+    def __init__(self) -> None:
+        self.encoder = FrameEncoder(1, 191)
+        self.frames = 0
+        self.estimate_sent_ns = 0
+
+    def send_bytes(self, frame: bytes) -> None:
+        self.frames += 1
+        if frame[7] == _VPE:
+            self.estimate_sent_ns = time.thread_time_ns()
+
+
+def _one_flight(seconds: float, sleep_s: float, batch: int) -> tuple[list[int], list[float]]:
+    """(IMU -> estimate CPU [ns] of each published tick, CPU per tick [ns] of each batch)."""
+    overrides = {"recording": {"enabled": False}, "publish": {"on_unhealthy": "inflate"}}
+    config = load_service_config(None, overrides)
+    service = CompanionService(config, load_vehicle_for(config))
+    link = _CountingLink()
+    wire = getattr(service, "_send_now_to", None)
+    if wire is not None:
+        wire(link)
+    parser = FrameParser()
+    ticks: dict[float, list[bytes]] = {}
+    for t, data in _datagrams(200.0, seconds):
+        ticks.setdefault(t, []).append(data)
+    per_tick = list(ticks.values())
+    skip = len(per_tick) // 5
+    to_estimate: list[int] = []
+    tick_cpu: list[float] = []
+    for first in range(0, len(per_tick), batch):
+        chunk = per_tick[first : first + batch]
+        if sleep_s:
+            time.sleep(sleep_s * len(chunk))
+        start = time.thread_time_ns()
+        for datagrams in chunk:
+            sent = link.estimate_sent_ns
+            imu_start = 0
+            for data in datagrams:
+                for msg in parser.feed(data, SOURCE):
+                    if msg.get_type() == "RAW_IMU":
+                        imu_start = time.thread_time_ns()
+                    service._handle_guarded(link, msg)  # noqa: SLF001 - the read callback's call
+            if first >= skip and link.estimate_sent_ns != sent:
+                to_estimate.append(link.estimate_sent_ns - imu_start)
+        if first >= skip:
+            tick_cpu.append((time.thread_time_ns() - start) / len(chunk))
+    return to_estimate, tick_cpu
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=20.0)
+    parser.add_argument("--sleep-ms", type=float, default=0.0)
+    parser.add_argument("--batch", type=int, default=1)
+    parser.add_argument("--repeat", type=int, default=2)
+    args = parser.parse_args()
+    for _ in range(args.repeat):
+        to_estimate, tick_cpu = _one_flight(args.seconds, 1e-3 * args.sleep_ms, args.batch)
+        deciles = statistics.quantiles(to_estimate, n=10)
+        print(
+            f"IMU -> estimate CPU p50 {1e-3 * statistics.median(to_estimate):6.1f} us, "
+            f"p90 {1e-3 * deciles[-1]:6.1f} us ({len(to_estimate)} published ticks); "
+            f"CPU per tick {1e-3 * statistics.fmean(tick_cpu):6.1f} us = "
+            f"{2e-5 * statistics.fmean(tick_cpu):5.2f} % of a core at 200 Hz "
+            f"(batch {args.batch}, sleep {args.sleep_ms:g} ms per tick)"
+        )
+
+
+if __name__ == "__main__":
+    main()

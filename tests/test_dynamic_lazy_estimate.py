@@ -126,7 +126,7 @@ def _check_approximation(approx, former: tuple) -> None:  # noqa: ANN001
     assert abs(north_east - covariance[0][1]) <= tol
     assert abs(approx.down_variance - covariance[2][2]) <= tol
     assert abs(approx.tension_n - tension) <= 1e-12 * abs(tension)
-    assert tol <= 1e-9  # and the bound is small: the decisions it leaves open are rare
+    assert tol <= 1e-3 * (north + east + approx.down_variance)  # the step's bound is small
 
 
 def _fields(*values) -> tuple:  # noqa: ANN002
@@ -164,6 +164,7 @@ def test_every_field_is_the_former_per_tick_value_whenever_it_is_read(flight) ->
     est = DynamicTetherEstimator(EstimatorConfig(), vehicle)
     later = DynamicTetherEstimator(EstimatorConfig(), vehicle)  # read after the flight
     expected, kept, statuses = [], [], set()
+    undecided = 0  # ticks whose status the approximation left to the exact values
     for kind, sample in samples:
         e = _feed(est, kind, sample)
         e_later = _feed(later, kind, sample)
@@ -173,6 +174,7 @@ def test_every_field_is_the_former_per_tick_value_whenever_it_is_read(flight) ->
         approx = e.approximate()
         status = e.status  # first the cheap status alone, as the service reads it
         assert status == former[5]
+        undecided += e._source._quick_status() is None
         assert _read(e) == former
         if approx is not None:  # within the rounding it claims
             _check_approximation(approx, former)
@@ -181,6 +183,7 @@ def test_every_field_is_the_former_per_tick_value_whenever_it_is_read(flight) ->
         statuses.add(status)
     assert [_read(e) for e in kept] == expected  # bit for bit, read after 1000s of ticks
     assert {LEARNING, WEAK_PULL} & statuses  # the flights reach the numeric tests
+    assert undecided <= 0.01 * len(expected)  # the approximation decides nearly every tick
 
 
 def _session_output(samples, eager: bool, monkeypatch) -> list:  # noqa: ANN001

@@ -49,18 +49,14 @@ from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterCo
 from tether_companion.estimation.dynamic.imu_batch import ImuBatch
 from tether_companion.estimation.dynamic.initialise import Initialiser
 from tether_companion.estimation.dynamic.member import MemberFilter
+from tether_companion.estimation.dynamic.mixture import MixtureValues, ProcessNoise
 from tether_companion.estimation.dynamic.models import UNDEFINED, ModelConstants
 from tether_companion.estimation.dynamic.noise import (
     accel_measurement_std_mps2,
     process_noise_density,
 )
 from tether_companion.estimation.dynamic.output import DynamicHealth, NavigationEstimate
-from tether_companion.estimation.dynamic.published import (
-    MixtureValues,
-    ProcessNoise,
-    StatusSettings,
-    TickSource,
-)
+from tether_companion.estimation.dynamic.published import StatusSettings, TickSource
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
 from tether_companion.estimation.inputs import InputFeed, range_height_m, range_reading_ok
 from tether_companion.estimation.pipeline import default_thrust_input

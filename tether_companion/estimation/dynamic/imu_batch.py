@@ -47,11 +47,6 @@ _TRANSITION_ENTRIES = np.array(
 )
 """Flat positions in ``Phi`` of ``T`` (position rows, velocity columns), ``B_p`` and ``B_v``
 (position and velocity rows, bias columns)."""
-_POSITION_ROW_ENTRIES = np.array(
-    [0 * _N + 0, 1 * _N + 1, 2 * _N + 2, 0 * _N + 3, 1 * _N + 4, 2 * _N + 5]
-    + [row * _N + col for row in range(3) for col in range(8, 11)]
-)
-"""Flat positions in ``Phi``'s position rows (3, 13) of the identity, ``T`` and ``B_p``."""
 
 
 class BatchStep:
@@ -63,7 +58,6 @@ class BatchStep:
         "_phi",
         "_q",
         "_q_step",
-        "_rows",
         "b_p",
         "b_v",
         "d_p",
@@ -93,7 +87,6 @@ class BatchStep:
         self.b_v = b_v
         """``B_v`` [s], 3x3 row-major."""
         self._phi: FloatArray | None = None
-        self._rows: FloatArray | None = None
         self._q: FloatArray | None = None
         self._q_step = _NO_ARRAY
 
@@ -107,27 +100,6 @@ class BatchStep:
             phi.flat[_TRANSITION_ENTRIES] = (t, t, t, *self.b_p, *self.b_v)
             self._phi = phi
         return phi
-
-    @property
-    def row_sum(self) -> float:
-        """A bound of every row's ``sum_k |Phi_ik|``: ``1 + T + sum |B_p| + sum |B_v|``."""
-        return 1.0 + self.duration_s + sum(map(abs, self.b_p)) + sum(map(abs, self.b_v))
-
-    @property
-    def offset_size(self) -> float:
-        """The largest ``|D_p|`` or ``|D_v|`` component [m, m/s]."""
-        return max(map(abs, (*self.d_p, *self.d_v)))
-
-    @property
-    def position_rows(self) -> FloatArray:
-        """The position rows of ``Phi`` (3, 13) (made once; do not change them)."""
-        rows = self._rows
-        if rows is None:
-            t = self.duration_s
-            rows = np.zeros((3, _N))
-            rows.flat[_POSITION_ROW_ENTRIES] = (1.0, 1.0, 1.0, t, t, t, *self.b_p)
-            self._rows = rows
-        return rows
 
     def noise(self, q: FloatArray) -> FloatArray:
         """``T q`` (13, 13) for the process noise spectral density ``q`` (do not change it)."""

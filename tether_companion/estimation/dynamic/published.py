@@ -11,14 +11,18 @@ fixed step), and computes
 
 * the **exact values** (:meth:`TickSource.values`: every field, with the same arithmetic as
   when they were computed at every tick, so bit for bit the same) only when a field is read;
-* the **status** (:meth:`TickSource.status`) from approximate scalars: the position stepped in
-  Python floats, the published position block ``A P A^T`` from the three position rows ``A``
-  of ``Phi`` only, the tension from the generated model; each comparison with a threshold
-  (slack tension, the pull against the wind's drag, the horizontal standard deviation) is
-  decided on them only when it is clearly on one side (:data:`MARGIN` relative, and for the
-  covariance an absolute bound of its rounding, :meth:`Approximation.covariance_tol`); when it
-  is not, or the ``learning`` test needs the thrust scale and wind's Schur complement, the
-  exact values decide. So the status is always the exact values' status;
+* the **status** (:meth:`TickSource.status`) from approximate scalars: the position and the
+  tension at the stepped state in Python floats, the published position block from the
+  mixture's own (:class:`~tether_companion.estimation.dynamic.mixture.MixtureValues`, made
+  once per member step) with a bound on how far the batch's step moves it
+  (:meth:`Approximation.covariance_tol`: ``|(Phi P Phi^T - P)_ij| <= e_i sd_j + e_j sd_i +
+  e_i e_j``, ``e_i = sum_k |Phi_ik - I_ik| sd_k``, plus the rounding); each comparison with a
+  threshold (slack tension, the pull against the wind's drag, the horizontal standard
+  deviation, the thrust scale and wind's share of it:
+  :meth:`~tether_companion.estimation.dynamic.mixture.HoverAnchor.explains`) is decided on
+  them only when it is clearly on one side (:data:`MARGIN` relative, and the bound); when it
+  is not, the exact values decide. So the status is always the exact values' status, and
+  between two member steps a tick costs no matrix product;
 * the same approximation for the publisher's checks (:meth:`TickSource.approximate`: finite,
   variances within the bound, tension above slack; ``service.health`` decides with the same
   margins and reads the exact values when unsure).
@@ -36,12 +40,17 @@ from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.imu_batch import BatchStep
+from tether_companion.estimation.dynamic.mixture import (
+    HOVER_UNKNOWNS,
+    ROUNDING,
+    MixtureValues,
+    ProcessNoise,
+)
 from tether_companion.estimation.dynamic.models import UNDEFINED, ModelConstants
 from tether_companion.estimation.dynamic.observability import (
     HoverUnknowns,
     assess,
     decide,
-    explains_approximately,
     horizontal_pull_n,
     min_horizontal_pull_n,
     unmodelled_position_covariance,
@@ -56,14 +65,9 @@ MARGIN = 1e-9
 decide (their rounding differs from the exact values' by ~1e-16 relative)."""
 FINITE_BOUND = 1e150
 """Approximate magnitudes below this are the rounding of finite exact values."""
-ROUNDING = 1e-12
-"""Bound on the approximate covariance's rounding, relative to its terms' magnitude (the
-products of 13 terms differ from the exact ones by a few 1e-16 of it)."""
 UNKNOWN_VARIANCE = 1e6
 """Variance reported for every component while there is no state [SI units^2]."""
-_HOVER_UNKNOWNS = (state.SCALE, state.WIND.start, state.WIND.start + 1)
-"""State indices of the thrust scale and the wind (what a steady hover does not observe)."""
-_HOVER_LIST = list(_HOVER_UNKNOWNS)
+_HOVER_LIST = list(HOVER_UNKNOWNS)
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,40 +80,6 @@ class StatusSettings:
     winch_length_noise_std_m: float
     pull_per_wind_n_s_per_m: float
     wind_std_mps: float
-
-
-class MixtureValues:
-    """The mixture's mean and covariance with what every tick between two member steps reads
-    of them as Python floats (made once per mixture: the members replace their arrays when
-    they step)."""
-
-    __slots__ = ("_rows", "finite", "largest_sd", "largest_value", "p", "sd", "x", "x_values")
-
-    def __init__(self, x: FloatArray, p: FloatArray) -> None:
-        self.x = x
-        self.p = p
-        self.x_values: list[float] = x.tolist()
-        diagonal = p.diagonal().tolist()
-        self.finite = (
-            math.isfinite(sum(self.x_values))
-            and bool(np.isfinite(p).all())
-            and min(diagonal) >= 0.0
-        )
-        """Whether the arrays are finite with a diagonal >= 0 (else: no approximation)."""
-        self.sd = [math.sqrt(v) if v >= 0.0 else math.nan for v in diagonal]
-        """Standard deviations [SI units]: ``|P_ij| <= sd_i sd_j`` bounds the terms."""
-        self.largest_sd = max(self.sd)
-        self.largest_value = max(max(self.x_values), -min(self.x_values))
-        """The largest ``|x_i|`` [SI units]."""
-        self._rows: list[list[float]] | None = None
-
-    @property
-    def rows(self) -> list[list[float]]:
-        """The covariance's rows as floats (made on first use)."""
-        rows = self._rows
-        if rows is None:
-            rows = self._rows = self.p.tolist()
-        return rows
 
 
 class TickSource:
@@ -141,8 +111,8 @@ class TickSource:
     __slots__ = (
         "_approximation",
         "_exact",
-        "_largest",
-        "_rows_p",
+        "_row_scale",
+        "_spread",
         "_status",
         "constants",
         "height_excess_m2",
@@ -188,9 +158,10 @@ class TickSource:
         self._exact: ExactValues | None = None
         self._status: str | None = None
         self._approximation: Approximation | None = None
-        self._rows_p: list[list[float]] = []
-        """The position rows of ``Phi P`` (3x13) (of ``P`` without a step)."""
-        self._largest = 0.0
+        self._spread = 0.0
+        """``max_i sum_k |E_ik| sd_k`` over the horizontal position rows of ``E = Phi - I``
+        [m]."""
+        self._row_scale = 0.0
         """A bound of ``sum_k |Phi_ik| sd_k`` over the rows ``i`` of ``Phi`` [SI units]."""
 
     # ------------------------------------------------------------------ exact
@@ -313,60 +284,31 @@ class TickSource:
     def _explained(self) -> bool | None:
         """Whether the thrust scale and the wind explain the horizontal covariance
         (:meth:`~tether_companion.estimation.dynamic.observability.HoverUnknowns.explains`):
-        without numbers while several thrust-scale hypotheses run, else from the
-        approximation (None: only the exact values tell)."""
+        without numbers while several thrust-scale hypotheses run, else from the mixture's
+        (None: only the exact values tell)."""
         if self.hypotheses > 1:
             return True
         approx = self._approximation
         mixture = self.mixture
         assert approx is not None and mixture is not None
-        sd, t = mixture.sd, approx.duration_s
-        p = mixture.rows
-        q = self.noise.diagonal
-        s, n, e = _HOVER_UNKNOWNS
-        unknowns = [
-            [p[s][s] + t * q[s], p[s][n], p[s][e]],
-            [p[n][s], p[n][n] + t * q[n], p[n][e]],
-            [p[e][s], p[e][n], p[e][e] + t * q[e]],
-        ]
-        rows = self._rows_p
-        cross = [[rows[0][s], rows[0][n], rows[0][e]], [rows[1][s], rows[1][n], rows[1][e]]]
-        sd_unknowns = max(sd[s], sd[n], sd[e])
-        noise = self.noise
-        return explains_approximately(
+        hover = mixture.hover()
+        if hover is None:
+            return None
+        return hover.explains(
             approx.horizontal,
-            unknowns,
-            cross,
+            approx.covariance_tol,
+            self._spread,
+            approx.duration_s,
+            self.noise,
+            self._row_scale,
             self.settings.max_horizontal_std_m,
-            horizontal_tol=approx.covariance_tol,
-            covariance_tol=ROUNDING * (sd_unknowns * sd_unknowns + t * noise.largest),
-            cross_tol=ROUNDING * self._largest * sd_unknowns,
-            margin=MARGIN,
+            MARGIN,
         )
 
     # ------------------------------------------------------------------ approximation
-    def _stepped(self) -> list[float]:
-        """The state's values stepped over the batch, in Python floats."""
-        mixture = self.mixture
-        assert mixture is not None
-        x = mixture.x_values
-        step = self.step
-        if step is None:
-            return x
-        t, d_p, d_v, b_p, b_v = step.duration_s, step.d_p, step.d_v, step.b_p, step.b_v
-        b0, b1, b2 = x[8], x[9], x[10]
-        out = list(x)
-        for i in range(3):
-            k = 3 * i
-            bias_p = b_p[k] * b0 + b_p[k + 1] * b1 + b_p[k + 2] * b2
-            bias_v = b_v[k] * b0 + b_v[k + 1] * b1 + b_v[k + 2] * b2
-            out[i] = x[i] + t * x[3 + i] + d_p[i] + bias_p
-            out[3 + i] = x[3 + i] + d_v[i] + bias_v
-        return out
-
     def approximate(self) -> Approximation | None:
         """The published position, its covariance and the tension in Python floats, with
-        bounds of their rounding; None without a state or with non-finite arrays (then only
+        bounds of their error; None without a state or with non-finite arrays (then only
         the exact values tell)."""
         approx = self._approximation
         if approx is not None:
@@ -374,25 +316,46 @@ class TickSource:
         mixture = self.mixture
         if mixture is None or not mixture.finite:
             return None
-        x = self._stepped()
-        tension, jac = _tension_and_jacobian(self.constants, x)
-        p, step, noise = mixture.p, self.step, self.noise
+        x = mixture.x_values
+        step, noise = self.step, self.noise
+        north, north_east, east, down = mixture.position_block
+        sd = mixture.sd
         if step is None:
-            t, row_sum, offset = 0.0, 1.0, 0.0
-            ap = self._rows_p = p[:3].tolist()
-            north, north_east = ap[0][0], ap[0][1]
-            east, down = ap[1][1], ap[2][2]
+            t = spread = moved = offset = 0.0
+            row_sum = 1.0
         else:
-            t, row_sum, offset = step.duration_s, step.row_sum, step.offset_size
-            ap = self._rows_p = (step.position_rows @ p).tolist()  # rows of Phi P
-            b = step.b_p
+            t, d_p, d_v, b, b_v = step.duration_s, step.d_p, step.d_v, step.b_p, step.b_v
+            b0, b1, b2 = x[8], x[9], x[10]
+            v0, v1, v2 = x[3], x[4], x[5]
+            x = list(x)  # stepped: Phi x + (D_p, D_v, 0...)
+            x[0] = x[0] + t * v0 + d_p[0] + (b[0] * b0 + b[1] * b1 + b[2] * b2)
+            x[1] = x[1] + t * v1 + d_p[1] + (b[3] * b0 + b[4] * b1 + b[5] * b2)
+            x[2] = x[2] + t * v2 + d_p[2] + (b[6] * b0 + b[7] * b1 + b[8] * b2)
+            x[3] = v0 + d_v[0] + (b_v[0] * b0 + b_v[1] * b1 + b_v[2] * b2)
+            x[4] = v1 + d_v[1] + (b_v[3] * b0 + b_v[4] * b1 + b_v[5] * b2)
+            x[5] = v2 + d_v[2] + (b_v[6] * b0 + b_v[7] * b1 + b_v[8] * b2)
+            a0, a1, a2, a3, a4, a5, a6, a7, a8 = map(abs, b)
+            s8, s9, s10 = sd[8], sd[9], sd[10]
+            # Phi P Phi^T - P = the velocity terms (exact below) + the bias terms, whose
+            # entries (i, j) are within f_i sd_j + f_j sd_i + T (v_i f_j + f_i v_j) + f_i f_j,
+            # f_i = sum_m |B_p,im| sd_8+m (Cauchy-Schwarz: |P_kl| <= sd_k sd_l)
+            f0 = a0 * s8 + a1 * s9 + a2 * s10
+            f1 = a3 * s8 + a4 * s9 + a5 * s10
+            f2 = a6 * s8 + a7 * s9 + a8 * s10
+            spread = max(f0, f1)
+            f = max(spread, f2)
+            moved = f * (2.0 * (mixture.position_sd + t * mixture.velocity_sd) + f)
+            row_sum = 1.0 + t + (a0 + a1 + a2 + a3 + a4 + a5 + a6 + a7 + a8)
+            row_sum += sum(map(abs, b_v))
+            offset = max(map(abs, (*d_p, *d_v)))
             q = noise.diagonal
-            # (Phi P Phi^T)_ij = (Phi P)_i . Phi_j, Phi_j = e_j + T e_(3+j) + B_p,j on the bias
-            a0, a1, a2 = ap
-            north = a0[0] + t * a0[3] + b[0] * a0[8] + b[1] * a0[9] + b[2] * a0[10] + t * q[0]
-            north_east = a0[1] + t * a0[4] + b[3] * a0[8] + b[4] * a0[9] + b[5] * a0[10]
-            east = a1[1] + t * a1[4] + b[3] * a1[8] + b[4] * a1[9] + b[5] * a1[10] + t * q[1]
-            down = a2[2] + t * a2[5] + b[6] * a2[8] + b[7] * a2[9] + b[8] * a2[10] + t * q[2]
+            ln, lne, le, ld = mixture.position_linear
+            qn, qne, qe, qd = mixture.position_quadratic
+            north += t * (ln + t * qn) + t * q[0]
+            north_east += t * (lne + t * qne)
+            east += t * (le + t * qe) + t * q[1]
+            down += t * (ld + t * qd) + t * q[2]
+        tension, jac = _tension_and_jacobian(self.constants, x)
         # every row of Phi has sum_k |Phi_ik| <= row_sum, so with |P_kl| <= sd_k sd_l
         # (Cauchy-Schwarz) the terms of (Phi P Phi^T)_ij are below (row_sum max sd)^2, and those
         # of the stepped state below row_sum max |x| + |(D_p, D_v)|
@@ -412,7 +375,8 @@ class TickSource:
         north_east += unmodelled[0][1]
         east += unmodelled[1][1]
         down += excess + unmodelled[2][2]
-        self._largest = largest
+        self._spread = spread
+        self._row_scale = largest
         scale = largest * largest + t * noise.largest
         scale += unmodelled[0][0] + unmodelled[1][1] + unmodelled[2][2] + excess
         # the tension's variance j^T (Phi P Phi^T + T Q) j, bounded the same way
@@ -431,21 +395,9 @@ class TickSource:
             tension,
             finite,
             ROUNDING * position_scale,
-            ROUNDING * scale if finite else math.inf,
+            ROUNDING * scale + (1.0 + ROUNDING) * moved if finite else math.inf,
         )
         return approx
-
-
-class ProcessNoise:
-    """The process noise spectral density ``q`` (13, 13, diagonal) with its diagonal as
-    floats and their largest (made once per filter)."""
-
-    __slots__ = ("diagonal", "largest", "matrix")
-
-    def __init__(self, matrix: FloatArray) -> None:
-        self.matrix = matrix
-        self.diagonal: list[float] = np.diagonal(matrix).tolist()
-        self.largest = max(map(abs, self.diagonal))
 
 
 def _tension_and_jacobian(

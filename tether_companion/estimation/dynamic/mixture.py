@@ -57,14 +57,12 @@ class MixtureValues:
 
     __slots__ = (
         "_hover",
+        "_position",
         "_rows",
         "finite",
         "largest_sd",
         "largest_value",
         "p",
-        "position_block",
-        "position_linear",
-        "position_quadratic",
         "position_sd",
         "sd",
         "velocity_sd",
@@ -92,21 +90,28 @@ class MixtureValues:
         """The largest ``|x_i|`` [SI units]."""
         self.velocity_sd = max(sd[3], sd[4], sd[5])
         """The largest velocity standard deviation [m/s]."""
-        pv = p[:6, :6].tolist()
-        self.position_block = (pv[0][0], pv[0][1], pv[1][1], pv[2][2])
-        """``P``'s north, north-east, east and down position entries [m^2]."""
-        self.position_linear = (
-            pv[0][3] + pv[3][0],
-            pv[0][4] + pv[3][1],
-            pv[1][4] + pv[4][1],
-            pv[2][5] + pv[5][2],
-        )
-        """The same entries' change per second of a step's velocity terms [m^2/s]:
-        ``P_i,3+j + P_3+i,j``."""
-        self.position_quadratic = (pv[3][3], pv[3][4], pv[4][4], pv[5][5])
-        """And per second squared: ``P_3+i,3+j`` [m^2/s^2]."""
         self._rows: list[list[float]] | None = None
         self._hover: HoverAnchor | None | bool = False
+        self._position: tuple[tuple[float, ...], ...] | None = None
+
+    def position_terms(self) -> tuple[tuple[float, ...], ...]:
+        """``P``'s north, north-east, east and down position entries [m^2]; the same entries'
+        change per second of a batch step's velocity terms, ``P_i,3+j + P_3+i,j`` [m^2/s];
+        and per second squared, ``P_3+i,3+j`` [m^2/s^2] (made on first use)."""
+        terms = self._position
+        if terms is None:
+            pv = self.p[:6, :6].tolist()
+            terms = self._position = (
+                (pv[0][0], pv[0][1], pv[1][1], pv[2][2]),
+                (
+                    pv[0][3] + pv[3][0],
+                    pv[0][4] + pv[3][1],
+                    pv[1][4] + pv[4][1],
+                    pv[2][5] + pv[5][2],
+                ),
+                (pv[3][3], pv[3][4], pv[4][4], pv[5][5]),
+            )
+        return terms
 
     @property
     def rows(self) -> list[list[float]]:

@@ -318,7 +318,8 @@ class TickSource:
             return None
         x = mixture.x_values
         step, noise = self.step, self.noise
-        north, north_east, east, down = mixture.position_block
+        block, linear, quadratic = mixture.position_terms()
+        north, north_east, east, down = block
         sd = mixture.sd
         if step is None:
             t = spread = moved = offset = 0.0
@@ -349,8 +350,8 @@ class TickSource:
             row_sum += sum(map(abs, b_v))
             offset = max(map(abs, (*d_p, *d_v)))
             q = noise.diagonal
-            ln, lne, le, ld = mixture.position_linear
-            qn, qne, qe, qd = mixture.position_quadratic
+            ln, lne, le, ld = linear
+            qn, qne, qe, qd = quadratic
             north += t * (ln + t * qn) + t * q[0]
             north_east += t * (lne + t * qne)
             east += t * (le + t * qe) + t * q[1]

@@ -72,7 +72,7 @@ def _former_estimate(est: DynamicTetherEstimator, source) -> tuple:  # noqa: ANN
         published[:3, :3] += unmodelled_position_covariance(
             x[state.POSITION],
             tension,
-            dyn.unmodelled_force_std_n,
+            est.bearing.force_std_n,  # the unmodelled force, widened by the bearing window
             dyn.winch_length_noise_std_m if est.health.winch_fused else 0.0,
         )
     status, reason = assess(

@@ -128,6 +128,29 @@ class DynamicFilterConfig:
         " causes, |p| sigma / T across the cable, is added to the published position"
         " covariance [N]",
     )
+    bearing_position_walk_m2ps: float = spec(
+        0.1,
+        minimum=0.0,
+        doc="the published position covariance is kept at least as wide across the cable as"
+        " a small filter of the horizontal force's constant offsets allows (a steady hover"
+        " does not tell the bearing from a cross wind; estimation/dynamic/consistency.py):"
+        " the random walk of its position offset, how far the estimate's positions seconds"
+        " apart may be off relative to each other; 0: off [m^2/s]",
+    )
+    bearing_wind_walk_m2ps3: float = spec(
+        0.3,
+        minimum=0.0,
+        doc="that small filter's wind random walk: how fast the cross wind changes that a"
+        " turn of the bearing must beat (the gusty hover's turbulence is 1.3 as a random walk;"
+        " chosen on seeds 1-5 of the realistic scenarios) [m^2/s^3]",
+    )
+    unmodelled_force_correlation_s: float = spec(
+        1.0,
+        exclusive_minimum=0.0,
+        doc="time over which the unmodelled horizontal force stays correlated: the bearing"
+        " window counts one independent force sample of unmodelled_force_std_n per this"
+        " time [s]",
+    )
     min_pull_over_wind_drag: float = spec(
         4.0,
         minimum=0.0,

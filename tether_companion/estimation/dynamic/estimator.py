@@ -38,7 +38,7 @@ from tether_companion.estimation.alignment import (
     aligner_for,
 )
 from tether_companion.estimation.config import EstimatorConfig
-from tether_companion.estimation.dynamic import generated
+from tether_companion.estimation.dynamic import generated, state
 from tether_companion.estimation.dynamic.aid.accel import NEAR_ANCHOR, ON_GROUND, AccelAid
 from tether_companion.estimation.dynamic.aid.cable_angle import CableAngleAid
 from tether_companion.estimation.dynamic.aid.load_cell import LoadCellAid
@@ -46,6 +46,7 @@ from tether_companion.estimation.dynamic.aid.rangefinder import RangefinderAid
 from tether_companion.estimation.dynamic.aid.winch import WinchAid
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterConfig, drag_per_s
+from tether_companion.estimation.dynamic.consistency import BearingWindow
 from tether_companion.estimation.dynamic.imu_batch import ImuBatch
 from tether_companion.estimation.dynamic.initialise import Initialiser
 from tether_companion.estimation.dynamic.member import MemberFilter
@@ -133,7 +134,6 @@ class DynamicTetherEstimator(InputFeed):
         self._status_settings = StatusSettings(
             slack_tension_n=dynamic.slack_tension_n,
             max_horizontal_std_m=dynamic.max_horizontal_std_m,
-            unmodelled_force_std_n=dynamic.unmodelled_force_std_n,
             winch_length_noise_std_m=dynamic.winch_length_noise_std_m,
             pull_per_wind_n_s_per_m=(
                 dynamic.min_pull_over_wind_drag * vehicle.mass_kg * self.constants.drag_per_s
@@ -153,6 +153,14 @@ class DynamicTetherEstimator(InputFeed):
         self.load_cell = LoadCellAid(dynamic.load_cell_noise_std_n)
         self.winch = WinchAid(dynamic.winch_length_noise_std_m, dynamic.slack_tension_n)
         self.cable_angle = CableAngleAid(dynamic.slack_tension_n)
+        self.bearing = BearingWindow(
+            vehicle.mass_kg * self.constants.drag_per_s,
+            dynamic.initial.wind_std_mps,
+            dynamic.unmodelled_force_std_n,
+            dynamic.unmodelled_force_correlation_s,
+            dynamic.bearing_position_walk_m2ps,
+            dynamic.bearing_wind_walk_m2ps3,
+        )
         self.bank: FilterBank | None = None
         self._initialiser = self._new_initialiser()
         self._time_s = math.nan
@@ -234,6 +242,11 @@ class DynamicTetherEstimator(InputFeed):
                 self.bank, self.constants, elevation_rad, azimuth_rad, self._time_s, noise_std_rad
             ):
                 self.health.cable_angle_fused += 1
+                x = self.bank.best.x_values()
+                # the azimuth's noise is sigma / cos(elevation), across the cable times the span
+                self.bearing.add_bearing(
+                    math.hypot(x[0], x[1]) * noise_std_rad / max(math.cos(elevation_rad), 0.05)
+                )
 
     def on_range(self, sample: RangeSample) -> None:
         """A downward rangefinder reading along the body z axis [m]: the height above the ground
@@ -317,6 +330,8 @@ class DynamicTetherEstimator(InputFeed):
             if fusion_tick:
                 accel_fused = self._fuse_accel(inputs, force, on_ground, t)
                 self._ticks_since_fusion = 0
+                if accel_fused:
+                    self._sample_bearing(t)
             self._inputs = [*inputs[:9], *force] if self._inertial else inputs
         self._check_divergence(t, fusion_tick)
         return self._estimate(accel_fused, stale, on_ground)
@@ -416,6 +431,14 @@ class DynamicTetherEstimator(InputFeed):
             self._gated_since_s = t
         return fused
 
+    def _sample_bearing(self, t: float) -> None:
+        """The mixture after a force-balance fusion into the bearing window."""
+        bank = self.bank
+        if bank is None or not self.bearing.enabled:
+            return
+        x, p = bank.mixture()
+        self.bearing.add(t, x[:3].tolist(), float(x[state.TENSION]), (p[0, 0], p[0, 1], p[1, 1]))
+
     def _check_divergence(self, t: float, fusion_tick: bool) -> None:
         bank = self.bank
         if bank is None:
@@ -435,6 +458,7 @@ class DynamicTetherEstimator(InputFeed):
         """Drop the state and initialise again from fresh data; counted in reset_counter."""
         self.bank = None
         self._initialiser = self._new_initialiser()
+        self.bearing.clear()
         self._resets += 1
         self.health.resets = self._resets
         self._reset_reason = f"filter restarted: {reason}"
@@ -461,6 +485,7 @@ class DynamicTetherEstimator(InputFeed):
             else self._status_settings,
             self.rangefinder.excess.variance,
             bool(self.health.winch_fused),
+            self.bearing.force_std_n,
             0 if bank is None else len(bank.filters),
             None if bank is not None else self._initialiser.reason,
             reset_reason,

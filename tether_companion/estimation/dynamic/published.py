@@ -76,7 +76,6 @@ class StatusSettings:
 
     slack_tension_n: float
     max_horizontal_std_m: float
-    unmodelled_force_std_n: float
     winch_length_noise_std_m: float
     pull_per_wind_n_s_per_m: float
     wind_std_mps: float
@@ -102,6 +101,9 @@ class TickSource:
         The rangefinder innovations' excess variance at the tick [m^2].
     winch_fused
         Whether a winch length was fused so far (its noise then stays along the cable).
+    force_std_n
+        The unmodelled horizontal force's standard deviation at the tick [N]
+        (:class:`~tether_companion.estimation.dynamic.consistency.BearingWindow`).
     hypotheses
         Members of the thrust-scale bank running.
     initialised_reason, reset_reason, on_ground, inputs_stale
@@ -115,6 +117,7 @@ class TickSource:
         "_spread",
         "_status",
         "constants",
+        "force_std_n",
         "height_excess_m2",
         "hypotheses",
         "initialised_reason",
@@ -137,6 +140,7 @@ class TickSource:
         settings: StatusSettings,
         height_excess_m2: float,
         winch_fused: bool,
+        force_std_n: float,
         hypotheses: int,
         initialised_reason: str | None,
         reset_reason: str | None,
@@ -150,6 +154,7 @@ class TickSource:
         self.settings = settings
         self.height_excess_m2 = height_excess_m2
         self.winch_fused = winch_fused
+        self.force_std_n = force_std_n
         self.hypotheses = hypotheses
         self.initialised_reason = initialised_reason
         self.reset_reason = reset_reason
@@ -191,7 +196,7 @@ class TickSource:
             published[:3, :3] += unmodelled_position_covariance(
                 x[state.POSITION],
                 tension,
-                settings.unmodelled_force_std_n,
+                self.force_std_n,
                 settings.winch_length_noise_std_m if self.winch_fused else 0.0,
             )
         status, reason = assess(
@@ -368,7 +373,7 @@ class TickSource:
             x[1],
             x[2],
             tension,
-            settings.unmodelled_force_std_n,
+            self.force_std_n,
             settings.winch_length_noise_std_m if self.winch_fused else 0.0,
         )
         excess = self.height_excess_m2

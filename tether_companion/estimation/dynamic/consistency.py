@@ -1,0 +1,190 @@
+"""What the last seconds of flight could tell about the bearing: the published covariance kept
+at least as wide as the window's information allows (:class:`BearingWindow`).
+
+The accelerometer reads the cable's horizontal pull ``-H u`` (``u`` the horizontal unit
+vector from the anchor to the drone) plus the rotor drag ``m mu (w - v)`` of the wind ``w``.
+A constant error ``d`` of the position across the cable turns the pull by ``H d / rho``
+(``rho`` the horizontal range), which a constant cross wind ``m mu dw = H d / rho`` hides
+exactly: at a hover's equilibrium the pair is a null direction of the linearised model (rank
+11 of 13, ``tests/test_dynamic_hover_observability.py``). It is told apart only when the
+bearing turns (the pull turns with the drone, the wind's drag does not), so what the data
+say about the bearing is set by how far the drone swept round the anchor within the time the
+wind stays the same, and by the wind's prior. The EKF, linearised at its own moving
+estimate, gains information along that direction that the data do not carry (its
+covariance shrinks in a steady hover where the bearing is as unknown as the cross wind:
+gusty hover with the winch, 37-46 % of the published ticks beyond 3 sigma).
+
+:class:`BearingWindow` computes that information apart from the filter: the constant offsets
+``theta = (d_n, d_e, dH, dw_n, dw_e)`` (position [m], horizontal pull [N], wind [m/s]) seen
+through the horizontal force at the estimated positions of the last seconds (the INS keeps
+their relative positions), each sample worth ``dt / correlation_s`` of an independent
+force sample of ``force_std_n`` (the unmodelled force is correlated over about a second),
+with exponential forgetting over ``memory_s`` (the wind changes), the wind's prior
+standard deviation, and the filter's own radial variance (the range is not this module's
+question). The variance across the cable it leaves, less what the published covariance
+already holds there, is returned as a horizontal force standard deviation, which the
+published estimate adds through
+:func:`~tether_companion.estimation.dynamic.observability.unmodelled_position_covariance`
+(the same ``|p| (I - u u^T) dF / T`` the unmodelled force already uses). The filter's state
+and covariance are untouched. Pure.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+_PARAMETERS = 5
+"""Offsets of (north, east) position [m], horizontal pull [N], (north, east) wind [m/s]."""
+LOW_PULL_SIGMAS = 2.0
+"""The window's rows are taken at the pull this many of its standard deviations below the
+filter's (at least half of it)."""
+_PULL_PRIOR_N2 = 100.0
+"""Prior variance of the horizontal pull's offset [N^2] (left to the data)."""
+
+
+class BearingWindow:
+    """A small Kalman filter of the constant offsets ``theta`` seen through the horizontal
+    force: what the recent flight tells about the bearing.
+
+    Parameters
+    ----------
+    drag_n_s_per_m
+        Rotor drag per unit airspeed ``m mu`` [N s/m] (0: the wind does not move the pull,
+        nothing is added).
+    wind_std_mps
+        The wind's prior standard deviation [m/s].
+    force_std_n
+        Standard deviation of one independent sample of the unmodelled horizontal force [N].
+    correlation_s
+        Time over which that force stays correlated [s] (samples this far apart count as
+        independent).
+    position_walk_m2ps
+        Random walk of the position offset [m^2/s]: how far the estimate's positions a few
+        seconds apart may be off relative to each other (the INS's drift between them); a
+        turn of the bearing tells the wind only when it is larger than that (0 or below: the
+        window is off and nothing is added).
+    wind_walk_m2ps3
+        Random walk of the wind [m^2/s^3].
+    sample_interval_s
+        Least time between two samples taken into the window [s].
+    """
+
+    def __init__(
+        self,
+        drag_n_s_per_m: float,
+        wind_std_mps: float,
+        force_std_n: float,
+        correlation_s: float,
+        position_walk_m2ps: float,
+        wind_walk_m2ps3: float,
+        sample_interval_s: float = 0.25,
+    ) -> None:
+        self._drag = drag_n_s_per_m
+        self._wind_variance = wind_std_mps * wind_std_mps
+        self._force_variance = force_std_n * force_std_n
+        self._correlation_s = correlation_s
+        self._walk = np.array(
+            [position_walk_m2ps, position_walk_m2ps, 0.0, wind_walk_m2ps3, wind_walk_m2ps3]
+        )
+        self._interval_s = sample_interval_s
+        self.enabled = position_walk_m2ps > 0.0 and drag_n_s_per_m > 0.0 and force_std_n > 0.0
+        self._covariance = np.zeros((_PARAMETERS, _PARAMETERS))
+        self._last_s = math.nan
+        self._bearing = (1.0, 0.0)
+        self._base_std_n = force_std_n
+        self.force_std_n = force_std_n
+        """The unmodelled horizontal force standard deviation [N] the published covariance
+        takes: ``force_std_n``, widened until it holds the window's variance across the
+        cable."""
+
+    def clear(self) -> None:
+        """Forget every sample (a restart)."""
+        self._last_s = math.nan
+        self.force_std_n = self._base_std_n
+
+    def add_bearing(self, across_std_m: float) -> None:
+        """A measurement of the position across the cable of standard deviation
+        ``across_std_m`` [m] (a ground-station cable angle's azimuth times the horizontal
+        range) at the last sample's bearing; ignored before the first sample."""
+        if not self.enabled or math.isnan(self._last_s) or not across_std_m > 0.0:
+            return
+        un, ue = self._bearing
+        row = np.array([-ue, un, 0.0, 0.0, 0.0])
+        p = self._covariance
+        ph = p @ row
+        p -= np.outer(ph, ph) / (row @ ph + across_std_m * across_std_m)
+        p[:] = 0.5 * (p + p.T)
+
+    def add(
+        self,
+        time_s: float,
+        position_ned_m: list[float],
+        tension_n: float,
+        filter_horizontal_m2: tuple[float, float, float],
+    ) -> None:
+        """One sample of the estimate at ``time_s`` [s]: its position from the anchor (NED
+        [m]), tension at the drone [N] and the filter's horizontal position covariance
+        ``(nn, ne, ee)`` [m^2]. Updates :attr:`force_std_n`; samples closer than
+        ``sample_interval_s`` to the last are ignored."""
+        if not self.enabled:
+            return
+        last = self._last_s
+        if not math.isnan(last) and time_s - last < self._interval_s:
+            return
+        north, east, down = position_ned_m
+        rho = math.hypot(north, east)
+        distance = math.sqrt(rho * rho + down * down)
+        if not (rho > 0.0 and tension_n > 0.0 and math.isfinite(distance)):
+            self.force_std_n = self._base_std_n
+            return
+        nn, ne, ee = filter_horizontal_m2
+        un, ue = north / rho, east / rho
+        self._bearing = (un, ue)
+        radial = max(un * un * nn + 2.0 * un * ue * ne + ue * ue * ee, 1e-12)
+        p = self._covariance
+        if math.isnan(last):  # the prior: the filter's position, the wind's prior, any pull
+            dt = self._interval_s
+            p[:] = 0.0
+            p[:2, :2] = ((nn, ne), (ne, ee))
+            p[2, 2] = _PULL_PRIOR_N2
+            p[3, 3] = p[4, 4] = self._wind_variance
+        else:
+            dt = time_s - last
+            p[np.diag_indices(_PARAMETERS)] += self._walk * dt
+        self._last_s = time_s
+        # the horizontal pull over the horizontal range, at the least pull the window does
+        # not exclude (the bearing's turn per unit of force is larger at a smaller pull)
+        least = max(
+            tension_n - LOW_PULL_SIGMAS * math.sqrt(p[2, 2]) * distance / rho, 0.5 * tension_n
+        )
+        k = least / distance
+        # rows of d(horizontal force)/d(theta): -(H / rho)(I - u u^T), -u, m mu I; and the
+        # filter's range (the radial offset)
+        rows = np.array(
+            [
+                [-k * (1.0 - un * un), k * un * ue, -un, self._drag, 0.0],
+                [k * ue * un, -k * (1.0 - ue * ue), -ue, 0.0, self._drag],
+                [un, ue, 0.0, 0.0, 0.0],
+            ]
+        )
+        force = self._force_variance * self._correlation_s / dt
+        noise = np.diag((force, force, radial))
+        ph = p @ rows.T
+        gain = np.linalg.solve(rows @ ph + noise, ph.T).T
+        p -= gain @ ph.T
+        p[:] = 0.5 * (p + p.T)
+        across_axis = np.array([-ue, un, 0.0, 0.0, 0.0])
+        window = float(across_axis @ p @ across_axis)
+        # across the cable the published covariance holds the filter's and the unmodelled
+        # force's |p| sigma / T
+        gain_m_per_n = distance / tension_n
+        base = self._base_std_n
+        across = ue * ue * nn - 2.0 * un * ue * ne + un * un * ee + (gain_m_per_n * base) ** 2
+        missing = window - across
+        extra2 = missing / (gain_m_per_n * gain_m_per_n) if missing > 0.0 else 0.0
+        self.force_std_n = math.sqrt(base * base + extra2)

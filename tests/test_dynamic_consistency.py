@@ -81,3 +81,17 @@ def test_off_without_drag_or_walk_and_forgotten_on_clear() -> None:
     assert window.force_std_n > BASE
     window.clear()
     assert window.force_std_n == BASE
+
+
+def test_a_cable_angle_tells_the_bearing_in_a_hover() -> None:
+    """With a ground-station azimuth (0.02 rad at 4 m: 0.08 m across the cable, 10 Hz) the
+    hover's bearing is measured: the window adds nothing to the filter's 0.2 m."""
+    window = _window()
+    hover = [4.0, 0.0, -2.5]
+    t = 0.0
+    while t <= 30.0:
+        window.add(t, hover, 4.0, (0.04, 0.0, 0.04))
+        if round(t / 0.02) % 5 == 0:
+            window.add_bearing(4.0 * 0.02)
+        t += 0.02
+    assert window.force_std_n == BASE

@@ -51,7 +51,6 @@ def _case(rng: np.random.Generator) -> tuple[TickSource, TickSource]:
     settings = StatusSettings(
         slack_tension_n=0.2,
         max_horizontal_std_m=horizontal_sd * float(rng.uniform(0.3, 1.3)),
-        unmodelled_force_std_n=0.2,
         winch_length_noise_std_m=0.05,
         pull_per_wind_n_s_per_m=float(rng.uniform(0.0, 0.3)),
         wind_std_mps=1.0,
@@ -60,7 +59,7 @@ def _case(rng: np.random.Generator) -> tuple[TickSource, TickSource]:
 
     def source() -> TickSource:
         return TickSource(MixtureValues(x, p), step, noise, constants, settings,
-                          0.01, False, 1, None, None, False, False)  # fmt: skip
+                          0.01, False, 0.2, 1, None, None, False, False)  # fmt: skip
 
     return source(), source()
 

@@ -384,50 +384,6 @@ def _largest_std_values(a: float, b: float, c: float) -> float:
     return math.sqrt(max(largest, 0.0))
 
 
-def explains_approximately(
-    horizontal_m2: tuple[float, float, float],
-    covariance: list[list[float]],
-    cross: list[list[float]],
-    max_std_m: float,
-    *,
-    horizontal_tol: float,
-    covariance_tol: float,
-    cross_tol: float,
-    margin: float,
-) -> bool | None:
-    """:meth:`HoverUnknowns.explains` (one hypothesis) on approximate values: the horizontal
-    covariance's entries (north-north, north-east, east-east) [m^2], the unknowns' covariance
-    (3x3) and their cross-covariance with the horizontal position (2x3), each entry within
-    ``*_tol`` of the exact one. The exact values' answer, or None when they could give
-    another (the bound through ``C``'s smallest eigenvalue, at least ``4 det C / tr(C)^2``).
-    """
-    (c00, c01, c02), (_, c11, c12), (_, _, c22) = covariance
-    trace = c00 + c11 + c22
-    det = c00 * (c11 * c22 - c12 * c12) - c01 * (c01 * c22 - c12 * c02)
-    det += c02 * (c01 * c12 - c11 * c02)
-    smallest = 4.0 * det / (trace * trace) if trace > 0.0 else 0.0
-    if not smallest > 1e3 * (3.0 * covariance_tol + 1e-12 * trace):  # det's own rounding
-        return None  # C nearly singular: the rounding's effect is not bounded
-    explained = _explained_2x2(covariance, cross)
-    if explained is None:
-        return None
-    a, b, c = horizontal_m2
-    e0, e1, e2 = explained
-    y_sq = max(e0 + e2, 0.0)  # |Y|^2 <= tr(Y^T Y), Y = L^-1 X^T
-    # first order: |d(X C^-1 X^T)| <= 2 |dX| |Y| / sqrt(l_min) + |Y|^2 |dC| / l_min (doubled)
-    moved = 2.0 * (
-        2.0 * math.sqrt(6.0) * cross_tol * math.sqrt(y_sq / smallest)
-        + y_sq * 3.0 * covariance_tol / smallest
-    )
-    std = _largest_std_values(a - e0, b - e1, c - e2)
-    bound_sq = max_std_m * max_std_m
-    tol = 2.0 * (moved + 2.0 * horizontal_tol)
-    tol += margin * (abs(a) + abs(b) + abs(c) + y_sq + bound_sq)
-    if not abs(std * std - bound_sq) > tol:
-        return None
-    return std <= max_std_m
-
-
 def _explained_2x2(
     covariance: list[list[float]], cross: list[list[float]]
 ) -> tuple[float, float, float] | None:

@@ -202,8 +202,8 @@ class Publisher:
         self._next_tension_s = -math.inf
         self._next_filtered_s = -math.inf
         self._last_sent_s = -math.inf
-        self._last_sent_position: FloatArray | None = None
-        self._last_ok_position: FloatArray | None = None
+        self._last_sent_position: tuple[float, float, float] | None = None
+        self._last_ok_position: tuple[float, float, float] | None = None
         """The last position published healthy: what ``on_unhealthy: inflate`` sends."""
         self._estimator_resets: int | None = None
         self._ever_ok = False
@@ -348,25 +348,26 @@ class Publisher:
         if attitude is None or (health != OK and self.config.on_unhealthy != "inflate"):
             self.counters.withheld += 1  # withheld whatever the position: not read
             return out, None
-        position = estimate.position_ned_m
+        # the position as Python floats: a published tick is on the way to the flight
+        # controller, and numpy's per-call overhead on 3-vectors was most of this part's cost
         if health != OK and self._last_ok_position is not None:
             position = self._last_ok_position  # inflate holds the last healthy position
-        finite = bool(np.all(np.isfinite(position)))
+        else:
+            position = tuple(estimate.position_ned_m.tolist())
+        finite = all(map(math.isfinite, position))
         send_inflated = health != OK and self.config.on_unhealthy == "inflate" and finite
         if attitude is None or not finite or (health != OK and not send_inflated):
             self.counters.withheld += 1
             return out, None
-        if t - self._last_sent_s > _RESUME_GAP_S and self._last_sent_position is not None:
+        last = self._last_sent_position
+        if t - self._last_sent_s > _RESUME_GAP_S and last is not None:
             self._bump_reset()
-        elif (
-            self._last_sent_position is not None
-            and float(np.linalg.norm(position - self._last_sent_position)) > self.config.jump_m
-        ):
+        elif last is not None and _farther_than(position, last, self.config.jump_m):
             self._bump_reset()
         self._last_sent_s = t
-        self._last_sent_position = position.copy()
+        self._last_sent_position = position
         if health == OK:
-            self._last_ok_position = position.copy()
+            self._last_ok_position = position
         if self.messages:
             out += self._position_messages(estimate, position, attitude, send_inflated)
             if send_now is not None:
@@ -374,15 +375,15 @@ class Publisher:
                 out = []
         self.counters.published += 1
         self.counters.inflated += int(send_inflated)
-        variances = np.diag(estimate.covariance).copy()
+        variances = estimate.covariance.diagonal().tolist()
         if send_inflated:
-            variances[:3] = self.config.inflated_variance_m2
+            variances[:3] = (float(self.config.inflated_variance_m2),) * 3
         publication = Publication(
             time_usec=int(round(t * 1e6)),
-            position_ned_m=(float(position[0]), float(position[1]), float(position[2])),
+            position_ned_m=position,
             tension_n=float(estimate.tension_n),
-            position_variance_m2=(float(variances[0]), float(variances[1]), float(variances[2])),
-            tension_variance_n2=float(variances[3]) if variances.shape[0] > 3 else 0.0,
+            position_variance_m2=(variances[0], variances[1], variances[2]),
+            tension_variance_n2=variances[3] if len(variances) > 3 else 0.0,
             health=health,
             reset_counter=self.reset_counter,
         )
@@ -392,12 +393,12 @@ class Publisher:
     def _position_messages(
         self,
         estimate: PositionEstimate,
-        position: FloatArray,
+        position: tuple[float, float, float],
         attitude: AttitudeSample,
         inflated: bool,
     ) -> list[MAVLinkMessage]:
         """VISION_POSITION_ESTIMATE (and ODOMETRY, VISION_SPEED_ESTIMATE when configured) for
-        ``position`` (NED [m]) at the estimate's time.
+        ``position`` (NED [m], floats) at the estimate's time.
 
         VISION_POSITION_ESTIMATE is built from Python floats (:meth:`_pose_urt`): it is what
         the flight controller waits for, so no numpy on its way out."""
@@ -406,9 +407,7 @@ class Publisher:
         out = [
             dialect.MAVLink_vision_position_estimate_message(
                 seconds_to_usec(t),
-                float(position[0]),
-                float(position[1]),
-                float(position[2]),
+                *position,
                 *(float(a) for a in euler),
                 self._pose_urt(estimate, inflated),
                 self.reset_counter & 0xFF,
@@ -421,7 +420,7 @@ class Publisher:
         if config.odometry:
             pose = PoseEstimate(
                 time_s=t,
-                position_ned_m=position,
+                position_ned_m=np.array(position),
                 euler_rad=euler,
                 covariance=self._pose_covariance(estimate, inflated=inflated),
                 reset_counter=self.reset_counter,
@@ -495,6 +494,19 @@ class Publisher:
         severity = dialect.MAV_SEVERITY_INFO if health == OK else dialect.MAV_SEVERITY_WARNING
         text = (_STATUSTEXT_PREFIX + health_text(health))[:50].encode("ascii")
         return [dialect.MAVLink_statustext_message(severity, text, 0, 0)]
+
+
+def _farther_than(
+    a: tuple[float, float, float], b: tuple[float, float, float], distance_m: float
+) -> bool:
+    """Whether ``a`` and ``b`` (NED [m]) are more than ``distance_m`` [m] apart, as
+    ``numpy.linalg.norm(a - b)`` says: from the distance in floats where it is clear of the
+    bound by more than its rounding, else from numpy's."""
+    d0, d1, d2 = a[0] - b[0], a[1] - b[1], a[2] - b[2]
+    distance = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    if abs(distance - distance_m) > 1e-9 * (distance + abs(distance_m)):
+        return distance > distance_m
+    return float(np.linalg.norm(np.array(a) - np.array(b))) > distance_m
 
 
 def _next_due(previous_due_s: float, now_s: float, period_s: float) -> float:

@@ -122,7 +122,8 @@ class Approximation:
 
 class ExactValues:
     """Every field of one tick's estimate (the arithmetic of the former per-tick
-    computation)."""
+    computation; ``reason`` None while it waits to be read, the status known already:
+    :meth:`~tether_companion.estimation.dynamic.published.TickSource.reason`)."""
 
     __slots__ = (
         "bias",
@@ -316,7 +317,11 @@ class NavigationEstimate:
 
     @property
     def reason(self) -> str:
-        return self._exact().reason
+        reason = self._exact().reason
+        if reason is None:
+            assert self._source is not None
+            reason = self._source.reason()
+        return reason
 
     @property
     def thrust_scale(self) -> float:

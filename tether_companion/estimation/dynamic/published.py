@@ -53,7 +53,6 @@ from tether_companion.estimation.dynamic.observability import (
     decide,
     horizontal_pull_n,
     min_horizontal_pull_n,
-    unmodelled_position_covariance,
     unmodelled_position_rows,
 )
 from tether_companion.estimation.dynamic.output import Approximation, ExactValues
@@ -112,6 +111,7 @@ class TickSource:
 
     __slots__ = (
         "_approximation",
+        "_assess_inputs",
         "_exact",
         "_row_scale",
         "_spread",
@@ -162,6 +162,8 @@ class TickSource:
         self.inputs_stale = inputs_stale
         self._exact: ExactValues | None = None
         self._status: str | None = None
+        self._assess_inputs: tuple | None = None
+        """What the exact status and reason are assessed from, kept while they wait."""
         self._approximation: Approximation | None = None
         self._spread = 0.0
         """``max_i sum_k |E_ik| sd_k`` over the horizontal position rows of ``E = Phi - I``
@@ -171,15 +173,25 @@ class TickSource:
 
     # ------------------------------------------------------------------ exact
     def values(self) -> ExactValues:
-        """Every field, exactly (computed on the first call)."""
+        """Every field, exactly (computed on the first call; the status and its reason only
+        when the status is not known yet: else the reason when it is read, :meth:`reason`)."""
         exact = self._exact
         if exact is None:
             exact = self._exact = self._compute()
             self._status = exact.status
         return exact
 
+    def reason(self) -> str:
+        """The exact values' reason (computed with their status when first read)."""
+        exact = self.values()
+        if exact.reason is None:
+            exact.status, exact.reason = self._assess(*self._assess_inputs)
+            self._assess_inputs = None
+        return exact.reason
+
     def _compute(self) -> ExactValues:
-        mixture, settings = self.mixture, self.settings
+        mixture = self.mixture
+        values = None
         if mixture is None:  # no state: zeros with a covariance that says "unknown"
             x = np.zeros(state.N_STATES)
             p = np.eye(state.N_STATES) * UNKNOWN_VARIANCE
@@ -192,39 +204,23 @@ class TickSource:
             tension, tension_var = self.constants.tension_at_drone(values, p)
         published = p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy()
         published[2, 2] += self.height_excess_m2
-        if mixture is not None:
-            published[:3, :3] += unmodelled_position_covariance(
-                x[state.POSITION],
-                tension,
-                self.force_std_n,
-                settings.winch_length_noise_std_m if self.winch_fused else 0.0,
+        if values is not None:
+            published[:3, :3] += np.array(
+                unmodelled_position_rows(
+                    values[0],
+                    values[1],
+                    values[2],
+                    tension,
+                    self.force_std_n,
+                    self.settings.winch_length_noise_std_m if self.winch_fused else 0.0,
+                )
             )
-        status, reason = assess(
-            initialised_reason=self.initialised_reason,
-            reset_reason=self.reset_reason,
-            on_ground=self.on_ground,
-            inputs_stale=self.inputs_stale,
-            tension_n=tension,
-            slack_tension_n=settings.slack_tension_n,
-            position_covariance_m2=published[:3, :3],
-            max_horizontal_std_m=settings.max_horizontal_std_m,
-            horizontal_pull_n=0.0 if mixture is None else horizontal_pull_n(values),
-            min_horizontal_pull_n=min_horizontal_pull_n(
-                settings.pull_per_wind_n_s_per_m,
-                settings.wind_std_mps,
-                float(x[state.WIND][0]),
-                float(x[state.WIND][1]),
-            ),
-            hover_unknowns=None
-            if mixture is None
-            else HoverUnknowns(
-                float(x[state.SCALE]),
-                x[state.WIND].copy(),
-                p[_HOVER_LIST][:, _HOVER_LIST],
-                p[:2][:, _HOVER_LIST],
-                self.hypotheses,
-            ),
-        )
+        status = self._status
+        reason = None
+        if status is None:
+            status, reason = self._assess(x, p, values, tension, published)
+        else:  # decided already: the reason waits until it is read
+            self._assess_inputs = (x, p, values, tension, published)
         return ExactValues(
             x[state.POSITION].copy(),
             x[state.VELOCITY].copy(),
@@ -236,6 +232,44 @@ class TickSource:
             float(x[state.SCALE]),
             x[state.BIAS].copy(),
             x[state.WIND].copy(),
+        )
+
+    def _assess(
+        self,
+        x: FloatArray,
+        p: FloatArray,
+        values: list[float] | None,
+        tension: float,
+        published: FloatArray,
+    ) -> tuple[str, str]:
+        """The exact values' ``(status, reason)`` (``values``: ``x`` as floats, None without
+        a state)."""
+        settings = self.settings
+        return assess(
+            initialised_reason=self.initialised_reason,
+            reset_reason=self.reset_reason,
+            on_ground=self.on_ground,
+            inputs_stale=self.inputs_stale,
+            tension_n=tension,
+            slack_tension_n=settings.slack_tension_n,
+            position_covariance_m2=published[:3, :3],
+            max_horizontal_std_m=settings.max_horizontal_std_m,
+            horizontal_pull_n=0.0 if values is None else horizontal_pull_n(values),
+            min_horizontal_pull_n=min_horizontal_pull_n(
+                settings.pull_per_wind_n_s_per_m,
+                settings.wind_std_mps,
+                float(x[state.WIND][0]),
+                float(x[state.WIND][1]),
+            ),
+            hover_unknowns=None
+            if values is None
+            else HoverUnknowns(
+                float(x[state.SCALE]),
+                x[state.WIND].copy(),
+                p[_HOVER_LIST][:, _HOVER_LIST],
+                p[:2][:, _HOVER_LIST],
+                self.hypotheses,
+            ),
         )
 
     # ------------------------------------------------------------------ status

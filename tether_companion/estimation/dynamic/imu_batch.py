@@ -27,6 +27,7 @@ Pure.
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Sequence
 
 import numpy as np
@@ -38,8 +39,10 @@ FloatArray = NDArray[np.float64]
 
 _N = state.N_STATES
 _ZERO_STATE = (0.0,) * _N
-_BIAS_COLUMNS = tuple(row * _N + state.BIAS.start + col for row in range(3) for col in range(3))
-"""Positions of ``dv'/db`` (3x3, row-major) in the generated ``dv'/dx`` (3x13, row-major)."""
+_BIAS_OF = operator.itemgetter(
+    *(row * _N + state.BIAS.start + col for row in range(3) for col in range(3))
+)
+"""``dv'/db`` (3x3, row-major) of the generated ``dv'/dx`` (3x13, row-major)."""
 _TRANSITION_ENTRIES = np.array(
     [0 * _N + 3, 1 * _N + 4, 2 * _N + 5]
     + [row * _N + col for row in range(3) for col in range(8, 11)]
@@ -162,11 +165,34 @@ class ImuBatch:
         xdot, jac = generated.inertial(_ZERO_STATE, u, c)
         d_p, d_v, b_p, b_v = self.d_p, self.d_v, self.b_p, self.b_v
         v0, v1, v2 = d_v
-        # new lists every tick (never changed in place): a BatchStep keeps them as they were
+        # new lists every tick (never changed in place): a BatchStep keeps them as they were;
+        # written out (this runs at every IMU tick)
         self.d_p = [d_p[0] + dt_s * v0, d_p[1] + dt_s * v1, d_p[2] + dt_s * v2]
         self.d_v = [v0 + dt_s * xdot[3], v1 + dt_s * xdot[4], v2 + dt_s * xdot[5]]
-        self.b_p = [b + dt_s * v for b, v in zip(b_p, b_v, strict=True)]
-        self.b_v = [b + dt_s * jac[k] for b, k in zip(b_v, _BIAS_COLUMNS, strict=True)]
+        c0, c1, c2, c3, c4, c5, c6, c7, c8 = b_v
+        self.b_p = [
+            b_p[0] + dt_s * c0,
+            b_p[1] + dt_s * c1,
+            b_p[2] + dt_s * c2,
+            b_p[3] + dt_s * c3,
+            b_p[4] + dt_s * c4,
+            b_p[5] + dt_s * c5,
+            b_p[6] + dt_s * c6,
+            b_p[7] + dt_s * c7,
+            b_p[8] + dt_s * c8,
+        ]
+        j0, j1, j2, j3, j4, j5, j6, j7, j8 = _BIAS_OF(jac)
+        self.b_v = [
+            c0 + dt_s * j0,
+            c1 + dt_s * j1,
+            c2 + dt_s * j2,
+            c3 + dt_s * j3,
+            c4 + dt_s * j4,
+            c5 + dt_s * j5,
+            c6 + dt_s * j6,
+            c7 + dt_s * j7,
+            c8 + dt_s * j8,
+        ]
         self.duration_s += dt_s
         self.ticks += 1
         self._step = None

@@ -33,6 +33,7 @@ Pure.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -425,8 +426,12 @@ class TickSource:
         else:
             jac_sum = sum(map(abs, jac))
             tension_bound = (jac_sum * largest) ** 2 + t * noise.largest * jac_sum * jac_sum
-        bounds = (scale, tension_bound, position_scale, abs(tension))
-        finite = all(b < FINITE_BOUND for b in bounds)  # nan fails
+        finite = (  # nan fails
+            scale < FINITE_BOUND
+            and tension_bound < FINITE_BOUND
+            and position_scale < FINITE_BOUND
+            and abs(tension) < FINITE_BOUND
+        )
         approx = self._approximation = Approximation(
             x,
             t,
@@ -442,7 +447,7 @@ class TickSource:
 
 def _tension_and_jacobian(
     constants: ModelConstants, x: list[float]
-) -> tuple[float, list[float] | None]:
+) -> tuple[float, Sequence[float] | None]:
     """The tension at the drone [N] and its Jacobian row as
     :meth:`~tether_companion.estimation.dynamic.models.ModelConstants.tension_at_drone`
     takes them (None: the chord tension's own variance)."""
@@ -452,5 +457,5 @@ def _tension_and_jacobian(
             (tension,), jac = constants.models.tension(x, (), constants.values())
         except UNDEFINED:
             return tension, None
-        return tension, list(jac)
+        return tension, jac
     return tension, None

@@ -166,11 +166,15 @@ class HoverAnchor:
     @classmethod
     def of(cls, mixture: MixtureValues) -> HoverAnchor | None:
         rows = mixture.rows
-        covariance = [[rows[i][j] for j in HOVER_UNKNOWNS] for i in HOVER_UNKNOWNS]
-        s0, s1, s2 = sd = tuple(mixture.sd[i] for i in HOVER_UNKNOWNS)
+        h0, h1, h2 = HOVER_UNKNOWNS
+        # written out (made at every member step): the unknowns' covariance C (upper
+        # triangle), their standard deviations, and X0, V (the north and east rows)
+        row0, row1, row2 = rows[h0], rows[h1], rows[h2]
+        c00, c01, c02, c11, c12, c22 = row0[h0], row0[h1], row0[h2], row1[h1], row1[h2], row2[h2]
+        msd = mixture.sd
+        s0, s1, s2 = sd = (msd[h0], msd[h1], msd[h2])
         if not min(sd) > 0.0:
             return None
-        (c00, c01, c02), (_, c11, c12), (_, _, c22) = covariance
         trace = c00 + c11 + c22
         det = c00 * (c11 * c22 - c12 * c12) - c01 * (c01 * c22 - c12 * c02)
         det += c02 * (c01 * c12 - c11 * c02)
@@ -186,15 +190,19 @@ class HoverAnchor:
         smallest = 4.0 * det / (trace * trace)
         if not smallest > 1e-6:
             return None
-        factor = _cholesky_3x3(covariance)
+        factor = _cholesky_3x3(c00, c01, c02, c11, c12, c22)
         if factor is None:
             return None
-        y0: list[float] = []
-        yv: list[float] = []
-        for i in (0, 1):  # the north and east rows of X0 and V
-            y0 += _forward(factor, [rows[i][j] for j in HOVER_UNKNOWNS])
-            yv += _forward(factor, [rows[3 + i][j] for j in HOVER_UNKNOWNS])
-        return cls(tuple(y0), tuple(yv), _SMALLEST_SHARE * smallest, sd)
+        n, e, vn, ve = rows[0], rows[1], rows[3], rows[4]
+        y0 = (
+            *_forward(factor, n[h0], n[h1], n[h2]),
+            *_forward(factor, e[h0], e[h1], e[h2]),
+        )
+        yv = (
+            *_forward(factor, vn[h0], vn[h1], vn[h2]),
+            *_forward(factor, ve[h0], ve[h1], ve[h2]),
+        )
+        return cls(y0, yv, _SMALLEST_SHARE * smallest, sd)
 
     def explains(
         self,
@@ -271,10 +279,12 @@ class HoverAnchor:
         return std <= max_std_m
 
 
-def _cholesky_3x3(c: list[list[float]]) -> tuple[float, ...] | None:
-    """The lower Cholesky factor of a symmetric 3x3 ``c`` as ``(l00, l10, l11, l20, l21,
-    l22)``; None when ``c`` is not positive definite."""
-    (c00, c01, c02), (_, c11, c12), (_, _, c22) = c
+def _cholesky_3x3(
+    c00: float, c01: float, c02: float, c11: float, c12: float, c22: float
+) -> tuple[float, ...] | None:
+    """The lower Cholesky factor of the symmetric 3x3 with upper triangle ``c00 .. c22``
+    (row-major) as ``(l00, l10, l11, l20, l21, l22)``; None when it is not positive
+    definite."""
     if not c00 > 0.0:
         return None
     l00 = math.sqrt(c00)
@@ -290,9 +300,9 @@ def _cholesky_3x3(c: list[list[float]]) -> tuple[float, ...] | None:
     return l00, l10, l11, l20, l21, math.sqrt(d22)
 
 
-def _forward(factor: tuple[float, ...], x: list[float]) -> list[float]:
+def _forward(factor: tuple[float, ...], x0: float, x1: float, x2: float) -> tuple[float, ...]:
     """``L^-1 x`` for the factor of :func:`_cholesky_3x3`."""
     l00, l10, l11, l20, l21, l22 = factor
-    y0 = x[0] / l00
-    y1 = (x[1] - l10 * y0) / l11
-    return [y0, y1, (x[2] - l20 * y0 - l21 * y1) / l22]
+    y0 = x0 / l00
+    y1 = (x1 - l10 * y0) / l11
+    return y0, y1, (x2 - l20 * y0 - l21 * y1) / l22

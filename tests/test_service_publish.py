@@ -23,7 +23,7 @@ from tether_companion.service.health import (
     STALE,
     STALE_PWM,
 )
-from tether_companion.service.publish import Publisher
+from tether_companion.service.publish import Publisher, _farther_than
 
 ATTITUDE = AttitudeSample(0.0, 0.05, -0.1, 1.2)
 HEALTH_VALUES = tuple(
@@ -303,3 +303,19 @@ def test_variance_grown_for_a_missing_rangefinder_is_no_range_health() -> None:
     publisher = Publisher(PublishConfig(settle_s=0.0), has_tension_state=True)
     _feed(publisher, [_estimate(1.0, covariance=grown)])  # same variance, no reason known
     assert publisher.health == CONVERGING
+
+
+def test_the_jump_test_in_floats_is_numpy_norms_verdict_also_at_the_bound() -> None:
+    """The publisher's jump test reads the positions as floats; where the distance is within
+    its rounding of ``jump_m`` numpy's norm decides, so the verdict is the former one."""
+    rng = np.random.default_rng(7)
+    for _ in range(2000):
+        a = rng.normal(scale=5.0, size=3)
+        b = a + rng.normal(size=3)
+        norm = float(np.linalg.norm(a - b))
+        # bounds far from, next to and exactly at the distance
+        for bound in (0.5 * norm, norm, np.nextafter(norm, 0.0), np.nextafter(norm, 9.0)):
+            verdict = _farther_than(tuple(a.tolist()), tuple(b.tolist()), float(bound))
+            assert verdict == (norm > bound)
+    nan = (math.nan, 0.0, 0.0)
+    assert _farther_than(nan, (0.0, 0.0, 0.0), 1.0) == (float(np.linalg.norm(np.array(nan))) > 1.0)

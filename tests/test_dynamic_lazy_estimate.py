@@ -30,6 +30,7 @@ from tether_companion.estimation.dynamic.output import (
     WEAK_PULL,
     NavigationEstimate,
 )
+from tether_companion.estimation.dynamic.position_information import reduce_added_rows
 from tether_companion.estimation.dynamic.published import UNKNOWN_VARIANCE
 from tether_companion.estimation.runner import _ATTITUDE, _PWM, _RANGE
 from tether_companion.physics.vehicle import load_vehicle
@@ -68,12 +69,15 @@ def _former_estimate(est: DynamicTetherEstimator, source) -> tuple:  # noqa: ANN
     published = p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy()
     published[2, 2] += est.rangefinder.excess.variance
     if bank is not None:
-        published[:3, :3] += unmodelled_position_covariance(
+        added = unmodelled_position_covariance(
             x[state.POSITION],
             tension,
             est.bearing.force_std_n,  # the unmodelled force, widened by the bearing window
             dyn.winch_length_noise_std_m if est.health.winch_fused else 0.0,
         )
+        # narrowed by the cable angles fused within the correlation time (none here: None)
+        information = est.position_information.at(est.time_s)
+        published[:3, :3] += np.array(reduce_added_rows(added.tolist(), information))
     status, reason = assess(
         initialised_reason=None if bank is not None else est._initialiser.reason,
         reset_reason=source.reset_reason,

@@ -56,10 +56,13 @@ def _case(rng: np.random.Generator) -> tuple[TickSource, TickSource]:
         wind_std_mps=1.0,
     )
     constants = ModelConstants(1.5, 0.3, 0.0)
+    # half the ticks with a cable angle's information narrowing the unmodelled term
+    h = rng.normal(size=(2, 3)) / 5.0
+    information = None if rng.uniform() < 0.5 else tuple((h.T @ h / 1e-4)[np.triu_indices(3)])
 
     def source() -> TickSource:
         return TickSource(MixtureValues(x, p), step, noise, constants, settings,
-                          0.01, False, 0.2, 1, None, None, False, False)  # fmt: skip
+                          0.01, False, 0.2, information, 1, None, None, False, False)  # fmt: skip
 
     return source(), source()
 

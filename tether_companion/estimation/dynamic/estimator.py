@@ -57,6 +57,7 @@ from tether_companion.estimation.dynamic.noise import (
     process_noise_density,
 )
 from tether_companion.estimation.dynamic.output import DynamicHealth, NavigationEstimate
+from tether_companion.estimation.dynamic.position_information import PositionInformation
 from tether_companion.estimation.dynamic.published import StatusSettings, TickSource
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
 from tether_companion.estimation.inputs import InputFeed, range_height_m, range_reading_ok
@@ -161,6 +162,9 @@ class DynamicTetherEstimator(InputFeed):
             dynamic.bearing_position_walk_m2ps,
             dynamic.bearing_wind_walk_m2ps3,
         )
+        self.position_information = PositionInformation(dynamic.unmodelled_force_correlation_s)
+        """What the fused cable angles tell about the position within the unmodelled force's
+        correlation time (it narrows the unmodelled term of the published covariance)."""
         self.bank: FilterBank | None = None
         self._initialiser = self._new_initialiser()
         self._time_s = math.nan
@@ -243,10 +247,36 @@ class DynamicTetherEstimator(InputFeed):
             ):
                 self.health.cable_angle_fused += 1
                 x = self.bank.best.x_values()
+                self._add_angle_information(x, elevation_rad, noise_std_rad)
                 # the azimuth's noise is sigma / cos(elevation), across the cable times the span
                 self.bearing.add_bearing(
                     math.hypot(x[0], x[1]) * noise_std_rad / max(math.cos(elevation_rad), 0.05)
                 )
+
+    def _add_angle_information(
+        self, x: list[float], elevation_rad: float, noise_std_rad: float
+    ) -> None:
+        """The fused angle's information about the position at the updated state ``x``
+        (its Jacobian's position columns, the noise as :class:`CableAngleAid` fuses it).
+
+        The azimuth always; the elevation only once a winch length was fused: the unmodelled
+        term turns the cable at a known range, and only with the length is its vertical part
+        the elevation the reading measures. Without a length the filter's range comes from
+        the height through the elevation (``rho = h / tan(el)``), and the term's vertical part
+        stands for that range's error, which the elevation does not remove in the filter
+        (docs/estimation.md, "The unmodelled term and the cable angle (nees10)")."""
+        try:
+            _, jac = self.constants.models.cable_angle(x, (), self.constants.values())
+        except UNDEFINED:
+            return
+        n = state.N_STATES
+        cos_elevation = max(math.cos(elevation_rad), CableAngleAid.MIN_COS_ELEVATION)
+        azimuth = (jac[n : n + 3], (noise_std_rad / cos_elevation) ** 2)
+        if self.health.winch_fused:
+            rows, variances = (jac[0:3], azimuth[0]), (noise_std_rad**2, azimuth[1])
+        else:
+            rows, variances = (azimuth[0],), (azimuth[1],)
+        self.position_information.add(rows, variances, self._time_s)
 
     def on_range(self, sample: RangeSample) -> None:
         """A downward rangefinder reading along the body z axis [m]: the height above the ground
@@ -459,6 +489,7 @@ class DynamicTetherEstimator(InputFeed):
         self.bank = None
         self._initialiser = self._new_initialiser()
         self.bearing.clear()
+        self.position_information.clear()
         self._resets += 1
         self.health.resets = self._resets
         self._reset_reason = f"filter restarted: {reason}"
@@ -486,6 +517,7 @@ class DynamicTetherEstimator(InputFeed):
             self.rangefinder.excess.variance,
             bool(self.health.winch_fused),
             self.bearing.force_std_n,
+            self.position_information.at(self._time_s),
             0 if bank is None else len(bank.filters),
             None if bank is not None else self._initialiser.reason,
             reset_reason,

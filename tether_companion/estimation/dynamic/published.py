@@ -57,6 +57,7 @@ from tether_companion.estimation.dynamic.observability import (
     unmodelled_position_rows,
 )
 from tether_companion.estimation.dynamic.output import Approximation, ExactValues
+from tether_companion.estimation.dynamic.position_information import reduce_added_rows
 
 FloatArray = NDArray[np.float64]
 
@@ -104,6 +105,11 @@ class TickSource:
     force_std_n
         The unmodelled horizontal force's standard deviation at the tick [N]
         (:class:`~tether_companion.estimation.dynamic.consistency.BearingWindow`).
+    position_information
+        The information about the position of the cable angles fused within the
+        unmodelled force's correlation time, (nn, ne, nd, ee, ed, dd) [1/m^2], which narrows
+        the unmodelled term (:mod:`~tether_companion.estimation.dynamic.position_information`);
+        None: none was fused, the term is left as it is.
     hypotheses
         Members of the thrust-scale bank running.
     initialised_reason, reset_reason, on_ground, inputs_stale
@@ -126,6 +132,7 @@ class TickSource:
         "mixture",
         "on_ground",
         "noise",
+        "position_information",
         "reset_reason",
         "settings",
         "step",
@@ -142,6 +149,7 @@ class TickSource:
         height_excess_m2: float,
         winch_fused: bool,
         force_std_n: float,
+        position_information: tuple[float, float, float, float, float, float] | None,
         hypotheses: int,
         initialised_reason: str | None,
         reset_reason: str | None,
@@ -156,6 +164,7 @@ class TickSource:
         self.height_excess_m2 = height_excess_m2
         self.winch_fused = winch_fused
         self.force_std_n = force_std_n
+        self.position_information = position_information
         self.hypotheses = hypotheses
         self.initialised_reason = initialised_reason
         self.reset_reason = reset_reason
@@ -207,13 +216,16 @@ class TickSource:
         published[2, 2] += self.height_excess_m2
         if values is not None:
             published[:3, :3] += np.array(
-                unmodelled_position_rows(
-                    values[0],
-                    values[1],
-                    values[2],
-                    tension,
-                    self.force_std_n,
-                    self.settings.winch_length_noise_std_m if self.winch_fused else 0.0,
+                reduce_added_rows(
+                    unmodelled_position_rows(
+                        values[0],
+                        values[1],
+                        values[2],
+                        tension,
+                        self.force_std_n,
+                        self.settings.winch_length_noise_std_m if self.winch_fused else 0.0,
+                    ),
+                    self.position_information,
                 )
             )
         status = self._status
@@ -403,13 +415,16 @@ class TickSource:
         largest = mixture.largest_sd * row_sum
         position_scale = mixture.largest_value * row_sum + offset
         settings = self.settings
-        unmodelled = unmodelled_position_rows(
-            x[0],
-            x[1],
-            x[2],
-            tension,
-            self.force_std_n,
-            settings.winch_length_noise_std_m if self.winch_fused else 0.0,
+        unmodelled = reduce_added_rows(
+            unmodelled_position_rows(
+                x[0],
+                x[1],
+                x[2],
+                tension,
+                self.force_std_n,
+                settings.winch_length_noise_std_m if self.winch_fused else 0.0,
+            ),
+            self.position_information,
         )
         excess = self.height_excess_m2
         north += unmodelled[0][0]

@@ -13,9 +13,10 @@ The flight controller holds its PWM outputs between updates (zero-order hold), s
 
 from __future__ import annotations
 
+import functools
 import math
 from bisect import bisect_left
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -44,6 +45,23 @@ class MotorLag:
         return math.exp(-dt_s / self.time_constant_s)
 
 
+@functools.cache
+def lag_function(n_motors: int) -> Callable[[Sequence[float], Sequence[float], float], list[float]]:
+    """``lag(targets, thrusts, decay)``: the ``n_motors`` thrusts [N] after a step whose
+    :meth:`MotorLag.decay` is ``decay``, each ``f_ss + (f - f_ss) decay`` for its steady-state
+    target ``f_ss`` (straight-line code per motor count: this runs at every physics step)."""
+    motors = range(n_motors)
+    source = (
+        "def lag(targets, thrusts, decay):\n"
+        f"    {''.join(f's{i}, ' for i in motors)}= targets\n"
+        f"    {''.join(f'f{i}, ' for i in motors)}= thrusts\n"
+        f"    return [{', '.join(f's{i} + (f{i} - s{i}) * decay' for i in motors)}]\n"
+    )
+    namespace: dict = {}
+    exec(compile(source, f"<generated motor lag, {n_motors} motors>", "exec"), namespace)  # noqa: S102
+    return namespace["lag"]
+
+
 class MotorMixer:
     """Turn a wrench (collective thrust, body torques) into motor thrusts and PWM pulses.
 
@@ -67,6 +85,7 @@ class MotorMixer:
         pseudo_inverse = np.linalg.pinv(self.allocation)
         self._collective_share = pseudo_inverse[:, 0].tolist()
         self._torque_rows = [tuple(row) for row in pseudo_inverse[:, 1:].tolist()]
+        self._mix = _mixing_function(tuple(self._collective_share), tuple(self._torque_rows))
         first = math.ceil(self.curve.pwm_min_us)
         last = math.floor(self.curve.pwm_max_us)
         self._first_pwm_us = first
@@ -75,19 +94,9 @@ class MotorMixer:
         self.max_thrust_n = self._thrust_table_n[-1]
 
     def motor_thrusts_n(self, collective_n: float, torque_body_n_m: Sequence[float]) -> list[float]:
-        """Motor thrusts [N], n values, for a collective thrust [N] and FRD torques (3,) [N m]."""
-        f_min, f_max = self.min_thrust_n, self.max_thrust_n
-        tl, tm, tn = torque_body_n_m
-        base = [min(max(c * collective_n, f_min), f_max) for c in self._collective_share]
-        share = [a * tl + b * tm + c * tn for a, b, c in self._torque_rows]
-        scale = 1.0
-        for b, d in zip(base, share, strict=True):
-            if d > 0.0 and b + d > f_max:
-                scale = min(scale, (f_max - b) / d)
-            elif d < 0.0 and b + d < f_min:
-                scale = min(scale, (f_min - b) / d)
-        scale = max(scale, 0.0)
-        return [b + scale * d for b, d in zip(base, share, strict=True)]
+        """Motor thrusts [N], n values, for a collective thrust [N] and FRD torques (3,) [N m]
+        (the saturation rule of the class docstring; :func:`_mixing_function`'s code)."""
+        return self._mix(collective_n, torque_body_n_m, self.min_thrust_n, self.max_thrust_n)
 
     def pwm_us(self, motor_thrusts_n: Sequence[float]) -> list[float]:
         """Whole-microsecond PWM pulses whose steady-state thrusts are nearest the given [N]."""
@@ -116,3 +125,43 @@ class MotorMixer:
     def wrench(self, motor_thrusts_n: ArrayLike) -> FloatArray:
         """(collective [N], roll, pitch, yaw torque [N m]), (4,), of motor thrusts (n,) [N]."""
         return self.allocation @ np.asarray(motor_thrusts_n, dtype=float)
+
+
+@functools.cache
+def _mixing_function(
+    collective_share: tuple[float, ...], torque_rows: tuple[tuple[float, float, float], ...]
+) -> Callable[[float, Sequence[float], float, float], list[float]]:
+    """``mix(collective_n, torque, f_min, f_max)``: :meth:`MotorMixer.motor_thrusts_n` as
+    straight-line code for one allocation's pseudo-inverse (its entries written in as exact
+    literals), one motor after another (no list, comprehension or loop: this runs at the
+    controller's rate). For motor ``i`` with collective share ``c_i`` and torque row
+    ``(a_i, b_i, e_i)``::
+
+        base_i  = min(max(c_i T, f_min), f_max)
+        share_i = a_i tau_l + b_i tau_m + e_i tau_n
+        scale   = max(min(1, (f_max - base_i) / share_i where base_i + share_i > f_max,
+                             (f_min - base_i) / share_i where base_i + share_i < f_min), 0)
+        f_i     = base_i + scale share_i
+    """
+    if not all(map(math.isfinite, (*collective_share, *(v for r in torque_rows for v in r)))):
+        raise ValueError("the allocation's pseudo-inverse is not finite")
+    lines = ["tl, tm, tn = torque", "scale = 1.0"]
+    for i, (c, (a, b, e)) in enumerate(zip(collective_share, torque_rows, strict=True)):
+        lines += [
+            f"b{i} = min(max({c!r} * collective_n, f_min), f_max)",
+            f"d{i} = {a!r} * tl + {b!r} * tm + {e!r} * tn",
+            f"if d{i} > 0.0 and b{i} + d{i} > f_max:",
+            f"    scale = min(scale, (f_max - b{i}) / d{i})",
+            f"elif d{i} < 0.0 and b{i} + d{i} < f_min:",
+            f"    scale = min(scale, (f_min - b{i}) / d{i})",
+        ]
+    lines.append("scale = max(scale, 0.0)")
+    lines.append(
+        "return [" + ", ".join(f"b{i} + scale * d{i}" for i in range(len(torque_rows))) + "]"
+    )
+    source = "def mix(collective_n, torque, f_min, f_max):\n" + "".join(
+        f"    {line}\n" for line in lines
+    )
+    namespace: dict = {}
+    exec(compile(source, "<generated motor mixing>", "exec"), namespace)  # noqa: S102
+    return namespace["mix"]

@@ -246,3 +246,40 @@ def test_generated_step_is_rk4_of_the_derivative_bit_for_bit(profile: str) -> No
         ]
         body.step(dt, targets)
         assert body.x == want
+
+
+@pytest.mark.parametrize("profile", ["default-quad", "realistic-quad"])
+def test_step_after_the_accelerometer_reuses_its_derivative_bit_for_bit(profile: str) -> None:
+    """A step right after ``specific_force_body_mps2`` takes that derivative as its first RK4
+    stage: the same state as a body that did not read it; a cable changed in place in between
+    (``forget_forces``) is evaluated afresh."""
+    vehicle = load_vehicle(profile)
+    cables = [ConstantTensionCable(3.0), ConstantTensionCable(3.0)]
+    reading, plain = (RigidBody(vehicle, cable.force_components) for cable in cables)
+    rng = np.random.default_rng(4)
+    rigid = (rng.normal(0.0, 1.0, N_RIGID_STATES) * 0.5).tolist()
+    rigid[POS_D] = -abs(rigid[POS_D]) - 2.0
+    motors = rng.uniform(1.0, 4.0, vehicle.n_motors).tolist()
+    for body in (reading, plain):
+        body.set_state(rigid + motors)
+        body.wind_ned_m_s = (1.5, -0.7, 0.2)
+    for k in range(30):
+        targets = rng.uniform(1.0, 4.0, vehicle.n_motors).tolist()
+        reading.specific_force_body_mps2()
+        if k == 10:  # a new set-point between the read and the step
+            for body, cable in zip((reading, plain), cables, strict=True):
+                cable.set_tension_n(5.0)
+                body.forget_forces()
+        reading.step(1.0 / 600.0, targets)
+        plain.step(1.0 / 600.0, targets)
+        assert reading.x == plain.x
+    body = plain  # the generated step given its first stage, against all four stages
+    k1 = body.derivative(body.x, *body.wrench(motors))
+    args = (
+        body.wrench(targets),
+        body.wrench(motors),
+        1e-3,
+        body._coefficients,
+        cables[1].force_components,
+    )
+    assert body._rk4_after(body.x, k1, *args) == body._rk4(body.x, body.wrench(motors), *args)

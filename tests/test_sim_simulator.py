@@ -337,3 +337,37 @@ def test_replace_cable_pulls_with_the_new_cable_at_once() -> None:
     sim.replace_cable(replace(sim.scenario.cable, model="elastic", length_m=4.0))
     sim.set_paid_out_m(4.5)
     assert sim.cable.paid_out_m == 4.5 and not sim.cable.released
+
+
+def _streams(sim: Simulator, seconds: float) -> list[tuple]:
+    """Every IMU sample, true tension and position at 200 Hz, and a tension set-point
+    changed mid-flight (between an IMU read and the next step; the tension read again)."""
+    rows = []
+    for k in range(1, int(seconds * 200) + 1):
+        sim.advance_to(k * 0.005)
+        imu = sim.read_imu()
+        rows.append((*imu.specific_force_body_mps2.tolist(), sim.tension_n, *sim.position_ned_m))
+        if k == 100 and sim.scenario.cable.model == "constant_tension":
+            sim.set_tension_n(5.0)
+            rows.append((sim.tension_n,))  # the new set-point's, at the same state
+    return rows
+
+
+@pytest.mark.parametrize("name", ["paper-circle", "elastic-hover", "realistic-gusty-hover"])
+def test_reused_evaluations_give_the_same_flight_bit_for_bit(name: str) -> None:
+    """The IMU read's forces reused for the true tension and the next RK4 step's first stage
+    (a history-free cable) change nothing: the same streams as a simulator told its cable has
+    a history (every evaluation made afresh, in the usual order)."""
+    scenario = replace(load_scenario(name), duration_s=1.5)
+    reusing, fresh = Simulator(scenario), Simulator(scenario)
+    assert reusing.cable.history_free
+    fresh.cable.history_free = False
+    fresh.body.force_history_free = False
+    assert _streams(reusing, 1.5) == _streams(fresh, 1.5)
+
+
+def test_a_catenary_cable_is_not_history_free() -> None:
+    """The stretched catenary's root search starts from its last answer: its forces are
+    evaluated every time (reusing one would move the flight in the last digits)."""
+    sim = Simulator(replace(load_scenario("catenary-hover"), duration_s=0.1))
+    assert not sim.cable.history_free and not sim.body.force_history_free

@@ -119,6 +119,9 @@ class CableModel(Protocol):
     tension_n: float
     paid_out_m: float
     released: bool
+    history_free: bool
+    """Whether ``force_components`` gives the same floats for the same arguments whatever it
+    was asked before (the simulator then reuses an evaluation at the same state)."""
 
     def force_components(
         self, pn: float, pe: float, pd: float, vn: float, ve: float, vd: float
@@ -145,6 +148,8 @@ class CableModel(Protocol):
 
 class _CableBase:
     """Shared state and the array wrapper around ``force_components``."""
+
+    history_free = True
 
     def __init__(
         self, paid_out_m: float, winch_rate_mps: float, min_length_m: float, spool_length_m: float
@@ -306,6 +311,8 @@ class CatenaryCable(_CableBase):
     The ``d`` component of the force is ``w s2`` (downward pull of the cable beyond the lowest
     point); the horizontal component ``w a`` points toward the anchor.
     """
+
+    history_free = False  # the stretch's root search starts from the last call's
 
     def __init__(self, elastic: ElasticCable, linear_density_kg_per_m: float) -> None:
         if not linear_density_kg_per_m > 0.0:

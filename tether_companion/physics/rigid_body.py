@@ -35,7 +35,6 @@ cable and any tug; horizontal forces on a landed drone are taken by friction.
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Callable, Sequence
 
@@ -43,8 +42,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.constants import GRAVITY_MPS2
-from tether_companion.physics.aerodynamics import drag_accel_body_mps2
-from tether_companion.physics.motors import MotorLag
+from tether_companion.physics.motors import MotorLag, lag_function
+from tether_companion.physics.rigid_body_code import NO_SLOPE, generated
 from tether_companion.physics.vehicle import VehicleProfile
 
 FloatArray = NDArray[np.float64]
@@ -81,131 +80,6 @@ def _no_force(
     pn: float, pe: float, pd: float, vn: float, ve: float, vd: float
 ) -> tuple[float, float, float]:
     return 0.0, 0.0, 0.0
-
-
-_STATE = ("pn", "pe", "pd", "u", "v", "w", "phi", "theta", "psi", "p", "q", "r")
-"""Names of the 12 rigid-body states in the generated code (the module's layout)."""
-_COEFFICIENTS = "bn, be, bd, c, im, wn, we, wd, gx, gy, gz, ix, iy, iz, rotor, ballistic"
-"""What the derivative reads besides the state and the wrench (``RigidBody._coefficients``)."""
-_DERIVATIVE = """\
-cr = cos(phi)
-sr = sin(phi)
-cp = cos(theta)
-sp = sin(theta)
-cy = cos(psi)
-sy = sin(psi)
-# rows of R_v^b (eq. 2)
-srsp = sr * sp
-crsp = cr * sp
-r00 = cp * cy
-r01 = cp * sy
-r10 = srsp * cy - cr * sy
-r11 = srsp * sy + cr * cy
-r12 = sr * cp
-r20 = crsp * cy + sr * sy
-r21 = crsp * sy - sr * cy
-r22 = cr * cp
-# eq. 3: NED velocity = R^T (u, v, w)
-vn = r00 * u + r10 * v + r20 * w
-ve = r01 * u + r11 * v + r21 * w
-vd = -sp * u + r12 * v + r22 * w
-fn, fe, fd = external_force(pn, pe, pd, vn, ve, vd)
-fn += bn - c * vn
-fe += be - c * ve
-fd += bd - c * vd
-ax = (r00 * fn + r01 * fe - sp * fd) * im
-ay = (r10 * fn + r11 * fe + r12 * fd) * im
-{drag}az = (r20 * fn + r21 * fe + r22 * fd - thrust_n) * im
-# eq. 4
-du = r * v - q * w + ax
-dv = p * w - r * u + ay
-dw = q * u - p * v + az
-# eq. 5
-s = sr * q + cr * r
-dphi = p + s * sp / cp
-dtheta = cr * q - sr * r
-dpsi = s / cp
-# eq. 6
-dp = gx * q * r + tau_l * ix
-dq = gy * p * r + tau_m * iy
-dr = gz * p * q + tau_n * iz
-"""
-"""Eqs. 3-6 at the state named by :data:`_STATE` for the wrench ``thrust_n, tau_l, tau_m,
-tau_n``, as straight-line code: written once, used by :meth:`RigidBody.derivative` and inlined
-four times into the RK4 step (no call, no tuple per stage)."""
-_DRAG = """\
-dax, day = drag_accel_body_mps2(
-    u - (r00 * wn + r01 * we - sp * wd), v - (r10 * wn + r11 * we + r12 * wd), rotor, ballistic
-)
-ax += dax
-ay += day
-"""
-_OUTPUTS = "vn, ve, vd, du, dv, dw, dphi, dtheta, dpsi, dp, dq, dr"
-_NO_SLOPE: tuple[float, ...] = ()
-
-
-def _indent(code: str) -> str:
-    return "".join(f"    {line}\n" for line in code.splitlines())
-
-
-@functools.cache
-def _generated(aero_drag: bool) -> tuple[Callable[..., tuple], Callable[..., list]]:
-    """``(derivative, rk4)`` compiled from :data:`_DERIVATIVE`, with the body-horizontal drag
-    of :mod:`~tether_companion.physics.aerodynamics` or without it.
-
-    ``derivative(x, wrench, slope, h, coefficients, external_force)`` is eqs. 3-6 at ``x``
-    (``x + h * slope`` unless ``slope`` is empty); ``rk4(x, w_start, w_half, w_full, h,
-    coefficients, external_force)`` returns the new state of one classical RK4 step with the
-    wrench at the stage times. The arithmetic is :data:`_DERIVATIVE`'s, operation for
-    operation, so both give the same floats as evaluating the stages one by one.
-    """
-    body = _DERIVATIVE.format(drag=_DRAG if aero_drag else "")
-    stage_in = ", ".join(_STATE)
-    x_names = [f"x{i}" for i in range(N_RIGID_STATES)]
-    derivative = (
-        "def derivative(x, wrench, slope, h, coefficients, external_force):\n"
-        f"    {_COEFFICIENTS} = coefficients\n"
-        "    thrust_n, tau_l, tau_m, tau_n = wrench\n"
-        "    if slope:\n"
-        f"        {', '.join(x_names)} = x\n"
-        f"        {', '.join(f's{i}' for i in range(N_RIGID_STATES))} = slope\n"
-        + "".join(f"        {name} = x{i} + h * s{i}\n" for i, name in enumerate(_STATE))
-        + "    else:\n"
-        f"        {stage_in} = x\n" + _indent(body) + f"    return ({_OUTPUTS})\n"
-    )
-    rk4 = [
-        "def rk4(x, w_start, w_half, w_full, h, coefficients, external_force):",
-        f"    {_COEFFICIENTS} = coefficients",
-        f"    {', '.join(x_names)} = x",
-        "    hh = 0.5 * h",
-    ]
-    stages = (
-        ("w_start", None, ""),
-        ("w_half", "k1", "hh"),
-        ("w_half", "k2", "hh"),
-        ("w_full", "k3", "h"),
-    )
-    for k, (wrench, previous, step) in enumerate(stages, start=1):
-        rk4.append(f"    thrust_n, tau_l, tau_m, tau_n = {wrench}")
-        for i, name in enumerate(_STATE):
-            value = f"x{i}" if previous is None else f"x{i} + {step} * {previous}_{i}"
-            rk4.append(f"    {name} = {value}")
-        rk4.append(_indent(body).rstrip("\n"))
-        outputs = ", ".join(f"k{k}_{i}" for i in range(N_RIGID_STATES))
-        rk4.append(f"    {outputs} = {_OUTPUTS}")
-    rk4.append("    h6 = h / 6.0")
-    rk4.append(
-        "    return ["
-        + ", ".join(
-            f"x{i} + h6 * (k1_{i} + k4_{i} + 2.0 * (k2_{i} + k3_{i}))"
-            for i in range(N_RIGID_STATES)
-        )
-        + "]"
-    )
-    namespace = {"cos": math.cos, "sin": math.sin, "drag_accel_body_mps2": drag_accel_body_mps2}
-    source = derivative + "\n".join(rk4) + "\n"
-    exec(compile(source, f"<generated rigid body, drag {aero_drag}>", "exec"), namespace)  # noqa: S102
-    return namespace["derivative"], namespace["rk4"]
 
 
 class RigidBody:
@@ -253,10 +127,11 @@ class RigidBody:
         self._rotor_drag_per_s = float(vehicle.rotor_drag_per_s)
         self._ballistic_coefficient = float(vehicle.ballistic_coefficient_kg_per_m2)
         has_aero_drag = self._rotor_drag_per_s > 0.0 or self._ballistic_coefficient > 0.0
-        self._derivative, self._rk4 = _generated(has_aero_drag)
+        self._derivative, self._rk4, self._rk4_after = generated(has_aero_drag)
         self.ground_down_m: Callable[[float, float], float] = _flat_ground
         """Down coordinate of the ground under (north, east) [m] (default: the anchor's level)."""
         self._lag = MotorLag(vehicle.motor_time_constant_s)
+        self._lag_all = lag_function(self.n_motors)
         allocation = vehicle.allocation_matrix()
         self._allocation_rows = tuple(tuple(float(a) for a in row) for row in allocation)
         self._tug_force_ned_n: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -273,6 +148,14 @@ class RigidBody:
         self.landed = False
         self._decay_dt = math.nan
         self._decay_half = self._decay_full = 1.0
+        self.force_history_free = True
+        """Whether :attr:`external_force` gives the same floats for the same arguments whatever
+        it was asked before: then the derivative :meth:`specific_force_body_mps2` evaluates is
+        the next step's first RK4 stage (else every stage is evaluated, in the usual order)."""
+        self._first_stage: tuple | None = None
+        """``(x, wrench, coefficients, external_force, derivative)`` of the last
+        :meth:`specific_force_body_mps2`: the next step's first RK4 stage while all four are
+        the same objects (and :meth:`forget_forces` was not called)."""
 
     # ------------------------------------------------------------------ constant forces
     @property
@@ -376,7 +259,7 @@ class RigidBody:
         return self._derivative(
             x,
             (thrust_n, tau_l, tau_m, tau_n),
-            slope if slope is not None else _NO_SLOPE,
+            slope if slope is not None else NO_SLOPE,
             step_s,
             self._coefficients,
             self.external_force,
@@ -416,17 +299,32 @@ class RigidBody:
             sn + (n0 - sn) * df,
         )
         self._wrench = w_full
-        self._motor_n = [s + (z - s) * df for s, z in zip(fss, self._motor_n, strict=True)]
+        self._motor_n = self._lag_all(fss, self._motor_n, df)
 
+        known, self._first_stage = self._first_stage, None
         if self.landed:
             if not self._lifts_off(t0):
                 return
             self.landed = False
-        x = self.x = self._rk4(
-            self.x, w_start, w_half, w_full, dt_s, self._coefficients, self.external_force
-        )
+        x, coefficients, force = self.x, self._coefficients, self.external_force
+        if (
+            known is not None
+            and known[0] is x
+            and known[1] is w_start
+            and known[2] is coefficients
+            and known[3] is force
+        ):  # the first stage is the derivative the accelerometer read: the same floats
+            x = self._rk4_after(x, known[4], w_half, w_full, dt_s, coefficients, force)
+        else:
+            x = self._rk4(x, w_start, w_half, w_full, dt_s, coefficients, force)
+        self.x = x
         if x[POS_D] >= self.ground_down_m(x[POS_N], x[POS_E]):
             self._touch_ground()
+
+    def forget_forces(self) -> None:
+        """Call when the external force changes without a new function (a cable's tension
+        set-point or length set in place): the next step evaluates every stage afresh."""
+        self._first_stage = None
 
     # ------------------------------------------------------------------ ground contact
     def _lifts_off(self, thrust_n: float) -> bool:
@@ -483,9 +381,10 @@ class RigidBody:
         )
         if self.landed:
             return -grav_body[0], -grav_body[1], -grav_body[2]
-        d = self._derivative(
-            x, self._wrench, _NO_SLOPE, 0.0, self._coefficients, self.external_force
-        )
+        wrench, coefficients, force = self._wrench, self._coefficients, self.external_force
+        d = self._derivative(x, wrench, NO_SLOPE, 0.0, coefficients, force)
+        if self.force_history_free:
+            self._first_stage = (x, wrench, coefficients, force, d)
         u, v, w = x[VEL_U], x[VEL_V], x[VEL_W]
         p, q, r = x[RATE_P], x[RATE_Q], x[RATE_R]
         # kinematic acceleration (eq. 7-10): du/dt + Omega x eta; minus gravity (eq. 11)

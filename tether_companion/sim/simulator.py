@@ -34,8 +34,8 @@ from tether_companion.physics.rigid_body import (
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.sim.controller import CascadedController, Setpoint
-from tether_companion.sim.events import Event
 from tether_companion.sim.ground import Ground
+from tether_companion.sim.ground_station import GroundStationEvents
 from tether_companion.sim.propulsion import PropulsionConfig
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.sensors import SensorConfig, SensorSuite
@@ -51,7 +51,7 @@ SATURATION_LIMIT_S = 2.0
 """Every motor at full command for this long: the vehicle cannot fly the scenario."""
 
 
-class Simulator:
+class Simulator(GroundStationEvents):
     """A tethered quadcopter flying a scenario.
 
     Parameters
@@ -119,6 +119,9 @@ class Simulator:
         self._steady_thrust_n = self._thrusts_for(self._pwm_us)
         self._cache_step = -1
         self._specific_force: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self._tension_step = -1
+        """The step at which the cable last evaluated its force at the state now (``tension_n``
+        holds; -1 after any change to the cable)."""
         self._thrust_varies = scenario.propulsion.battery.sag_v_per_cell_per_min > 0.0
         self._initialise()
 
@@ -140,6 +143,8 @@ class Simulator:
         self._cable_diameter_m = config.diameter_m
         force = self._cable_force if config.diameter_m > 0.0 else self.cable.force_components
         self.body.external_force = force
+        self.body.force_history_free = self.cable.history_free
+        self._cable_changed()
 
     def _make_gusts(self, w20_mps: float | None = None) -> DrydenTurbulence | None:
         wind = self.scenario.wind
@@ -242,7 +247,7 @@ class Simulator:
         if not all(map(math.isfinite, self.body.x)):
             self._fail(f"t = {t:.2f} s: the vehicle's state is not finite")
         top = self.vehicle.thrust_curve.pwm_max_us
-        if self.armed and all(p >= top - 0.5 for p in self._pwm_us):
+        if self.armed and min(self._pwm_us) >= top - 0.5:  # every motor at the top
             self._saturated_since_s = min(self._saturated_since_s, t)
             if t - self._saturated_since_s >= SATURATION_LIMIT_S:
                 self._saturated_since_s = math.inf
@@ -265,14 +270,6 @@ class Simulator:
         target = round(time_s / self.physics_dt_s)
         while self._steps < target:
             self.step()
-
-    def _apply_due_events(self, until_s: float) -> None:
-        events = self._events
-        while self._next_event < len(events) and events[self._next_event].time_s <= until_s:
-            self._apply_event(events[self._next_event])
-            self._next_event += 1
-        more = self._next_event < len(events)
-        self._next_event_s = events[self._next_event].time_s if more else math.inf
 
     def _update_controller(self, t: float) -> None:
         if not self.armed:
@@ -330,8 +327,11 @@ class Simulator:
 
     def _specific_force_now(self) -> tuple[float, float, float]:
         if self._cache_step != self._steps:
-            self._specific_force = self.body.specific_force_body_mps2()
+            body = self.body
+            self._specific_force = body.specific_force_body_mps2()
             self._cache_step = self._steps
+            if not body.landed and self.cable.history_free:  # the cable asked at this state
+                self._tension_step = self._steps
         return self._specific_force
 
     @property
@@ -359,8 +359,13 @@ class Simulator:
 
     @property
     def tension_n(self) -> float:
-        """True cable tension at the drone now [N] (``truth.tension_n`` without the arrays)."""
-        self._cable_force_now(self.body.velocity_ned_m_s())
+        """True cable tension at the drone now [N] (``truth.tension_n`` without the arrays;
+        the cable's own when it was evaluated at this state already, by the IMU's specific
+        force: the same call with the same arguments)."""
+        if self._tension_step != self._steps:
+            self._cable_force_now(self.body.velocity_ned_m_s())
+            if self.cable.history_free:
+                self._tension_step = self._steps
         return self.cable.tension_n
 
     def _cable_force_now(self, velocity_ned_m_s: tuple[float, float, float]) -> tuple:
@@ -461,40 +466,3 @@ class Simulator:
     def replace_cable(self, config: CableConfig) -> None:
         """Swap the tether for a fresh one built from ``config`` (attached, its own winch state)."""
         self._attach_cable(config)
-
-    # ------------------------------------------------------------------ ground-station events
-    def set_tension_n(self, tension_n: float) -> None:
-        """Set the winch tension [N] (constant-tension cable only)."""
-        self.cable.set_tension_n(tension_n)
-
-    def set_winch_rate_mps(self, rate_mps: float) -> None:
-        """Set the winch rate [m/s], positive paying out."""
-        self.cable.set_winch_rate_mps(rate_mps)
-
-    def set_paid_out_m(self, length_m: float) -> None:
-        """Set the paid-out cable length [m] (the winch jumps to it)."""
-        self.cable.paid_out_m = length_m
-
-    def apply_tug(self, force_ned_n: ArrayLike, duration_s: float) -> None:
-        """Pull on the drone with an extra NED force [N] for ``duration_s`` seconds from now."""
-        force = np.asarray(force_ned_n, dtype=float).reshape(3)
-        if not (np.all(np.isfinite(force)) and math.isfinite(duration_s) and duration_s > 0.0):
-            raise ValueError(
-                f"tug needs a finite force and a duration > 0 s, got {force}, {duration_s!r}"
-            )
-        self.body.tug_force_ned_n = tuple(force.tolist())  # type: ignore[assignment]
-        self._tug_end_s = self.time_s + duration_s
-
-    def release_tether(self) -> None:
-        """Let the tether go: no cable force from now on."""
-        self.cable.release()
-
-    def _apply_event(self, event: Event) -> None:
-        if event.kind == "set_tension":
-            self.set_tension_n(event.tension_n)
-        elif event.kind == "winch_rate":
-            self.set_winch_rate_mps(event.winch_rate_mps)
-        elif event.kind == "tug":
-            self.apply_tug(event.force_ned_n, event.duration_s)
-        else:
-            self.release_tether()

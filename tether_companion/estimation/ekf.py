@@ -372,7 +372,9 @@ class ExtendedKalmanFilter:
             update = self._updaters[key] = scalar_update.updater(
                 self._n, m, tuple(h) if constant else None
             )
-        x, p = self._lists()
+        x, p = self._xl, self._pl
+        if x is None or p is None:
+            x, p = self._lists()
         outcome = update(x, p, h, innovation, float(r_variance), in_force)
         if outcome is None:  # S not positive definite: NaN/inf somewhere, or singular
             if not math.isfinite(sum(p) + sum(h) + sum(innovation) + r_variance):

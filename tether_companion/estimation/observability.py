@@ -93,15 +93,19 @@ class RangeWatch:
         self.config = config
         self._last_fused_s = math.nan
         self._start_s = math.nan
+        self._lost_at: tuple[float, bool] = (math.nan, False)
+        """(time [s], :meth:`lost` then): the pipeline asks twice per tick."""
 
     def reset(self) -> None:
         """Forget everything (filter restart)."""
         self._last_fused_s = math.nan
         self._start_s = math.nan
+        self._lost_at = (math.nan, False)
 
     def on_fused(self, time_s: float) -> None:
         """A height was fused at ``time_s`` [s]."""
         self._last_fused_s = time_s
+        self._lost_at = (math.nan, False)
 
     def unmeasured_s(self, time_s: float) -> float:
         """Seconds since the last fused height (since the first tick when none yet) [s]."""
@@ -112,7 +116,11 @@ class RangeWatch:
 
     def lost(self, time_s: float) -> bool:
         """True when no height was fused for longer than ``range_lost_after_s``."""
-        return self.unmeasured_s(time_s) > self.config.range_lost_after_s
+        at, lost = self._lost_at
+        if at != time_s:  # (nan after a change: never equal)
+            lost = self.unmeasured_s(time_s) > self.config.range_lost_after_s
+            self._lost_at = (time_s, lost)
+        return lost
 
     def grow(
         self, covariance: FloatArray, position_ned_m: FloatArray, time_s: float, dt_s: float

@@ -460,6 +460,8 @@ def _stale_counts(health: EstimatorHealth) -> tuple[int, int, int]:
 
 def _stale_input(before: tuple[int, int, int], after: tuple[int, int, int]) -> str | bool:
     """The publisher health naming the input that kept this tick from fusing (False: none)."""
+    if after == before:  # the usual tick: one comparison of the tuples
+        return False
     for name, old, new in zip(_STALE_HEALTH, before, after, strict=True):
         if new > old:
             return name

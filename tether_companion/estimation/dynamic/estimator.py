@@ -355,14 +355,18 @@ class DynamicTetherEstimator(InputFeed):
             assert isinstance(aligned, AlignedInputs)
             on_ground = aligned.thrust_n < self.dynamic.min_thrust_fraction * self._weight_n
             rows = aligned.rotation.rows  # Python floats, made once per attitude sample
-            inputs = [*rows[0], *rows[1], *rows[2], aligned.thrust_n]
             force = self.aligner.specific_force_values
-            if fusion_tick:
-                accel_fused = self._fuse_accel(inputs, force, on_ground, t)
-                self._ticks_since_fusion = 0
-                if accel_fused:
-                    self._sample_bearing(t)
-            self._inputs = [*inputs[:9], *force] if self._inertial else inputs
+            if fusion_tick or not self._inertial:
+                inputs = [*rows[0], *rows[1], *rows[2], aligned.thrust_n]
+                if fusion_tick:
+                    accel_fused = self._fuse_accel(inputs, force, on_ground, t)
+                    self._ticks_since_fusion = 0
+                    if accel_fused:
+                        self._sample_bearing(t)
+                if not self._inertial:
+                    self._inputs = inputs
+            if self._inertial:  # the next tick's batch step: R_v^b and the specific force
+                self._inputs = [*rows[0], *rows[1], *rows[2], *force]
         self._check_divergence(t, fusion_tick)
         return self._estimate(accel_fused, stale, on_ground)
 

@@ -15,16 +15,24 @@ is read around each batch and from the start of each published tick's RAW_IMU to
 VISION_POSITION_ESTIMATE's frame. The first fifth of the flight (start-up, the filter's
 initialisation) is left out.
 
+With ``--bytecodes N`` it counts instead, load-independently, the Python bytecodes executed
+per tick over ``N`` ticks after the first fifth (``sys.settrace`` opcode events; numpy's and
+other C code's instructions are not in it: callgrind counts those), by function: its own and
+inclusive of what it calls, with its calls per tick.
+
 Run: ``python tests/service_path_cost.py [--seconds 20] [--sleep-ms 0] [--batch 1]
-[--repeat 2]``; with ``PYTHONPATH=TREE`` to measure another tree's code (one that has no
-``send_now`` is measured without it).
+[--repeat 2] [--bytecodes 1000 [--top 40]]``; with ``PYTHONPATH=TREE`` to measure another
+tree's code (one that has no ``send_now`` is measured without it).
 """
 
 from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import time
+from collections import Counter
+from types import FrameType
 
 from hot_path_cost import SOURCE, _datagrams  # type: ignore[import-not-found]
 
@@ -49,8 +57,46 @@ class _CountingLink:
             self.estimate_sent_ns = time.thread_time_ns()
 
 
-def _one_flight(seconds: float, sleep_s: float, batch: int) -> tuple[list[int], list[float]]:
-    """(IMU -> estimate CPU [ns] of each published tick, CPU per tick [ns] of each batch)."""
+class _BytecodeCounter:
+    """Bytecodes executed by function (own, and inclusive of the functions it calls)."""
+
+    def __init__(self) -> None:
+        self.own: Counter[str] = Counter()
+        self.inclusive: Counter[str] = Counter()
+        self.calls: Counter[str] = Counter()
+
+    @staticmethod
+    def _name(frame: FrameType) -> str:
+        code = frame.f_code
+        return f"{code.co_filename.rsplit('tether_companion/', 1)[-1]}:{code.co_name}"
+
+    def trace(self, frame: FrameType, event: str, arg: object):  # noqa: ANN205 - settrace's
+        if event == "call":
+            frame.f_trace_opcodes = True
+            self.calls[self._name(frame)] += 1
+            return self._opcode
+        return None
+
+    def _opcode(self, frame: FrameType, event: str, arg: object):  # noqa: ANN202 - settrace's
+        if event == "opcode":
+            self.own[self._name(frame)] += 1
+            seen = set()
+            caller: FrameType | None = frame
+            while caller is not None:
+                name = self._name(caller)
+                if name not in seen:
+                    seen.add(name)
+                    self.inclusive[name] += 1
+                caller = caller.f_back
+        return self._opcode
+
+
+def _one_flight(
+    seconds: float, sleep_s: float, batch: int, count: tuple[_BytecodeCounter, int] | None = None
+) -> tuple[list[int], list[float]]:
+    """(IMU -> estimate CPU [ns] of each published tick, CPU per tick [ns] of each batch);
+    with ``count`` = (counter, ticks) the bytecodes of that many ticks after the skipped
+    start are counted instead of timed."""
     overrides = {"recording": {"enabled": False}, "publish": {"on_unhealthy": "inflate"}}
     config = load_service_config(None, overrides)
     service = CompanionService(config, load_vehicle_for(config))
@@ -68,6 +114,8 @@ def _one_flight(seconds: float, sleep_s: float, batch: int) -> tuple[list[int], 
     tick_cpu: list[float] = []
     for first in range(0, len(per_tick), batch):
         chunk = per_tick[first : first + batch]
+        if count is not None and first in (skip, skip + count[1]):
+            sys.settrace(count[0].trace if first == skip else None)
         if sleep_s:
             time.sleep(sleep_s * len(chunk))
         start = time.thread_time_ns()
@@ -92,7 +140,20 @@ def main() -> None:
     parser.add_argument("--sleep-ms", type=float, default=0.0)
     parser.add_argument("--batch", type=int, default=1)
     parser.add_argument("--repeat", type=int, default=2)
+    parser.add_argument("--bytecodes", type=int, default=0, help="count over this many ticks")
+    parser.add_argument("--top", type=int, default=40)
     args = parser.parse_args()
+    if args.bytecodes:
+        counter = _BytecodeCounter()
+        _one_flight(args.seconds, 0.0, 1, (counter, args.bytecodes))
+        sys.settrace(None)
+        ticks = args.bytecodes
+        print(f"{sum(counter.own.values()) / ticks:.0f} bytecodes per tick ({ticks} ticks)")
+        for title, table in (("own", counter.own), ("inclusive", counter.inclusive)):
+            print(f"--- {title}: bytecodes per tick, calls per tick, function")
+            for name, n in table.most_common(args.top):
+                print(f"{n / ticks:8.1f} {counter.calls[name] / ticks:6.2f} {name}")
+        return
     for _ in range(args.repeat):
         to_estimate, tick_cpu = _one_flight(args.seconds, 1e-3 * args.sleep_ms, args.batch)
         deciles = statistics.quantiles(to_estimate, n=10)

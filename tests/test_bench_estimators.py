@@ -17,10 +17,12 @@ from tether_companion.bench.estimators import cluster
 from tether_companion.bench.estimators.flight import FlightRecord, KindTrace
 from tether_companion.bench.estimators.registry import kinds
 from tether_companion.bench.estimators.scores import (
+    TAUT_TENSION_N,
     converge_time_s,
     nees,
     nees_band,
     pool,
+    published_after_taut_s,
     score_kind,
     share_in_band,
 )
@@ -110,6 +112,7 @@ def test_beyond_3_sigma_is_0_8_percent_for_consistent_errors_and_counts_publishe
         wind_ned_mps=zeros,
         specific_force_body_mps2=zeros,
         angle_seen=np.zeros(n, dtype=bool),
+        landed=np.zeros(n, dtype=bool),
         traces={},
     )
 
@@ -336,3 +339,20 @@ def test_paper_filters_are_told_the_anchor_height_and_the_rangefinder_mounting()
     late = record.time_s >= 3.0
     down_error = record.traces["ekf-4s"].position_ned_m[late, 2] - record.position_ned_m[late, 2]
     assert np.sqrt(np.mean(down_error**2)) < 0.2  # 1.2 m if the stand were taken for ground
+
+
+def test_published_after_taut_counts_from_lift_off_with_the_cable_pulling() -> None:
+    """The issue's "position published within 5 s of the cable becoming taut": from the first
+    tick off the ground with the true tension above TAUT_TENSION_N to the first published tick
+    at or after it; ticks published on the ground or before it do not count; never published
+    after it is inf, never taut nan."""
+    time_s = np.arange(10) * 0.5
+    landed = np.array([True] * 4 + [False] * 6)
+    tension = np.array([3.0] * 5 + [0.1] + [3.0] * 4)  # lift-off at 2.0 s, slack at 2.5 s
+    published = np.zeros(10, dtype=bool)
+    published[1] = True  # on the ground: does not count
+    assert published_after_taut_s(time_s, landed, tension, published) == math.inf
+    published[7] = True
+    assert published_after_taut_s(time_s, landed, tension, published) == pytest.approx(1.5)
+    slack = np.full(10, TAUT_TENSION_N)  # never above: never taut
+    assert math.isnan(published_after_taut_s(time_s, landed, slack, published))

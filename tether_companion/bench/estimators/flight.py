@@ -74,6 +74,8 @@ class FlightRecord:
         The accelerometer's true specific force without noise or bias, FRD, (N, 3) [m/s^2].
     angle_seen
         Whether the ground station's cable-angle sensor reported at the tick, shape (N,).
+    landed
+        Whether the drone rested on the ground at the tick, shape (N,).
     traces
         Kind name -> :class:`KindTrace`.
     """
@@ -89,6 +91,7 @@ class FlightRecord:
     wind_ned_mps: FloatArray
     specific_force_body_mps2: FloatArray
     angle_seen: NDArray[np.bool_]
+    landed: NDArray[np.bool_]
     traces: dict[str, KindTrace]
 
 
@@ -128,6 +131,7 @@ def fly(
     tension, thrust = np.empty(n), np.empty(n)
     range_seen = np.zeros(n, dtype=bool)
     angle_seen = np.zeros(n, dtype=bool)
+    landed = np.zeros(n, dtype=bool)
     outputs = [_empty_trace(n) for _ in kinds]
     tick = 0
     seen = False
@@ -167,6 +171,7 @@ def fly(
             truth["force"][tick] = state.specific_force_body_mps2
             tension[tick] = state.tension_n
             thrust[tick] = float(state.motor_thrust_n.sum())
+            landed[tick] = state.landed
             range_seen[tick] = seen
             seen = False
             for estimator, out in zip(estimators, outputs, strict=True):
@@ -192,6 +197,7 @@ def fly(
         wind_ned_mps=truth["wind"],
         specific_force_body_mps2=truth["force"],
         angle_seen=angle_seen,
+        landed=landed,
         traces={
             kind.name: KindTrace(
                 position_ned_m=out["position"],

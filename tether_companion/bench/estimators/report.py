@@ -68,6 +68,7 @@ ROWS = (
     ("NEES in 95 % band", lambda c: _pct(c["nees_in_band"])),
     ("time to converge [s]", lambda c: _converge(c)),
     ("share published", lambda c: _pct(c["share_published"])),
+    ("published after taut, worst seed [s]", lambda c: _after_taut(c)),
     ("beyond 3 sigma (consistent: 0.8 %)", lambda c: _pct(c["beyond_3_sigma"], 1)),
     ("published beyond 3 sigma", lambda c: _pct(c["published_beyond_3_sigma"], 1)),
     ("CRLB horizontal [m]", lambda c: _f(c["crlb_horizontal_m"])),
@@ -80,6 +81,18 @@ ROWS = (
     ("RMSE / own CRLB vertical", lambda c: _f(c["vertical_rmse_over_own_bound"], 2)),
 )
 """The table's rows: label and how a pooled cell is shown."""
+
+
+def _after_taut(cell: dict) -> str:
+    """The slowest seed's seconds from taut to the first published tick, with how many
+    seeds never published after it ("-": the cable was never taut)."""
+    times = [t for t in cell["published_after_taut_s_per_seed"] if not math.isnan(t)]
+    if not times:
+        return "-"
+    never = sum(1 for t in times if math.isinf(t))
+    finite = [t for t in times if math.isfinite(t)]
+    text = _f(max(finite), 1) if finite else "never"
+    return f"{text} ({never}/{len(times)} never)" if never and finite else text
 
 
 def _converge(cell: dict) -> str:

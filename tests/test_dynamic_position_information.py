@@ -29,13 +29,14 @@ def _direction_rows(p: np.ndarray) -> np.ndarray:
 
 
 def _upper(j: np.ndarray) -> tuple[float, ...]:
-    return tuple(float(v) for v in j[np.triu_indices(3)])
+    """``J`` as the terms of :meth:`PositionInformation.at` with no innovation excess."""
+    return tuple(float(v) for v in j[np.triu_indices(3)]) + (0.0,) * 6
 
 
 def test_without_information_the_added_term_is_left_exactly_as_it_is() -> None:
     rows = unmodelled_position_rows(3.0, 2.0, -2.5, 4.0, 0.2, 0.05)
     assert reduce_added_rows(rows, None) is rows
-    assert reduce_added_rows(rows, (0.0,) * 6) == rows  # J = 0: (I + C 0)^-1 C = C
+    assert reduce_added_rows(rows, (0.0,) * 12) == rows  # J = 0: (I + C 0)^-1 C = C
     assert PositionInformation(1.0).at(5.0) is None
 
 
@@ -76,7 +77,7 @@ def test_an_angle_narrows_the_turn_of_the_cable_to_the_angle_s_accuracy() -> Non
 def test_the_information_is_forgotten_over_the_correlation_time() -> None:
     info = PositionInformation(2.0)
     info.add([(0.0, 1.0, 0.0)], [0.25], 10.0)
-    assert info.at(10.0) == pytest.approx((0.0, 0.0, 0.0, 4.0, 0.0, 0.0))
+    assert info.at(10.0) == pytest.approx((0.0, 0.0, 0.0, 4.0, 0.0, 0.0) + (0.0,) * 6)
     assert info.at(12.0)[3] == pytest.approx(4.0 * math.exp(-1.0))
     info.add([(0.0, 1.0, 0.0)], [0.25], 12.0)  # the older reading decayed, the new one whole
     assert info.at(12.0)[3] == pytest.approx(4.0 * (1.0 + math.exp(-1.0)))

@@ -242,9 +242,21 @@ class DynamicTetherEstimator(InputFeed):
             return
         if self.bank is not None and self._fresh(time_s, self.config.staleness.tension_s):
             self._step_batch()
-            if self.bank is not None and self.cable_angle.fuse(
+            if self.bank is None:
+                return
+            status = self.cable_angle.status
+            gated_before = status.gated
+            fused = self.cable_angle.fuse(
                 self.bank, self.constants, elevation_rad, azimuth_rad, self._time_s, noise_std_rad
-            ):
+            )
+            if fused or status.gated != gated_before:  # an innovation of this reading
+                self.position_information.add_angle_innovation(
+                    status.last_innovation,
+                    status.last_innovation_variance.tolist(),
+                    self.bank.best.x_values()[:3],
+                    self._time_s,
+                )
+            if fused:
                 self.health.cable_angle_fused += 1
                 x = self.bank.best.x_values()
                 self._add_angle_information(x, elevation_rad, noise_std_rad)

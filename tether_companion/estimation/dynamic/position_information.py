@@ -18,7 +18,15 @@ Kalman (information-sum) update of the prior ``C``::
 which needs no inverse of ``C`` (rank 2 or 3) or ``J`` (rank 2 for an angle). Without any
 such measurement ``J = 0`` and ``C' = C`` exactly. ``C'`` is never larger than ``C`` and at
 most ``J^-1`` in the directions ``J`` measures (a steady 10 Hz angle over 1 s: about ten
-readings' worth). The filter's own state and covariance are untouched. Pure.
+readings' worth).
+
+That holds while the filter follows the angle. When it does not (its bearing off by more than
+the readings allow: innovations beyond the gate, as in a gusty hover's first seconds), the
+angle's innovations show the error directly: their variance beyond the predicted
+(:class:`~tether_companion.estimation.dynamic.observability.InnovationExcess`, as for the
+rangefinder's height) is added in the directions they measure, the azimuth's times the
+horizontal range across the cable, the elevation's times the range in the cable's vertical
+plane (a straight cable's geometry). The filter's own state and covariance are untouched. Pure.
 """
 
 from __future__ import annotations
@@ -26,8 +34,15 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from tether_companion.estimation.dynamic.observability import InnovationExcess
+
 Rows = list[list[float]]
 """A 3x3 position covariance as rows of Python floats [m^2]."""
+Terms = tuple[float, ...]
+"""``J`` (nn, ne, nd, ee, ed, dd) [1/m^2] and the excess covariance (the same six) [m^2]."""
+ANGLE_EXCESS_TIME_CONSTANT_S = 2.0
+"""Averaging time of the cable angle's innovation excess [s] (the rangefinder's)."""
+_ZERO6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 class PositionInformation:
@@ -42,20 +57,60 @@ class PositionInformation:
         the offset it causes now.
     """
 
-    __slots__ = ("_j", "_last_s", "_tau_s")
+    __slots__ = ("_azimuth", "_elevation", "_excess", "_j", "_last_s", "_tau_s")
 
     def __init__(self, correlation_s: float) -> None:
         if not correlation_s > 0.0:
             raise ValueError(f"correlation_s must be positive, got {correlation_s!r}")
         self._tau_s = correlation_s
-        self._j = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        self._j = _ZERO6
         """(nn, ne, nd, ee, ed, dd) at :attr:`_last_s`."""
         self._last_s = math.nan
+        self._elevation = InnovationExcess(ANGLE_EXCESS_TIME_CONSTANT_S)
+        self._azimuth = InnovationExcess(ANGLE_EXCESS_TIME_CONSTANT_S)
+        self._excess = _ZERO6
+        """The angle innovations' excess as a position covariance (nn, ne, nd, ee, ed, dd)."""
 
     def clear(self) -> None:
         """Forget every measurement (a restart)."""
-        self._j = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        self._j = _ZERO6
         self._last_s = math.nan
+        self._elevation = InnovationExcess(ANGLE_EXCESS_TIME_CONSTANT_S)
+        self._azimuth = InnovationExcess(ANGLE_EXCESS_TIME_CONSTANT_S)
+        self._excess = _ZERO6
+
+    def add_angle_innovation(
+        self,
+        innovation_rad: Sequence[float],
+        variance_rad2: Sequence[float],
+        position_ned_m: Sequence[float],
+        time_s: float,
+    ) -> None:
+        """A cable-angle reading's (elevation, azimuth) innovation [rad] and its predicted
+        variance [rad^2] (fused or gated) at the estimated position (NED [m]): the excess,
+        mapped to the position at that position."""
+        self._elevation.add(float(innovation_rad[0]), float(variance_rad2[0]), time_s)
+        self._azimuth.add(float(innovation_rad[1]), float(variance_rad2[1]), time_s)
+        n, e, d = (float(v) for v in position_ned_m)
+        rho = math.hypot(n, e)
+        distance = math.sqrt(rho * rho + d * d)
+        if not (rho > 0.0 and math.isfinite(distance)):
+            return
+        if math.isnan(self._last_s):
+            self._last_s = time_s
+        across = self._azimuth.variance * rho * rho  # along (-e, n, 0) / rho
+        vertical = self._elevation.variance * distance * distance
+        # the cable's vertical plane: perpendicular to p, (n d, e d, -rho^2) / (rho |p|)
+        tn, te = -e / rho, n / rho
+        vn, ve, vd = n * d / (rho * distance), e * d / (rho * distance), -rho / distance
+        self._excess = (
+            across * tn * tn + vertical * vn * vn,
+            across * tn * te + vertical * vn * ve,
+            vertical * vn * vd,
+            across * te * te + vertical * ve * ve,
+            vertical * ve * vd,
+            vertical * vd * vd,
+        )
 
     def add(
         self, rows: Sequence[Sequence[float]], variances: Sequence[float], time_s: float
@@ -94,24 +149,32 @@ class PositionInformation:
             return 1.0
         return math.exp(-(time_s - last) / self._tau_s)
 
-    def at(self, time_s: float) -> tuple[float, float, float, float, float, float] | None:
-        """``J`` at ``time_s`` [s] as (nn, ne, nd, ee, ed, dd) [1/m^2]; None when nothing was
-        ever added (the added covariance is then left exactly as it is)."""
+    def at(self, time_s: float) -> Terms | None:
+        """``J`` at ``time_s`` [s] (nn, ne, nd, ee, ed, dd) [1/m^2] followed by the angle
+        innovations' excess covariance (the same six) [m^2]; None when nothing was ever added
+        (the added covariance is then left exactly as it is)."""
         if math.isnan(self._last_s):
             return None
         decay = self._decay(time_s) if math.isfinite(time_s) else 1.0
-        return tuple(v * decay for v in self._j)  # type: ignore[return-value]
+        j = self._j
+        return (
+            j[0] * decay,
+            j[1] * decay,
+            j[2] * decay,
+            j[3] * decay,
+            j[4] * decay,
+            j[5] * decay,
+            *self._excess,
+        )
 
 
-def reduce_added_rows(
-    rows: Rows, information: tuple[float, float, float, float, float, float] | None
-) -> Rows:
-    """``C' = (I + C J)^-1 C`` for the added position covariance ``C`` (rows, [m^2]) and the
-    information ``J`` (:meth:`PositionInformation.at`, [1/m^2]); ``rows`` itself when
-    ``information`` is None. Python floats (read every IMU tick by the status)."""
+def reduce_added_rows(rows: Rows, information: Terms | None) -> Rows:
+    """``C' = (I + C J)^-1 C`` plus the angle innovations' excess for the added position
+    covariance ``C`` (rows, [m^2]) and the terms of :meth:`PositionInformation.at`; ``rows``
+    itself when ``information`` is None. Python floats (read every IMU tick by the status)."""
     if information is None:
         return rows
-    jnn, jne, jnd, jee, jed, jdd = information
+    jnn, jne, jnd, jee, jed, jdd, enn, ene, end, eee, eed, edd = information
     (c00, c01, c02), (_, c11, c12), (_, _, c22) = rows
     # M = I + C J (C and J symmetric)
     m00 = 1.0 + c00 * jnn + c01 * jne + c02 * jnd
@@ -146,5 +209,5 @@ def reduce_added_rows(
     r20 = (a20 * c00 + a21 * c01 + a22 * c02) / det
     r21 = (a20 * c01 + a21 * c11 + a22 * c12) / det
     r22 = (a20 * c02 + a21 * c12 + a22 * c22) / det
-    s01, s02, s12 = 0.5 * (r01 + r10), 0.5 * (r02 + r20), 0.5 * (r12 + r21)
-    return [[r00, s01, s02], [s01, r11, s12], [s02, s12, r22]]
+    s01, s02, s12 = 0.5 * (r01 + r10) + ene, 0.5 * (r02 + r20) + end, 0.5 * (r12 + r21) + eed
+    return [[r00 + enn, s01, s02], [s01, r11 + eee, s12], [s02, s12, r22 + edd]]

@@ -28,64 +28,76 @@ def _direction_rows(p: np.ndarray) -> np.ndarray:
     return np.vstack([elevation, azimuth])
 
 
-def _upper(j: np.ndarray) -> tuple[float, ...]:
-    """``J`` as the terms of :meth:`PositionInformation.at` with no innovation excess."""
-    return tuple(float(v) for v in j[np.triu_indices(3)]) + (0.0,) * 6
+def _rows_of(r2: np.ndarray) -> list[np.ndarray]:
+    return [r2[0], r2[1]]
 
 
-def test_without_information_the_added_term_is_left_exactly_as_it_is() -> None:
+def test_without_a_reading_the_added_term_is_left_exactly_as_it_is() -> None:
     rows = unmodelled_position_rows(3.0, 2.0, -2.5, 4.0, 0.2, 0.05)
     assert reduce_added_rows(rows, None) is rows
-    assert reduce_added_rows(rows, (0.0,) * 12) == rows  # J = 0: (I + C 0)^-1 C = C
-    assert PositionInformation(1.0).at(5.0) is None
+    info = PositionInformation(1.0)
+    assert info.at(5.0) is None
+    info.add_angle_innovation((0.01, 0.02), (1e-4, 1e-4), (3.0, 2.0, -2.5), 5.0)  # no reading
+    assert info.at(5.0) is None
 
 
-def test_the_update_is_the_information_sum() -> None:
+def test_a_reading_is_the_kalman_update_of_the_added_covariance() -> None:
     rng = np.random.default_rng(3)
     for _ in range(50):
         a = rng.normal(size=(3, 3))
         c = a @ a.T + 0.01 * np.eye(3)
         h = rng.normal(size=(2, 3))
-        j = h.T @ np.diag(1.0 / rng.uniform(0.01, 1.0, size=2)) @ h
-        reduced = np.array(reduce_added_rows(c.tolist(), _upper(j)))
-        np.testing.assert_allclose(reduced, np.linalg.inv(np.linalg.inv(c) + j), rtol=1e-9)
+        r = rng.uniform(0.01, 1.0, size=2)
+        info = PositionInformation(1.0)
+        info.add(_rows_of(h), r.tolist(), 2.0, c.tolist())
+        reduced = np.array(reduce_added_rows(c.tolist(), info.at(2.0)))
+        expected = np.linalg.inv(np.linalg.inv(c) + h.T @ np.diag(1.0 / r) @ h)
+        np.testing.assert_allclose(reduced, expected, rtol=1e-9, atol=1e-12)
         assert np.linalg.eigvalsh(c - reduced).min() > -1e-12  # never wider than before
 
 
-def test_an_angle_narrows_the_turn_of_the_cable_to_the_angle_s_accuracy() -> None:
-    """The unmodelled force's turn of the cable (rank 2, across the cable) after ten readings
-    of a 0.02 rad direction: about 0.02 |p| / sqrt(10) across, nothing along the cable."""
+def test_a_steady_angle_narrows_the_turn_of_the_cable_and_the_term_comes_back_after() -> None:
+    """The unmodelled force's turn of the cable (across it) under a 10 Hz angle of 0.02 rad
+    with tau = 1 s: a Gauss-Markov offset measured ten times per correlation time, well below
+    the term and about the accuracy of a few readings; along the cable the winch's 0.05 m
+    stays (a direction does not measure the range); without readings it is back to ``C``."""
     p = np.array([4.0, 2.0, -2.5])
     distance = float(np.linalg.norm(p))
     rows = unmodelled_position_rows(*p, 4.0, 0.2, 0.05)
     h = _direction_rows(p)
     elevation = math.asin(-p[2] / distance)
-    r_inv = np.diag([1.0 / 0.02**2, math.cos(elevation) ** 2 / 0.02**2])
-    reduced = np.array(reduce_added_rows(rows, _upper(10.0 * h.T @ r_inv @ h)))
+    variances = [0.02**2, (0.02 / math.cos(elevation)) ** 2]
+    info = PositionInformation(1.0)
+    for k in range(100):
+        info.add(_rows_of(h), variances, 0.1 * k, rows)
+    reduced = np.array(reduce_added_rows(rows, info.at(9.9)))
     u = p / distance
     across = np.cross(u, [0.0, 0.0, 1.0])
     across /= np.linalg.norm(across)
     before = math.sqrt(across @ np.array(rows) @ across)
     after = math.sqrt(across @ reduced @ across)
     assert before == pytest.approx(distance * 0.2 / 4.0)
-    assert after < 0.02 * distance / math.sqrt(10.0) * 1.001
-    assert after > 0.9 * 0.02 * distance / math.sqrt(10.0)
-    # along the cable the winch's 0.05 m stays: a direction does not measure the range
+    assert 0.02 * distance / math.sqrt(10.0) < after < 0.02 * distance  # one reading
     assert u @ reduced @ u == pytest.approx(0.05**2, rel=1e-9)
-
-
-def test_the_information_is_forgotten_over_the_correlation_time() -> None:
-    info = PositionInformation(2.0)
-    info.add([(0.0, 1.0, 0.0)], [0.25], 10.0)
-    assert info.at(10.0) == pytest.approx((0.0, 0.0, 0.0, 4.0, 0.0, 0.0) + (0.0,) * 6)
-    assert info.at(12.0)[3] == pytest.approx(4.0 * math.exp(-1.0))
-    info.add([(0.0, 1.0, 0.0)], [0.25], 12.0)  # the older reading decayed, the new one whole
-    assert info.at(12.0)[3] == pytest.approx(4.0 * (1.0 + math.exp(-1.0)))
-    info.add([(math.nan, 1.0, 0.0)], [0.25], 13.0)  # ignored
-    info.add([(1.0, 1.0, 0.0)], [0.0], 13.0)  # ignored
-    assert info.at(12.0)[3] == pytest.approx(4.0 * (1.0 + math.exp(-1.0)))
+    later = np.array(reduce_added_rows(rows, info.at(9.9 + 5.0)))  # 5 tau without a reading
+    np.testing.assert_allclose(later, np.array(rows), rtol=1e-3, atol=1e-9)
     info.clear()
-    assert info.at(12.0) is None
+    assert info.at(10.0) is None
+
+
+def test_innovations_beyond_the_predicted_widen_the_term_across_the_cable() -> None:
+    """A filter whose bearing is off (azimuth innovations of 0.2 rad, 4 m out, predicted
+    0.02 rad) publishes about that offset across the cable."""
+    p = (4.0, 0.0, -2.5)
+    rows = unmodelled_position_rows(*p, 4.0, 0.2, 0.05)
+    info = PositionInformation(1.0)
+    info.add(_rows_of(_direction_rows(np.array(p))), [1e-4, 1e-4], 0.0, rows)
+    for k in range(40):
+        info.add_angle_innovation((0.0, 0.2), (4e-4, 4e-4), p, 0.1 * k)
+    widened = np.array(reduce_added_rows(rows, info.at(3.9)))
+    east = math.sqrt(widened[1, 1])
+    assert 0.5 < east < 1.0  # the excess (2 s average, 4 s in) of the 0.8 m across, and C
+    assert widened[2, 2] == pytest.approx(rows[2][2], rel=1e-3)  # the elevation agrees
     with pytest.raises(ValueError):
         PositionInformation(0.0)
 

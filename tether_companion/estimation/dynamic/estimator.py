@@ -56,6 +56,7 @@ from tether_companion.estimation.dynamic.noise import (
     accel_measurement_std_mps2,
     process_noise_density,
 )
+from tether_companion.estimation.dynamic.observability import unmodelled_position_rows
 from tether_companion.estimation.dynamic.output import DynamicHealth, NavigationEstimate
 from tether_companion.estimation.dynamic.position_information import PositionInformation
 from tether_companion.estimation.dynamic.published import StatusSettings, TickSource
@@ -284,11 +285,20 @@ class DynamicTetherEstimator(InputFeed):
         n = state.N_STATES
         cos_elevation = max(math.cos(elevation_rad), CableAngleAid.MIN_COS_ELEVATION)
         azimuth = (jac[n : n + 3], (noise_std_rad / cos_elevation) ** 2)
-        if self.health.winch_fused:
+        winch = bool(self.health.winch_fused)
+        if winch:
             rows, variances = (jac[0:3], azimuth[0]), (noise_std_rad**2, azimuth[1])
         else:
             rows, variances = (azimuth[0],), (azimuth[1],)
-        self.position_information.add(rows, variances, self._time_s)
+        added = unmodelled_position_rows(  # at the chord tension (the drone's, straight)
+            x[0],
+            x[1],
+            x[2],
+            x[state.TENSION],
+            self.bearing.force_std_n,
+            self.dynamic.winch_length_noise_std_m if winch else 0.0,
+        )
+        self.position_information.add(rows, variances, self._time_s, added)
 
     def on_range(self, sample: RangeSample) -> None:
         """A downward rangefinder reading along the body z axis [m]: the height above the ground

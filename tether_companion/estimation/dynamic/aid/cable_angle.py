@@ -3,28 +3,87 @@ north) of the cable where it leaves the anchor [rad] (generated ``cable_angle_*`
 catenary's tangent there, flat where the cable rests on the ground). The azimuth innovation is
 wrapped to [-pi, pi). The sensor's noise is a direction noise ``sigma`` per axis [rad]: the
 elevation's is ``sigma``, the azimuth's ``sigma / cos(elevation)`` (a direction error across
-a steep cable turns its azimuth by more). Skipped while the cable is slack."""
+a steep cable turns its azimuth by more).
+
+Skipped as slack only when the filter is sure the cable is slack (:func:`.slack.surely_slack`):
+a tension estimate that merely dips below ``slack_tension_n`` must not lock out the angle
+that would correct it.
+
+At a low tension the generated tangent is not evaluated as it stands: its horizontal part is
+``T_ch p_ne/|p|``, so a member whose chord tension went negative predicts a cable leaving
+the anchor away from the drone (elevation ``-el``, azimuth ``+ pi``); those innovations were
+gated and then, after ``max_consecutive_rejections``, fused regardless, and a linearised
+update of a half-turn innovation threw the position away (slack-gate-wip's angle-alone
+runaway). A slack cable does not point back at the anchor: below :data:`MIN_MODEL_TENSION_N`
+(or the slack threshold, the larger) the model is evaluated at that tension, its Jacobian's
+tension column 0 (for a weightless cable the angles do not depend on the tension at all).
+
+A bearing that far off is beyond the linearisation anyway: when a sample is going to be fused
+regardless of the gate (the member's angle was gated ``max_consecutive_rejections`` times in a
+row) and its azimuth innovation exceeds :data:`TURN_LIMIT_RAD`, the member's horizontal state
+(position, velocity, wind) is first turned about the anchor's vertical by that innovation
+(:func:`turn_about_anchor`), the exact correction of a bearing, instead of a linearised
+update that moves the drone along the tangent off the circle; counted in
+:attr:`CableAngleAid.turns`.
+"""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.aid.slack import SLACK, surely_slack
 from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
 from tether_companion.estimation.dynamic.bank import FilterBank
-from tether_companion.estimation.dynamic.models import ModelConstants
+from tether_companion.estimation.dynamic.member import MemberFilter
+from tether_companion.estimation.dynamic.models import UNDEFINED, ModelConstants
 from tether_companion.frames import wrap_pi
 
 FloatArray = NDArray[np.float64]
 
 NAME = "cable_angle"
-SLACK = "slack"
+
+MIN_MODEL_TENSION_N = 1e-3
+"""The lowest chord tension [N] the model is evaluated at (module docstring)."""
+
+TURN_LIMIT_RAD = 0.2
+"""An azimuth innovation [rad] beyond which a sample fused regardless of the gate turns the
+member about the anchor instead (the linearised ``a dpsi`` is then ``tan`` 1.4 % off)."""
+
+_HORIZONTAL_PAIRS = (
+    (state.POSITION.start, state.POSITION.start + 1),
+    (state.VELOCITY.start, state.VELOCITY.start + 1),
+    (state.WIND.start, state.WIND.start + 1),
+)
+"""The (north, east) index pairs of the states that turn with the bearing."""
+
+
+def turn_about_anchor(member: MemberFilter, angle_rad: float) -> None:
+    """Turn ``member``'s position, velocity and wind about the anchor's vertical by
+    ``angle_rad`` [rad] (north toward east), and its covariance with them."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    turn = np.eye(state.N_STATES)
+    for north, east in _HORIZONTAL_PAIRS:
+        turn[north, north], turn[north, east] = c, -s
+        turn[east, north], turn[east, east] = s, c
+    member.x = turn @ member.x
+    member.P = turn @ member.P @ turn.T
 
 
 class CableAngleAid:
-    """Fuses (elevation, azimuth) [rad] while the chord tension is above ``slack_tension_n``
-    [N]."""
+    """Fuses (elevation, azimuth) [rad] unless the chord tension is surely below
+    ``slack_tension_n`` [N].
+
+    Attributes
+    ----------
+    status
+        What the sensor did (:class:`AidStatus`).
+    turns
+        Members turned about the anchor instead of a linearised update (module docstring).
+    """
 
     MIN_COS_ELEVATION = 0.05
     """The azimuth's noise is at most ``sigma / MIN_COS_ELEVATION`` (a cable within 3 degrees
@@ -32,7 +91,9 @@ class CableAngleAid:
 
     def __init__(self, slack_tension_n: float) -> None:
         self.status = AidStatus()
+        self.turns = 0
         self._slack_n = slack_tension_n
+        self._floor_n = max(slack_tension_n, MIN_MODEL_TENSION_N)
 
     def fuse(
         self,
@@ -44,19 +105,46 @@ class CableAngleAid:
         noise_std_rad: float,
     ) -> bool:
         """Fuse one reading [rad] of direction noise ``noise_std_rad`` [rad]."""
-        if bank.best.x[state.TENSION] < self._slack_n:
+        if surely_slack(bank.best, self._slack_n):
             self.status.skip(SLACK)
             return False
+        for member in bank.filters:
+            self._turn_if_far(member, azimuth_rad)
         model = constants.models.cable_angle
         c = constants.values()
+        floor = self._floor_n
 
         def measure(xs: FloatArray) -> tuple[FloatArray, FloatArray]:
-            (elevation, azimuth), jac = model(xs.tolist(), (), c)
+            low = xs[state.TENSION] < floor
+            if low:
+                xs = xs.copy()
+                xs[state.TENSION] = floor
+            try:
+                values, jac_flat = model(xs.tolist(), (), c)
+            except UNDEFINED:
+                return np.full(2, math.nan), np.full((2, state.N_STATES), math.nan)
+            h = np.array(values)
+            jac = np.array(jac_flat).reshape(2, state.N_STATES)
+            if low:
+                jac[:, state.TENSION] = 0.0
             # predicted azimuth moved by whole turns next to the measured one
-            azimuth = azimuth_rad - wrap_pi(azimuth_rad - azimuth)
-            return np.array((elevation, azimuth)), np.array(jac).reshape(2, state.N_STATES)
+            h[1] = azimuth_rad - wrap_pi(azimuth_rad - h[1])
+            return h, jac
 
         z = np.array((elevation_rad, azimuth_rad))
         cos_elevation = max(np.cos(elevation_rad), self.MIN_COS_ELEVATION)
         r = np.diag((noise_std_rad**2, (noise_std_rad / cos_elevation) ** 2))
         return fuse(bank, NAME, self.status, z, measure, r, time_s)
+
+    def _turn_if_far(self, member: MemberFilter, azimuth_rad: float) -> None:
+        """Turn ``member`` to the measured azimuth [rad] when its next angle is fused
+        regardless of the gate and its bearing is more than :data:`TURN_LIMIT_RAD` off."""
+        sensor = member.sensors.get(NAME)
+        limit = member.max_consecutive_rejections
+        if sensor is None or not 0 < limit <= sensor.consecutive_rejections:
+            return
+        x = member.x
+        off = wrap_pi(azimuth_rad - math.atan2(x[1], x[0]))
+        if abs(off) > TURN_LIMIT_RAD:
+            turn_about_anchor(member, off)
+            self.turns += 1

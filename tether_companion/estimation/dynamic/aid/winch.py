@@ -1,6 +1,10 @@
 """Optional winch paid-out length: the cable's arc length (generated ``winch_length_*``: the
-catenary's, ``|p|`` for a weightless cable). Skipped while the cable is slack (its length then
-says only that the drone is closer than that)."""
+catenary's, ``|p|`` for a weightless cable). While the filter's tension is below
+``slack_tension_n`` the cable may be slack and its length says only that the drone is no
+farther from the anchor than that: the reading is skipped, unless the filter has the drone
+beyond it, when the distance ``|p|`` itself is fused to the length (the one statement that
+holds for any cable; the catenary's arc, longer than the chord at a deep sag, is not: fused
+there it published wrong positions on the sagging circle)."""
 
 from __future__ import annotations
 
@@ -8,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.aid.slack import SLACK
 from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.models import ModelConstants, evaluate
@@ -15,12 +20,12 @@ from tether_companion.estimation.dynamic.models import ModelConstants, evaluate
 FloatArray = NDArray[np.float64]
 
 NAME = "winch"
-SLACK = "slack"
 
 
 class WinchAid:
     """Fuses a paid-out length [m] with noise ``noise_std_m`` [m] while the chord tension is
-    above ``slack_tension_n`` [N]."""
+    above ``slack_tension_n`` [N], and below it as a bound on the distance the filter's drone
+    exceeds."""
 
     def __init__(self, noise_std_m: float, slack_tension_n: float) -> None:
         self.status = AidStatus()
@@ -31,13 +36,26 @@ class WinchAid:
         self, bank: FilterBank, constants: ModelConstants, length_m: float, time_s: float
     ) -> bool:
         """Fuse one reading [m]."""
-        if bank.best.x[state.TENSION] < self._slack_n:
-            self.status.skip(SLACK)
-            return False
+        best = bank.best
+        z = np.array((length_m,))
+        if best.x[state.TENSION] < self._slack_n:
+            if not float(np.linalg.norm(best.x[state.POSITION])) > length_m:
+                self.status.skip(SLACK)
+                return False
+            return fuse(bank, NAME, self.status, z, _chord, self._r, time_s)
         c = constants.values()
         model = constants.models.winch_length
 
         def measure(xs: FloatArray) -> tuple[FloatArray, FloatArray]:
             return evaluate(model, xs, (), c, 1)
 
-        return fuse(bank, NAME, self.status, np.array((length_m,)), measure, self._r, time_s)
+        return fuse(bank, NAME, self.status, z, measure, self._r, time_s)
+
+
+def _chord(xs: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The anchor-to-drone distance [m] and its Jacobian (1, 13)."""
+    p = xs[state.POSITION]
+    distance = float(np.linalg.norm(p))
+    jac = np.zeros((1, state.N_STATES))
+    jac[0, state.POSITION] = p / distance
+    return np.array((distance,)), jac

@@ -278,9 +278,9 @@ class DynamicTetherEstimator(InputFeed):
         the height through the elevation (``rho = h / tan(el)``), and the term's vertical part
         stands for that range's error, which the elevation does not remove in the filter
         (docs/estimation.md, "The unmodelled term and the cable angle (nees10)")."""
-        try:
-            _, jac = self.constants.models.cable_angle(x, (), self.constants.values())
-        except UNDEFINED:
+        _, jac_rows = self.cable_angle.evaluate(self.constants, np.array(x))
+        jac = jac_rows.ravel().tolist()
+        if not all(math.isfinite(v) for v in jac):
             return
         n = state.N_STATES
         cos_elevation = max(math.cos(elevation_rad), CableAngleAid.MIN_COS_ELEVATION)

@@ -110,23 +110,9 @@ class CableAngleAid:
             return False
         for member in bank.filters:
             self._turn_if_far(member, azimuth_rad)
-        model = constants.models.cable_angle
-        c = constants.values()
-        floor = self._floor_n
 
         def measure(xs: FloatArray) -> tuple[FloatArray, FloatArray]:
-            low = xs[state.TENSION] < floor
-            if low:
-                xs = xs.copy()
-                xs[state.TENSION] = floor
-            try:
-                values, jac_flat = model(xs.tolist(), (), c)
-            except UNDEFINED:
-                return np.full(2, math.nan), np.full((2, state.N_STATES), math.nan)
-            h = np.array(values)
-            jac = np.array(jac_flat).reshape(2, state.N_STATES)
-            if low:
-                jac[:, state.TENSION] = 0.0
+            h, jac = self.evaluate(constants, xs)
             # predicted azimuth moved by whole turns next to the measured one
             h[1] = azimuth_rad - wrap_pi(azimuth_rad - h[1])
             return h, jac
@@ -135,6 +121,23 @@ class CableAngleAid:
         cos_elevation = max(np.cos(elevation_rad), self.MIN_COS_ELEVATION)
         r = np.diag((noise_std_rad**2, (noise_std_rad / cos_elevation) ** 2))
         return fuse(bank, NAME, self.status, z, measure, r, time_s)
+
+    def evaluate(self, constants: ModelConstants, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """The angles (elevation, azimuth) [rad] (2,) and their Jacobian (2, 13) as fused at the
+        state ``x``: the chord tension floored (module docstring), ``nan`` where the model is
+        undefined."""
+        low = x[state.TENSION] < self._floor_n
+        if low:
+            x = x.copy()
+            x[state.TENSION] = self._floor_n
+        try:
+            values, jac_flat = constants.models.cable_angle(x.tolist(), (), constants.values())
+        except UNDEFINED:
+            return np.full(2, math.nan), np.full((2, state.N_STATES), math.nan)
+        jac = np.array(jac_flat).reshape(2, state.N_STATES)
+        if low:
+            jac[:, state.TENSION] = 0.0
+        return np.array(values), jac
 
     def _turn_if_far(self, member: MemberFilter, azimuth_rad: float) -> None:
         """Turn ``member`` to the measured azimuth [rad] when its next angle is fused

@@ -261,10 +261,9 @@ class DynamicTetherEstimator(InputFeed):
                 self.health.cable_angle_fused += 1
                 x = self.bank.best.x_values()
                 self._add_angle_information(x, elevation_rad, noise_std_rad)
-                # the azimuth's noise is sigma / cos(elevation), across the cable times the span
-                self.bearing.add_bearing(
-                    math.hypot(x[0], x[1]) * noise_std_rad / max(math.cos(elevation_rad), 0.05)
-                )
+                # the azimuth's noise across the cable: times the span
+                azimuth_std_rad = CableAngleAid.noise_std_rad(elevation_rad, noise_std_rad)[1]
+                self.bearing.add_bearing(math.hypot(x[0], x[1]) * azimuth_std_rad)
 
     def _add_angle_information(
         self, x: list[float], elevation_rad: float, noise_std_rad: float
@@ -283,13 +282,12 @@ class DynamicTetherEstimator(InputFeed):
         if not all(math.isfinite(v) for v in jac):
             return
         n = state.N_STATES
-        cos_elevation = max(math.cos(elevation_rad), CableAngleAid.MIN_COS_ELEVATION)
-        azimuth = (jac[n : n + 3], (noise_std_rad / cos_elevation) ** 2)
+        elevation_std, azimuth_std = CableAngleAid.noise_std_rad(elevation_rad, noise_std_rad)
         winch = bool(self.health.winch_fused)
         if winch:
-            rows, variances = (jac[0:3], azimuth[0]), (noise_std_rad**2, azimuth[1])
+            rows, variances = (jac[0:3], jac[n : n + 3]), (elevation_std**2, azimuth_std**2)
         else:
-            rows, variances = (azimuth[0],), (azimuth[1],)
+            rows, variances = (jac[n : n + 3],), (azimuth_std**2,)
         added = unmodelled_position_rows(  # at the chord tension (the drone's, straight)
             x[0],
             x[1],

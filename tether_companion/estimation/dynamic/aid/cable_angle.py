@@ -118,9 +118,16 @@ class CableAngleAid:
             return h, jac
 
         z = np.array((elevation_rad, azimuth_rad))
-        cos_elevation = max(np.cos(elevation_rad), self.MIN_COS_ELEVATION)
-        r = np.diag((noise_std_rad**2, (noise_std_rad / cos_elevation) ** 2))
+        r = np.diag([sd**2 for sd in self.noise_std_rad(elevation_rad, noise_std_rad)])
         return fuse(bank, NAME, self.status, z, measure, r, time_s)
+
+    @classmethod
+    def noise_std_rad(cls, elevation_rad: float, noise_std_rad: float) -> tuple[float, float]:
+        """The (elevation, azimuth) noise standard deviations [rad] of a reading of direction
+        noise ``noise_std_rad`` [rad]: ``sigma`` and ``sigma / cos(elevation)`` (module
+        docstring), the latter at most ``sigma / MIN_COS_ELEVATION``."""
+        cos_elevation = max(math.cos(elevation_rad), cls.MIN_COS_ELEVATION)
+        return noise_std_rad, noise_std_rad / cos_elevation
 
     def evaluate(self, constants: ModelConstants, x: FloatArray) -> tuple[FloatArray, FloatArray]:
         """The angles (elevation, azimuth) [rad] (2,) and their Jacobian (2, 13) as fused at the

@@ -127,3 +127,25 @@ def test_with_winch_and_angle_the_published_covariance_is_less_far_too_wide() ->
     assert trace.published[after].mean() > 0.9
     assert 0.04 < mean < nees_band(1)[1], mean
     assert not np.any(np.abs(error[published]) > 3.0 * sd[published])
+
+
+@pytest.mark.parametrize(
+    ("rows", "variances", "time_s", "added"),
+    [
+        ([[math.nan, 0.0, 0.0]], [1e-4], 1.0, None),  # a non-finite Jacobian
+        ([[0.1, 0.2, 0.0]], [0.0], 1.0, None),  # no noise: not a measurement
+        ([[0.1, 0.2, 0.0]], [math.inf], 1.0, None),
+        ([[0.1, 0.2, 0.0]], [1e-4], math.nan, None),  # no time
+        ([[0.1, 0.2, 0.0]], [1e-4], 1.0, math.nan),  # a non-finite term
+    ],
+)
+def test_a_bad_reading_is_ignored_and_leaves_the_term_as_it_was(rows, variances, time_s, added):
+    """What reaches the term from the filter is already checked at the service's boundary;
+    a non-finite or noiseless value that gets here anyway changes nothing (no NaN can reach
+    the published covariance through it)."""
+    term = unmodelled_position_rows(3.0, 2.0, -2.5, 4.0, 0.2, 0.05)
+    if added is not None:
+        term = [[added, *row[1:]] for row in term]
+    info = PositionInformation(1.0)
+    info.add(rows, variances, time_s, term)
+    assert info.at(1.0) is None

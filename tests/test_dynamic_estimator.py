@@ -150,13 +150,13 @@ def test_optional_sensors_shrink_the_uncertainty_they_measure() -> None:
     truth_p = run.truth_position_ned_m[-1]
     p_before = kf.P.copy()
     est.set_known_tension_n(float(run.truth_tension_n[-1]), t)
-    assert est.load_cell.status.fused == 1 and est.health.load_cell_fused == 1
+    assert est.ground_station.load_cell.status.fused == 1 and est.health.load_cell_fused == 1
     est.set_paid_out_length_m(float(np.linalg.norm(truth_p)), t)
-    assert est.winch.status.fused == 1
+    assert est.ground_station.winch.status.fused == 1
     elevation = math.atan2(-truth_p[2], math.hypot(truth_p[0], truth_p[1]))
     azimuth = math.atan2(truth_p[1], truth_p[0])
     est.on_cable_angle(elevation, azimuth + 2 * math.pi, t, 0.02)  # a whole turn must not matter
-    status = est.cable_angle.status
+    status = est.ground_station.cable_angle.status
     assert status.fused == 1 and abs(status.last_innovation[1]) < 0.5
     assert status.last_test_ratio >= 0.0 and status.last_fused_time_s == est.time_s
     horizontal_before = np.trace(p_before[:2, :2])

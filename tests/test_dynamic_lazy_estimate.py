@@ -76,10 +76,10 @@ def _former_estimate(est: DynamicTetherEstimator, source) -> tuple:  # noqa: ANN
             dyn.winch_length_noise_std_m if est.health.winch_fused else 0.0,
         )
         # narrowed by the cable angles fused within the correlation time (none here: None)
-        information = est.position_information.at(est.time_s)
+        information = est.ground_station.position_information.at(est.time_s)
         published[:3, :3] += np.array(reduce_added_rows(added.tolist(), information))
     status, reason = assess(
-        initialised_reason=None if bank is not None else est._initialiser.reason,
+        initialised_reason=None if bank is not None else est.initialising_reason,
         reset_reason=source.reset_reason,
         on_ground=source.on_ground,
         inputs_stale=source.inputs_stale,
@@ -89,7 +89,7 @@ def _former_estimate(est: DynamicTetherEstimator, source) -> tuple:  # noqa: ANN
         max_horizontal_std_m=dyn.max_horizontal_std_m,
         horizontal_pull_n=0.0 if bank is None else horizontal_pull_n(values),
         min_horizontal_pull_n=min_horizontal_pull_n(
-            est._status_settings.pull_per_wind_n_s_per_m,
+            est.ground_station.status_settings(est.time_s).pull_per_wind_n_s_per_m,
             dyn.initial.wind_std_mps,
             float(x[state.WIND][0]),
             float(x[state.WIND][1]),

@@ -72,8 +72,8 @@ def _pulled_back(tension_n: float, sd_n: float) -> None:
     for k in range(1, 6):
         est.on_cable_angle(*_angles(truth), t + 0.001 * k, 0.01)
     after = np.linalg.norm(est.bank.best.x[state.POSITION][:2] - truth[:2])
-    assert est.cable_angle.status.fused == 5
-    assert SLACK not in est.cable_angle.status.skipped_by_reason
+    assert est.ground_station.cable_angle.status.fused == 5
+    assert SLACK not in est.ground_station.cable_angle.status.skipped_by_reason
     assert after < 0.3 * before
 
 
@@ -102,9 +102,10 @@ def test_a_surely_slack_cable_skips_the_angle_and_an_unreachable_length() -> Non
     _believe(est, *SURELY_SLACK, (0.0, 0.0, 0.0))
     est.on_cable_angle(*_angles(truth), t + 0.001, 0.01)
     est.set_paid_out_length_m(float(np.linalg.norm(truth)) + 1.0, t + 0.002)
-    assert est.cable_angle.status.skipped_by_reason[SLACK] == 1
-    assert est.winch.status.skipped_by_reason[SLACK] == 1
-    assert est.cable_angle.status.fused == 0 and est.winch.status.fused == 0
+    assert est.ground_station.cable_angle.status.skipped_by_reason[SLACK] == 1
+    assert est.ground_station.winch.status.skipped_by_reason[SLACK] == 1
+    assert est.ground_station.cable_angle.status.fused == 0
+    assert est.ground_station.winch.status.fused == 0
 
 
 def test_a_drone_beyond_the_line_is_pulled_in_whatever_the_tension() -> None:
@@ -116,7 +117,7 @@ def test_a_drone_beyond_the_line_is_pulled_in_whatever_the_tension() -> None:
     length = before - 1.0
     est.set_paid_out_length_m(length, t + 0.001)
     after = float(np.linalg.norm(est.bank.best.x[state.POSITION]))
-    assert est.winch.status.fused == 1
+    assert est.ground_station.winch.status.fused == 1
     assert abs(after - length) < 0.5 * abs(before - length)
 
 
@@ -131,8 +132,8 @@ def test_a_bearing_far_off_is_turned_about_the_anchor() -> None:
     for k in range(1, limit + 2):
         est.on_cable_angle(*_angles(truth), t + 0.001 * k, 0.01)
     p = est.bank.best.x[state.POSITION]
-    assert est.cable_angle.status.gated == limit
-    assert est.cable_angle.turns == len(est.bank.filters)
+    assert est.ground_station.cable_angle.status.gated == limit
+    assert est.ground_station.cable_angle.turns == len(est.bank.filters)
     assert abs(wrap_pi(math.atan2(p[1], p[0]) - math.atan2(truth[1], truth[0]))) < 0.02
     assert abs(math.hypot(p[0], p[1]) - math.hypot(truth[0], truth[1])) < 0.1
 

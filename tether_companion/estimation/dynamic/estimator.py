@@ -7,21 +7,23 @@ service, replay and the offline runner can use either:
 * ``on_attitude``, ``on_pwm``: through the shared
   :class:`~tether_companion.estimation.alignment.InputAligner`;
 * ``on_imu``: until initialised, the tick feeds the
-  :class:`~tether_companion.estimation.dynamic.initialise.Initialiser`; afterwards the filter
+  :class:`~tether_companion.estimation.dynamic.startup.FilterStartup`; afterwards the filter
   predicts to the IMU time with the previous tick's inputs (force balance, or the previous
   specific force in the inertial formulation) and fuses the accelerometer force balance;
 * ``on_range``: the tilt-corrected height above the ground (validity checked and counted);
 * ``set_known_tension_n`` (load cell), ``set_paid_out_length_m`` (winch; also switches the
-  cable model to the known length), ``on_cable_angle`` (ground-station cable angle).
+  cable model to the known length), ``on_cable_angle`` (ground-station cable angle): checked
+  and fused by :class:`~tether_companion.estimation.dynamic.ground_station.GroundStationInputs`
+  once the filter is initialised and the reading is fresh.
 
-Divergence: a non-finite state (the EKF resets), an accelerometer innovation gated for
-``DIVERGED_AFTER_S`` in a row, or a position beyond ``MAX_DISTANCE_M`` restarts the
-initialisation; ``reset_counter`` counts it and the tick's status is ``reset`` with the reason.
+Divergence (:mod:`~tether_companion.estimation.dynamic.divergence`: a non-finite state, an
+accelerometer innovation gated for ``DIVERGED_AFTER_S`` in a row, or a position beyond
+``MAX_DISTANCE_M``) restarts the initialisation; ``reset_counter`` counts it and the tick's
+status is ``reset`` with the reason.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable
 
@@ -38,28 +40,28 @@ from tether_companion.estimation.alignment import (
     aligner_for,
 )
 from tether_companion.estimation.config import EstimatorConfig
-from tether_companion.estimation.dynamic import generated, state
-from tether_companion.estimation.dynamic.aid.accel import NEAR_ANCHOR, ON_GROUND, AccelAid
-from tether_companion.estimation.dynamic.aid.cable_angle import CableAngleAid
-from tether_companion.estimation.dynamic.aid.load_cell import LoadCellAid
+from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.accel_fusion import AccelFusion
 from tether_companion.estimation.dynamic.aid.rangefinder import RangefinderAid
-from tether_companion.estimation.dynamic.aid.winch import WinchAid
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterConfig, drag_per_s
 from tether_companion.estimation.dynamic.consistency import BearingWindow
+from tether_companion.estimation.dynamic.divergence import (
+    MAX_DISTANCE_M,
+    step_bank,
+    too_far,
+)
+from tether_companion.estimation.dynamic.ground_station import GroundStationInputs
 from tether_companion.estimation.dynamic.imu_batch import ImuBatch
-from tether_companion.estimation.dynamic.initialise import Initialiser
-from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.dynamic.mixture import MixtureValues, ProcessNoise
-from tether_companion.estimation.dynamic.models import UNDEFINED, ModelConstants
+from tether_companion.estimation.dynamic.models import ModelConstants
 from tether_companion.estimation.dynamic.noise import (
     accel_measurement_std_mps2,
     process_noise_density,
 )
-from tether_companion.estimation.dynamic.observability import unmodelled_position_rows
 from tether_companion.estimation.dynamic.output import DynamicHealth, NavigationEstimate
-from tether_companion.estimation.dynamic.position_information import PositionInformation
 from tether_companion.estimation.dynamic.published import StatusSettings, TickSource
+from tether_companion.estimation.dynamic.startup import FilterStartup
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
 from tether_companion.estimation.inputs import InputFeed, range_height_m, range_reading_ok
 from tether_companion.estimation.pipeline import default_thrust_input
@@ -68,14 +70,6 @@ from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import ImuSample, RangeSample
 
 FloatArray = NDArray[np.float64]
-
-DIVERGED_AFTER_S = 1.0
-"""Accelerometer innovations gated this long in a row [s]: the filter has diverged."""
-MAX_DISTANCE_M = 1000.0
-"""A position farther than this from the anchor [m] is a divergence."""
-ANGLE_FRESH_S = 1.0
-"""A ground-station cable angle fused within this [s] measures the bearing: the rule that
-withholds a pull too weak against the wind's drag (observability.py) is waived meanwhile."""
 
 
 class DynamicTetherEstimator(InputFeed):
@@ -133,7 +127,7 @@ class DynamicTetherEstimator(InputFeed):
         self._q = process_noise_density(dynamic)
         self._q_matrix = np.diag(self._q)
         self._noise = ProcessNoise(self._q_matrix)
-        self._status_settings = StatusSettings(
+        status_settings = StatusSettings(
             slack_tension_n=dynamic.slack_tension_n,
             max_horizontal_std_m=dynamic.max_horizontal_std_m,
             winch_length_noise_std_m=dynamic.winch_length_noise_std_m,
@@ -142,19 +136,14 @@ class DynamicTetherEstimator(InputFeed):
             ),
             wind_std_mps=dynamic.initial.wind_std_mps,
         )
-        self._angle_status_settings = dataclasses.replace(
-            self._status_settings, pull_per_wind_n_s_per_m=0.0
-        )
-        """The status settings while a cable angle measures the bearing (ANGLE_FRESH_S)."""
         self._mixture: MixtureValues | None = None
         """The bank's latest mixture with its values as floats (kept while it is the same)."""
-        self.accel = AccelAid(accel_measurement_std_mps2(dynamic), config.min_cable_length_m)
+        self.accel = AccelFusion(
+            accel_measurement_std_mps2(dynamic), config.min_cable_length_m, self.health
+        )
         self.rangefinder = RangefinderAid(
             config.altimeter_noise_variance_m2, config.ground_station.anchor_height_m
         )
-        self.load_cell = LoadCellAid(dynamic.load_cell_noise_std_n)
-        self.winch = WinchAid(dynamic.winch_length_noise_std_m, dynamic.slack_tension_n)
-        self.cable_angle = CableAngleAid(dynamic.slack_tension_n)
         self.bearing = BearingWindow(
             vehicle.mass_kg * self.constants.drag_per_s,
             dynamic.initial.wind_std_mps,
@@ -163,27 +152,24 @@ class DynamicTetherEstimator(InputFeed):
             dynamic.bearing_position_walk_m2ps,
             dynamic.bearing_wind_walk_m2ps3,
         )
-        self.position_information = PositionInformation(dynamic.unmodelled_force_correlation_s)
-        """What the fused cable angles tell about the position within the unmodelled force's
-        correlation time (it narrows the unmodelled term of the published covariance)."""
+        self.ground_station = GroundStationInputs(
+            dynamic, self.bearing, self.health, status_settings
+        )
+        """The load cell, the winch and the cable angle."""
         self.bank: FilterBank | None = None
-        self._initialiser = self._new_initialiser()
+        self._startup = FilterStartup(
+            config,
+            dynamic,
+            self.constants,
+            self._q,
+            inertial=self._inertial,
+            ticks_per_fusion=self._ticks_per_fusion,
+        )
         self._time_s = math.nan
         self._inputs: list[float] | None = None
         self._resets = 0
         self._reset_reason: str | None = None
-        self._gated_since_s = math.nan
         self._last_tick_s = math.nan
-
-    # ------------------------------------------------------------------ setup
-    def _new_initialiser(self) -> Initialiser:
-        return Initialiser(
-            self.dynamic,
-            self.vehicle.mass_kg,
-            self.constants.drag_per_s,
-            self.dynamic.accel_noise_std_mps2,
-            math.sqrt(self.config.altimeter_noise_variance_m2),
-        )
 
     # ------------------------------------------------------------------ properties
     @property
@@ -209,94 +195,37 @@ class DynamicTetherEstimator(InputFeed):
     # ------------------------------------------------------------------ inputs
     def set_known_tension_n(self, tension_n: float, time_s: float) -> None:
         """Load-cell tension at the drone [N] at ``time_s`` [s]: fused when initialised."""
-        if not (math.isfinite(tension_n) and math.isfinite(time_s)) or tension_n < 0.0:
-            self.health.nonfinite_rejected += 1
-            return
-        if self.bank is not None and self._fresh(time_s, self.config.staleness.tension_s):
-            self._step_batch()
-            if self.load_cell.fuse(self.bank, self.constants, tension_n, self._time_s):
-                self.health.load_cell_fused += 1
+        if self.ground_station.tension_ok(tension_n, time_s) and self._stepped_to(time_s):
+            assert self.bank is not None
+            self.ground_station.fuse_tension(self.bank, self.constants, tension_n, self._time_s)
 
     def set_paid_out_length_m(self, length_m: float, time_s: float) -> None:
         """Winch paid-out length [m]: the cable model's length from now on, and fused."""
-        if not (math.isfinite(length_m) and math.isfinite(time_s)) or length_m <= 0.0:
-            self.health.nonfinite_rejected += 1
+        if not self.ground_station.length_ok(length_m, time_s):
             return
         self.constants.length_m = length_m
-        if self.bank is not None and self._fresh(time_s, self.config.staleness.tension_s):
-            self._step_batch()
-            if self.winch.fuse(self.bank, self.constants, length_m, self._time_s):
-                self.health.winch_fused += 1
+        if self._stepped_to(time_s):
+            assert self.bank is not None
+            self.ground_station.fuse_length(self.bank, self.constants, length_m, self._time_s)
 
     def on_cable_angle(
         self, elevation_rad: float, azimuth_rad: float, time_s: float, noise_std_rad: float
     ) -> None:
         """Ground-station cable angle at the anchor [rad]: elevation up, azimuth from north,
         the sensor's direction noise ``noise_std_rad`` [rad] (aid/cable_angle.py)."""
-        values = (elevation_rad, azimuth_rad, time_s, noise_std_rad)
-        if (
-            not all(math.isfinite(v) for v in values)
-            or abs(elevation_rad) > math.pi / 2
-            or noise_std_rad <= 0.0
+        inputs = self.ground_station
+        if inputs.angle_ok(elevation_rad, azimuth_rad, time_s, noise_std_rad) and (
+            self._stepped_to(time_s)
         ):
-            self.health.nonfinite_rejected += 1
-            return
-        if self.bank is not None and self._fresh(time_s, self.config.staleness.tension_s):
-            self._step_batch()
-            if self.bank is None:
-                return
-            status = self.cable_angle.status
-            gated_before = status.gated
-            fused = self.cable_angle.fuse(
-                self.bank, self.constants, elevation_rad, azimuth_rad, self._time_s, noise_std_rad
+            assert self.bank is not None
+            inputs.fuse_angle(
+                self.bank,
+                self.constants,
+                elevation_rad,
+                azimuth_rad,
+                self._time_s,
+                noise_std_rad,
             )
-            if fused or status.gated != gated_before:  # an innovation of this reading
-                self.position_information.add_angle_innovation(
-                    status.last_innovation,
-                    status.last_innovation_variance.tolist(),
-                    self.bank.best.x_values()[:3],
-                    self._time_s,
-                )
-            if fused:
-                self.health.cable_angle_fused += 1
-                x = self.bank.best.x_values()
-                self._add_angle_information(x, elevation_rad, noise_std_rad)
-                # the azimuth's noise across the cable: times the span
-                azimuth_std_rad = CableAngleAid.noise_std_rad(elevation_rad, noise_std_rad)[1]
-                self.bearing.add_bearing(math.hypot(x[0], x[1]) * azimuth_std_rad)
-
-    def _add_angle_information(
-        self, x: list[float], elevation_rad: float, noise_std_rad: float
-    ) -> None:
-        """The fused angle's information about the position at the updated state ``x``
-        (its Jacobian's position columns, the noise as :class:`CableAngleAid` fuses it).
-
-        The azimuth always; the elevation only once a winch length was fused: the unmodelled
-        term turns the cable at a known range, and only with the length is its vertical part
-        the elevation the reading measures. Without a length the filter's range comes from
-        the height through the elevation (``rho = h / tan(el)``), and the term's vertical part
-        stands for that range's error, which the elevation does not remove in the filter
-        (docs/estimation.md, "The unmodelled term and the cable angle (nees10)")."""
-        _, jac_rows = self.cable_angle.evaluate(self.constants, np.array(x))
-        jac = jac_rows.ravel().tolist()
-        if not all(math.isfinite(v) for v in jac):
-            return
-        n = state.N_STATES
-        elevation_std, azimuth_std = CableAngleAid.noise_std_rad(elevation_rad, noise_std_rad)
-        winch = bool(self.health.winch_fused)
-        if winch:
-            rows, variances = (jac[0:3], jac[n : n + 3]), (elevation_std**2, azimuth_std**2)
-        else:
-            rows, variances = (jac[n : n + 3],), (azimuth_std**2,)
-        added = unmodelled_position_rows(  # at the chord tension (the drone's, straight)
-            x[0],
-            x[1],
-            x[2],
-            x[state.TENSION],
-            self.bearing.force_std_n,
-            self.dynamic.winch_length_noise_std_m if winch else 0.0,
-        )
-        self.position_information.add(rows, variances, self._time_s, added)
 
     def on_range(self, sample: RangeSample) -> None:
         """A downward rangefinder reading along the body z axis [m]: the height above the ground
@@ -312,7 +241,7 @@ class DynamicTetherEstimator(InputFeed):
             return
         height_above_anchor_m = height_m - self.config.ground_station.anchor_height_m
         if self.bank is None:
-            self._initialiser.add_height(height_above_anchor_m)
+            self._startup.add_height(height_above_anchor_m)
             return
         if not self._fresh(sample.time_s, self.config.staleness.range_s):
             health.range_stale += 1
@@ -367,7 +296,8 @@ class DynamicTetherEstimator(InputFeed):
             health.nonfinite_rejected += 1
         if fusion_tick:
             self._step_batch()
-        if self.bank is None:  # the prediction diverged and restarted
+        bank = self.bank
+        if bank is None:  # the prediction diverged and restarted
             return self._estimate(False, stale, False)
         on_ground = False
         accel_fused = False
@@ -379,7 +309,7 @@ class DynamicTetherEstimator(InputFeed):
             if fusion_tick or not self._inertial:
                 inputs = [*rows[0], *rows[1], *rows[2], aligned.thrust_n]
                 if fusion_tick:
-                    accel_fused = self._fuse_accel(inputs, force, on_ground, t)
+                    accel_fused = self.accel.fuse(bank, self.constants, inputs, force, t, on_ground)
                     self._ticks_since_fusion = 0
                     if accel_fused:
                         self._sample_bearing(t)
@@ -393,47 +323,37 @@ class DynamicTetherEstimator(InputFeed):
     @property
     def initialising_reason(self) -> str:
         """Why there is no state yet (empty once initialised)."""
-        return "" if self.bank is not None else self._initialiser.reason
+        return "" if self.bank is not None else self._startup.reason
 
     # ------------------------------------------------------------------ internals
     def _fresh(self, time_s: float, bound_s: float) -> bool:
         return not math.isnan(self._time_s) and abs(time_s - self._time_s) <= bound_s
 
+    def _stepped_to(self, time_s: float) -> bool:
+        """Whether a ground-station reading at ``time_s`` [s] can be fused now: the filter is
+        initialised, the reading within ``staleness.tension_s`` of the filter time, and the
+        members stepped to that time without diverging."""
+        if self.bank is None or not self._fresh(time_s, self.config.staleness.tension_s):
+            return False
+        self._step_batch()
+        return self.bank is not None
+
     def _initialise_tick(self, aligned: AlignedInputs | str, stale: bool) -> NavigationEstimate:
         if stale:
             return self._estimate(False, True, False)
         assert isinstance(aligned, AlignedInputs)
-        t, force, rotation, thrust = aligned
-        self._initialiser.add_tick(t, force, rotation, thrust)
-        starts = self._initialiser.hypotheses(t, self.dynamic.initial, self.constants.length_m)
-        if not starts:
-            return self._estimate(False, False, False)
-        c = self.constants
-        process = generated.inertial if self._inertial else c.models.force_balance
-        gate = self.config.gate
-        members = [
-            MemberFilter(
-                x0,
-                p0,
-                self._q,
-                c,
-                process,
-                gate_probability=gate.probability,
-                max_consecutive_rejections=gate.max_consecutive_rejections,
-            )
-            for x0, p0 in starts
-        ]
-        self.bank = FilterBank(
-            members, t, self.dynamic.initial.thrust_scale_bank_max_s, self._ticks_per_fusion
-        )
-        self.health.initialisations += 1
-        inputs = [*rotation.ravel().tolist(), thrust]
-        self._inputs = [*inputs[:9], *force.tolist()] if self._inertial else inputs
-        self._last_tick_s = t
-        self._gated_since_s = math.nan
-        self._ticks_since_fusion = 0
-        if self._batch is not None:
-            self._batch.clear()
+        bank = self._startup.add_tick(aligned)
+        if bank is not None:
+            self.bank = bank
+            self.health.initialisations += 1
+            t, force, rotation, thrust = aligned
+            inputs = [*rotation.ravel().tolist(), thrust]
+            self._inputs = [*inputs[:9], *force.tolist()] if self._inertial else inputs
+            self._last_tick_s = t
+            self.accel.gated.clear()
+            self._ticks_since_fusion = 0
+            if self._batch is not None:
+                self._batch.clear()
         return self._estimate(False, False, False)
 
     def _step_batch(self) -> None:
@@ -445,45 +365,14 @@ class DynamicTetherEstimator(InputFeed):
         batch.clear()
 
     def _step_members(self, step: Callable[[FilterBank], None]) -> None:
-        """Run a prediction ``step`` on the bank; drop the members it reset, restart when
-        it reset all of them or the model is undefined."""
+        """Run a prediction ``step`` on the bank (:func:`step_bank`); restart when it says."""
         bank = self.bank
         assert bank is not None
-        resets_before = [kf.resets for kf in bank.filters]
-        try:
-            step(bank)
-        except UNDEFINED:  # at the anchor, or zero tension: the cable model is undefined
-            self._restart("position at the anchor or no tension")
+        reason = step_bank(bank, step)
+        if reason is not None:
+            self._restart(reason)
             return
-        reset = [kf.resets != r for kf, r in zip(bank.filters, resets_before, strict=True)]
-        if all(reset):
-            self._restart("state or covariance not finite")
-            return
-        if any(reset):  # drop the members that restarted
-            bank.keep([i for i, r in enumerate(reset) if not r])
         self.health.pd_repairs = sum(kf.pd_repairs for kf in bank.filters)
-
-    def _fuse_accel(
-        self, inputs: list[float], force: list[float], on_ground: bool, t: float
-    ) -> bool:
-        health = self.health
-        status = self.accel.status
-        gated_before = status.gated
-        bank = self.bank
-        assert bank is not None
-        fused = self.accel.fuse(bank, self.constants, inputs, force, t, on_ground)
-        health.on_ground = status.skipped_by_reason.get(ON_GROUND, 0)
-        health.near_anchor = status.skipped_by_reason.get(NEAR_ANCHOR, 0)
-        health.accel_gated = status.gated
-        sensors = bank.best.sensors
-        if "accel" in sensors:
-            health.last_accel_nis = sensors["accel"].last_nis
-        if fused:
-            health.accel_fused += 1
-            self._gated_since_s = math.nan
-        elif status.gated != gated_before and math.isnan(self._gated_since_s):
-            self._gated_since_s = t
-        return fused
 
     def _sample_bearing(self, t: float) -> None:
         """The mixture after a force-balance fusion into the bearing window."""
@@ -497,23 +386,20 @@ class DynamicTetherEstimator(InputFeed):
         bank = self.bank
         if bank is None:
             return
-        if not math.isnan(self._gated_since_s) and t - self._gated_since_s >= DIVERGED_AFTER_S:
-            self._restart(f"accelerometer innovations gated for {DIVERGED_AFTER_S:g} s")
-            return
-        if not fusion_tick:  # the members have not stepped since the last check
-            return
-        bank.drop_unhealthy(MAX_DISTANCE_M)
-        bank.maybe_decide(t)
-        x = bank.best.x_values()
-        if x[0] * x[0] + x[1] * x[1] + x[2] * x[2] > MAX_DISTANCE_M**2:
-            self._restart(f"position beyond {MAX_DISTANCE_M:g} m")
+        reason = self.accel.gated.diverged(t)
+        if reason is None and fusion_tick:  # else the members have not stepped since
+            bank.drop_unhealthy(MAX_DISTANCE_M)
+            bank.maybe_decide(t)
+            reason = too_far(bank.best.x_values())
+        if reason is not None:
+            self._restart(reason)
 
     def _restart(self, reason: str) -> None:
         """Drop the state and initialise again from fresh data; counted in reset_counter."""
         self.bank = None
-        self._initialiser = self._new_initialiser()
+        self._startup.restart()
         self.bearing.clear()
-        self.position_information.clear()
+        self.ground_station.clear()
         self._resets += 1
         self.health.resets = self._resets
         self._reset_reason = f"filter restarted: {reason}"
@@ -535,15 +421,13 @@ class DynamicTetherEstimator(InputFeed):
             None if batch is None or bank is None else batch.step(),
             self._noise,
             self.constants,
-            self._angle_status_settings
-            if self._time_s - self.cable_angle.status.last_fused_time_s <= ANGLE_FRESH_S
-            else self._status_settings,
+            self.ground_station.status_settings(self._time_s),
             self.rangefinder.excess.variance,
             bool(self.health.winch_fused),
             self.bearing.force_std_n,
-            self.position_information.at(self._time_s),
+            self.ground_station.position_information.at(self._time_s),
             0 if bank is None else len(bank.filters),
-            None if bank is not None else self._initialiser.reason,
+            None if bank is not None else self._startup.reason,
             reset_reason,
             on_ground,
             stale,

@@ -1,0 +1,211 @@
+"""The ground station's readings fused into the dynamic filter: :class:`GroundStationInputs`.
+
+Three optional sensors at the anchor, each with its own measurement module under ``aid/``:
+
+* the load cell's tension at the drone [N] (:class:`LoadCellAid`);
+* the winch's paid-out cable length [m] (:class:`WinchAid`);
+* the cable angle at the anchor [rad]: elevation up from the horizontal, azimuth from north
+  (:class:`CableAngleAid`). A fused angle also feeds the bearing window (the azimuth's noise
+  across the cable) and :class:`PositionInformation` (what it tells about the position within
+  the unmodelled force's correlation time, which narrows the published covariance's
+  unmodelled term); while one was fused within :data:`ANGLE_FRESH_S` the estimate's status
+  waives the weak-pull rule (:meth:`GroundStationInputs.status_settings`).
+
+Each reading is checked here (a non-finite or impossible value is counted in
+``health.nonfinite_rejected`` and dropped); when to fuse it (the filter initialised, the reading
+fresh, the members stepped to the filter time) is the estimator's decision
+(:class:`~tether_companion.estimation.dynamic.estimator.DynamicTetherEstimator`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.aid.cable_angle import CableAngleAid
+from tether_companion.estimation.dynamic.aid.load_cell import LoadCellAid
+from tether_companion.estimation.dynamic.aid.winch import WinchAid
+from tether_companion.estimation.dynamic.bank import FilterBank
+from tether_companion.estimation.dynamic.config import DynamicFilterConfig
+from tether_companion.estimation.dynamic.consistency import BearingWindow
+from tether_companion.estimation.dynamic.models import ModelConstants
+from tether_companion.estimation.dynamic.observability import unmodelled_position_rows
+from tether_companion.estimation.dynamic.output import DynamicHealth
+from tether_companion.estimation.dynamic.position_information import PositionInformation
+from tether_companion.estimation.dynamic.published import StatusSettings
+
+ANGLE_FRESH_S = 1.0
+"""A ground-station cable angle fused within this [s] measures the bearing: the rule that
+withholds a pull too weak against the wind's drag (observability.py) is waived meanwhile."""
+
+
+class GroundStationInputs:
+    """Checks and fuses the load cell's tension, the winch's length and the cable angle.
+
+    Parameters
+    ----------
+    dynamic
+        The filter's settings (the sensors' noise, the slack tension, the unmodelled force's
+        correlation time).
+    bearing
+        The estimator's bearing window: a fused angle adds its azimuth's noise across the
+        cable [m], and the window's unmodelled force [N] sizes the angle's information.
+    health
+        The estimator's counters (``nonfinite_rejected``, ``*_fused``).
+    status_settings
+        The rules the estimate's status is judged by without a fresh cable angle.
+    """
+
+    def __init__(
+        self,
+        dynamic: DynamicFilterConfig,
+        bearing: BearingWindow,
+        health: DynamicHealth,
+        status_settings: StatusSettings,
+    ) -> None:
+        self.load_cell = LoadCellAid(dynamic.load_cell_noise_std_n)
+        self.winch = WinchAid(dynamic.winch_length_noise_std_m, dynamic.slack_tension_n)
+        self.cable_angle = CableAngleAid(dynamic.slack_tension_n)
+        self.position_information = PositionInformation(dynamic.unmodelled_force_correlation_s)
+        """What the fused cable angles tell about the position within the unmodelled force's
+        correlation time (it narrows the unmodelled term of the published covariance)."""
+        self._winch_length_noise_std_m = dynamic.winch_length_noise_std_m
+        self._bearing = bearing
+        self._health = health
+        self._status_settings = status_settings
+        self._angle_status_settings = dataclasses.replace(
+            status_settings, pull_per_wind_n_s_per_m=0.0
+        )
+        """The status settings while a cable angle measures the bearing (ANGLE_FRESH_S)."""
+
+    # ------------------------------------------------------------------ checks
+    def tension_ok(self, tension_n: float, time_s: float) -> bool:
+        """Whether a load-cell reading (tension [N] at ``time_s`` [s]) is usable (counted
+        in ``nonfinite_rejected`` when not)."""
+        if not (math.isfinite(tension_n) and math.isfinite(time_s)) or tension_n < 0.0:
+            self._health.nonfinite_rejected += 1
+            return False
+        return True
+
+    def length_ok(self, length_m: float, time_s: float) -> bool:
+        """Whether a winch reading (paid-out length [m] at ``time_s`` [s]) is usable (counted
+        in ``nonfinite_rejected`` when not)."""
+        if not (math.isfinite(length_m) and math.isfinite(time_s)) or length_m <= 0.0:
+            self._health.nonfinite_rejected += 1
+            return False
+        return True
+
+    def angle_ok(
+        self, elevation_rad: float, azimuth_rad: float, time_s: float, noise_std_rad: float
+    ) -> bool:
+        """Whether a cable-angle reading is usable: finite, the elevation within +-pi/2 [rad],
+        a positive noise [rad] (counted in ``nonfinite_rejected`` when not)."""
+        values = (elevation_rad, azimuth_rad, time_s, noise_std_rad)
+        if (
+            not all(math.isfinite(v) for v in values)
+            or abs(elevation_rad) > math.pi / 2
+            or noise_std_rad <= 0.0
+        ):
+            self._health.nonfinite_rejected += 1
+            return False
+        return True
+
+    # ------------------------------------------------------------------ fusion
+    def fuse_tension(
+        self, bank: FilterBank, constants: ModelConstants, tension_n: float, time_s: float
+    ) -> None:
+        """Fuse a load-cell tension at the drone [N] at filter time ``time_s`` [s]."""
+        if self.load_cell.fuse(bank, constants, tension_n, time_s):
+            self._health.load_cell_fused += 1
+
+    def fuse_length(
+        self, bank: FilterBank, constants: ModelConstants, length_m: float, time_s: float
+    ) -> None:
+        """Fuse a winch paid-out length [m] at filter time ``time_s`` [s]."""
+        if self.winch.fuse(bank, constants, length_m, time_s):
+            self._health.winch_fused += 1
+
+    def fuse_angle(
+        self,
+        bank: FilterBank,
+        constants: ModelConstants,
+        elevation_rad: float,
+        azimuth_rad: float,
+        time_s: float,
+        noise_std_rad: float,
+    ) -> None:
+        """Fuse a cable angle at the anchor (elevation up, azimuth from north [rad], the
+        sensor's direction noise ``noise_std_rad`` [rad]) at filter time ``time_s`` [s]; its
+        innovation, and once fused its information and bearing, are recorded."""
+        status = self.cable_angle.status
+        gated_before = status.gated
+        fused = self.cable_angle.fuse(
+            bank, constants, elevation_rad, azimuth_rad, time_s, noise_std_rad
+        )
+        if fused or status.gated != gated_before:  # an innovation of this reading
+            self.position_information.add_angle_innovation(
+                status.last_innovation,
+                status.last_innovation_variance.tolist(),
+                bank.best.x_values()[:3],
+                time_s,
+            )
+        if fused:
+            self._health.cable_angle_fused += 1
+            x = bank.best.x_values()
+            self._add_angle_information(constants, x, elevation_rad, noise_std_rad, time_s)
+            # the azimuth's noise across the cable: times the span
+            azimuth_std_rad = CableAngleAid.noise_std_rad(elevation_rad, noise_std_rad)[1]
+            self._bearing.add_bearing(math.hypot(x[0], x[1]) * azimuth_std_rad)
+
+    def status_settings(self, time_s: float) -> StatusSettings:
+        """The rules the estimate's status at filter time ``time_s`` [s] is judged by: the
+        weak-pull rule waived while a cable angle fused within :data:`ANGLE_FRESH_S`
+        measures the bearing."""
+        if time_s - self.cable_angle.status.last_fused_time_s <= ANGLE_FRESH_S:
+            return self._angle_status_settings
+        return self._status_settings
+
+    def clear(self) -> None:
+        """Forget the angles' information (the filter restarts)."""
+        self.position_information.clear()
+
+    def _add_angle_information(
+        self,
+        constants: ModelConstants,
+        x: list[float],
+        elevation_rad: float,
+        noise_std_rad: float,
+        time_s: float,
+    ) -> None:
+        """The fused angle's information about the position at the updated state ``x``
+        (its Jacobian's position columns, the noise as :class:`CableAngleAid` fuses it).
+
+        The azimuth always; the elevation only once a winch length was fused: the unmodelled
+        term turns the cable at a known range, and only with the length is its vertical part
+        the elevation the reading measures. Without a length the filter's range comes from
+        the height through the elevation (``rho = h / tan(el)``), and the term's vertical part
+        stands for that range's error, which the elevation does not remove in the filter
+        (docs/estimation.md, "The unmodelled term and the cable angle (nees10)")."""
+        _, jac_rows = self.cable_angle.evaluate(constants, np.array(x))
+        jac = jac_rows.ravel().tolist()
+        if not all(math.isfinite(v) for v in jac):
+            return
+        n = state.N_STATES
+        elevation_std, azimuth_std = CableAngleAid.noise_std_rad(elevation_rad, noise_std_rad)
+        winch = bool(self._health.winch_fused)
+        if winch:
+            rows, variances = (jac[0:3], jac[n : n + 3]), (elevation_std**2, azimuth_std**2)
+        else:
+            rows, variances = (jac[n : n + 3],), (azimuth_std**2,)
+        added = unmodelled_position_rows(  # at the chord tension (the drone's, straight)
+            x[0],
+            x[1],
+            x[2],
+            x[state.TENSION],
+            self._bearing.force_std_n,
+            self._winch_length_noise_std_m if winch else 0.0,
+        )
+        self.position_information.add(rows, variances, time_s, added)

@@ -10,10 +10,10 @@ from tether_companion.estimation.dynamic.output import (
     WEAK_PULL,
     NavigationEstimate,
 )
-from tether_companion.service.config import PublishConfig
 from tether_companion.service.health import OK as PUBLISH_OK
 from tether_companion.service.health import assess_health
 from tether_companion.service.publish import Publisher
+from tether_companion.service.publish_config import PublishConfig
 
 
 def _estimate(status: str = OK, position_variance: float = 0.01) -> NavigationEstimate:

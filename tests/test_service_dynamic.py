@@ -19,7 +19,7 @@ from tether_companion.estimation.dynamic import output
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.output import NavigationEstimate
 from tether_companion.samples import AttitudeSample
-from tether_companion.service.config import PublishConfig, load_service_config, load_vehicle_for
+from tether_companion.service.config import load_service_config, load_vehicle_for
 from tether_companion.service.emulator_process import EmulatorProcess
 from tether_companion.service.health import (
     CONVERGING,
@@ -33,6 +33,7 @@ from tether_companion.service.health import (
     dynamic_health,
 )
 from tether_companion.service.publish import Publisher
+from tether_companion.service.publish_config import PublishConfig
 from tether_companion.service.session import EstimationSession
 from tether_companion.service.status import render
 

@@ -25,15 +25,16 @@ from tether_companion.estimation.tension_kf import TensionEstimate, TensionHealt
 from tether_companion.estimation.thrust_input import MotorLagThrustInput
 from tether_companion.mavlink.estimates import local_position_ned_message
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
-from tether_companion.service.config import PublishConfig, load_service_config, load_vehicle_for
-from tether_companion.service.health import DIVERGED, SLACK
-from tether_companion.service.health import WEAK_PULL as HEALTH_WEAK_PULL
-from tether_companion.service.publish import (
+from tether_companion.service.config import load_service_config, load_vehicle_for
+from tether_companion.service.estimate_messages import (
     CATENARY_POSITION_NAMES,
     TENSION_MAGNITUDE_NAME,
     TENSION_VECTOR_NAMES,
-    Publisher,
 )
+from tether_companion.service.health import DIVERGED, SLACK
+from tether_companion.service.health import WEAK_PULL as HEALTH_WEAK_PULL
+from tether_companion.service.publish import Publisher
+from tether_companion.service.publish_config import PublishConfig
 from tether_companion.service.session import EstimationSession
 from tether_companion.service.synthetic import HoverStreams
 

@@ -13,7 +13,6 @@ from tether_companion.estimation.observability import RANGEFINDER
 from tether_companion.mavlink import estimates
 from tether_companion.mavlink.units import urt_to_covariance
 from tether_companion.samples import AttitudeSample
-from tether_companion.service.config import PublishConfig
 from tether_companion.service.health import (
     CONVERGING,
     DIVERGED,
@@ -24,6 +23,7 @@ from tether_companion.service.health import (
     STALE_PWM,
 )
 from tether_companion.service.publish import Publisher, _farther_than
+from tether_companion.service.publish_config import PublishConfig
 
 ATTITUDE = AttitudeSample(0.0, 0.05, -0.1, 1.2)
 HEALTH_VALUES = tuple(

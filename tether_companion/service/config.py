@@ -4,6 +4,10 @@ Every section is a frozen dataclass validated by :mod:`tether_companion.config`:
 or a value out of range stops the service at start with a message naming the file, the key,
 the value and what is allowed (exit code 2). ``docs/config-reference.md`` lists every key
 (generated with :func:`config_reference`: ``python -m tether_companion.service.config``).
+
+This module holds the whole file (:class:`ServiceConfig`, its cross-section checks, loading);
+the larger sections live beside what reads them (``publish_config.py``, ``input_config.py``,
+``link_config.py``, ``winch.py``, ``cable_angle.py``, ``vehicle_fetch.py``).
 """
 
 from __future__ import annotations
@@ -24,205 +28,20 @@ from tether_companion.estimation.tension_kf import TensionFilterConfig
 from tether_companion.modes.config import TensionModeConfig
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.service.cable_angle import CableAngleConfig
+from tether_companion.service.input_config import InputLimitsConfig, TensionConfig
 from tether_companion.service.link_config import (
     LinkConfig,
     OriginConfig,
     SecurityConfig,
     StreamsConfig,
 )
+from tether_companion.service.publish_config import PublishConfig
 from tether_companion.service.vehicle_fetch import (
     FROM_AUTOPILOT,
     AutopilotVehicleConfig,
     require_mass,
 )
 from tether_companion.service.winch import WinchConfig
-
-
-@dataclass(frozen=True)
-class InputLimitsConfig:
-    """Plausibility bounds: samples outside them are dropped and counted as absurd."""
-
-    max_specific_force_mps2: float = spec(
-        16.0 * 9.80665,
-        exclusive_minimum=0.0,
-        doc="largest accelerometer magnitude accepted [m/s^2] (16 g)",
-    )
-    max_angular_rate_rad_s: float = spec(
-        35.0, exclusive_minimum=0.0, doc="largest gyro rate accepted [rad/s] (2000 deg/s)"
-    )
-    pwm_min_us: float = spec(800.0, minimum=0.0, doc="smallest motor pulse width accepted [us]")
-    pwm_max_us: float = spec(2200.0, minimum=0.0, doc="largest motor pulse width accepted [us]")
-    range_min_m: float = spec(
-        0.05, minimum=0.0, doc="rangefinder readings below this are dropped [m]"
-    )
-    range_max_m: float = spec(
-        40.0, exclusive_minimum=0.0, doc="rangefinder readings above this are dropped [m]"
-    )
-    reorder_window_s: float = spec(
-        0.03,
-        minimum=0.0,
-        maximum=0.2,
-        doc="largest reorder window: 0 until the link reorders, then 1.25x the lateness seen "
-        "(adds as much latency), back to 0 after 5-10 s without; 0 = drop every late sample [s]",
-    )
-
-    def validate(self) -> None:
-        """Bounds in order."""
-        if self.pwm_max_us <= self.pwm_min_us:
-            raise ConfigError(
-                "", "pwm_max_us", self.pwm_max_us, f"must be > pwm_min_us ({self.pwm_min_us})"
-            )
-        if self.range_max_m <= self.range_min_m:
-            raise ConfigError(
-                "", "range_max_m", self.range_max_m, f"must be > range_min_m ({self.range_min_m})"
-            )
-
-
-@dataclass(frozen=True)
-class TensionConfig:
-    """Where the cable tension comes from when the 3-state estimator is chosen."""
-
-    source: str = spec(
-        "estimate",
-        choices=("estimate", "config", "message", "winch"),
-        doc="estimate (4-state EKF), config (known_tension_n), "
-        "message (NAMED_VALUE_FLOAT from a load cell), winch (WINCH_STATUS tension, carried "
-        "from the winch to the drone by the cable's weight; needs winch.enabled)",
-    )
-    known_tension_n: float = spec(
-        4.0, exclusive_minimum=0.0, maximum=500.0, doc="tension when source = config [N]"
-    )
-    message_name: str = spec(
-        "TENSION", doc="NAMED_VALUE_FLOAT name carrying the measured tension [N]"
-    )
-    sensor_system_id: int = spec(1, minimum=1, maximum=255, doc="system id of the tension sensor")
-    sensor_component_id: int = spec(
-        1, minimum=0, maximum=255, doc="component id of the tension sensor"
-    )
-
-    def validate(self) -> None:
-        """NAMED_VALUE_FLOAT names are at most 10 characters."""
-        if not 1 <= len(self.message_name) <= 10:
-            raise ConfigError(
-                "",
-                "message_name",
-                self.message_name,
-                "must be 1 to 10 characters (NAMED_VALUE_FLOAT name)",
-            )
-
-
-@dataclass(frozen=True)
-class PublishConfig:
-    """What is sent to the flight controller and when."""
-
-    rate_hz: float = spec(
-        30.0,
-        minimum=1.0,
-        maximum=200.0,
-        doc="VISION_POSITION_ESTIMATE rate [Hz] (flight-controller time)",
-    )
-    covariance: str = spec(
-        "ekf",
-        choices=("ekf", "unknown"),
-        doc="ekf: position variances from the EKF; "
-        "unknown: covariance[0] = NaN (ArduPilot then uses VISO_POS_M_NSE)",
-    )
-    attitude_variance_rad2: float = spec(
-        1.0,
-        exclusive_minimum=0.0,
-        maximum=10.0,
-        doc="roll/pitch/yaw variance sent [rad^2] (large: the attitude is the FC's own)",
-    )
-    odometry: bool = spec(
-        False,
-        doc="also send ODOMETRY (pose, and the velocity in the body frame with its covariance "
-        "when the estimator has one; velocity marked unknown otherwise)",
-    )
-    odometry_frame: str = spec(
-        "local_ned",
-        choices=("local_ned", "local_frd"),
-        doc="ODOMETRY frame_id: local_ned for PX4; local_frd for ArduPilot, which ignores "
-        "ODOMETRY in any other frame",
-    )
-    speed_estimate: bool = spec(
-        False,
-        doc="also send VISION_SPEED_ESTIMATE (NED velocity and covariance; ArduPilot fuses it "
-        "with EK3_SRC1_VELXY 6) when the estimator has a velocity",
-    )
-    tension_rate_hz: float = spec(
-        10.0, minimum=0.0, maximum=50.0, doc="NAMED_VALUE_FLOAT tension rate [Hz] (0 = off)"
-    )
-    tension_name: str = spec(
-        "TETH_TENS", doc="NAMED_VALUE_FLOAT name of the tension of the published estimate"
-    )
-    filtered_rate_hz: float = spec(
-        10.0,
-        minimum=0.0,
-        maximum=50.0,
-        doc="NAMED_VALUE_FLOAT rate of the tension filter's force on the drone TETH_TN, "
-        "TETH_TE, TETH_TD (NED) and magnitude TETH_TMAG [N], and of the catenary position "
-        "TETH_CN, TETH_CE, TETH_CD [m] when it runs [Hz] (0 = off)",
-    )
-    filtered_max_age_s: float = spec(
-        0.3,
-        exclusive_minimum=0.0,
-        maximum=5.0,
-        doc="a filtered tension not updated for this long is not published [s]",
-    )
-    statustext: bool = spec(True, doc="send STATUSTEXT when the health changes")
-    on_unhealthy: str = spec(
-        "stop",
-        choices=("stop", "inflate"),
-        doc="when not healthy (stale, diverged, slack, weak pull, short cable): stop sending, "
-        "or send the last healthy position with inflated_variance_m2",
-    )
-    inflated_variance_m2: float = spec(
-        100.0, exclusive_minimum=0.0, maximum=1e4, doc="position variance sent when unhealthy [m^2]"
-    )
-    max_position_variance_m2: float = spec(
-        0.5,
-        exclusive_minimum=0.0,
-        doc="an estimate whose largest position variance reaches this is not healthy [m^2]",
-    )
-    settle_s: float = spec(
-        1.0,
-        minimum=0.0,
-        maximum=60.0,
-        doc="an estimator run must stay healthy this long before its first position is sent [s]",
-    )
-    idle_thrust_fraction: float = spec(
-        0.25,
-        minimum=0.0,
-        maximum=1.0,
-        doc="total motor thrust below this fraction of the weight = on the ground, not sent",
-    )
-    slack_tension_n: float = spec(
-        0.3,
-        minimum=0.0,
-        doc="estimated tension below this = slack tether, position unobservable [N]",
-    )
-    jump_m: float = spec(
-        1.0,
-        exclusive_minimum=0.0,
-        doc="a move this large between two publications raises reset_counter [m]",
-    )
-    short_cable_m: float = spec(
-        1.0,
-        minimum=0.0,
-        doc="dynamic filter: a position withheld for a weak pull or a slack cable closer than "
-        "this to the anchor is reported as short_cable [m]",
-    )
-
-    def validate(self) -> None:
-        """NAMED_VALUE_FLOAT names are at most 10 characters."""
-        if not 1 <= len(self.tension_name) <= 10:
-            raise ConfigError(
-                "",
-                "tension_name",
-                self.tension_name,
-                "must be 1 to 10 characters (NAMED_VALUE_FLOAT name)",
-            )
-
 
 EKF = "ekf"
 CATENARY = "catenary"

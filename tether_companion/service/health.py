@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from tether_companion.estimation.dynamic import output as dynamic_output
 from tether_companion.estimation.dynamic.output import Approximation
 from tether_companion.estimation.observability import RANGEFINDER
-from tether_companion.service.config import PublishConfig
+from tether_companion.service.publish_config import PublishConfig
 
 FloatArray = NDArray[np.float64]
 

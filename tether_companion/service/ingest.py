@@ -49,8 +49,8 @@ from tether_companion.service.cable_angle import (
     CableAngleGate,
     CableAngleReading,
 )
-from tether_companion.service.config import InputLimitsConfig, TensionConfig
 from tether_companion.service.fc_time import BACKSTEP, IMPLAUSIBLE, REBOOT, FcTimeGate
+from tether_companion.service.input_config import InputLimitsConfig, TensionConfig
 from tether_companion.service.link_config import LinkConfig
 from tether_companion.service.reorder import ReorderBuffer
 from tether_companion.service.winch import WinchConfig, WinchGate, WinchReading

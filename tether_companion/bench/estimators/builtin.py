@@ -36,8 +36,8 @@ from tether_companion.estimation.config import load_estimator_config
 from tether_companion.estimation.pipeline import TetherEstimator
 from tether_companion.estimation.tension_kf import TensionEstimator, TensionFilterConfig
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
-from tether_companion.service.config import PublishConfig
 from tether_companion.service.health import OK, assess_health
+from tether_companion.service.publish_config import PublishConfig
 from tether_companion.service.session import CatenaryEstimate
 
 

@@ -139,6 +139,25 @@ class MessageLayout:
         """``make(flat, src_system, src_component, seq, frame) -> record`` from the unpacked
         struct items ``flat`` (wire order)."""
 
+    def record_of(
+        self,
+        frame: bytearray,
+        header_len: int,
+        end: int,
+        src_system: int,
+        src_component: int,
+        seq: int,
+    ) -> HotRecord:
+        """The record of a checked ``frame`` of this message whose payload is
+        ``frame[header_len:end]``; the header items as given."""
+        size = self.size
+        if end - header_len >= size:
+            flat = self.unpacker.unpack_from(frame, header_len)
+        else:  # MAVLink 2 trailing zeros truncated by the sender
+            payload = frame[header_len:end] + self.padding[end - header_len :]
+            flat = self.unpacker.unpack(payload)
+        return self.make(flat, src_system, src_component, seq, frame)
+
 
 def _record_builder(message_class: type[dialect.MAVLink_message], record: type[HotRecord]):
     """A function building one message's record, generated from its layout.
@@ -204,12 +223,7 @@ class FastDecoder:
             header_len = _HEADER_LEN_V2
             seq, src_system, src_component = frame[4], frame[5], frame[6]
             msg_id = frame[7] | (frame[8] << 8) | (frame[9] << 16)
-        layout = self.layouts[msg_id]
         end = len(frame) - 2 - signature_len
-        size = layout.size
-        if end - header_len >= size:
-            flat = layout.unpacker.unpack_from(frame, header_len)
-        else:  # MAVLink 2 trailing zeros truncated by the sender
-            payload = frame[header_len:end] + layout.padding[end - header_len :]
-            flat = layout.unpacker.unpack(payload)
-        return layout.make(flat, src_system, src_component, seq, frame)
+        return self.layouts[msg_id].record_of(
+            frame, header_len, end, src_system, src_component, seq
+        )

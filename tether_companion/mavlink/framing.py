@@ -184,20 +184,18 @@ class FrameParser:
         known = _KNOWN.get(msg_id)
         if known is None or length > known[0]:
             return None
-        crc_end = n - signature_len
-        if _checksum(data[1 : crc_end - _CRC_LEN], known[1]) != data[crc_end - 2] | (
-            data[crc_end - 1] << 8
-        ):
+        end = n - signature_len - _CRC_LEN
+        if _checksum(data[1:end], known[1]) != data[end] | (data[end + 1] << 8):
             return None
         frame = bytearray(data)
         counters = self.counters
         if self.gate is not None and not self.gate.admit(frame, self._source):
             counters.untrusted += 1
             return []
-        fast = self._fast
+        layout = None if self._fast is None else self._fast.layouts.get(msg_id)
         msg: Received
-        if fast is not None and msg_id in fast.layouts:
-            msg = fast.decode(frame, signature_len)
+        if layout is not None:
+            msg = layout.record_of(frame, _HEADER_V2, end, data[5], data[6], data[4])
         else:
             try:
                 msg = self._decoder.decode(frame)

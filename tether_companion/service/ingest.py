@@ -234,7 +234,20 @@ class Ingest:
         against the clock model).
         """
         self._local_s = local_s
-        held = self._decode(msg)
+        kind_name = msg.get_type()
+        known = self._inputs.get(kind_name)
+        if known is not None and self.from_flight_controller(msg):
+            # the flight controller's input streams: none of _decode's other cases has their
+            # names, so this is its outcome for them, without its tests for the other cases
+            self.rebooted = False
+            self.counters.messages += 1
+            kind, decode = known
+            sample = decode(msg)
+            if sample is None:
+                return []
+            held = self._timed(kind, sample)
+        else:
+            held = self._decode(msg, kind_name)
         if held is None:
             return []
         kind, sample = held
@@ -253,12 +266,12 @@ class Ingest:
         released = self.receive(msg, local_s)
         return released[-1] if released else None
 
-    def _decode(self, msg: Received) -> tuple[str, Sample] | None:
-        """(kind, checked sample) carried by ``msg`` before reordering, or None."""
+    def _decode(self, msg: Received, kind_name: str) -> tuple[str, Sample] | None:
+        """(kind, checked sample) carried by ``msg`` (named ``kind_name``) before reordering,
+        or None."""
         self.rebooted = False
         counters = self.counters
         counters.messages += 1
-        kind_name = msg.get_type()
         if kind_name == "NAMED_VALUE_FLOAT" and self._tension_name is not None:
             return self._timed(TENSION, self._tension(msg))
         ground = self._ground.get(kind_name) if self._ground else None

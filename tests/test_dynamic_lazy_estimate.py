@@ -231,7 +231,7 @@ def test_an_approximate_decision_near_a_threshold_is_left_to_the_exact_values() 
     common = dict(
         initialised=True,
         reset=False,
-        on_ground=False,
+        on_ground="",
         inputs_stale=False,
         slack_tension_n=0.5,
         horizontal_m2=(0.01, 0.0, 0.01),

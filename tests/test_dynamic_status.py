@@ -16,7 +16,7 @@ def _status(horizontal: np.ndarray, unknowns: HoverUnknowns | None) -> tuple[str
     return assess(
         initialised_reason=None,
         reset_reason=None,
-        on_ground=False,
+        on_ground="",
         inputs_stale=False,
         tension_n=16.0,
         slack_tension_n=0.2,

@@ -117,6 +117,14 @@ class DynamicFilterConfig:
         maximum=1.0,
         doc="thrust below this fraction of the weight: on the ground, force balance not fused",
     )
+    touchdown_height_m: float = spec(
+        0.3,
+        minimum=0.0,
+        doc="estimated height of the centre of mass above the ground (the anchor's height "
+        "above the ground minus the down position) below which the drone is touching down or "
+        "just lifted off: position withheld (status on_ground), the ground's contact force "
+        "being no part of the model and the rangefinder at its minimum range [m]",
+    )
     max_horizontal_std_m: float = spec(
         0.5, exclusive_minimum=0.0, doc="horizontal std beyond which the pull is too weak [m]"
     )

@@ -59,6 +59,7 @@ from tether_companion.estimation.dynamic.noise import (
     accel_measurement_std_mps2,
     process_noise_density,
 )
+from tether_companion.estimation.dynamic.observability import on_ground_reason
 from tether_companion.estimation.dynamic.output import DynamicHealth, NavigationEstimate
 from tether_companion.estimation.dynamic.published import StatusSettings, TickSource
 from tether_companion.estimation.dynamic.startup import FilterStartup
@@ -116,6 +117,8 @@ class DynamicTetherEstimator(InputFeed):
         )
         self.health = DynamicHealth()
         self._weight_n = vehicle.mass_kg * GRAVITY_MPS2
+        self._ground_down_m = config.ground_station.anchor_height_m
+        """The ground's down position, NED from the anchor [m] (taken flat)."""
         self._inertial = dynamic.formulation == INERTIAL
         self._ticks_per_fusion = dynamic.imu_ticks_per_fusion if self._inertial else 1
         """IMU ticks per prediction and force-balance fusion (the inertial formulation's
@@ -429,7 +432,12 @@ class DynamicTetherEstimator(InputFeed):
             0 if bank is None else len(bank.filters),
             None if bank is not None else self._startup.reason,
             reset_reason,
-            on_ground,
+            on_ground_reason(
+                on_ground,
+                math.nan if mixture is None else mixture.x_values[2],
+                self._ground_down_m,
+                self.dynamic.touchdown_height_m,
+            ),
             stale,
         )
         return NavigationEstimate.of_tick(

@@ -153,7 +153,7 @@ class TickSource:
         hypotheses: int,
         initialised_reason: str | None,
         reset_reason: str | None,
-        on_ground: bool,
+        on_ground: str,
         inputs_stale: bool,
     ) -> None:
         self.mixture = mixture

@@ -5,7 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 from tether_companion.estimation.dynamic import state
-from tether_companion.estimation.dynamic.bank import FilterBank, log_det_innovation
+from tether_companion.estimation.dynamic.bank import (
+    MERGE_DISTANCE_M,
+    FilterBank,
+    log_det_innovation,
+)
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
 
 N = state.N_STATES
@@ -77,3 +81,58 @@ def test_a_wide_member_pays_for_its_width() -> None:
         )
     weights = bank.weights()
     assert weights[0] > weights[1]
+
+
+def _across(offset_m: float) -> ExtendedKalmanFilter:
+    """A member at (2, offset, -2): another bearing from the anchor."""
+    kf = _member(0.0)
+    kf.x = kf.x.copy()
+    kf.x[1] = offset_m
+    return kf
+
+
+def test_a_bearing_the_data_reject_is_dropped_without_confirming_the_other() -> None:
+    """Two bearings: the other one's weight falls below DROP_WEIGHT and it goes (before
+    MIN_BANK_S: rejection needs no waiting); that a far bearing is wrong does not make the
+    one left right (the 2 N circle: 1 m off across the cable after its ring was rejected)."""
+    bank = FilterBank(
+        [_member(0.0), _across(1.5)], 0.0, 30.0, log_priors=[0.0, -2.0], bearings=[0, 1]
+    )
+    bank.maybe_decide(0.1)
+    assert not bank.bearing_confirmed and len(bank.filters) == 2  # prior 0.12: kept
+    bank.log_weight[1] = -6.0  # the data's verdict: weight 0.25 %
+    bank.maybe_decide(0.2)
+    assert bank.decided and not bank.bearing_confirmed and bank.best.x[1] == 0.0
+
+
+def test_a_bearing_that_converged_to_the_best_is_dropped_and_confirms_it() -> None:
+    """Started elsewhere, brought within MERGE_DISTANCE_M of the best by the data: the same
+    bearing, whatever its weight; the data, not the start, chose it."""
+    bank = FilterBank(
+        [_member(0.0), _across(MERGE_DISTANCE_M * 0.9)],
+        0.0,
+        30.0,
+        log_priors=[0.0, -0.1],
+        bearings=[0, 1],
+    )
+    bank.maybe_decide(0.1)
+    assert bank.decided and bank.bearing_confirmed
+
+
+def test_bearings_left_undecided_collapse_unconfirmed() -> None:
+    """A steady hover does not tell the bearings apart: the bank collapses by time and the
+    bearing is not confirmed (the mixture's spread stays in the collapsed covariance)."""
+    bank = FilterBank(
+        [_member(0.0), _across(1.5)], 0.0, 6.0, log_priors=[0.0, -0.5], bearings=[0, 1]
+    )
+    _, cov = bank.mixture()
+    bank.maybe_decide(6.5)
+    assert bank.decided and not bank.bearing_confirmed
+    assert bank.best.P[1, 1] == cov[1, 1] > 0.4  # the bearings' spread
+
+
+def test_thrust_members_of_one_bearing_do_not_confirm_it() -> None:
+    bank = FilterBank([_member(-0.5), _member(0.5)], 0.0, 30.0)
+    bank.log_weight[1] = -10.0
+    bank.maybe_decide(3.5)
+    assert bank.decided and not bank.bearing_confirmed

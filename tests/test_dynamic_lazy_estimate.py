@@ -89,7 +89,9 @@ def _former_estimate(est: DynamicTetherEstimator, source) -> tuple:  # noqa: ANN
         max_horizontal_std_m=dyn.max_horizontal_std_m,
         horizontal_pull_n=0.0 if bank is None else horizontal_pull_n(values),
         min_horizontal_pull_n=min_horizontal_pull_n(
-            est.ground_station.status_settings(est.time_s).pull_per_wind_n_s_per_m,
+            est.ground_station.status_settings(
+                est.time_s, bank is not None and bank.bearing_confirmed
+            ).pull_per_wind_n_s_per_m,
             dyn.initial.wind_std_mps,
             float(x[state.WIND][0]),
             float(x[state.WIND][1]),

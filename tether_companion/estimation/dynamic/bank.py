@@ -54,6 +54,15 @@ evidence of ``k`` ticks, so it is divided by ``LIKELIHOOD_TEMPERING / k``
 (:attr:`FilterBank.force_balance_tempering`): the evidence per second does not depend on how
 the ticks are batched (with ``k = 4`` and the full 20 the bank saw a quarter of it and
 collapsed by time, undecided, with a member far off still weighing 20-50 %)."""
+DROP_WEIGHT = 0.01
+"""Posterior weight below which a member of a bearing other than the best member's is
+dropped (the data reject that bearing; that does not confirm the best one: on the realistic
+2 N circle, tuning seed 4, the ring's far bearings were rejected while the best was 1.0-1.2 m
+off across the cable at 0.4-0.5 m)."""
+MERGE_DISTANCE_M = 0.3
+"""A bearing hypothesis whose members are all this close to the best member, horizontally
+[m], has converged to its bearing and is dropped (started elsewhere, the data brought it
+there)."""
 
 
 class FilterBank:
@@ -69,6 +78,14 @@ class FilterBank:
         Longest time the members run side by side [s] (:meth:`maybe_decide`).
     ticks_per_force_balance
         IMU ticks summed in one force-balance sample (see :data:`LIKELIHOOD_TEMPERING`).
+    log_priors
+        Each member's log prior weight (default: equal).
+    bearings
+        Each member's bearing hypothesis (members of one bearing differ only in the thrust
+        scale; default: all one). While members of several bearings run, those of a bearing
+        other than the best member's are dropped when their weight falls below
+        :data:`DROP_WEIGHT`, and those that converged to it (:data:`MERGE_DISTANCE_M`); when
+        every other bearing converged so, :attr:`bearing_confirmed`.
     """
 
     def __init__(
@@ -77,13 +94,22 @@ class FilterBank:
         start_s: float,
         max_bank_s: float,
         ticks_per_force_balance: int = 1,
+        log_priors: list[float] | None = None,
+        bearings: list[int] | None = None,
     ) -> None:
         self.filters = filters
         self.force_balance_tempering = LIKELIHOOD_TEMPERING / ticks_per_force_balance
         """What a force-balance sample's log-likelihood is divided by."""
-        self.log_weight = [0.0] * len(filters)
-        """Each member's tempered log-likelihood so far (unnormalised; Python floats: read
-        every tick)."""
+        self.log_weight = [0.0] * len(filters) if log_priors is None else list(log_priors)
+        """Each member's tempered log-likelihood so far plus its log prior (unnormalised;
+        Python floats: read every tick)."""
+        self.bearings = [0] * len(filters) if bearings is None else list(bearings)
+        """Each member's bearing hypothesis."""
+        self.bearing_confirmed = False
+        """Whether every other bearing hypothesis converged to the best member's (started
+        elsewhere, brought there by the data), none rejected and none left by time."""
+        self._rejected = False
+        """Whether a bearing hypothesis was dropped for its weight."""
         self.start_s = start_s
         self.max_bank_s = max_bank_s
         self._mixture_cache: tuple[list[FloatArray], list[float], tuple[FloatArray, FloatArray]]
@@ -121,6 +147,7 @@ class FilterBank:
         """Keep only the members at ``indices`` (with their log-likelihoods)."""
         self.filters = [self.filters[i] for i in indices]
         self.log_weight = [self.log_weight[i] for i in indices]
+        self.bearings = [self.bearings[i] for i in indices]
 
     def predict(self, dt_s: float, u: list[float]) -> None:
         """Predict every member over ``dt_s`` [s] (``u`` the inputs as floats)."""
@@ -298,17 +325,24 @@ class FilterBank:
         return mean, cov
 
     def maybe_decide(self, time_s: float) -> None:
-        """Keep one member when its weight passes :data:`SELECT_WEIGHT` (after
-        :data:`MIN_BANK_S`), or collapse to the moments after ``max_bank_s``."""
+        """Drop the members of rejected bearings (:data:`DROP_WEIGHT`); keep one member when
+        its weight passes :data:`SELECT_WEIGHT` (after :data:`MIN_BANK_S`), or collapse to
+        the moments after ``max_bank_s``."""
         if self.decided:
             return
+        bearings = self.bearings
+        several = bearings.count(bearings[0]) != len(bearings)
+        if several:
+            self._drop_rejected_bearings()
+            if self.decided:
+                return
         elapsed = time_s - self.start_s
         if elapsed < MIN_BANK_S:
             return
         w = self.weights()
         best = int(np.argmax(w))
         if w[best] >= SELECT_WEIGHT:
-            self.keep([best])
+            self.keep([best])  # other bearings rejected: not confirmed
         elif elapsed >= self.max_bank_s:
             mean, cov = self.mixture()
             kf = self.filters[best]
@@ -317,6 +351,33 @@ class FilterBank:
             kf.resets = resets  # a collapse is not a restart
             self.filters = [kf]
             self.log_weight = [0.0]
+            self.bearings = [0]
+
+    def _drop_rejected_bearings(self) -> None:
+        """Drop the members of bearings other than the best member's whose weight is below
+        :data:`DROP_WEIGHT`, and the bearings whose members all came within
+        :data:`MERGE_DISTANCE_M` of the best member; one bearing left, every other one
+        converged to it, confirms it."""
+        w = self.weights().tolist()
+        top = w.index(max(w))
+        best = self.bearings[top]
+        bn, be = self.filters[top].x_values()[:2]
+        near: dict[int, bool] = {}
+        for b, kf in zip(self.bearings, self.filters, strict=True):
+            n, e = kf.x_values()[:2]
+            close = math.hypot(n - bn, e - be) <= MERGE_DISTANCE_M
+            near[b] = near.get(b, True) and close
+        keep = [
+            i
+            for i, (b, wi) in enumerate(zip(self.bearings, w, strict=True))
+            if b == best or (wi >= DROP_WEIGHT and not near[b])
+        ]
+        if len(keep) < len(w):
+            dropped = set(range(len(w))) - set(keep)
+            self._rejected = self._rejected or any(not near[self.bearings[i]] for i in dropped)
+            self.keep(keep)
+            if all(b == best for b in self.bearings) and not self._rejected:
+                self.bearing_confirmed = True
 
 
 def log_det_innovation(p: FloatArray, h_jac: FloatArray, r: FloatArray) -> float:

@@ -73,6 +73,18 @@ class DynamicInitial:
         (0.2, 0.2, 0.2), exclusive_minimum=0.0, doc="accelerometer bias, body x y z [m/s^2]"
     )
     wind_std_mps: float = spec(2.0, exclusive_minimum=0.0, doc="wind, north and east [m/s]")
+    wind_hypotheses: int = spec(
+        4,
+        minimum=0,
+        maximum=12,
+        doc="bearing hypotheses: members started beside the thrust-scale ones with the"
+        " window's force less the drag of this many winds on a ring (the pull's direction,"
+        " so the bearing, differs with the wind a steady hover cannot tell), kept while the"
+        " data do not reject them; the pull rule relaxes once they are rejected (0: off) [1]",
+    )
+    wind_hypothesis_radius_std: float = spec(
+        2.0, exclusive_minimum=0.0, doc="the ring's radius in wind prior standard deviations [1]"
+    )
     window_s: float = spec(
         1.0, exclusive_minimum=0.0, doc="data averaged to initialise (tension direction) [s]"
     )
@@ -165,6 +177,14 @@ class DynamicFilterConfig:
         doc="publish only while the horizontal pull exceeds this many times the rotor drag of"
         " a wind of initial.wind_std_mps or of the estimated wind, whichever is larger (the"
         " bearing is unknown below) [1]",
+    )
+    confirmed_pull_over_wind_drag: float = spec(
+        2.0,
+        minimum=0.0,
+        doc="min_pull_over_wind_drag once every other bearing hypothesis of the bank"
+        " (initial.wind_hypotheses) converged to the best member's (the data, not the start,"
+        " chose the bearing), until the filter's cable goes slack (docs/estimation.md, the"
+        " bearing hypotheses) [1]",
     )
     imu_ticks_per_fusion: int = spec(
         4,

@@ -155,8 +155,13 @@ class DynamicTetherEstimator(InputFeed):
             dynamic.bearing_position_walk_m2ps,
             dynamic.bearing_wind_walk_m2ps3,
         )
+        drag_n_s_per_m = vehicle.mass_kg * self.constants.drag_per_s
         self.ground_station = GroundStationInputs(
-            dynamic, self.bearing, self.health, status_settings
+            dynamic,
+            self.bearing,
+            self.health,
+            status_settings,
+            dynamic.confirmed_pull_over_wind_drag * drag_n_s_per_m,
         )
         """The load cell, the winch and the cable angle."""
         self.bank: FilterBank | None = None
@@ -393,7 +398,10 @@ class DynamicTetherEstimator(InputFeed):
         if reason is None and fusion_tick:  # else the members have not stepped since
             bank.drop_unhealthy(MAX_DISTANCE_M)
             bank.maybe_decide(t)
-            reason = too_far(bank.best.x_values())
+            x = bank.best.x_values()
+            reason = too_far(x)
+            if bank.bearing_confirmed and x[state.TENSION] < self.dynamic.slack_tension_n:
+                bank.bearing_confirmed = False  # a slack cable's pull holds no bearing
         if reason is not None:
             self._restart(reason)
 
@@ -424,7 +432,9 @@ class DynamicTetherEstimator(InputFeed):
             None if batch is None or bank is None else batch.step(),
             self._noise,
             self.constants,
-            self.ground_station.status_settings(self._time_s),
+            self.ground_station.status_settings(
+                self._time_s, bank is not None and bank.bearing_confirmed
+            ),
             self.rangefinder.excess.variance,
             bool(self.health.winch_fused),
             self.bearing.force_std_n,

@@ -65,6 +65,7 @@ class GroundStationInputs:
         bearing: BearingWindow,
         health: DynamicHealth,
         status_settings: StatusSettings,
+        confirmed_pull_per_wind_n_s_per_m: float,
     ) -> None:
         self.load_cell = LoadCellAid(dynamic.load_cell_noise_std_n)
         self.winch = WinchAid(dynamic.winch_length_noise_std_m, dynamic.slack_tension_n)
@@ -80,6 +81,10 @@ class GroundStationInputs:
             status_settings, pull_per_wind_n_s_per_m=0.0
         )
         """The status settings while a cable angle measures the bearing (ANGLE_FRESH_S)."""
+        self._confirmed_status_settings = dataclasses.replace(
+            status_settings, pull_per_wind_n_s_per_m=confirmed_pull_per_wind_n_s_per_m
+        )
+        """The status settings once the bank's bearing hypotheses converged to one."""
 
     # ------------------------------------------------------------------ checks
     def tension_ok(self, tension_n: float, time_s: float) -> bool:
@@ -160,12 +165,15 @@ class GroundStationInputs:
             azimuth_std_rad = CableAngleAid.noise_std_rad(elevation_rad, noise_std_rad)[1]
             self._bearing.add_bearing(math.hypot(x[0], x[1]) * azimuth_std_rad)
 
-    def status_settings(self, time_s: float) -> StatusSettings:
+    def status_settings(self, time_s: float, bearing_confirmed: bool) -> StatusSettings:
         """The rules the estimate's status at filter time ``time_s`` [s] is judged by: the
         weak-pull rule waived while a cable angle fused within :data:`ANGLE_FRESH_S`
-        measures the bearing."""
+        measures the bearing, relaxed (``confirmed_pull_over_wind_drag``) while the bank's
+        bearing hypotheses have converged to one (``bearing_confirmed``)."""
         if time_s - self.cable_angle.status.last_fused_time_s <= ANGLE_FRESH_S:
             return self._angle_status_settings
+        if bearing_confirmed:
+            return self._confirmed_status_settings
         return self._status_settings
 
     def clear(self) -> None:

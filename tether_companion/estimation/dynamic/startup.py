@@ -90,18 +90,23 @@ class FilterStartup:
         gate = self._config.gate
         members = [
             MemberFilter(
-                x0,
-                p0,
+                start.x,
+                start.p,
                 self._q,
                 c,
                 process,
                 gate_probability=gate.probability,
                 max_consecutive_rejections=gate.max_consecutive_rejections,
             )
-            for x0, p0 in starts
+            for start in starts
         ]
         return FilterBank(
-            members, t, self._dynamic.initial.thrust_scale_bank_max_s, self._ticks_per_fusion
+            members,
+            t,
+            self._dynamic.initial.thrust_scale_bank_max_s,
+            self._ticks_per_fusion,
+            [start.log_prior for start in starts],
+            [i if start.bearing_rival else 0 for i, start in enumerate(starts)],
         )
 
     def _new_initialiser(self) -> Initialiser:

@@ -18,7 +18,7 @@ DEBUG_VECT ``CABLE_ANG`` at 10 Hz from (255, 158) (the service's convention,
 :mod:`tether_companion.service.cable_angle`: ``x`` azimuth from true north toward east, ``y``
 elevation up [rad], ``time_usec`` the sensor's UNIX time) with the direction from the anchor to
 SITL's truth (SITL's tether is a straight line), turned by ``noise_std_rad`` per axis
-(:func:`tether_companion.emulator.cable_angle.noisy_angles`, the emulator's noise model).
+(:func:`tether_companion.sim.ground_sensors.noisy_angles`, the emulator's noise model).
 """
 
 from __future__ import annotations
@@ -32,8 +32,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from pymavlink import mavutil
 
-from tether_companion.emulator.cable_angle import noisy_angles
 from tether_companion.mavlink.geo import Geodetic, geodetic_to_ned
+from tether_companion.sim.ground_sensors import noisy_angles
 
 FC_SYSTEM, FC_COMPONENT = 1, 1
 COMPANION_COMPONENT = 191

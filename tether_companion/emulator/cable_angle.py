@@ -14,7 +14,6 @@ generator (seeded from the scenario's seed): switching it on does not change the
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,11 +21,9 @@ import numpy as np
 from tether_companion.config import spec
 from tether_companion.mavlink.framing import FrameEncoder, dialect
 from tether_companion.physics.cable_anchor import anchor_direction_ned
+from tether_companion.sim.ground_sensors import ANGLE_SEED_SALT, noisy_angles
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.simulator import Simulator
-
-_SEED_SALT = 250
-"""Mixed into the scenario's seed for the sensor's own noise (DEBUG_VECT's message id)."""
 
 
 @dataclass(frozen=True)
@@ -66,7 +63,7 @@ class EmulatedCableAngle:
     ) -> None:
         self.config = config
         self._encoder = FrameEncoder(config.system_id, config.component_id)
-        self._rng = np.random.default_rng([scenario.seed, _SEED_SALT])
+        self._rng = np.random.default_rng([scenario.seed, ANGLE_SEED_SALT])
         self._name = config.message_name.encode("ascii")
         self._unix0_s = unix_time_at_start_s
         self.period_s = 1.0 / config.rate_hz
@@ -87,18 +84,3 @@ class EmulatedCableAngle:
         )
         self.sent += 1
         return self._encoder.encode(msg)
-
-
-def noisy_angles(
-    direction_ned: tuple[float, float, float], noise_std_rad: float, rng: np.random.Generator
-) -> tuple[float, float]:
-    """(azimuth from north toward east, elevation up) [rad] of the unit vector
-    ``direction_ned`` turned by ``noise_std_rad`` [rad] per axis (across it horizontally and
-    vertically): the azimuth's noise is ``noise_std_rad / cos(elevation)``."""
-    north, east, down = direction_ned
-    elevation = math.atan2(-down, math.hypot(north, east))
-    azimuth = math.atan2(east, north)
-    across, up = noise_std_rad * rng.standard_normal(2)
-    elevation = min(max(elevation + up, -0.5 * math.pi), 0.5 * math.pi)
-    azimuth += across / max(math.cos(elevation), 1e-3)
-    return (azimuth + math.pi) % (2.0 * math.pi) - math.pi, elevation

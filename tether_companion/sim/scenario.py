@@ -24,6 +24,7 @@ from tether_companion.resources import SCENARIOS_DIR, builtin_path
 from tether_companion.sim.controller import ControllerConfig
 from tether_companion.sim.events import Event
 from tether_companion.sim.ground import GroundConfig
+from tether_companion.sim.ground_sensors import GroundSensorConfig
 from tether_companion.sim.propulsion import PropulsionConfig
 from tether_companion.sim.sensors import SensorConfig
 from tether_companion.sim.trajectory import TrajectoryConfig
@@ -95,6 +96,10 @@ class Scenario:
     )
     ground: GroundConfig = spec(
         default_factory=GroundConfig, doc="anchor height above the ground, terrain"
+    )
+    ground_station: GroundSensorConfig = spec(
+        default_factory=GroundSensorConfig,
+        doc="errors of the ground station's winch encoder and cable-angle sensor",
     )
     events: tuple[Event, ...] = spec((), doc="timed ground-station events")
     home: HomeConfig = spec(default_factory=HomeConfig, doc="anchor location")

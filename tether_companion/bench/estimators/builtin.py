@@ -110,7 +110,8 @@ class TensionCatenary:
         """The catenary estimator does not use the rangefinder."""
 
     def on_ground_station(self, station: GroundStation) -> None:
-        self._catenary.set_paid_out_length_m(station.paid_out_m, station.time_s)
+        if station.paid_out_m is not None:
+            self._catenary.set_paid_out_length_m(station.paid_out_m, station.time_s)
 
     def on_imu(self, sample: ImuSample) -> TickOutput | None:
         tension = self._tension.on_imu(sample)

@@ -16,14 +16,13 @@ from numpy.typing import NDArray
 
 from tether_companion.bench.estimators import SIMULATORS
 from tether_companion.bench.estimators.registry import (
-    ANGLE_RATE_HZ,
     EstimatorKind,
     FlightContext,
     GroundStation,
 )
 from tether_companion.estimation.runner import _ATTITUDE, _IMU, _PWM, _RANGE, _schedule
-from tether_companion.physics.cable_anchor import anchor_direction_ned
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
+from tether_companion.sim.ground_sensors import GroundSensors
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.simulator import Simulator
 
@@ -136,7 +135,7 @@ def fly(
     tick = 0
     seen = False
     dt_s = sim.physics_dt_s
-    next_angle_s = 0.0
+    ground = GroundSensors(scenario.ground_station, scenario.cable.model, scenario.seed)
     for step, what in schedule:
         sim.advance_to(step * dt_s)
         if what == _ATTITUDE:
@@ -156,12 +155,13 @@ def fly(
         else:
             imu = sim.read_imu()
             state = sim.truth
-            direction = None
-            if imu.time_s >= next_angle_s:  # the cable-angle sensor's report
-                next_angle_s = imu.time_s + 1.0 / ANGLE_RATE_HZ
-                direction = anchor_direction_ned(sim.cable, tuple(state.position_ned_m))
-            station = GroundStation(imu.time_s, state.tension_n, sim.cable.paid_out_m, direction)
-            angle_seen[tick] = direction is not None
+            readings = ground.read(
+                imu.time_s, sim.cable, tuple(state.position_ned_m), state.tension_n
+            )
+            station = GroundStation(
+                imu.time_s, state.tension_n, readings.paid_out_m, readings.cable_angle_rad
+            )
+            angle_seen[tick] = readings.cable_angle_rad is not None
             time_s[tick] = imu.time_s
             truth["position"][tick] = state.position_ned_m
             truth["velocity"][tick] = state.velocity_ned_m_s

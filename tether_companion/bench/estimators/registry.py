@@ -60,21 +60,21 @@ class GroundStation:
     tension_n
         Load-cell reading of the cable tension at the drone end [N] (the simulator's truth).
     paid_out_m
-        Cable length paid out by the winch [m].
-    anchor_direction_ned
-        Unit vector along which the cable leaves the anchor, NED (the truth a cable-angle
-        sensor measures, :func:`~tether_companion.physics.cable_anchor.anchor_direction_ned`),
-        at the sensor's :data:`ANGLE_RATE_HZ`; None between its reports or when undefined.
+        Cable length paid out as the winch reports it [m]; None between its reports
+        (:mod:`~tether_companion.sim.ground_sensors`: exact at every tick unless the scenario's
+        ``ground_station`` errors are on).
+    cable_angle_rad
+        The cable-angle sensor's (azimuth from north toward east, elevation up) of the cable
+        where it leaves the anchor [rad], with its errors; None between its reports or when
+        the cable has no direction there.
     """
 
     time_s: float
     tension_n: float
-    paid_out_m: float
-    anchor_direction_ned: tuple[float, float, float] | None = None
+    paid_out_m: float | None
+    cable_angle_rad: tuple[float, float] | None = None
 
 
-ANGLE_RATE_HZ = 10.0
-"""The ground station's cable-angle sensor reports this often [Hz] (as the emulator's)."""
 _NAN3 = np.full(3, math.nan)
 _NAN33 = np.full((3, 3), math.nan)
 

@@ -7,10 +7,10 @@
 * ``dynamic-winch``: the same, also given the winch's paid-out length each tick (the ground
   station's report; the cable model then uses that length and the length is fused);
 * ``dynamic-angle``, ``dynamic-winch-angle``: ``dynamic`` / ``dynamic-winch`` also given the
-  ground station's cable angle at the anchor (10 Hz, the simulated cable's direction turned by
-  :data:`ANGLE_SENSOR_NOISE_RAD` per axis from its own generator, fused with the service's
-  default :data:`ANGLE_CONFIGURED_NOISE_RAD`; the emulator's sensor and the service's
-  ``cable_angle`` section).
+  ground station's cable angle at the anchor (the simulated sensor of
+  :mod:`~tether_companion.sim.ground_sensors`, with the scenario's ``ground_station`` errors),
+  fused with the service's default ``cable_angle`` section (:data:`ANGLE_CONFIG`: the noise
+  and calibration it tells the filter).
 
 Published: the estimate's status is ``ok`` (:attr:`NavigationEstimate.observable`).
 
@@ -35,7 +35,6 @@ from tether_companion.bench.estimators.registry import (
     TickOutput,
     register,
 )
-from tether_companion.emulator.cable_angle import EmulatedCableAngleConfig, noisy_angles
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig, drag_per_s
 from tether_companion.estimation.dynamic.crlb import (
@@ -59,12 +58,8 @@ if TYPE_CHECKING:  # flight.py imports the registry, which imports this provider
 FloatArray = NDArray[np.float64]
 
 
-ANGLE_SENSOR_NOISE_RAD = EmulatedCableAngleConfig().noise_std_rad
-"""The simulated cable-angle sensor's direction noise per axis [rad] (the emulator's)."""
-ANGLE_CONFIGURED_NOISE_RAD = CableAngleConfig().noise_std_rad
-"""The noise the filter is told [rad] (the service's default ``cable_angle.noise_std_rad``)."""
-ANGLE_SEED_SALT = 250
-"""Mixed into the scenario's seed for the sensor's noise (the emulator's salt)."""
+ANGLE_CONFIG = CableAngleConfig()
+"""What the filter is told of the cable-angle sensor: the service's defaults."""
 HEAVY_CABLE_MODELS = ("elastic", "catenary")
 """The simulator's cable models that have weight (``physics/cable.py``); its constant-tension
 winch is the paper's weightless straight line whatever ``linear_density_kg_per_m`` says."""
@@ -94,7 +89,8 @@ def own_model_bound(
     """The posterior CRLB of the filter's 13-state model along ``record``'s truth with the
     kind's measurements (:mod:`~tether_companion.estimation.dynamic.crlb`: force balance and
     rangefinder; ``winch``: the paid-out length; ``angle``: the cable angle with the simulated
-    sensor's noise, :data:`ANGLE_SENSOR_NOISE_RAD`), diagonal (N, 13)."""
+    sensor's white noise, the scenario's ``ground_station.angle_noise_std_rad``), diagonal
+    (N, 13)."""
     dynamic = filter_config(context)
     vehicle = context.vehicle
     constants = ModelConstants(
@@ -118,7 +114,7 @@ def own_model_bound(
     residual = residual_density_m2ps3(
         force_balance.residuals_mps2, interval_s, dynamic.noise.force_residual_m2ps3
     )
-    angle_std = ANGLE_SENSOR_NOISE_RAD if angle else None
+    angle_std = context.scenario.ground_station.angle_noise_std_rad if angle else None
     noise = bound_noise(
         context.scenario, dynamic, residual, winch=winch, cable_angle_std_rad=angle_std
     )
@@ -143,9 +139,7 @@ class DynamicKind:
         config = context.estimator_config(EstimatorConfig())  # anchor height, rangefinder mounting
         self._estimator = DynamicTetherEstimator(config, context.vehicle, dynamic)
         self._use_winch = use_winch
-        self._angle_rng = (
-            np.random.default_rng([context.scenario.seed, ANGLE_SEED_SALT]) if use_angle else None
-        )
+        self._use_angle = use_angle
 
     def on_attitude(self, sample: AttitudeSample) -> None:
         self._estimator.on_attitude(sample)
@@ -157,13 +151,13 @@ class DynamicKind:
         self._estimator.on_range(sample)
 
     def on_ground_station(self, station: GroundStation) -> None:
-        if self._use_winch:
+        if self._use_winch and station.paid_out_m is not None:
             self._estimator.set_paid_out_length_m(station.paid_out_m, station.time_s)
-        direction = station.anchor_direction_ned
-        if self._angle_rng is not None and direction is not None:
-            azimuth, elevation = noisy_angles(direction, ANGLE_SENSOR_NOISE_RAD, self._angle_rng)
+        angle = station.cable_angle_rad
+        if self._use_angle and angle is not None:
+            azimuth, elevation = angle
             self._estimator.on_cable_angle(
-                elevation, azimuth, station.time_s, ANGLE_CONFIGURED_NOISE_RAD
+                elevation, azimuth, station.time_s, ANGLE_CONFIG.noise_std_rad
             )
 
     def on_imu(self, sample: ImuSample) -> TickOutput | None:

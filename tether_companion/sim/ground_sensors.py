@@ -1,0 +1,256 @@
+"""The ground station's sensors on a simulated flight: the winch's paid-out length from a drum
+encoder and the cable-angle sensor at the anchor, with the errors real ones have.
+
+The ground station's *events* (tension set-points, winch rates, tugs) are
+:mod:`~tether_companion.sim.ground_station`'s; this module reads what its sensors report of the
+simulated cable (the scenario's ``ground_station`` section, :class:`GroundSensorConfig`).
+
+Off (``enabled: false``, every scenario but the realistic ones) the sensors are the ones the
+scorecard always had: the winch reports the simulator's ``paid_out_m`` exactly at every IMU
+tick, and the angle sensor the cable's direction at the anchor at ``angle_rate_hz`` turned by
+``angle_noise_std_rad`` per axis (white, the emulator's generator and salt).
+
+On, each flight draws (seeded, from its own generator: switching them on does not change the
+flight) and reports (sources of the magnitudes: docs/simulator.md, "The ground station's
+sensors"):
+
+* the **winch** at ``winch_rate_hz``: ``offset + (1 + scale) L_0`` quantised to
+  ``winch_resolution_m``, of the state ``winch_latency_s`` ago, where ``L_0`` is the cable's
+  unstretched length off the drum (the encoder counts the drum's turns: the cable's elastic
+  stretch ``T L / EA`` is not in it; the constant-tension cable's ``paid_out_m`` is the
+  anchor-to-drone distance, so it is stretched by ``cable_axial_stiffness_n``; the elastic and
+  catenary cables' ``paid_out_m`` is already unstretched, their stretch is in the physics),
+  ``scale`` ~ N(0, ``winch_scale_error_std``) (the drum's effective radius: cable layering,
+  wear), ``offset`` ~ N(0, ``winch_zero_offset_std_m``) (where the count was zeroed);
+* the **cable angle** at ``angle_rate_hz``: the direction at the anchor of the state
+  ``angle_latency_s`` ago (the drone's position then, the cable as it is now), turned by
+  white ``angle_noise_std_rad`` per axis, plus an azimuth bias ~ N(0,
+  ``angle_azimuth_bias_std_rad``) (the sensor's zero against true north) and an elevation
+  bias ~ N(0, ``angle_elevation_bias_std_rad``) (its level), each angle quantised to
+  ``angle_resolution_rad``.
+
+Pure and synchronous.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from tether_companion.config import spec
+from tether_companion.physics.cable import CableModel
+from tether_companion.physics.cable_anchor import anchor_direction_ned
+
+ANGLE_SEED_SALT = 250
+"""Mixed into the scenario's seed for the angle sensor's white noise (the emulator's salt,
+DEBUG_VECT's message id)."""
+CALIBRATION_SEED_SALT = 9251
+"""Mixed into the scenario's seed for the per-flight calibration errors."""
+TIME_TOL_S = 1e-9
+"""Times closer than this [s] are the same instant (a tick less a latency, rounded)."""
+STRETCHED_PAID_OUT_MODELS = ("constant_tension",)
+"""Cable models whose ``paid_out_m`` is the stretched anchor-to-drone distance (the encoder
+sees it less the stretch); the others' is the unstretched length."""
+
+
+@dataclass(frozen=True)
+class GroundSensorConfig:
+    """The ``ground_station`` section of a scenario: the ground station's sensors' errors."""
+
+    enabled: bool = spec(
+        False,
+        doc="give the winch encoder and the cable-angle sensor the errors below (false: the "
+        "exact length every IMU tick, the angle with white noise only)",
+    )
+    winch_rate_hz: float = spec(
+        10.0, exclusive_minimum=0.0, maximum=200.0, doc="winch length report rate [Hz]"
+    )
+    winch_scale_error_std: float = spec(
+        0.01, minimum=0.0, maximum=0.2, doc="drum encoder's scale error, per flight [1]"
+    )
+    winch_zero_offset_std_m: float = spec(
+        0.1, minimum=0.0, maximum=5.0, doc="drum encoder's zero offset, per flight [m]"
+    )
+    winch_resolution_m: float = spec(
+        0.01, minimum=0.0, maximum=1.0, doc="reported length's step (0: none) [m]"
+    )
+    winch_latency_s: float = spec(
+        0.1, minimum=0.0, maximum=2.0, doc="age of the reported length [s]"
+    )
+    cable_axial_stiffness_n: float = spec(
+        0.0,
+        minimum=0.0,
+        doc="the cable's axial stiffness EA for the stretch the encoder does not see "
+        "(constant_tension cable; 0: none) [N]",
+    )
+    angle_rate_hz: float = spec(
+        10.0, exclusive_minimum=0.0, maximum=200.0, doc="cable-angle report rate [Hz]"
+    )
+    angle_noise_std_rad: float = spec(
+        0.01, minimum=0.0, maximum=0.5, doc="white direction noise per axis [rad]"
+    )
+    angle_azimuth_bias_std_rad: float = spec(
+        0.026, minimum=0.0, maximum=0.5, doc="azimuth zero against north, per flight [rad]"
+    )
+    angle_elevation_bias_std_rad: float = spec(
+        0.007, minimum=0.0, maximum=0.5, doc="elevation zero (level), per flight [rad]"
+    )
+    angle_resolution_rad: float = spec(
+        0.0015, minimum=0.0, maximum=0.1, doc="reported angles' step (0: none) [rad]"
+    )
+    angle_latency_s: float = spec(
+        0.05, minimum=0.0, maximum=2.0, doc="age of the reported angles [s]"
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class Calibration:
+    """One flight's calibration errors (drawn once).
+
+    Attributes
+    ----------
+    winch_scale, winch_offset_m
+        The encoder's scale error [1] and zero offset [m].
+    azimuth_bias_rad, elevation_bias_rad
+        The angle sensor's zero errors [rad].
+    """
+
+    winch_scale: float
+    winch_offset_m: float
+    azimuth_bias_rad: float
+    elevation_bias_rad: float
+
+
+@dataclass(frozen=True, slots=True)
+class GroundReadings:
+    """What the ground station's sensors report at one IMU tick.
+
+    Attributes
+    ----------
+    paid_out_m
+        The winch's reported length [m]; None between its reports.
+    cable_angle_rad
+        The angle sensor's (azimuth from north toward east, elevation up) [rad]; None between
+        its reports or while the cable has no direction at the anchor.
+    """
+
+    paid_out_m: float | None
+    cable_angle_rad: tuple[float, float] | None
+
+
+class GroundSensors:
+    """The winch encoder and the cable-angle sensor of one flight (module docstring).
+
+    Parameters
+    ----------
+    config
+        The scenario's ``ground_station`` section.
+    cable_model
+        The scenario's ``cable.model`` (whether ``paid_out_m`` is stretched).
+    seed
+        The scenario's seed.
+    """
+
+    def __init__(self, config: GroundSensorConfig, cable_model: str, seed: int) -> None:
+        self.config = config
+        self._angle_rng = np.random.default_rng([seed, ANGLE_SEED_SALT])
+        self._stretched = cable_model in STRETCHED_PAID_OUT_MODELS
+        self.calibration = Calibration(0.0, 0.0, 0.0, 0.0)
+        if config.enabled:
+            scale, offset, azimuth, elevation = np.random.default_rng(
+                [seed, CALIBRATION_SEED_SALT]
+            ).standard_normal(4)
+            self.calibration = Calibration(
+                float(scale) * config.winch_scale_error_std,
+                float(offset) * config.winch_zero_offset_std_m,
+                float(azimuth) * config.angle_azimuth_bias_std_rad,
+                float(elevation) * config.angle_elevation_bias_std_rad,
+            )
+        self._history: deque[tuple[float, float, tuple[float, float, float]]] = deque()
+        """(time [s], encoder's unstretched length [m], position NED [m]) of recent ticks."""
+        self._next_winch_s = 0.0
+        self._next_angle_s = 0.0
+
+    def read(
+        self,
+        time_s: float,
+        cable: CableModel,
+        position_ned_m: tuple[float, float, float],
+        tension_n: float,
+    ) -> GroundReadings:
+        """The reports due at ``time_s`` [s] (called at every IMU tick, in time order) of the
+        simulated ``cable`` with the drone at ``position_ned_m`` [m] pulling ``tension_n`` [N]."""
+        cfg = self.config
+        angle_due = time_s >= self._next_angle_s
+        if angle_due:
+            self._next_angle_s = time_s + 1.0 / cfg.angle_rate_hz
+        if not cfg.enabled:
+            angle = None
+            if angle_due:
+                direction = anchor_direction_ned(cable, position_ned_m)
+                angle = None if direction is None else self._noisy(direction)
+            return GroundReadings(cable.paid_out_m, angle)
+        length = cable.paid_out_m
+        if self._stretched and cfg.cable_axial_stiffness_n > 0.0:
+            length /= 1.0 + max(tension_n, 0.0) / cfg.cable_axial_stiffness_n
+        self._history.append((time_s, length, position_ned_m))
+        paid_out = None
+        if time_s >= self._next_winch_s:
+            self._next_winch_s = time_s + 1.0 / cfg.winch_rate_hz
+            _, old_length, _ = self._at(time_s - cfg.winch_latency_s)
+            calibration = self.calibration
+            reported = calibration.winch_offset_m + (1.0 + calibration.winch_scale) * old_length
+            paid_out = _quantised(reported, cfg.winch_resolution_m)
+        angle = None
+        if angle_due:
+            _, _, old_position = self._at(time_s - cfg.angle_latency_s)
+            direction = anchor_direction_ned(cable, old_position)
+            if direction is not None:
+                azimuth, elevation = self._noisy(direction)
+                calibration = self.calibration
+                step = cfg.angle_resolution_rad
+                azimuth = _quantised(azimuth + calibration.azimuth_bias_rad, step)
+                elevation = _quantised(elevation + calibration.elevation_bias_rad, step)
+                angle = ((azimuth + math.pi) % (2.0 * math.pi) - math.pi, elevation)
+        self._forget(time_s - max(cfg.winch_latency_s, cfg.angle_latency_s))
+        return GroundReadings(paid_out, angle)
+
+    def _noisy(self, direction: tuple[float, float, float]) -> tuple[float, float]:
+        return noisy_angles(direction, self.config.angle_noise_std_rad, self._angle_rng)
+
+    def _at(self, time_s: float) -> tuple[float, float, tuple[float, float, float]]:
+        """The latest recorded tick at or before ``time_s`` [s] (within :data:`TIME_TOL_S`;
+        the oldest kept if none)."""
+        history = self._history
+        for entry in reversed(history):
+            if entry[0] <= time_s + TIME_TOL_S:
+                return entry
+        return history[0]
+
+    def _forget(self, before_s: float) -> None:
+        """Drop the ticks no report will need: all but the last at or before ``before_s``."""
+        history = self._history
+        while len(history) > 1 and history[1][0] <= before_s + TIME_TOL_S:
+            history.popleft()
+
+
+def noisy_angles(
+    direction_ned: tuple[float, float, float], noise_std_rad: float, rng: np.random.Generator
+) -> tuple[float, float]:
+    """(azimuth from north toward east, elevation up) [rad] of the unit vector
+    ``direction_ned`` turned by ``noise_std_rad`` [rad] per axis (across it horizontally and
+    vertically): the azimuth's noise is ``noise_std_rad / cos(elevation)``."""
+    north, east, down = direction_ned
+    elevation = math.atan2(-down, math.hypot(north, east))
+    azimuth = math.atan2(east, north)
+    across, up = noise_std_rad * rng.standard_normal(2)
+    elevation = min(max(elevation + up, -0.5 * math.pi), 0.5 * math.pi)
+    azimuth += across / max(math.cos(elevation), 1e-3)
+    return (azimuth + math.pi) % (2.0 * math.pi) - math.pi, elevation
+
+
+def _quantised(value: float, step: float) -> float:
+    return round(value / step) * step if step > 0.0 else value

@@ -131,3 +131,19 @@ def test_the_innovations_excess_variance_is_what_the_filter_did_not_predict() ->
     assert biased.variance == pytest.approx(0.09, abs=0.05)
     biased.add(math.nan, predicted, 20.0)  # a non-finite innovation changes nothing
     assert math.isfinite(biased.variance)
+
+
+def test_an_honest_filters_innovations_add_almost_no_excess() -> None:
+    """Innovations exactly as predicted: the 2 s average of ``y^2 - S`` scatters by ~0.16 S;
+    clipped at 0 it averaged 0.064 S over these 10 min (the published down variance of an
+    honest filter widened by that); counted only when significant, 0.013 S."""
+    rng = np.random.default_rng(11)
+    predicted = 0.105
+    excess = InnovationExcess(2.0)
+    seen = []
+    for i in range(20 * 600):  # 10 min at 20 Hz
+        excess.add(rng.normal(scale=math.sqrt(predicted)), predicted, i * 0.05)
+        if i >= 40:
+            seen.append(excess.variance)
+    assert np.mean(seen) < 0.02 * predicted
+    assert np.mean(np.array(seen) > 0.0) < 0.05

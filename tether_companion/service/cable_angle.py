@@ -92,6 +92,20 @@ class CableAngleConfig:
         maximum=0.5,
         doc="added to the sent elevation: the sensor's zero against the horizontal [rad]",
     )
+    azimuth_calibration_std_rad: float = spec(
+        0.026,
+        minimum=0.0,
+        maximum=0.5,
+        doc="how well azimuth_offset_rad is known (the sensor's alignment to true north: 1-2"
+        " degrees with a compass), carried across the cable in the published covariance [rad]",
+    )
+    elevation_calibration_std_rad: float = spec(
+        0.007,
+        minimum=0.0,
+        maximum=0.5,
+        doc="how well elevation_offset_rad is known (the sensor's levelling: 0.3-0.5 degrees"
+        " with a bubble level), carried in the published covariance [rad]",
+    )
     max_elevation_rad: float = spec(
         1.4,
         exclusive_minimum=0.0,

@@ -119,7 +119,26 @@ class DynamicFilterConfig:
         0.0, minimum=0.0, doc="cable weight per length (0: a light, straight cable) [N/m]"
     )
     load_cell_noise_std_n: float = spec(0.1, exclusive_minimum=0.0, doc="load cell [N]")
-    winch_length_noise_std_m: float = spec(0.05, exclusive_minimum=0.0, doc="winch length [m]")
+    winch_length_noise_std_m: float = spec(
+        0.02,
+        exclusive_minimum=0.0,
+        doc="winch length's reading noise (a drum encoder's 1 cm steps, the cable's lay, its"
+        " report's age) [m]",
+    )
+    winch_length_offset_std_m: float = spec(
+        0.1,
+        minimum=0.0,
+        maximum=10.0,
+        doc="winch length's zero error (where the encoder count was zeroed), carried along the"
+        " cable in the published covariance [m]",
+    )
+    winch_length_scale_std: float = spec(
+        0.01,
+        minimum=0.0,
+        maximum=0.5,
+        doc="winch length's scale error (the drum's effective radius: layering, wear), times"
+        " the length along the cable in the published covariance [1]",
+    )
     slack_tension_n: float = spec(
         0.2, minimum=0.0, doc="below this tension the cable is reported slack [N]"
     )

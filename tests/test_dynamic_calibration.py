@@ -53,11 +53,18 @@ def test_an_elevation_zero_error_moves_the_drone_in_the_cables_vertical_plane() 
     assert _variance(without, (0.0, 0.0, 1.0)) == pytest.approx(0.0, abs=1e-15)
 
 
-def test_the_winchs_zero_and_scale_errors_lie_along_the_cable() -> None:
+def test_the_winchs_zero_and_scale_errors_move_the_drone_along_its_horizontal_range() -> None:
+    """The rangefinder holds the height: a length off by ``dL`` moves the drone horizontally
+    by ``dL |p| / rho``, ``dL`` along the cable."""
     term = winch_calibration(P, 5.5, 0.1, 0.01)
-    assert _variance(term, P) == pytest.approx(0.1**2 + (0.01 * 5.5) ** 2)
+    length_var = 0.1**2 + (0.01 * 5.5) ** 2
+    assert _variance(term, (3.0, 4.0, 0.0)) == pytest.approx(length_var * 29.0 / 25.0)
+    assert _variance(term, P) == pytest.approx(length_var)
     assert _variance(term, (-4.0, 3.0, 0.0)) == pytest.approx(0.0, abs=1e-15)
-    assert winch_calibration((0.0, 0.0, 0.0), 5.5, 0.1, 0.01) == (0.0,) * 6
+    assert _variance(term, (0.0, 0.0, 1.0)) == pytest.approx(0.0, abs=1e-15)
+    steep = winch_calibration((0.1, 0.0, -5.0), 5.0, 0.1, 0.0)
+    assert _variance(steep, (1.0, 0.0, 0.0)) == pytest.approx(0.1**2 * 9.0)  # at most 3x
+    assert winch_calibration((0.0, 0.0, -3.0), 5.5, 0.1, 0.01) == (0.0,) * 6
     assert angle_calibration((0.0, 0.0, -3.0), 0.026, 0.007, True) == (0.0,) * 6
 
 

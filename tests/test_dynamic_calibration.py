@@ -54,25 +54,33 @@ def test_an_elevation_zero_error_moves_the_drone_in_the_cables_vertical_plane() 
 
 
 def test_the_winchs_zero_and_scale_errors_move_the_drone_along_its_horizontal_range() -> None:
-    """The rangefinder holds the height: a length off by ``dL`` moves the drone horizontally
-    by ``dL |p| / rho``, ``dL`` along the cable."""
-    term = winch_calibration(P, 5.5, 0.1, 0.01)
+    """Without an angle the rangefinder holds the height: a length off by ``dL`` moves the
+    drone horizontally by ``dL |p| / rho``, ``dL`` along the cable."""
+    term = winch_calibration(P, 5.5, 0.1, 0.01, with_angle=False)
     length_var = 0.1**2 + (0.01 * 5.5) ** 2
     assert _variance(term, (3.0, 4.0, 0.0)) == pytest.approx(length_var * 29.0 / 25.0)
     assert _variance(term, P) == pytest.approx(length_var)
     assert _variance(term, (-4.0, 3.0, 0.0)) == pytest.approx(0.0, abs=1e-15)
     assert _variance(term, (0.0, 0.0, 1.0)) == pytest.approx(0.0, abs=1e-15)
-    steep = winch_calibration((0.1, 0.0, -5.0), 5.0, 0.1, 0.0)
+    steep = winch_calibration((0.1, 0.0, -5.0), 5.0, 0.1, 0.0, with_angle=False)
     assert _variance(steep, (1.0, 0.0, 0.0)) == pytest.approx(0.1**2 * 9.0)  # at most 3x
-    assert winch_calibration((0.0, 0.0, -3.0), 5.5, 0.1, 0.01) == (0.0,) * 6
+    assert winch_calibration((0.0, 0.0, -3.0), 5.5, 0.1, 0.01, False) == (0.0,) * 6
     assert angle_calibration((0.0, 0.0, -3.0), 0.026, 0.007, True) == (0.0,) * 6
+
+
+def test_with_an_angle_the_winchs_errors_lie_along_the_cable() -> None:
+    """The angle holds the direction: a length off by ``dL`` moves the drone along it."""
+    term = winch_calibration(P, 5.5, 0.1, 0.01, with_angle=True)
+    assert _variance(term, P) == pytest.approx(0.1**2 + (0.01 * 5.5) ** 2)
+    assert _variance(term, (-4.0, 3.0, 0.0)) == pytest.approx(0.0, abs=1e-15)
+    assert _variance(term, (3.0 * -2.0, 4.0 * -2.0, -25.0)) == pytest.approx(0.0, abs=1e-15)
 
 
 def test_the_published_term_carries_them_from_the_first_reading_until_a_restart() -> None:
     rows = unmodelled_position_rows(*P, 4.0, 0.2, 0.02)
     info = PositionInformation(1.0)
     assert info.at(1.0) is None
-    winch = winch_calibration(P, 5.5, 0.1, 0.01)
+    winch = winch_calibration(P, 5.5, 0.1, 0.01, with_angle=False)
     info.set_winch_calibration(winch)
     # no angle yet: the unmodelled term as it is, and the winch's calibration
     added = np.array(reduce_added_rows(rows, info.at(1.0)))

@@ -106,24 +106,39 @@ def angle_calibration(
 
 
 def winch_calibration(
-    position_ned_m: Sequence[float], length_m: float, offset_std_m: float, scale_std: float
+    position_ned_m: Sequence[float],
+    length_m: float,
+    offset_std_m: float,
+    scale_std: float,
+    with_angle: bool,
 ) -> tuple[float, ...]:
     """The position covariance (nn, ne, nd, ee, ed, dd) [m^2] a winch encoder's calibration
     errors leave at ``position_ned_m`` (NED from the anchor [m]) when the filter follows its
     length ``length_m`` [m]: the zero offset ``offset_std_m`` [m] and the scale error
-    ``scale_std`` [1] times the length, ``s_L``. The rangefinder holds the height, so a length
-    off by ``dL`` moves the drone along the horizontal range, by ``dL |p| / rho`` (``rho`` the
-    horizontal range; at most :data:`MAX_RANGE_GAIN` times ``dL``, a cable within 20 degrees
-    of the vertical): along the cable ``dL``, across it in its vertical plane ``dL tan(el)``
-    (measured on the realistic 10 N circle, seed 1: 0.21 m along and 0.09-0.28 m across,
-    where the cable alone left the across part out). Zeros where the range is undefined."""
+    ``scale_std`` [1] times the length, ``s_L``, moving the drone to where the length meets
+    what holds the rest of the position:
+
+    * with a cable angle (``with_angle``) the direction from the anchor is measured, so a
+      length off by ``dL`` moves the drone along the cable by ``dL``;
+    * without, the rangefinder holds the height, so it moves the drone along the horizontal
+      range, by ``dL |p| / rho`` (``rho`` the horizontal range; at most
+      :data:`MAX_RANGE_GAIN` times ``dL``, a cable within 20 degrees of the vertical): along
+      the cable ``dL`` and across it in its vertical plane ``dL tan(el)`` (measured on the
+      realistic 10 N circle, seed 1: 0.21 m along and 0.09-0.28 m across, where a term along
+      the cable left the across part out).
+
+    Zeros where the direction is undefined."""
     n, e, d = (float(v) for v in position_ned_m)
     rho = math.hypot(n, e)
     distance = math.hypot(rho, d)
     if not (rho > 0.0 and math.isfinite(distance + length_m)):
         return _ZERO6
+    w = offset_std_m * offset_std_m + (scale_std * length_m) ** 2
+    if with_angle:
+        u0, u1, u2 = n / distance, e / distance, d / distance
+        return (w * u0 * u0, w * u0 * u1, w * u0 * u2, w * u1 * u1, w * u1 * u2, w * u2 * u2)
     gain = min(distance / rho, MAX_RANGE_GAIN)
-    w = (offset_std_m * offset_std_m + (scale_std * length_m) ** 2) * gain * gain
+    w *= gain * gain
     h0, h1 = n / rho, e / rho
     return (w * h0 * h0, w * h0 * h1, 0.0, w * h1 * h1, 0.0, 0.0)
 

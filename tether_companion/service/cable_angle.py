@@ -74,11 +74,12 @@ class CableAngleConfig:
     )
     message_name: str = spec("CABLE_ANG", doc="DEBUG_VECT name of the readings (1-10 ASCII)")
     noise_std_rad: float = spec(
-        0.02,
+        0.01,
         exclusive_minimum=0.0,
         maximum=0.5,
-        doc="the sensor's direction noise, one standard deviation per axis (the azimuth's is "
-        "this over cos(elevation)) [rad]",
+        doc="the sensor's white direction noise, one standard deviation per axis (the azimuth's"
+        " is this over cos(elevation)): an encoder gimbal on a strumming cable, ~0.6 degrees;"
+        " its calibration errors are the *_calibration_std_rad below [rad]",
     )
     azimuth_offset_rad: float = spec(
         0.0,
@@ -271,6 +272,11 @@ class CableAngleFeed(GroundFeed[CableAngleReading]):
         if math.isfinite(filter_s) and abs(reading.time_s - filter_s) > self.config.max_age_s:
             self.stale_readings += 1
             return
+        config = self.config
         estimator.on_cable_angle(  # type: ignore[attr-defined]
-            reading.elevation_rad, reading.azimuth_rad, reading.time_s, self.config.noise_std_rad
+            reading.elevation_rad,
+            reading.azimuth_rad,
+            reading.time_s,
+            config.noise_std_rad,
+            (config.elevation_calibration_std_rad, config.azimuth_calibration_std_rad),
         )

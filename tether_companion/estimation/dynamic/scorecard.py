@@ -60,6 +60,11 @@ FloatArray = NDArray[np.float64]
 
 ANGLE_CONFIG = CableAngleConfig()
 """What the filter is told of the cable-angle sensor: the service's defaults."""
+ANGLE_CALIBRATION = (
+    ANGLE_CONFIG.elevation_calibration_std_rad,
+    ANGLE_CONFIG.azimuth_calibration_std_rad,
+)
+"""The calibration errors it is told of, (elevation, azimuth) [rad]."""
 HEAVY_CABLE_MODELS = ("elastic", "catenary")
 """The simulator's cable models that have weight (``physics/cable.py``); its constant-tension
 winch is the paper's weightless straight line whatever ``linear_density_kg_per_m`` says."""
@@ -157,7 +162,7 @@ class DynamicKind:
         if self._use_angle and angle is not None:
             azimuth, elevation = angle
             self._estimator.on_cable_angle(
-                elevation, azimuth, station.time_s, ANGLE_CONFIG.noise_std_rad
+                elevation, azimuth, station.time_s, ANGLE_CONFIG.noise_std_rad, ANGLE_CALIBRATION
             )
 
     def on_imu(self, sample: ImuSample) -> TickOutput | None:

@@ -10,6 +10,9 @@ import math
 import numpy as np
 import pytest
 
+from tether_companion.config import ConfigError
+from tether_companion.estimation.config import EstimatorConfig
+from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.observability import unmodelled_position_rows
 from tether_companion.estimation.dynamic.position_information import (
     PositionInformation,
@@ -17,6 +20,8 @@ from tether_companion.estimation.dynamic.position_information import (
     reduce_added_rows,
     winch_calibration,
 )
+from tether_companion.physics.vehicle import load_vehicle
+from tether_companion.service.config import load_service_config
 
 P = (3.0, 4.0, -2.0)
 """A drone 5 m out horizontally, 2 m above the anchor."""
@@ -93,3 +98,30 @@ def test_the_published_term_carries_them_from_the_first_reading_until_a_restart(
     assert np.array(reduce_added_rows(rows, info.at(2.0))) == pytest.approx(added)
     info.clear()
     assert info.at(3.0) is None
+
+
+@pytest.mark.parametrize(
+    "calibration", [(math.nan, 0.026), (0.007, math.inf), (-0.007, 0.026), (0.007, -1.0)]
+)
+def test_a_reading_with_absurd_calibration_errors_is_counted_and_dropped(calibration) -> None:
+    estimator = DynamicTetherEstimator(EstimatorConfig(), load_vehicle("default-quad"))
+    estimator.on_cable_angle(0.5, 0.3, 1.0, 0.01, calibration)
+    assert estimator.health.nonfinite_rejected == 1
+    estimator.on_cable_angle(0.5, 0.3, 1.0, 0.01, (0.007, 0.026))
+    assert estimator.health.nonfinite_rejected == 1
+
+
+@pytest.mark.parametrize(
+    ("section", "key", "value"),
+    [
+        ("cable_angle", "azimuth_calibration_std_rad", math.nan),
+        ("cable_angle", "elevation_calibration_std_rad", -0.01),
+        ("cable_angle", "azimuth_calibration_std_rad", 2.0),
+        ("dynamic_filter", "winch_length_offset_std_m", math.inf),
+        ("dynamic_filter", "winch_length_scale_std", -0.01),
+        ("dynamic_filter", "winch_length_noise_std_m", 0.0),
+    ],
+)
+def test_absurd_calibration_settings_are_rejected(section, key, value) -> None:
+    with pytest.raises(ConfigError, match=key):
+        load_service_config(None, {section: {key: value}})

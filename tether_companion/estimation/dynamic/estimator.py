@@ -217,14 +217,20 @@ class DynamicTetherEstimator(InputFeed):
             self.ground_station.fuse_length(self.bank, self.constants, length_m, self._time_s)
 
     def on_cable_angle(
-        self, elevation_rad: float, azimuth_rad: float, time_s: float, noise_std_rad: float
+        self,
+        elevation_rad: float,
+        azimuth_rad: float,
+        time_s: float,
+        noise_std_rad: float,
+        calibration_std_rad: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         """Ground-station cable angle at the anchor [rad]: elevation up, azimuth from north,
-        the sensor's direction noise ``noise_std_rad`` [rad] (aid/cable_angle.py)."""
+        the sensor's direction noise ``noise_std_rad`` [rad] (aid/cable_angle.py) and its
+        calibration errors (elevation, azimuth) [rad] (position_information.py)."""
         inputs = self.ground_station
-        if inputs.angle_ok(elevation_rad, azimuth_rad, time_s, noise_std_rad) and (
-            self._stepped_to(time_s)
-        ):
+        if inputs.angle_ok(
+            elevation_rad, azimuth_rad, time_s, noise_std_rad, calibration_std_rad
+        ) and self._stepped_to(time_s):
             assert self.bank is not None
             inputs.fuse_angle(
                 self.bank,
@@ -233,6 +239,7 @@ class DynamicTetherEstimator(InputFeed):
                 azimuth_rad,
                 self._time_s,
                 noise_std_rad,
+                calibration_std_rad,
             )
 
     def on_range(self, sample: RangeSample) -> None:

@@ -11,6 +11,12 @@ Three optional sensors at the anchor, each with its own measurement module under
   unmodelled term); while one was fused within :data:`ANGLE_FRESH_S` the estimate's status
   waives the weak-pull rule (:meth:`GroundStationInputs.status_settings`).
 
+The winch's and the angle's calibration errors (the encoder's zero and scale, the angle
+sensor's zero against north and its level) are not white: the filter follows them, and
+:class:`PositionInformation` carries them in the published covariance from the first fused
+reading (:func:`~tether_companion.estimation.dynamic.position_information.winch_calibration`,
+:func:`~tether_companion.estimation.dynamic.position_information.angle_calibration`).
+
 Each reading is checked here (a non-finite or impossible value is counted in
 ``health.nonfinite_rejected`` and dropped); when to fuse it (the filter initialised, the reading
 fresh, the members stepped to the filter time) is the estimator's decision
@@ -34,7 +40,11 @@ from tether_companion.estimation.dynamic.consistency import BearingWindow
 from tether_companion.estimation.dynamic.models import ModelConstants
 from tether_companion.estimation.dynamic.observability import unmodelled_position_rows
 from tether_companion.estimation.dynamic.output import DynamicHealth
-from tether_companion.estimation.dynamic.position_information import PositionInformation
+from tether_companion.estimation.dynamic.position_information import (
+    PositionInformation,
+    angle_calibration,
+    winch_calibration,
+)
 from tether_companion.estimation.dynamic.published import StatusSettings
 
 ANGLE_FRESH_S = 1.0
@@ -74,6 +84,11 @@ class GroundStationInputs:
         """What the fused cable angles tell about the position within the unmodelled force's
         correlation time (it narrows the unmodelled term of the published covariance)."""
         self._winch_length_noise_std_m = dynamic.winch_length_noise_std_m
+        self._winch_calibration_m = (
+            dynamic.winch_length_offset_std_m,
+            dynamic.winch_length_scale_std,
+        )
+        """The winch length's zero error [m] and scale error [1] (standard deviations)."""
         self._bearing = bearing
         self._health = health
         self._status_settings = status_settings
@@ -104,15 +119,22 @@ class GroundStationInputs:
         return True
 
     def angle_ok(
-        self, elevation_rad: float, azimuth_rad: float, time_s: float, noise_std_rad: float
+        self,
+        elevation_rad: float,
+        azimuth_rad: float,
+        time_s: float,
+        noise_std_rad: float,
+        calibration_std_rad: tuple[float, float] = (0.0, 0.0),
     ) -> bool:
         """Whether a cable-angle reading is usable: finite, the elevation within +-pi/2 [rad],
-        a positive noise [rad] (counted in ``nonfinite_rejected`` when not)."""
-        values = (elevation_rad, azimuth_rad, time_s, noise_std_rad)
+        a positive noise [rad], calibration errors (elevation, azimuth) finite and not
+        negative [rad] (counted in ``nonfinite_rejected`` when not)."""
+        values = (elevation_rad, azimuth_rad, time_s, noise_std_rad, *calibration_std_rad)
         if (
             not all(math.isfinite(v) for v in values)
             or abs(elevation_rad) > math.pi / 2
             or noise_std_rad <= 0.0
+            or min(calibration_std_rad) < 0.0
         ):
             self._health.nonfinite_rejected += 1
             return False
@@ -132,6 +154,16 @@ class GroundStationInputs:
         """Fuse a winch paid-out length [m] at filter time ``time_s`` [s]."""
         if self.winch.fuse(bank, constants, length_m, time_s):
             self._health.winch_fused += 1
+            offset_std_m, scale_std = self._winch_calibration_m
+            self.position_information.set_winch_calibration(
+                winch_calibration(
+                    bank.best.x_values()[:3],
+                    length_m,
+                    offset_std_m,
+                    scale_std,
+                    bool(self._health.cable_angle_fused),
+                )
+            )
 
     def fuse_angle(
         self,
@@ -141,10 +173,12 @@ class GroundStationInputs:
         azimuth_rad: float,
         time_s: float,
         noise_std_rad: float,
+        calibration_std_rad: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         """Fuse a cable angle at the anchor (elevation up, azimuth from north [rad], the
-        sensor's direction noise ``noise_std_rad`` [rad]) at filter time ``time_s`` [s]; its
-        innovation, and once fused its information and bearing, are recorded."""
+        sensor's direction noise ``noise_std_rad`` [rad], its calibration errors
+        ``calibration_std_rad`` (elevation, azimuth) [rad]) at filter time ``time_s`` [s]; its
+        innovation, and once fused its information, calibration and bearing, are recorded."""
         status = self.cable_angle.status
         gated_before = status.gated
         fused = self.cable_angle.fuse(
@@ -161,6 +195,14 @@ class GroundStationInputs:
             self._health.cable_angle_fused += 1
             x = bank.best.x_values()
             self._add_angle_information(constants, x, elevation_rad, noise_std_rad, time_s)
+            self.position_information.set_angle_calibration(
+                angle_calibration(
+                    x[:3],
+                    calibration_std_rad[1],
+                    calibration_std_rad[0],
+                    bool(self._health.winch_fused),
+                )
+            )
             # the azimuth's noise across the cable: times the span
             azimuth_std_rad = CableAngleAid.noise_std_rad(elevation_rad, noise_std_rad)[1]
             self._bearing.add_bearing(math.hypot(x[0], x[1]) * azimuth_std_rad)
@@ -177,7 +219,7 @@ class GroundStationInputs:
         return self._status_settings
 
     def clear(self) -> None:
-        """Forget the angles' information (the filter restarts)."""
+        """Forget the angles' information and the calibration terms (the filter restarts)."""
         self.position_information.clear()
 
     def _add_angle_information(

@@ -120,10 +120,10 @@ class DynamicFilterConfig:
     )
     load_cell_noise_std_n: float = spec(0.1, exclusive_minimum=0.0, doc="load cell [N]")
     winch_length_noise_std_m: float = spec(
-        0.02,
+        0.05,
         exclusive_minimum=0.0,
-        doc="winch length's reading noise (a drum encoder's 1 cm steps, the cable's lay, its"
-        " report's age) [m]",
+        doc="winch length's reading noise: a drum encoder's 1 cm steps and its report's age"
+        " (0.1 s at the 0.3-0.5 m/s a constant-tension winch reels in a gusty hover) [m]",
     )
     winch_length_offset_std_m: float = spec(
         0.1,

@@ -177,19 +177,26 @@ class _Estimator:
 
     def __init__(self) -> None:
         self.time_s = 20.0
-        self.angles: list[tuple[float, ...]] = []
+        self.angles: list[tuple[object, ...]] = []
 
-    def on_cable_angle(self, *args: float) -> None:
+    def on_cable_angle(self, *args: object) -> None:
         self.angles.append(args)
 
 
 def test_feed_hands_the_angle_and_its_noise_to_the_filter_unless_stale_or_vertical() -> None:
-    config = CableAngleConfig(enabled=True, noise_std_rad=0.03, timeout_s=1.0, max_age_s=0.2)
+    config = CableAngleConfig(
+        enabled=True,
+        noise_std_rad=0.03,
+        azimuth_calibration_std_rad=0.02,
+        elevation_calibration_std_rad=0.005,
+        timeout_s=1.0,
+        max_age_s=0.2,
+    )
     feed = CableAngleFeed(config, uses_angle=True)
     estimator = _Estimator()
     assert feed.note == "" and feed.last is None
     feed.on_reading(CableAngleReading(20.05, 0.5, 1.0), estimator)
-    assert estimator.angles == [(0.5, 1.0, 20.05, 0.03)]
+    assert estimator.angles == [(0.5, 1.0, 20.05, 0.03, (0.005, 0.02))]
     feed.on_reading(CableAngleReading(19.7, 0.5, 1.0), estimator)  # 0.3 s behind the filter
     assert feed.stale_readings == 1 and len(estimator.angles) == 1
     feed.on_reading(CableAngleReading(20.1, 1.45, 1.0), estimator)  # steeper than 1.4 rad

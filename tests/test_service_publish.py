@@ -13,14 +13,17 @@ from tether_companion.estimation.observability import RANGEFINDER
 from tether_companion.mavlink import estimates
 from tether_companion.mavlink.units import urt_to_covariance
 from tether_companion.samples import AttitudeSample
+from tether_companion.service.estimate_messages import STATUSTEXT_PREFIX, EstimateMessages
 from tether_companion.service.health import (
     CONVERGING,
     DIVERGED,
+    HEALTH_STATES,
     NO_RANGE,
     OK,
     SLACK,
     STALE,
     STALE_PWM,
+    health_text,
 )
 from tether_companion.service.publish import Publisher, _farther_than
 from tether_companion.service.publish_config import PublishConfig
@@ -133,6 +136,15 @@ def test_converging_then_ok_then_diverged_with_statustext() -> None:
     assert publisher.health == DIVERGED and not _of(sent, "VISION_POSITION_ESTIMATE")
     (text,) = _of(sent, "STATUSTEXT")
     assert text.severity == 4 and "diverged" in text.text
+
+
+def test_every_health_statustext_is_whole_within_mavlinks_50_characters() -> None:
+    """STATUSTEXT carries 50 characters: a health's words cut there would reach the ground
+    station truncated ("... no positi")."""
+    for health in HEALTH_STATES:
+        words = STATUSTEXT_PREFIX + health_text(health)
+        assert len(words) <= 50, words
+        assert EstimateMessages.statustext(health).text == words
 
 
 def test_slack_tether_stops_or_inflates() -> None:

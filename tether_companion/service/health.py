@@ -15,7 +15,7 @@ initialising    ``converging``
 learning        ``learning``, or ``short_cable`` closer than ``short_cable_m``
 weak_pull       ``weak_pull``, or ``short_cable`` closer than ``short_cable_m``
 slack           ``slack``, or ``short_cable`` closer than ``short_cable_m``
-on_ground       ``motors_idle``
+on_ground       ``motors_idle`` (motors idle, or the filter's height below touchdown_height_m)
 stale_inputs    judged as usual: the stale input is named by the session
 reset           ``diverged`` (reset_counter goes up with the filter's restart)
 ==============  ==================================================================
@@ -81,14 +81,14 @@ _HEALTH_TEXT = {
     SLACK: "tether slack, position unobservable",
     STALE: "inputs stale, no estimate",
     NO_ATTITUDE: "no attitude from FC",
-    MOTORS_IDLE: "motors idle (landed?), position withheld",
+    MOTORS_IDLE: "on ground or touching down, no position",
     NO_RANGE: "no rangefinder height, position unknown",
     NO_IMU: "no IMU data, no estimate",
     STALE_ATTITUDE: "attitude stale, position withheld",
     STALE_PWM: "motor outputs stale, position withheld",
     STALE_TENSION: "tension reading stale, position withheld",
     WEAK_PULL: "pull too weak, position unobservable",
-    SHORT_CABLE: "cable short or slack near anchor, no position",
+    SHORT_CABLE: "cable short/slack near anchor, no position",
 }
 
 

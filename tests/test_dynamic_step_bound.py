@@ -65,9 +65,15 @@ def _case(rng: np.random.Generator) -> tuple[TickSource, TickSource]:
         else (*excess[np.triu_indices(3)], float(rng.uniform()), *excess[np.triu_indices(3)])
     )
 
+    # half the ticks with a sagging cable's range variance (sag_range), a third of those
+    # beyond the bound
+    sag_std = 0.0 if rng.uniform() < 0.5 else horizontal_sd * float(rng.uniform(0.0, 1.5))
+    sag = (sag_std, sag_std * sag_std * float(rng.uniform()))
+
     def source() -> TickSource:
         return TickSource(MixtureValues(x, p), step, noise, constants, settings,
-                          0.01, False, 0.2, information, 1, None, None, False, False)  # fmt: skip
+                          0.01, False, 0.2, information, 1, None, None, False, False,
+                          *sag)  # fmt: skip
 
     return source(), source()
 

@@ -62,6 +62,7 @@ from tether_companion.estimation.dynamic.noise import (
 from tether_companion.estimation.dynamic.observability import on_ground_reason
 from tether_companion.estimation.dynamic.output import DynamicHealth, NavigationEstimate
 from tether_companion.estimation.dynamic.published import StatusSettings, TickSource
+from tether_companion.estimation.dynamic.sag_range import NO_SAG, mixture_sag
 from tether_companion.estimation.dynamic.startup import FilterStartup
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
 from tether_companion.estimation.inputs import InputFeed, range_height_m, range_reading_ok
@@ -140,6 +141,10 @@ class DynamicTetherEstimator(InputFeed):
             wind_std_mps=dynamic.initial.wind_std_mps,
         )
         self._mixture: MixtureValues | None = None
+        self._sag_key: tuple[MixtureValues, float] | None = None
+        self._sag = NO_SAG
+        """The sag's range std and added variance for the mixture and winch length of
+        ``_sag_key``."""
         """The bank's latest mixture with its values as floats (kept while it is the same)."""
         self.accel = AccelFusion(
             accel_measurement_std_mps2(dynamic), config.min_cable_length_m, self.health
@@ -422,6 +427,18 @@ class DynamicTetherEstimator(InputFeed):
         self.health.resets = self._resets
         self._reset_reason = f"filter restarted: {reason}"
 
+    def _sag_range(self, mixture: MixtureValues) -> tuple[float, float]:
+        """The range's standard deviation [m] over the tensions the filter cannot rule out at
+        the fused winch length and the variance [m^2] the published covariance then needs
+        along the horizontal range
+        (:func:`~tether_companion.estimation.dynamic.sag_range.sag_range_variance_m2`),
+        computed once per mixture and length reading."""
+        key = (mixture, self.constants.length_m)
+        if self._sag_key != key:
+            self._sag_key = key
+            self._sag = mixture_sag(mixture, self.constants)
+        return self._sag
+
     def _estimate(self, accel_fused: bool, stale: bool, on_ground: bool) -> NavigationEstimate:
         """The tick's estimate: what its values are computed from, kept (they are computed
         when read: :mod:`~tether_companion.estimation.dynamic.published`)."""
@@ -434,6 +451,9 @@ class DynamicTetherEstimator(InputFeed):
             if mixture is None or mixture.x is not x or mixture.p is not p:
                 mixture = self._mixture = MixtureValues(x, p)
         batch = self._batch
+        sag = NO_SAG
+        if mixture is not None and self.health.winch_fused and self.constants.weight_n_per_m > 0:
+            sag = self._sag_range(mixture)
         source = TickSource(
             mixture,
             None if batch is None or bank is None else batch.step(),
@@ -456,6 +476,7 @@ class DynamicTetherEstimator(InputFeed):
                 self.dynamic.touchdown_height_m,
             ),
             stale,
+            *sag,
         )
         return NavigationEstimate.of_tick(
             self._time_s,

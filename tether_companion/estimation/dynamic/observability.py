@@ -299,6 +299,7 @@ def assess(
     horizontal_pull_n: float = math.inf,
     min_horizontal_pull_n: float = 0.0,
     hover_unknowns: HoverUnknowns | None = None,
+    sag_std_m: float = 0.0,
 ) -> tuple[str, str]:
     """``(status, reason)`` of one tick (reason empty when ``ok``): :func:`decide` on these
     values, in words.
@@ -325,6 +326,10 @@ def assess(
     hover_unknowns
         What the filter knows of the thrust scale and the wind (None: not told; then never
         ``learning``).
+    sag_std_m
+        The range's standard deviation over the plausible tensions at a fused winch length
+        on a sagging cable [m] (:mod:`~tether_companion.estimation.dynamic.sag_range`);
+        beyond ``max_horizontal_std_m`` the reason says the cable may rest on the ground.
     """
     horizontal = position_covariance_m2[:2, :2]
     (a, b), (_, c) = horizontal.tolist()
@@ -368,6 +373,12 @@ def assess(
             f"learning the thrust scale and the wind ({hover_unknowns.describe()}): horizontal"
             f" std {std:.2f} m > {max_horizontal_std_m:g} m; a steady hover does not tell"
             " them from the cable's pull, motion (a climb, a turn) or a load cell does"
+        )
+    if sag_std_m > max_horizontal_std_m:
+        return WEAK_PULL, (
+            f"sagging cable, may rest on the ground: at the winch's length the range depends"
+            f" on the tension ({tension_n:.1f} N; range std {sag_std_m:.2f} m >"
+            f" {max_horizontal_std_m:g} m)"
         )
     return WEAK_PULL, (
         f"horizontal std {std:.2f} m > {max_horizontal_std_m:g} m: pull too weak "

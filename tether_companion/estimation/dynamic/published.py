@@ -114,6 +114,15 @@ class TickSource:
         Members of the thrust-scale bank running.
     initialised_reason, reset_reason, on_ground, inputs_stale
         As for :func:`~tether_companion.estimation.dynamic.observability.assess`.
+    sag_std_m
+        The range's standard deviation over the tensions the filter cannot rule out at a
+        fused winch length on a sagging cable [m]; beyond ``max_horizontal_std_m`` the
+        withheld estimate's reason says so (never ``learning``: the thrust scale and the
+        wind do not explain it).
+    sag_m2
+        The variance added along the horizontal range ``(n, e)/|(n, e)|`` for the tensions
+        the filter cannot rule out at a fused winch length on a sagging cable [m^2]
+        (:func:`~tether_companion.estimation.dynamic.sag_range.sag_range_variance_m2`).
     """
 
     __slots__ = (
@@ -134,6 +143,8 @@ class TickSource:
         "noise",
         "position_information",
         "reset_reason",
+        "sag_m2",
+        "sag_std_m",
         "settings",
         "step",
         "winch_fused",
@@ -155,6 +166,8 @@ class TickSource:
         reset_reason: str | None,
         on_ground: str,
         inputs_stale: bool,
+        sag_std_m: float = 0.0,
+        sag_m2: float = 0.0,
     ) -> None:
         self.mixture = mixture
         self.step = step if step is not None and step.ticks else None
@@ -170,6 +183,8 @@ class TickSource:
         self.reset_reason = reset_reason
         self.on_ground = on_ground
         self.inputs_stale = inputs_stale
+        self.sag_std_m = sag_std_m
+        self.sag_m2 = sag_m2
         self._exact: ExactValues | None = None
         self._status: str | None = None
         self._assess_inputs: tuple | None = None
@@ -228,6 +243,12 @@ class TickSource:
                     self.position_information,
                 )
             )
+            if self.sag_m2:
+                sag_nn, sag_ne, sag_ee = _along_range(values[0], values[1], self.sag_m2)
+                published[0, 0] += sag_nn
+                published[0, 1] += sag_ne
+                published[1, 0] += sag_ne
+                published[1, 1] += sag_ee
         status = self._status
         reason = None
         if status is None:
@@ -274,8 +295,9 @@ class TickSource:
                 float(x[state.WIND][0]),
                 float(x[state.WIND][1]),
             ),
+            sag_std_m=self.sag_std_m,
             hover_unknowns=None
-            if values is None
+            if values is None or self._sag_withholds()
             else HoverUnknowns(
                 float(x[state.SCALE]),
                 x[state.WIND].copy(),
@@ -338,6 +360,8 @@ class TickSource:
         (:meth:`~tether_companion.estimation.dynamic.observability.HoverUnknowns.explains`):
         without numbers while several thrust-scale hypotheses run, else from the mixture's
         (None: only the exact values tell)."""
+        if self._sag_withholds():
+            return False
         if self.hypotheses > 1:
             return True
         approx = self._approximation
@@ -356,6 +380,11 @@ class TickSource:
             self.settings.max_horizontal_std_m,
             MARGIN,
         )
+
+    def _sag_withholds(self) -> bool:
+        """Whether the range's spread over the plausible tensions alone is beyond the bound
+        (then the thrust scale and the wind do not explain the covariance)."""
+        return self.sag_std_m > self.settings.max_horizontal_std_m
 
     # ------------------------------------------------------------------ approximation
     def approximate(self) -> Approximation | None:
@@ -430,11 +459,16 @@ class TickSource:
         north += unmodelled[0][0]
         north_east += unmodelled[0][1]
         east += unmodelled[1][1]
+        if self.sag_m2:
+            sag_nn, sag_ne, sag_ee = _along_range(x[0], x[1], self.sag_m2)
+            north += sag_nn
+            north_east += sag_ne
+            east += sag_ee
         down += excess + unmodelled[2][2]
         self._spread = spread
         self._row_scale = largest
         scale = largest * largest + t * noise.largest
-        scale += unmodelled[0][0] + unmodelled[1][1] + unmodelled[2][2] + excess
+        scale += unmodelled[0][0] + unmodelled[1][1] + unmodelled[2][2] + excess + self.sag_m2
         # the tension's variance j^T (Phi P Phi^T + T Q) j, bounded the same way
         if jac is None:
             tension_bound = largest * largest + t * noise.largest
@@ -474,3 +508,13 @@ def _tension_and_jacobian(
             return tension, None
         return tension, jac
     return tension, None
+
+
+def _along_range(n: float, e: float, variance_m2: float) -> tuple[float, float, float]:
+    """``variance_m2`` [m^2] along the horizontal range direction of ``(n, e)`` [m] as the
+    (nn, ne, ee) entries it adds [m^2] (none right above the anchor)."""
+    span = math.hypot(n, e)
+    if span == 0.0:
+        return 0.0, 0.0, 0.0
+    h0, h1 = n / span, e / span
+    return variance_m2 * h0 * h0, variance_m2 * h0 * h1, variance_m2 * h1 * h1

@@ -1,0 +1,99 @@
+"""A fused winch length on a sagging cable: the published covariance along the range covers
+the range's change over the tensions the filter cannot rule out, or the estimate is withheld
+(issue 10: never published beyond 3 sigma of its own covariance)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.mixture import MixtureValues, ProcessNoise
+from tether_companion.estimation.dynamic.models import CATENARY, ModelConstants, rests_on_ground
+from tether_companion.estimation.dynamic.observability import OK
+from tether_companion.estimation.dynamic.published import StatusSettings, TickSource
+from tether_companion.estimation.dynamic.sag_range import (
+    arc_length_m,
+    mixture_sag,
+    span_at_length_m,
+)
+
+WEIGHT_N_PER_M = 0.0167 * 9.81
+"""ArduPilot's SIM_TETH_DENSITY default's weight [N/m] (realistic-sagging-hover)."""
+LENGTH_M = 7.0
+HEIGHT_M = 3.0
+SETTINGS = StatusSettings(
+    slack_tension_n=0.2,
+    max_horizontal_std_m=0.5,
+    winch_length_noise_std_m=0.05,
+    pull_per_wind_n_s_per_m=0.0,
+    wind_std_mps=1.0,
+)
+
+
+def _chord_tension(span_m: float, horizontal_n: float) -> float:
+    return horizontal_n * math.hypot(span_m, HEIGHT_M) / span_m
+
+
+def test_the_arc_length_is_the_generated_models_on_both_sides_of_the_touchdown() -> None:
+    constants = (1.5, 0.3, WEIGHT_N_PER_M)
+    for span, horizontal in ((5.0, 0.1), (5.0, 0.7), (4.0, 3.0), (6.0, 0.3)):
+        x = [span, 0.0, -HEIGHT_M] + [0.0] * 10
+        x[state.TENSION] = _chord_tension(span, horizontal)
+        (expected,), _ = CATENARY.winch_length(x, (), constants)
+        assert math.isclose(arc_length_m(span, HEIGHT_M, horizontal, WEIGHT_N_PER_M), expected)
+    # the inverse, and the span at a length grows with the tension
+    spans = [span_at_length_m(LENGTH_M, HEIGHT_M, h, WEIGHT_N_PER_M) for h in (0.05, 0.1, 0.7)]
+    assert spans == sorted(spans)
+    assert math.isclose(
+        arc_length_m(spans[1], HEIGHT_M, 0.1, WEIGHT_N_PER_M), LENGTH_M, abs_tol=1e-3
+    )
+
+
+def _source(span_m: float, chord_n: float, tension_sd_n: float, north_sd_m: float) -> TickSource:
+    """A tick of a filter on the sagging hover's cable at ``span_m`` north, 3 m up, with a
+    chord tension ``chord_n`` +- ``tension_sd_n`` and its own north sd ``north_sd_m``."""
+    x = np.zeros(state.N_STATES)
+    x[:3] = (span_m, 0.0, -HEIGHT_M)
+    x[state.TENSION] = chord_n
+    x[state.SCALE] = 1.0
+    p = np.eye(state.N_STATES) * 1e-4
+    p[0, 0] = north_sd_m**2
+    p[1, 1] = 0.1**2
+    p[state.TENSION, state.TENSION] = tension_sd_n**2
+    mixture = MixtureValues(x, p)
+    constants = ModelConstants(1.5, 0.3, WEIGHT_N_PER_M, LENGTH_M)
+    noise = ProcessNoise(np.eye(state.N_STATES) * 1e-6)
+    return TickSource(mixture, None, noise, constants, SETTINGS, 0.0, True, 0.0, None, 1,
+                      None, None, False, False, *mixture_sag(mixture, constants))  # fmt: skip
+
+
+def test_a_grounded_cable_read_as_free_is_withheld_or_covered() -> None:
+    # the drone 5 m out: the cable's horizontal tension 0.1 N, 2 m of it on the ground; the
+    # filter reads 0.7 N +- 0.3 (realistic-sagging-hover seed 9): a free catenary whose span
+    # at the winch's length is ~1 m too long, with its own (linearised) north sd 0.25 m
+    truth_span = span_at_length_m(LENGTH_M, HEIGHT_M, 0.1, WEIGHT_N_PER_M)
+    assert abs(truth_span - 5.0) < 0.1
+    truth = [truth_span, 0.0, -HEIGHT_M] + [0.0] * 10
+    truth[state.TENSION] = _chord_tension(truth_span, 0.1)
+    assert rests_on_ground(truth, (1.5, 0.3, WEIGHT_N_PER_M))
+    span = span_at_length_m(LENGTH_M, HEIGHT_M, 0.7, WEIGHT_N_PER_M)
+    error = span - truth_span
+    assert error > 0.9
+    estimate = _source(span, _chord_tension(span, 0.7), 0.3, 0.25).values()
+    north_sd = math.sqrt(estimate.covariance[0, 0])
+    assert estimate.status != OK or error <= 3.0 * north_sd
+    assert estimate.status != OK  # here: beyond the 0.5 m bound, withheld, and says why
+    assert "rest on the ground" in (_source(span, _chord_tension(span, 0.7), 0.3, 0.25).reason())
+
+
+def test_a_taut_cable_keeps_its_covariance() -> None:
+    # the same cable pulled at 8 N: the span at the length barely moves with the tension
+    span = span_at_length_m(LENGTH_M, HEIGHT_M, 8.0, WEIGHT_N_PER_M)
+    source = _source(span, _chord_tension(span, 8.0), 0.3, 0.05)
+    assert source.sag_std_m < 0.01
+    assert source.sag_m2 == 0.0  # the filter's own claims more along the range already
+    estimate = source.values()
+    assert estimate.status == OK
+    assert math.sqrt(estimate.covariance[0, 0]) < 0.07

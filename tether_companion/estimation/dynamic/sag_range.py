@@ -1,0 +1,157 @@
+"""The range a fused winch length leaves open on a sagging cable: :func:`sag_range_variance_m2`.
+
+With the winch's paid-out length ``L`` fused and the height fixed by the rangefinder, the
+drone's horizontal range from the anchor follows from the cable's shape, and on a cable with
+weight that shape depends on the tension: at a fixed length a lower horizontal tension ``H``
+sags the cable more and pulls the drone in. Near the touchdown (the cable resting on the
+anchor's level, :func:`~tether_companion.estimation.dynamic.models.rests_on_ground`) the
+dependence is strong and one-sided: the grounded part takes up length, so the range at the
+fused length falls by about as much as the grounded part grows, while a higher tension
+straightens a free cable only a little. The filter's covariance is linearised at its own
+tension, so when that tension is too high (a free catenary where the real cable rests on the
+ground: realistic-sagging-hover, seed 9, 2 sigma high, range 1 m long with a 0.3-0.4 m standard
+deviation) it underrates the range's error.
+
+This module evaluates the range at the fused length at the filter's chord tension and at
+``T -+ 3 sigma_T`` (the free or grounded catenary through the anchor and a point at the
+drone's height, solved for its span), and returns the variance the published covariance
+must at least have along the horizontal range: a third of the larger of the two range
+changes, squared, less what the filter already claims along that direction. The publisher's
+``max_horizontal_std_m`` rule then withholds where the grounded regime makes the range
+unknown, and the published covariance is honest where it publishes.
+
+Pure; scalar Python floats (computed once per member step, not per tick).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.mixture import MixtureValues
+from tether_companion.estimation.dynamic.models import ModelConstants
+
+TENSION_SIGMAS = 3.0
+"""How many of the tension's standard deviations either side are taken as plausible: the
+range change there, divided by as many, is the published standard deviation along the range,
+so a range error beyond 3 sigma needs a tension beyond 3 sigma (the range is monotonic in the
+tension at a fixed length)."""
+LOW_TENSION_FRACTION = 0.01
+"""The lower plausible tension is at least this fraction of the chord tension (the curve is
+defined only for a positive tension; near zero the span at the length barely changes)."""
+NO_SAG = (0.0, 0.0)
+""":func:`sag_range_variance_m2`'s answer where it does not apply."""
+SPAN_TOLERANCE_M = 1e-4
+"""The bisection's tolerance on the span [m]."""
+
+
+def arc_length_m(
+    span_m: float, height_m: float, horizontal_n: float, weight_n_per_m: float
+) -> float:
+    """The length [m] of a cable of weight ``weight_n_per_m`` [N/m] with horizontal tension
+    ``horizontal_n`` [N] from the anchor to a point ``span_m`` [m] away horizontally and
+    ``height_m`` [m] > 0 above it: the free catenary, or where its lowest point would fall
+    between the ends below the anchor, the catenary touching down on the anchor's level at
+    ``x_t = a - c acosh(1 + b/c)`` with the grounded part straight (``c = H/w``)."""
+    c = horizontal_n / weight_n_per_m
+    rise = c * math.acosh(1.0 + height_m / c)  # span of the rising part from its lowest point
+    if span_m > rise:  # grounded: flat from the anchor to the touchdown, then rising
+        return span_m - rise + math.sqrt(height_m * (height_m + 2.0 * c))
+    half = span_m / (2.0 * c)
+    if half > 350.0:  # sinh overflows: a cable this slack is far longer than any winch's
+        return math.inf
+    chord = 2.0 * c * math.sinh(half)
+    return math.sqrt(height_m * height_m + chord * chord)
+
+
+def span_at_length_m(
+    length_m: float, height_m: float, horizontal_n: float, weight_n_per_m: float
+) -> float:
+    """The span [m] at which the cable (as :func:`arc_length_m`) is ``length_m`` [m] long at
+    height ``height_m`` [m]; the arc length grows with the span, so bisection on
+    ``[0, sqrt(L^2 - h^2)]`` (the straight line's span bounds every curve's)."""
+    low, high = 0.0, math.sqrt(max(length_m * length_m - height_m * height_m, 0.0))
+    while high - low > SPAN_TOLERANCE_M:
+        middle = 0.5 * (low + high)
+        if arc_length_m(middle, height_m, horizontal_n, weight_n_per_m) > length_m:
+            high = middle
+        else:
+            low = middle
+    return 0.5 * (low + high)
+
+
+def sag_range_std_m(
+    x: Sequence[float],
+    tension_variance_n2: float,
+    weight_n_per_m: float,
+    length_m: float,
+) -> float:
+    """The range's spread at the fused length over the plausible tensions [m]: the larger
+    change of the span at ``length_m`` [m] and the state's height (``x``: the state's values,
+    NED position from the anchor [m], chord tension [N]) between the chord tension and
+    ``T -+ TENSION_SIGMAS sigma_T``, divided by ``TENSION_SIGMAS`` (``tension_variance_n2``
+    [N^2]; the lower end at least
+    :data:`LOW_TENSION_FRACTION` of ``T``: a cable whose tension may be near zero may lie on
+    the ground up to the foot of the drone, and the range is then that unsure). 0 where it
+    does not apply: no weight, no length, the drone at or below the anchor's level, right
+    above it, a non-positive tension."""
+    span = math.hypot(x[0], x[1])
+    height = -x[2]
+    tension = x[state.TENSION]
+    if (
+        weight_n_per_m <= 0.0
+        or not length_m > height > 0.0
+        or span <= 0.0
+        or not tension > 0.0
+        or not tension_variance_n2 >= 0.0
+    ):
+        return 0.0
+    # the chord tension's horizontal part: H = T a / |p| (as rests_on_ground)
+    horizontal_per_chord = span / math.hypot(span, height)
+    spread = TENSION_SIGMAS * math.sqrt(tension_variance_n2)
+    centre = span_at_length_m(length_m, height, tension * horizontal_per_chord, weight_n_per_m)
+    low_tension = max(tension - spread, LOW_TENSION_FRACTION * tension)
+    lower = span_at_length_m(length_m, height, low_tension * horizontal_per_chord, weight_n_per_m)
+    upper = span_at_length_m(
+        length_m, height, (tension + spread) * horizontal_per_chord, weight_n_per_m
+    )
+    return max(centre - lower, upper - centre) / TENSION_SIGMAS
+
+
+def sag_range_variance_m2(
+    x: Sequence[float],
+    horizontal_covariance_m2: tuple[float, float, float],
+    tension_variance_n2: float,
+    weight_n_per_m: float,
+    length_m: float,
+) -> tuple[float, float]:
+    """:func:`sag_range_std_m` [m] and the variance [m^2] to add along the horizontal range
+    direction ``(n, e)/|(n, e)|`` so that the published covariance there is at least that
+    squared: that squared less what ``horizontal_covariance_m2`` (nn, ne, ee) [m^2] already
+    holds along it, never negative (the linearised part the filter claims is not counted
+    twice)."""
+    std = sag_range_std_m(x, tension_variance_n2, weight_n_per_m, length_m)
+    if std == 0.0:
+        return NO_SAG
+    span = math.hypot(x[0], x[1])
+    h0, h1 = x[0] / span, x[1] / span
+    nn, ne, ee = horizontal_covariance_m2
+    along = h0 * h0 * nn + 2.0 * h0 * h1 * ne + h1 * h1 * ee
+    return std, max(std * std - along, 0.0)
+
+
+def mixture_sag(mixture: MixtureValues, constants: ModelConstants) -> tuple[float, float]:
+    """:func:`sag_range_variance_m2` of the bank's mixture (its state, horizontal position
+    covariance and chord tension variance) at the cable's weight and the winch length of
+    ``constants``; :data:`NO_SAG` for a mixture with non-finite values."""
+    if not mixture.finite:
+        return NO_SAG
+    p = mixture.p
+    return sag_range_variance_m2(
+        mixture.x_values,
+        (float(p[0, 0]), float(p[0, 1]), float(p[1, 1])),
+        float(p[state.TENSION, state.TENSION]),
+        constants.weight_n_per_m,
+        constants.length_m,
+    )

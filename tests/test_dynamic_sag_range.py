@@ -51,9 +51,17 @@ def test_the_arc_length_is_the_generated_models_on_both_sides_of_the_touchdown()
     )
 
 
-def _source(span_m: float, chord_n: float, tension_sd_n: float, north_sd_m: float) -> TickSource:
+def _source(
+    span_m: float,
+    chord_n: float,
+    tension_sd_n: float,
+    north_sd_m: float,
+    winch: bool = True,
+    weight_n_per_m: float = WEIGHT_N_PER_M,
+) -> TickSource:
     """A tick of a filter on the sagging hover's cable at ``span_m`` north, 3 m up, with a
-    chord tension ``chord_n`` +- ``tension_sd_n`` and its own north sd ``north_sd_m``."""
+    chord tension ``chord_n`` +- ``tension_sd_n`` and its own north sd ``north_sd_m``, with
+    the winch's length fused or not."""
     x = np.zeros(state.N_STATES)
     x[:3] = (span_m, 0.0, -HEIGHT_M)
     x[state.TENSION] = chord_n
@@ -63,10 +71,11 @@ def _source(span_m: float, chord_n: float, tension_sd_n: float, north_sd_m: floa
     p[1, 1] = 0.1**2
     p[state.TENSION, state.TENSION] = tension_sd_n**2
     mixture = MixtureValues(x, p)
-    constants = ModelConstants(1.5, 0.3, WEIGHT_N_PER_M, LENGTH_M)
+    constants = ModelConstants(1.5, 0.3, weight_n_per_m, LENGTH_M if winch else math.nan)
     noise = ProcessNoise(np.eye(state.N_STATES) * 1e-6)
-    return TickSource(mixture, None, noise, constants, SETTINGS, 0.0, True, 0.0, None, 1,
-                      None, None, False, False, *mixture_sag(mixture, constants))  # fmt: skip
+    return TickSource(mixture, None, noise, constants, SETTINGS, 0.0, winch, 0.0, None, 1,
+                      None, None, False, False,
+                      *mixture_sag(mixture, constants, winch))  # fmt: skip
 
 
 def test_a_grounded_cable_read_as_free_is_withheld_or_covered() -> None:
@@ -97,3 +106,21 @@ def test_a_taut_cable_keeps_its_covariance() -> None:
     estimate = source.values()
     assert estimate.status == OK
     assert math.sqrt(estimate.covariance[0, 0]) < 0.07
+
+
+def test_without_a_length_a_cable_that_may_rest_on_the_ground_is_withheld() -> None:
+    # a 0.1 kg/m power tether, the drone 5 m out 3 m up pulled at 0.67 N horizontally
+    # (realistic-heavy-sagging-hover): 3.4 m of it on the ground. Neither the pull at the drone
+    # nor the anchor's angle depends on the range then; a filter whose own covariance claims
+    # 0.2 m (its start's) is withheld, and says why
+    heavy = 0.1 * 9.81
+    chord = _chord_tension(3.2, 0.67)
+    source = _source(3.2, chord, 0.6, 0.2, winch=False, weight_n_per_m=heavy)
+    assert source.sag_std_m == math.inf
+    assert source.status() != OK
+    assert "range is unknown" in source.reason()
+    assert source.values().status == source.status()
+    # the same cable pulled at 8 N leaves the anchor upward: published
+    taut = _source(4.5, _chord_tension(4.5, 8.0), 0.3, 0.2, winch=False, weight_n_per_m=heavy)
+    assert taut.sag_std_m == 0.0
+    assert taut.status() == OK

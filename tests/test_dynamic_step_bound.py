@@ -5,6 +5,7 @@ the status it decides is the exact values' status (or it leaves the tick to them
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 
 import numpy as np
@@ -65,10 +66,12 @@ def _case(rng: np.random.Generator) -> tuple[TickSource, TickSource]:
         else (*excess[np.triu_indices(3)], float(rng.uniform()), *excess[np.triu_indices(3)])
     )
 
-    # half the ticks with a sagging cable's range variance (sag_range), a third of those
-    # beyond the bound
+    # half the ticks with a sagging cable's range variance (sag_range), some beyond the
+    # bound, a tenth with the range unknown (no length, the cable may rest on the ground)
     sag_std = 0.0 if rng.uniform() < 0.5 else horizontal_sd * float(rng.uniform(0.0, 1.5))
     sag = (sag_std, sag_std * sag_std * float(rng.uniform()))
+    if rng.uniform() < 0.1:
+        sag = (math.inf, 0.0)
 
     def source() -> TickSource:
         return TickSource(MixtureValues(x, p), step, noise, constants, settings,

@@ -431,12 +431,13 @@ class DynamicTetherEstimator(InputFeed):
         """The range's standard deviation [m] over the tensions the filter cannot rule out at
         the fused winch length and the variance [m^2] the published covariance then needs
         along the horizontal range
-        (:func:`~tether_companion.estimation.dynamic.sag_range.sag_range_variance_m2`),
-        computed once per mixture and length reading."""
-        key = (mixture, self.constants.length_m)
+        (:func:`~tether_companion.estimation.dynamic.sag_range.mixture_sag`), computed once
+        per mixture and length reading."""
+        winch = bool(self.health.winch_fused)
+        key = (mixture, self.constants.length_m if winch else math.nan)
         if self._sag_key != key:
             self._sag_key = key
-            self._sag = mixture_sag(mixture, self.constants)
+            self._sag = mixture_sag(mixture, self.constants, winch)
         return self._sag
 
     def _estimate(self, accel_fused: bool, stale: bool, on_ground: bool) -> NavigationEstimate:
@@ -452,7 +453,7 @@ class DynamicTetherEstimator(InputFeed):
                 mixture = self._mixture = MixtureValues(x, p)
         batch = self._batch
         sag = NO_SAG
-        if mixture is not None and self.health.winch_fused and self.constants.weight_n_per_m > 0:
+        if mixture is not None and self.constants.weight_n_per_m > 0.0:
             sag = self._sag_range(mixture)
         source = TickSource(
             mixture,

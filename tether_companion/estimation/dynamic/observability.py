@@ -329,7 +329,8 @@ def assess(
     sag_std_m
         The range's standard deviation over the plausible tensions at a fused winch length
         on a sagging cable [m] (:mod:`~tether_companion.estimation.dynamic.sag_range`);
-        beyond ``max_horizontal_std_m`` the reason says the cable may rest on the ground.
+        beyond ``max_horizontal_std_m`` the reason says the cable may rest on the ground;
+        ``inf``: no winch length, and the cable may rest on the ground (withheld).
     """
     horizontal = position_covariance_m2[:2, :2]
     (a, b), (_, c) = horizontal.tolist()
@@ -347,6 +348,7 @@ def assess(
         explained=None
         if hover_unknowns is None
         else lambda: hover_unknowns.explains(horizontal, max_horizontal_std_m),
+        range_unknown=sag_std_m == math.inf,
     )
     assert status is not None  # no margin: always decided
     if status == OK:
@@ -361,6 +363,11 @@ def assess(
         return STALE_INPUTS, "attitude or motor outputs stale: prediction only"
     if status == SLACK:
         return SLACK, f"cable slack ({tension_n:.2f} N < {slack_tension_n:g} N)"
+    if sag_std_m == math.inf:
+        return WEAK_PULL, (
+            "sagging cable, may rest on the ground: without the winch's length the range is"
+            f" unknown ({tension_n:.1f} N)"
+        )
     if horizontal_pull_n < min_horizontal_pull_n:
         return WEAK_PULL, (
             f"horizontal pull {horizontal_pull_n:.2f} N < {min_horizontal_pull_n:.2f} N: the"
@@ -401,6 +408,7 @@ def decide(
     explained: Callable[[], bool | None] | None,
     margin: float = 0.0,
     variance_tol: float = 0.0,
+    range_unknown: bool = False,
 ) -> str | None:
     """The status of one tick (the order of the module's docstring), or None when ``margin``
     > 0 and a comparison it needs is within ``margin`` (relative) of its threshold or not a
@@ -419,6 +427,10 @@ def decide(
         Relative margin of approximate values (0: the values are exact).
     variance_tol
         Bound of the approximate ``horizontal_m2`` entries' rounding [m^2] (0: exact).
+    range_unknown
+        The cable may rest on the ground and no winch length bounds the range: neither the
+        pull at the drone nor the anchor's angle depends on the range there (only the
+        grounded part's length does), so ``weak_pull``.
     Other parameters as for :func:`assess`.
     """
     if reset:
@@ -432,6 +444,8 @@ def decide(
     slack = _less(tension_n, slack_tension_n, margin)
     if slack is None or slack:
         return None if slack is None else SLACK
+    if range_unknown:
+        return WEAK_PULL
     weak = _less(horizontal_pull_n, min_horizontal_pull_n, margin)
     if weak is None or weak:
         return None if weak is None else WEAK_PULL

@@ -118,7 +118,8 @@ class TickSource:
         The range's standard deviation over the tensions the filter cannot rule out at a
         fused winch length on a sagging cable [m]; beyond ``max_horizontal_std_m`` the
         withheld estimate's reason says so (never ``learning``: the thrust scale and the
-        wind do not explain it).
+        wind do not explain it); ``inf``: no winch length and the cable may rest on the
+        ground, withheld.
     sag_m2
         The variance added along the horizontal range ``(n, e)/|(n, e)|`` for the tensions
         the filter cannot rule out at a fused winch length on a sagging cable [m^2]
@@ -353,6 +354,7 @@ class TickSource:
             explained=self._explained,
             margin=MARGIN,
             variance_tol=tol,
+            range_unknown=self.sag_std_m == math.inf,
         )
 
     def _explained(self) -> bool | None:

@@ -30,7 +30,7 @@ from collections.abc import Sequence
 
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.mixture import MixtureValues
-from tether_companion.estimation.dynamic.models import ModelConstants
+from tether_companion.estimation.dynamic.models import ModelConstants, rests_on_ground
 
 TENSION_SIGMAS = 3.0
 """How many of the tension's standard deviations either side are taken as plausible: the
@@ -141,17 +141,46 @@ def sag_range_variance_m2(
     return std, max(std * std - along, 0.0)
 
 
-def mixture_sag(mixture: MixtureValues, constants: ModelConstants) -> tuple[float, float]:
-    """:func:`sag_range_variance_m2` of the bank's mixture (its state, horizontal position
-    covariance and chord tension variance) at the cable's weight and the winch length of
-    ``constants``; :data:`NO_SAG` for a mixture with non-finite values."""
+def grounded_plausible(
+    x: Sequence[float], tension_variance_n2: float, weight_n_per_m: float
+) -> bool:
+    """Whether the cable of the state's values ``x`` may rest on the ground: it does
+    (:func:`~tether_companion.estimation.dynamic.models.rests_on_ground`) at the state's
+    position with the chord tension ``TENSION_SIGMAS`` standard deviations
+    (``tension_variance_n2`` [N^2]) below the state's (at least
+    :data:`LOW_TENSION_FRACTION` of it; a lower tension sags the cable more)."""
+    tension = x[state.TENSION]
+    if not tension > 0.0 or not tension_variance_n2 >= 0.0:
+        return False
+    low = list(x)
+    low[state.TENSION] = max(
+        tension - TENSION_SIGMAS * math.sqrt(tension_variance_n2), LOW_TENSION_FRACTION * tension
+    )
+    return rests_on_ground(low, (0.0, 0.0, weight_n_per_m))
+
+
+def mixture_sag(
+    mixture: MixtureValues, constants: ModelConstants, winch: bool
+) -> tuple[float, float]:
+    """What the sag leaves open of the range at the bank's mixture (its state, horizontal
+    position covariance and chord tension variance) on the cable of ``constants``: with a
+    fused winch length (``winch``), :func:`sag_range_variance_m2` at ``constants.length_m``;
+    without one, ``(inf, 0)`` where the cable may rest on the ground
+    (:func:`grounded_plausible`: the pull at the drone and the anchor's angle then do not
+    depend on the range, only the grounded part's length does; the estimate is withheld),
+    else :data:`NO_SAG`. :data:`NO_SAG` for a mixture with non-finite values."""
     if not mixture.finite:
         return NO_SAG
     p = mixture.p
+    tension_variance = float(p[state.TENSION, state.TENSION])
+    if not winch:
+        if grounded_plausible(mixture.x_values, tension_variance, constants.weight_n_per_m):
+            return math.inf, 0.0
+        return NO_SAG
     return sag_range_variance_m2(
         mixture.x_values,
         (float(p[0, 0]), float(p[0, 1]), float(p[1, 1])),
-        float(p[state.TENSION, state.TENSION]),
+        tension_variance,
         constants.weight_n_per_m,
         constants.length_m,
     )

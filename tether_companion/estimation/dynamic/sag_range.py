@@ -91,9 +91,12 @@ def sag_range_std_m(
     change of the span at ``length_m`` [m] and the state's height (``x``: the state's values,
     NED position from the anchor [m], chord tension [N]) between the chord tension and
     ``T -+ TENSION_SIGMAS sigma_T``, divided by ``TENSION_SIGMAS`` (``tension_variance_n2``
-    [N^2]; the lower end at least
-    :data:`LOW_TENSION_FRACTION` of ``T``: a cable whose tension may be near zero may lie on
-    the ground up to the foot of the drone, and the range is then that unsure). 0 where it
+    [N^2]; the lower end at least :data:`LOW_TENSION_FRACTION` of ``T``, and that where the
+    cable rests on the ground at ``T - TENSION_SIGMAS sigma_T``: then the filter's tension,
+    read from a horizontal pull of a few tenths of a newton, does not bound how much of the
+    cable lies on the ground (realistic-sagging-hover seed 39: the true chord tension 3.3
+    sigma below the filter's), and the range is taken as unsure down to the cable lying flat
+    up to the foot of the drone). 0 where it
     does not apply: no weight, no length, the drone at or below the anchor's level, right
     above it, a non-positive tension."""
     span = math.hypot(x[0], x[1])
@@ -112,6 +115,10 @@ def sag_range_std_m(
     spread = TENSION_SIGMAS * math.sqrt(tension_variance_n2)
     centre = span_at_length_m(length_m, height, tension * horizontal_per_chord, weight_n_per_m)
     low_tension = max(tension - spread, LOW_TENSION_FRACTION * tension)
+    low = list(x)
+    low[state.TENSION] = low_tension
+    if rests_on_ground(low, (0.0, 0.0, weight_n_per_m)):  # grounded at the low end: to none
+        low_tension = LOW_TENSION_FRACTION * tension
     lower = span_at_length_m(length_m, height, low_tension * horizontal_per_chord, weight_n_per_m)
     upper = span_at_length_m(
         length_m, height, (tension + spread) * horizontal_per_chord, weight_n_per_m

@@ -115,9 +115,7 @@ def sag_range_std_m(
     spread = TENSION_SIGMAS * math.sqrt(tension_variance_n2)
     centre = span_at_length_m(length_m, height, tension * horizontal_per_chord, weight_n_per_m)
     low_tension = max(tension - spread, LOW_TENSION_FRACTION * tension)
-    low = list(x)
-    low[state.TENSION] = low_tension
-    if rests_on_ground(low, (0.0, 0.0, weight_n_per_m)):  # grounded at the low end: to none
+    if grounded_plausible(x, tension_variance_n2, weight_n_per_m):  # at the low end: to none
         low_tension = LOW_TENSION_FRACTION * tension
     lower = span_at_length_m(length_m, height, low_tension * horizontal_per_chord, weight_n_per_m)
     upper = span_at_length_m(

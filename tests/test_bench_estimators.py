@@ -112,6 +112,7 @@ def test_beyond_3_sigma_is_0_8_percent_for_consistent_errors_and_counts_publishe
         wind_ned_mps=zeros,
         specific_force_body_mps2=zeros,
         angle_seen=np.zeros(n, dtype=bool),
+        winch_seen=np.zeros(n, dtype=bool),
         landed=np.zeros(n, dtype=bool),
         traces={},
     )

@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -18,6 +19,7 @@ import pytest
 from tether_companion.estimation.dynamic import generated, state
 from tether_companion.estimation.dynamic.crlb import (
     BoundNoise,
+    CalibrationPrior,
     Gating,
     TrueTrack,
     information_step,
@@ -103,11 +105,26 @@ def _fd(model, x, u, c, rows):
 
 def _reference(track, constants, noise, *, repeat_range: int = 1) -> np.ndarray:
     """An EKF covariance along the truth, samples fused one at a time (Joseph form), the
-    Jacobians by differences; the rangefinder fused ``repeat_range`` times per sample."""
+    Jacobians by differences; the rangefinder fused ``repeat_range`` times per sample. With
+    ``noise.calibration`` the state has the four calibration errors after the 13 (winch offset
+    and scale, elevation and azimuth zero errors), written here from the readings' own
+    equations: ``offset + (1 + scale) L`` and ``angle + bias``."""
     models = constants.models
     c = constants.values()
-    p = np.diag(noise.prior_std**2)
+    calibration = noise.calibration
+    extra = 0 if calibration is None else 4
+    n = N + extra
+    prior = noise.prior_std if calibration is None else np.r_[noise.prior_std, calibration.std()]
+    p = np.diag(prior**2)
     out = np.empty((len(track.time_s), N))
+
+    def wide(h, calibration_columns=()):
+        full = np.zeros((h.shape[0], n))
+        full[:, :N] = h
+        for row, column, value in calibration_columns:
+            full[row, column] = value
+        return full
+
     previous = track.time_s[0]
     for k in range(len(track.time_s)):
         x = track.state_at(k)
@@ -124,25 +141,31 @@ def _reference(track, constants, noise, *, repeat_range: int = 1) -> np.ndarray:
             c,
             3,
         )
-        f = np.eye(N) + dt * a
-        p = f @ p @ f.T + np.diag(noise.process_density * dt)
+        f = np.eye(n)
+        f[:N, :N] += dt * a
+        p = f @ p @ f.T + np.diag(np.r_[noise.process_density, np.zeros(extra)] * dt)
         accel = _fd(models.accel, x, (*rotation, 16.0), c, 3)
-        samples = [(accel, np.diag(noise.force_balance_var_mps2))]
+        samples = [(wide(accel), np.diag(noise.force_balance_var_mps2))]
         if track.range_seen[k]:
             height = _fd(generated.height_above_ground, x, (0.0,), (0.0, 0.0, 0.0), 1)
-            samples += [(height, np.array([[noise.range_var_m2]]))] * repeat_range
-        samples.append((_fd(models.winch_length, x, (), c, 1), np.array([[noise.winch_var_m2]])))
+            samples += [(wide(height), np.array([[noise.range_var_m2]]))] * repeat_range
+        if track.winch_seen is None or track.winch_seen[k]:
+            length = models.winch_length(x, (), c)[0][0]
+            winch_columns = () if extra == 0 else ((0, N, 1.0), (0, N + 1, length))
+            h = wide(_fd(models.winch_length, x, (), c, 1), winch_columns)
+            samples.append((h, np.array([[noise.winch_var_m2]])))
         if track.angle_seen[k]:
             elevation = models.cable_angle(x, (), c)[0][0]
             var = noise.cable_angle_var_rad2
             r = np.diag([var, var / math.cos(elevation) ** 2])
-            samples.append((_fd(models.cable_angle, x, (), c, 2), r))
+            angle_columns = () if extra == 0 else ((0, N + 2, 1.0), (1, N + 3, 1.0))
+            samples.append((wide(_fd(models.cable_angle, x, (), c, 2), angle_columns), r))
         for h, r in samples:
             s = h @ p @ h.T + r
             gain = p @ h.T @ np.linalg.inv(s)
-            joseph = np.eye(N) - gain @ h
+            joseph = np.eye(n) - gain @ h
             p = joseph @ p @ joseph.T + gain @ r @ gain.T
-        out[k] = np.diag(p)
+        out[k] = np.diag(p)[:N]
     return out
 
 
@@ -166,6 +189,43 @@ def test_the_bound_is_the_kalman_covariance_at_the_truth(weight):
         track, constants, BoundNoise(density, prior, ACCEL_VAR, 0.05**2), gating
     )
     assert np.max(np.abs(only_sensors[:, 0] / bound[:, 0] - 1.0)) > 0.05
+
+
+def test_calibration_errors_are_estimated_beside_the_state_and_widen_the_bound():
+    """With the ground station's calibration errors (winch offset 0.1 m and scale 1 %, angle
+    zero errors 0.4 and 1.5 degrees) the bound is the augmented Kalman covariance at the truth
+    (the winch at its reports only); it is wider than without them, and equal as their priors
+    go to zero."""
+    track, constants = _track(0.0)
+    track = dataclasses.replace(track, winch_seen=np.arange(len(track.time_s)) % 20 == 3)
+    prior = np.array([5.0, 5, 5, 0.5, 0.5, 0.5, 3.0, 0.1, 0.2, 0.2, 0.2, 2.0, 2.0])
+    density = np.array(
+        [1e-6, 1e-6, 1e-6, 1e-4, 1e-4, 1e-4, 2.0, 1e-5, 1e-4, 1e-4, 1e-4, 0.04, 0.04]
+    )
+    gating = Gating(ticks_per_fusion=1, min_distance_m=0.3, min_thrust_n=5.0)
+
+    def noise(calibration):
+        return BoundNoise(
+            density,
+            prior,
+            ACCEL_VAR,
+            0.05**2,
+            winch_var_m2=0.003**2,
+            cable_angle_var_rad2=0.01**2,
+            calibration=calibration,
+        )
+
+    calibrated = noise(CalibrationPrior(0.1, 0.01, 0.007, 0.026))
+    bound = posterior_bound(track, constants, calibrated, gating)
+    np.testing.assert_allclose(bound, _reference(track, constants, calibrated), rtol=1e-4)
+    exact = posterior_bound(track, constants, noise(None), gating)
+    np.testing.assert_allclose(exact, _reference(track, constants, noise(None)), rtol=1e-4)
+    horizontal = slice(0, 2)
+    assert np.all(bound[-1, horizontal] > 1.5 * exact[-1, horizontal])
+    tiny = posterior_bound(
+        track, constants, noise(CalibrationPrior(1e-9, 1e-9, 1e-9, 1e-9)), gating
+    )
+    np.testing.assert_allclose(tiny, exact, rtol=1e-5)
 
 
 def test_residual_density_is_two_sigma_squared_tau():

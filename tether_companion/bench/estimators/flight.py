@@ -73,6 +73,8 @@ class FlightRecord:
         The accelerometer's true specific force without noise or bias, FRD, (N, 3) [m/s^2].
     angle_seen
         Whether the ground station's cable-angle sensor reported at the tick, shape (N,).
+    winch_seen
+        Whether the ground station's winch reported its length at the tick, shape (N,).
     landed
         Whether the drone rested on the ground at the tick, shape (N,).
     traces
@@ -90,6 +92,7 @@ class FlightRecord:
     wind_ned_mps: FloatArray
     specific_force_body_mps2: FloatArray
     angle_seen: NDArray[np.bool_]
+    winch_seen: NDArray[np.bool_]
     landed: NDArray[np.bool_]
     traces: dict[str, KindTrace]
 
@@ -130,6 +133,7 @@ def fly(
     tension, thrust = np.empty(n), np.empty(n)
     range_seen = np.zeros(n, dtype=bool)
     angle_seen = np.zeros(n, dtype=bool)
+    winch_seen = np.zeros(n, dtype=bool)
     landed = np.zeros(n, dtype=bool)
     outputs = [_empty_trace(n) for _ in kinds]
     tick = 0
@@ -162,6 +166,7 @@ def fly(
                 imu.time_s, state.tension_n, readings.paid_out_m, readings.cable_angle_rad
             )
             angle_seen[tick] = readings.cable_angle_rad is not None
+            winch_seen[tick] = readings.paid_out_m is not None
             time_s[tick] = imu.time_s
             truth["position"][tick] = state.position_ned_m
             truth["velocity"][tick] = state.velocity_ned_m_s
@@ -197,6 +202,7 @@ def fly(
         wind_ned_mps=truth["wind"],
         specific_force_body_mps2=truth["force"],
         angle_seen=angle_seen,
+        winch_seen=winch_seen,
         landed=landed,
         traces={
             kind.name: KindTrace(

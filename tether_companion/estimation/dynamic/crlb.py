@@ -77,6 +77,8 @@ class TrueTrack:
     angle_seen
         A ground-station cable-angle report at the tick, shape (N,); ``None``: none in the
         flight.
+    winch_seen
+        A winch length report at the tick, shape (N,); ``None``: one every tick.
     """
 
     time_s: FloatArray
@@ -89,6 +91,7 @@ class TrueTrack:
     range_seen: NDArray[np.bool_]
     specific_force_body_mps2: FloatArray
     angle_seen: NDArray[np.bool_] | None = None
+    winch_seen: NDArray[np.bool_] | None = None
 
     def state_at(self, k: int) -> list[float]:
         """The model's state at tick ``k``: position, velocity, chord tension
@@ -104,6 +107,49 @@ class TrueTrack:
         wind = self.wind_ned_mps[k]
         v = self.velocity_ned_mps[k]
         return [*map(float, p), *map(float, v), tension, 1.0, 0.0, 0.0, 0.0, *map(float, wind[:2])]
+
+
+@dataclass(frozen=True)
+class CalibrationPrior:
+    """The ground station's per-flight calibration errors, unknown constants the bound
+    estimates beside the state (nuisance parameters with a Gaussian prior; the bound of the
+    state is then the marginal of the augmented bound: a constant error that the data cannot
+    separate from the position stays in it). The winch reports ``offset + (1 + scale) L``, the
+    angle sensor ``(elevation + elevation bias, azimuth + azimuth bias)``.
+
+    Attributes
+    ----------
+    winch_offset_std_m
+        The encoder's zero offset [m].
+    winch_scale_std
+        The encoder's scale error [1].
+    elevation_bias_std_rad, azimuth_bias_std_rad
+        The angle sensor's zero errors [rad].
+
+    A zero standard deviation is an error known to be zero: it is left out of the augmented
+    state.
+    """
+
+    winch_offset_std_m: float
+    winch_scale_std: float
+    elevation_bias_std_rad: float
+    azimuth_bias_std_rad: float
+
+    def std(self) -> FloatArray:
+        """The prior standard deviations, indexed by :data:`OFFSET`, :data:`SCALE`,
+        :data:`ELEVATION_BIAS`, :data:`AZIMUTH_BIAS`."""
+        return np.array(
+            [
+                self.winch_offset_std_m,
+                self.winch_scale_std,
+                self.elevation_bias_std_rad,
+                self.azimuth_bias_std_rad,
+            ]
+        )
+
+
+OFFSET, SCALE, ELEVATION_BIAS, AZIMUTH_BIAS = range(4)
+"""Indices of the calibration errors in :meth:`CalibrationPrior.std`."""
 
 
 @dataclass(frozen=True)
@@ -125,6 +171,9 @@ class BoundNoise:
     cable_angle_var_rad2
         Variance of the cable direction's turn per axis in one angle report [rad^2]: the
         elevation's, the azimuth's over ``cos^2(elevation)``; ``None``: not measured.
+    calibration
+        The ground station's calibration errors estimated beside the state; ``None``: the
+        winch and the angle sensor have none.
     """
 
     process_density: FloatArray
@@ -133,6 +182,7 @@ class BoundNoise:
     range_var_m2: float
     winch_var_m2: float | None = None
     cable_angle_var_rad2: float | None = None
+    calibration: CalibrationPrior | None = None
 
 
 @dataclass(frozen=True)
@@ -237,7 +287,9 @@ def posterior_bound(
 ) -> FloatArray:
     """Diagonal of the bound ``J_k^-1`` at every tick, shape (N, 13), in the state's units
     squared (position [m^2] first). The prior ``diag(prior_std^2)`` holds before the first
-    tick. ``force_balance``: the samples of :func:`force_balance_at_truth` when already made."""
+    tick. ``force_balance``: the samples of :func:`force_balance_at_truth` when already made.
+    With ``noise.calibration`` the recursion runs on the state and the four calibration errors
+    (constants: identity transition, no process noise) and returns the state's part."""
     if force_balance is None:
         force_balance = force_balance_at_truth(track, constants, gating)
     accel_weight = 1.0 / np.asarray(noise.force_balance_var_mps2, dtype=float)
@@ -245,14 +297,27 @@ def posterior_bound(
         int(k): jac.T @ (accel_weight[:, None] * jac)
         for k, jac in zip(force_balance.ticks, force_balance.jacobians, strict=True)
     }
+    calibration = noise.calibration
+    prior_std = noise.prior_std
+    density = noise.process_density
+    column: dict[int, int] = {}
+    """Calibration error (:data:`OFFSET`...) -> its column in the augmented state."""
+    if calibration is not None:
+        stds = calibration.std()
+        unknown = [i for i in range(len(stds)) if stds[i] > 0.0]
+        column = {error: _N + j for j, error in enumerate(unknown)}
+        prior_std = np.concatenate([prior_std, stds[unknown]])
+        density = np.concatenate([density, np.zeros(len(unknown))])
+    winch_columns = ((column.get(OFFSET), column.get(SCALE)),)
+    angle_columns = ((column.get(ELEVATION_BIAS),), (column.get(AZIMUTH_BIAS),))
+    n = len(prior_std)
     n_ticks = len(track.time_s)
     out = np.empty((n_ticks, _N))
-    covariance = np.diag(noise.prior_std**2)
+    covariance = np.diag(prior_std**2)
     models = constants.models
     c = constants.values()
-    density = noise.process_density
-    transition = np.eye(_N)
-    gathered = np.zeros((_N, _N))
+    transition = np.eye(n)
+    gathered = np.zeros((n, n))
     samples = 0
     previous_s = track.time_s[0]
     zero_force = (0.0, 0.0, 0.0)
@@ -263,10 +328,10 @@ def posterior_bound(
         previous_s = track.time_s[k]
         _, dv = generated.inertial(x, (*rows[0], *rows[1], *rows[2], *zero_force), c)
         transition[0:3, 3:6] = dt * np.eye(3)
-        transition[3:6, :] = dt * np.reshape(dv, (3, _N))
+        transition[3:6, :_N] = dt * np.reshape(dv, (3, _N))
         transition[3:6, 3:6] += np.eye(3)
         if k in accel_information:
-            gathered += accel_information[k]
+            gathered[:_N, :_N] += accel_information[k]
             samples += 1
         if track.range_seen[k]:
             samples += _add(
@@ -276,14 +341,19 @@ def posterior_bound(
                 _NO_CONSTANTS,
                 1,
                 noise.range_var_m2,
-                _ANCHOR_LEVEL,
+                u=_ANCHOR_LEVEL,
             )
         taut = x[state.TENSION] > 0.0
-        if noise.winch_var_m2 is not None and taut:
-            samples += _add(gathered, models.winch_length, x, c, 1, noise.winch_var_m2)
+        winch_seen = track.winch_seen is None or track.winch_seen[k]
+        if noise.winch_var_m2 is not None and taut and winch_seen:
+            samples += _add(
+                gathered, models.winch_length, x, c, 1, noise.winch_var_m2, winch_columns
+            )
         angle_var = noise.cable_angle_var_rad2
         if angle_var is not None and taut and track.angle_seen is not None and track.angle_seen[k]:
-            samples += _add(gathered, models.cable_angle, x, c, 2, angle_var, per_cos=True)
+            samples += _add(
+                gathered, models.cable_angle, x, c, 2, angle_var, angle_columns, per_cos=True
+            )
         apply = (k + 1) % gating.ticks_per_fusion == 0 and samples > 0
         covariance = information_step(
             covariance, transition, np.diag(density * dt), gathered if apply else None
@@ -291,7 +361,7 @@ def posterior_bound(
         if apply:
             gathered[:] = 0.0
             samples = 0
-        out[k] = np.diag(covariance)
+        out[k] = np.diag(covariance)[:_N]
     return out
 
 
@@ -302,6 +372,7 @@ def _add(
     c: tuple[float, float, float],
     rows: int,
     variance: float,
+    calibration_columns: tuple[tuple[int | None, ...], ...] = (),
     u: tuple[float, ...] = (),
     *,
     per_cos: bool = False,
@@ -309,14 +380,22 @@ def _add(
     """``gathered += H^T R^-1 H`` for the generated ``model`` at ``x`` with ``R = variance I``
     (``per_cos``, the cable angle: the second row's, the azimuth's, over the cosine squared of
     the first, the elevation); 0 where the model is undefined there (at the anchor, zero
-    tension), else 1."""
+    tension), else 1. ``calibration_columns``: per row, the augmented state's columns of the
+    calibration errors in the reading, ``None`` where it has none: an additive zero error
+    (coefficient 1), then a scale error (coefficient the model's value); ``H`` takes
+    ``gathered``'s width."""
     try:
         value, jac = model(x, u, c)
     except UNDEFINED:
         return 0
-    jacobian = np.reshape(jac, (rows, _N))
+    jacobian = np.zeros((rows, len(gathered)))
+    jacobian[:, :_N] = np.reshape(jac, (rows, _N))
     if not np.isfinite(jacobian).all():
         return 0
+    for row, columns in enumerate(calibration_columns):
+        for column, coefficient in zip(columns, (1.0, value[row]), strict=False):
+            if column is not None:
+                jacobian[row, column] = coefficient
     weight = np.full(rows, 1.0 / variance)
     if per_cos:
         weight[1] *= math.cos(value[0]) ** 2

@@ -32,10 +32,20 @@ rangefinder                     the true noise (its tilt correction, 1-3 %, left
                                 taken as white (it is correlated over metres, so this
                                 over-counts its averaging: the bound is lower than with it
                                 modelled)
-winch length                    the filter's (the simulator's length is exact: with it the
-                                bound would be zero along the cable)
+winch length                    with the scenario's ``ground_station`` errors: at the
+                                encoder's reports, the white variance of its step
+                                (``resolution^2 / 12``, at least 1 mm squared), its zero
+                                offset and scale error unknown constants with their priors
+                                (estimated beside the state); without them the filter's
+                                told noise every tick (the simulator's length is then exact:
+                                with it the bound would be zero along the cable)
 cable angle                     the simulated sensor's direction noise (elevation; azimuth
-                                over the elevation's cosine), at its reports
+                                over the elevation's cosine) and its step's
+                                ``resolution^2 / 12``, at its reports; with the
+                                ``ground_station`` errors its azimuth and elevation zero
+                                errors unknown constants with their priors
+latencies                       left out: a known delay costs a bound no information (the
+                                filter does not compensate it: its own loss)
 prior                           the filter's priors for what its first second cannot measure
                                 (velocity, thrust scale, bias, wind); none on position and
                                 tension (100 m, 100 N: the filter takes them from the data,
@@ -54,7 +64,7 @@ from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig
-from tether_companion.estimation.dynamic.crlb import BoundNoise, Gating
+from tether_companion.estimation.dynamic.crlb import BoundNoise, CalibrationPrior, Gating
 from tether_companion.estimation.dynamic.noise import process_noise_density
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.sim.scenario import Scenario
@@ -62,6 +72,8 @@ from tether_companion.sim.wind import DrydenParameters
 
 FloatArray = NDArray[np.float64]
 
+MIN_WINCH_STD_M = 1e-3
+"""Smallest white noise [m] the bound gives an encoder with no step (a finite information)."""
 UNINFORMED_POSITION_STD_M = 100.0
 UNINFORMED_TENSION_STD_N = 100.0
 MIN_RESIDUAL_SAMPLES = 50
@@ -129,12 +141,12 @@ def bound_noise(
     residual_density: tuple[float, float, float],
     *,
     winch: bool,
-    cable_angle_std_rad: float | None = None,
+    angle: bool,
 ) -> BoundNoise:
     """The noise of the bound for ``scenario`` (the table above); ``residual_density``: the
     force residual's white equivalent per body axis [m^2/s^3] (:func:`residual_density_m2ps3`);
-    ``winch``: whether the measurement set has the winch length; ``cable_angle_std_rad``: the
-    cable-angle sensor's true direction noise per axis [rad] (``None``: no cable angle)."""
+    ``winch``, ``angle``: whether the measurement set has the winch length, the cable angle
+    (the scenario's ``ground_station`` sensor)."""
     imu_step_s = 1.0 / scenario.sensors.imu_rate_hz
     accel_var = accel_variance_mps2(scenario)
     density = process_noise_density(dynamic)
@@ -151,6 +163,19 @@ def bound_noise(
     prior[state.SCALE] = initial.thrust_scale_std
     prior[state.BIAS] = initial.accel_bias_std_mps2
     prior[state.WIND] = initial.wind_std_mps
+    sensors = scenario.ground_station
+    winch_var = dynamic.winch_length_noise_std_m**2
+    angle_var = sensors.angle_noise_std_rad**2
+    calibration = None
+    if sensors.enabled:
+        winch_var = max(sensors.winch_resolution_m**2 / 12.0, MIN_WINCH_STD_M**2)
+        angle_var += sensors.angle_resolution_rad**2 / 12.0
+        calibration = CalibrationPrior(
+            winch_offset_std_m=sensors.winch_zero_offset_std_m if winch else 0.0,
+            winch_scale_std=sensors.winch_scale_error_std if winch else 0.0,
+            elevation_bias_std_rad=sensors.angle_elevation_bias_std_rad if angle else 0.0,
+            azimuth_bias_std_rad=sensors.angle_azimuth_bias_std_rad if angle else 0.0,
+        )
     return BoundNoise(
         process_density=density,
         prior_std=prior,
@@ -160,8 +185,9 @@ def bound_noise(
             accel_var + residual_density[2] / interval_s,
         ),
         range_var_m2=scenario.sensors.range_noise_std_m**2 + ground.terrain_std_m**2,
-        winch_var_m2=dynamic.winch_length_noise_std_m**2 if winch else None,
-        cable_angle_var_rad2=None if cable_angle_std_rad is None else cable_angle_std_rad**2,
+        winch_var_m2=winch_var if winch else None,
+        cable_angle_var_rad2=angle_var if angle else None,
+        calibration=calibration,
     )
 
 

@@ -93,9 +93,10 @@ def own_model_bound(
 ) -> FloatArray:
     """The posterior CRLB of the filter's 13-state model along ``record``'s truth with the
     kind's measurements (:mod:`~tether_companion.estimation.dynamic.crlb`: force balance and
-    rangefinder; ``winch``: the paid-out length; ``angle``: the cable angle with the simulated
-    sensor's white noise, the scenario's ``ground_station.angle_noise_std_rad``), diagonal
-    (N, 13)."""
+    rangefinder; ``winch``: the paid-out length at the encoder's reports; ``angle``: the cable
+    angle at the sensor's reports; each with the scenario's ``ground_station`` errors, its
+    calibration errors estimated beside the state: :func:`~.crlb_noise.bound_noise`),
+    diagonal (N, 13)."""
     dynamic = filter_config(context)
     vehicle = context.vehicle
     constants = ModelConstants(
@@ -104,6 +105,7 @@ def own_model_bound(
     track = TrueTrack(
         specific_force_body_mps2=record.specific_force_body_mps2,
         angle_seen=record.angle_seen,
+        winch_seen=record.winch_seen,
         time_s=record.time_s,
         position_ned_m=record.position_ned_m,
         velocity_ned_mps=record.velocity_ned_mps,
@@ -119,10 +121,7 @@ def own_model_bound(
     residual = residual_density_m2ps3(
         force_balance.residuals_mps2, interval_s, dynamic.noise.force_residual_m2ps3
     )
-    angle_std = context.scenario.ground_station.angle_noise_std_rad if angle else None
-    noise = bound_noise(
-        context.scenario, dynamic, residual, winch=winch, cable_angle_std_rad=angle_std
-    )
+    noise = bound_noise(context.scenario, dynamic, residual, winch=winch, angle=angle)
     return posterior_bound(track, constants, noise, gating, force_balance)
 
 

@@ -122,7 +122,9 @@ def test_run_stops_with_exit_2_naming_the_bad_parameter(tmp_path) -> None:
 
 def test_run_with_a_fallback_flies_on_it_and_says_why(tmp_path) -> None:
     config = _config(tmp_path, fallback="default-quad")
-    code, err, score = asyncio.run(_run(config, 16.0, tmp_path))
+    # 12 s of wall time: the service process took over 8 s to start and fetch the parameters
+    # once at load 8-14 (0 estimates in a 16 s flight at speed 2)
+    code, err, score = asyncio.run(_run(config, 24.0, tmp_path))
     assert code is None, err  # still running when the emulator finished
     assert "Traceback" not in err
     print(f"fallback run: {score['scored']} estimates scored, 3-D RMSE {score['rmse_m']['3d']} m")

@@ -27,10 +27,23 @@ initial: {{airborne: true}}
     return path
 
 
-def gusty_hover_takeoff_scenario(tmp_path: Path, duration_s: float, seed: int) -> Path:
+REALISTIC_GROUND_STATION = "{enabled: true, cable_axial_stiffness_n: 50000.0}"
+"""The realistic scenarios' ``ground_station`` section (sitl/scenarios/realistic-circle.yaml:
+its other values are the section's defaults): the winch encoder's 1 % scale and 0.1 m offset
+per flight, 0.1 s late, 1 cm steps, the cable's stretch; the angle 0.05 s late, 0.01 rad of
+noise, 1.5 deg azimuth and 0.4 deg elevation biases per flight, 12-bit steps."""
+
+
+def gusty_hover_takeoff_scenario(
+    tmp_path: Path, duration_s: float, seed: int, ground_station: bool = False
+) -> Path:
     """The hover scenario's quad and 4 N winch in realistic-gusty-hover's wind (3 m/s mean,
     light Dryden turbulence), taking off from the ground under the hover point (4, 0, -2.5) m;
-    the thrust map exact, no sensor biases. Returns the scenario file's path."""
+    the thrust map exact, no sensor biases; with ``ground_station`` the ground station's
+    sensors have the realistic errors (:data:`REALISTIC_GROUND_STATION`), else none (the
+    exact length, the angle with 0.01 rad of white noise). Returns the scenario file's
+    path."""
+    section = REALISTIC_GROUND_STATION if ground_station else "{enabled: false}"
     path = tmp_path / f"gusty-hover-takeoff-{seed}.yaml"
     path.write_text(
         f"""
@@ -40,6 +53,7 @@ seed: {seed}
 wind: {{velocity_ned_m_s: [-2.0, 2.2, 0.0], turbulence_w20_mps: 7.7}}
 trajectory: {{kind: hover, position_ned_m: [4.0, 0.0, -2.5]}}
 initial: {{airborne: false, armed: true, position_ned_m: [4.0, 0.0, 0.0]}}
+ground_station: {section}
 """,
         encoding="utf-8",
     )

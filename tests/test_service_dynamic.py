@@ -291,14 +291,24 @@ SETTLE_S = 5.0
 LATEST_START_S = 40.0
 
 
-def _closed_loop_hover(tmp_path, seed: int, winch: bool = False, cable_angle: bool = False) -> dict:
+def _closed_loop_hover(
+    tmp_path,
+    seed: int,
+    winch: bool = False,
+    cable_angle: bool = False,
+    ground_station: bool = False,
+) -> dict:
     """Take off into the gusty hover (the emulator's navigation on its truth until our first
     estimate, as a pilot would climb in ALT_HOLD), then fly on nothing but the published
     estimate: the deviation from the hover point over ``HOLD_S`` after ``SETTLE_S``. With
-    ``winch`` the emulator's ground station sends WINCH_STATUS (10 Hz, 2 cm noise, 1 cm
-    steps), with ``cable_angle`` the cable's direction at the anchor (DEBUG_VECT, 10 Hz,
-    0.01 rad per axis), and the service reads them."""
-    path = gusty_hover_takeoff_scenario(tmp_path, LATEST_START_S + SETTLE_S + HOLD_S, seed)
+    ``winch`` the emulator's ground station sends WINCH_STATUS (10 Hz), with ``cable_angle``
+    the cable's direction at the anchor (DEBUG_VECT, 10 Hz, 0.01 rad per axis), and the
+    service reads them; with ``ground_station`` they have the realistic scenarios' errors
+    (the encoder's scale, offset, latency and steps, the angle's biases, latency and steps:
+    sim/ground_sensors.py), else the exact length and the angle's white noise only."""
+    path = gusty_hover_takeoff_scenario(
+        tmp_path, LATEST_START_S + SETTLE_S + HOLD_S, seed, ground_station
+    )
     emulator: dict = {"navigation": "vision"}
     overrides: dict = {"estimator": {"kind": "dynamic"}}
     if winch:

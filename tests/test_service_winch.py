@@ -249,10 +249,11 @@ def test_winch_is_off_by_default_and_the_dynamic_filter_takes_its_tension() -> N
 
 
 def test_emulated_winch_feeds_the_dynamic_filter_in_lockstep(tmp_path) -> None:
-    """The emulator's ground station sends WINCH_STATUS (10 Hz, quantised, from 255/169); the
-    service (shipped configuration, winch enabled) fuses its length: the filter's cable length
-    is the true distance within the emulated noise."""
-    path = gusty_hover_takeoff_scenario(tmp_path, 14.0, seed=3)
+    """The emulator's ground station sends WINCH_STATUS (10 Hz, with the realistic encoder's
+    errors: 1 cm steps, the flight's scale and offset; from 255/169); the service (shipped
+    configuration, winch enabled) fuses its length: the filter's cable length is the true
+    distance within the encoder's calibration error."""
+    path = gusty_hover_takeoff_scenario(tmp_path, 14.0, seed=3, ground_station=True)
     controller = build_controller(str(path), emulator={"winch": {"enabled": True}})
     lockstep = LockstepService(controller, {"winch": {"enabled": True}})
     while controller.time_s < 14.0:
@@ -268,7 +269,10 @@ def test_emulated_winch_feeds_the_dynamic_filter_in_lockstep(tmp_path) -> None:
     assert session.ingest.winch is not None and session.ingest.winch.counters.dropped == 0
     assert session.estimator.health.winch_fused > 50
     distance = float(np.linalg.norm(controller.sim.position_ned_m))
-    assert session.estimator.constants.length_m == pytest.approx(distance, abs=0.1)
+    calibration = controller.ground_sensors.calibration  # seed 3: 11 cm long
+    encoder = calibration.winch_offset_m + (1.0 + calibration.winch_scale) * distance
+    assert abs(encoder - distance) > 0.05
+    assert session.estimator.constants.length_m == pytest.approx(encoder, abs=0.03)
     view = io.StringIO()
     Console(file=view, width=200).print(render(lockstep.service))
     assert "winch line [m], tension at winch [N]" in view.getvalue()

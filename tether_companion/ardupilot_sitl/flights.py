@@ -40,6 +40,7 @@ from tether_companion.ardupilot_sitl.scoring import (
     trace_of,
 )
 from tether_companion.mavlink.geo import Geodetic
+from tether_companion.sim.ground_sensors import GroundSensorConfig
 
 GPS_LESS_PARAMS = {
     "GPS1_TYPE": 0,
@@ -91,12 +92,18 @@ class FlightOptions:
     station after the hold (MAV_CMD_USER_2), instead of LAND."""
     reel_in_mps: float = 0.3
     winch: bool = False
-    """The ground station is also the tether's winch: WINCH_STATUS at 10 Hz
-    (:meth:`GroundStation.start_winch`) and the companion reads it (``winch.enabled``)."""
+    """The ground station is also the tether's winch: WINCH_STATUS
+    (:meth:`GroundStation.start_ground_sensors`) and the companion reads it
+    (``winch.enabled``)."""
     cable_angle: bool = False
-    """The ground station has a cable-angle sensor at the anchor: DEBUG_VECT at 10 Hz
-    (:meth:`GroundStation.start_cable_angle`) and the companion reads it
+    """The ground station has a cable-angle sensor at the anchor: DEBUG_VECT
+    (:meth:`GroundStation.start_ground_sensors`) and the companion reads it
     (``cable_angle.enabled``)."""
+    ground_station: GroundSensorConfig = field(default_factory=GroundSensorConfig)
+    """The winch's and the angle sensor's rates and errors (a scenario's ``ground_station``
+    section; the default: off, 10 Hz, the exact length, 0.01 rad of white angle noise)."""
+    ground_station_seed: int = 1
+    """Seeds the sensors' calibration draws and noise."""
     companion_overrides: dict = field(default_factory=dict)
     workdir: Path | None = None
     """Kept after the flight when given (SITL's logs, the companion's config, log and .tlog)."""
@@ -228,11 +235,16 @@ def _run(
             )
             gcs.set_param("SIM_SPEEDUP", options.speedup)
             overrides = {"publish": {"on_unhealthy": "inflate"}, **options.companion_overrides}
+            if options.winch or options.cable_angle:
+                gcs.start_ground_sensors(
+                    options.ground_station,
+                    options.ground_station_seed,
+                    winch_line_length_m=TETHER_LINE_LENGTH_M if options.winch else None,
+                    cable_angle=options.cable_angle,
+                )
             if options.winch:
-                gcs.start_winch(TETHER_LINE_LENGTH_M)
                 overrides["winch"] = {"enabled": True}
             if options.cable_angle:
-                gcs.start_cable_angle()
                 overrides["cable_angle"] = {"enabled": True}
             config = companion_config(workdir, sitl_opts.home, overrides)
             companion = CompanionProcess(config, sitl.ports["serial1"], workdir / "companion.log")

@@ -5,20 +5,23 @@ commands (mode, arm, takeoff, position targets, EKF source set) and what the aut
 A reader thread keeps the latest of each and a history; every wait is bounded in wall time.
 Positions are NED [m] from the SITL home, which is the tether's anchor.
 
-With :meth:`GroundStation.start_winch` it is also the tether's winch: WINCH_STATUS at 10 Hz from
-(255, 169), which the autopilot routes to the companion. SITL's tether (SIM_Tether.cpp) is a
-straight spring of rest length SIM_TETH_LINELEN (8 N/m in tether.parm, stretching 1.5-2.7 m at
-12-22 N), not a stiff tether on a drum: the winch reported here is that of a stiff tether of
-the same geometry, whose paid-out line is the cable's length ``max(LINELEN, |p|)`` (the
-anchor-to-drone distance while taut, from SITL's SIM_STATE truth), with 2 cm of noise and 1 cm
-steps like the emulator's winch; its tension is reported unknown (NaN).
-
-With :meth:`GroundStation.start_cable_angle` it also has a cable-angle sensor at the anchor:
-DEBUG_VECT ``CABLE_ANG`` at 10 Hz from (255, 158) (the service's convention,
-:mod:`tether_companion.service.cable_angle`: ``x`` azimuth from true north toward east, ``y``
-elevation up [rad], ``time_usec`` the sensor's UNIX time) with the direction from the anchor to
-SITL's truth (SITL's tether is a straight line), turned by ``noise_std_rad`` per axis
-(:func:`tether_companion.sim.ground_sensors.noisy_angles`, the emulator's noise model).
+With :meth:`GroundStation.start_ground_sensors` it is also the tether's ground station:
+the winch (WINCH_STATUS at ``winch_rate_hz`` from (255, 169)) and the cable-angle sensor at the
+anchor (DEBUG_VECT ``CABLE_ANG`` at ``angle_rate_hz`` from (255, 158): the service's convention,
+:mod:`tether_companion.service.cable_angle`, ``x`` azimuth from true north toward east, ``y``
+elevation up [rad], ``time_usec`` the sensor's UNIX time), which the autopilot routes to the
+companion, sent in wall time. What they report is the offline simulator's sensors'
+(:class:`tether_companion.sim.ground_sensors.GroundSensors`, configured by a
+:class:`~tether_companion.sim.ground_sensors.GroundSensorConfig`, seeded): off, the exact length
+and the direction with white noise; on, also the encoder's per-flight scale and offset, the
+latencies, the steps and the angle's per-flight biases. The sensors record SITL's SIM_STATE
+truth as it arrives (25 Hz) in the autopilot's time, so a latency is resolved to the 0.04 s
+of that stream. SITL's tether (SIM_Tether.cpp) is a straight spring of rest length
+SIM_TETH_LINELEN (8 N/m in tether.parm, stretching 1.5-2.7 m at 12-22 N), not a stiff tether on
+a drum: the winch reported here is that of a stiff tether of the same geometry, whose paid-out
+line is the cable's length ``max(LINELEN, |p|)`` (the anchor-to-drone distance while taut); its
+tension is reported unknown (NaN). The direction at the anchor is the straight line to the
+drone.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ import numpy as np
 from pymavlink import mavutil
 
 from tether_companion.mavlink.geo import Geodetic, geodetic_to_ned
-from tether_companion.sim.ground_sensors import noisy_angles
+from tether_companion.sim.ground_sensors import GroundSensorConfig, GroundSensors
 
 FC_SYSTEM, FC_COMPONENT = 1, 1
 COMPANION_COMPONENT = 191
@@ -41,12 +44,8 @@ COMPANION_COMPONENT = 191
 GCS_SYSTEM = 255
 WINCH_COMPONENT = 169
 """MAV_COMP_ID_WINCH: the ground station's winch sends as (GCS_SYSTEM, WINCH_COMPONENT)."""
-WINCH_RATE_HZ = 10.0
-WINCH_NOISE_STD_M = 0.02
-WINCH_RESOLUTION_M = 0.01
 ANGLE_COMPONENT = 158
 """MAV_COMP_ID_PERIPHERAL: the cable-angle sensor sends as (GCS_SYSTEM, ANGLE_COMPONENT)."""
-ANGLE_RATE_HZ = 10.0
 ANGLE_NAME = b"CABLE_ANG"
 MAV_CMD_SET_EKF_SOURCE_SET = 42007
 COPTER_MODES = {"STABILIZE": 0, "ALT_HOLD": 2, "AUTO": 3, "GUIDED": 4, "LOITER": 5, "RTL": 6,
@@ -111,6 +110,8 @@ class Telemetry:
     """The autopilot's GPS_GLOBAL_ORIGIN, once received."""
     params: dict[str, float] = field(default_factory=dict)
     """PARAM_VALUEs received."""
+    ground_sensors: GroundSensors | None = None
+    """The ground station's sensors, recording each truth (None: no winch, no angle)."""
 
 
 class GroundStation:
@@ -146,50 +147,72 @@ class GroundStation:
             sender.join(timeout=5.0)
         self.master.close()
 
-    # ------------------------------------------------------------------ the winch
-    def start_winch(self, line_length_m: float, seed: int = 9005) -> None:
-        """Send WINCH_STATUS at ``WINCH_RATE_HZ`` (wall time) from now on, for a tether of
-        rest length ``line_length_m`` [m] (update :attr:`line_length_m` as it is reeled)."""
-        self.line_length_m = line_length_m
-        rng = np.random.default_rng(seed)
-        packer = mavutil.mavlink.MAVLink(None, srcSystem=GCS_SYSTEM, srcComponent=WINCH_COMPONENT)
+    # ------------------------------------------------------------------ the ground station
+    def start_ground_sensors(
+        self,
+        config: GroundSensorConfig,
+        seed: int,
+        *,
+        winch_line_length_m: float | None = None,
+        cable_angle: bool = False,
+    ) -> GroundSensors:
+        """From now on, send WINCH_STATUS (with ``winch_line_length_m``: the tether's rest
+        length SIM_TETH_LINELEN [m]; update :attr:`line_length_m` as it is reeled) and the
+        cable's direction at the anchor (``cable_angle``) at ``config``'s rates (wall time),
+        with ``config``'s errors drawn from ``seed`` (module docstring). Returns the sensors
+        (their calibration for the flight's record)."""
+        sensors = GroundSensors(config, "constant_tension", seed)
+        tel = self.telemetry
+        with tel.lock:
+            tel.ground_sensors = sensors
+            if tel.truth_ned_m is not None:
+                self._record_truth(tel, tel.truth_ned_m)
+        if winch_line_length_m is not None:
+            self.line_length_m = winch_line_length_m
+            self._start_sender("sitl-winch", config.winch_rate_hz, self._winch_frame)
+        if cable_angle:
+            self._start_sender("sitl-cable-angle", config.angle_rate_hz, self._angle_frame)
+        return sensors
 
-        def frame(truth: np.ndarray) -> bytes:
-            length = max(self.line_length_m, float(np.linalg.norm(truth)))
-            length += WINCH_NOISE_STD_M * rng.standard_normal()
-            length = round(length / WINCH_RESOLUTION_M) * WINCH_RESOLUTION_M
-            self.winch_sent += 1
-            return mavutil.mavlink.MAVLink_winch_status_message(
-                int(time.time() * 1e6), length, math.nan, math.nan, math.nan, math.nan,
-                32767, mavutil.mavlink.MAV_WINCH_STATUS_HEALTHY,
-            ).pack(packer)  # fmt: skip
+    def _record_truth(self, tel: Telemetry, truth_ned_m: np.ndarray) -> None:
+        """Give the ground station's sensors SITL's truth at the autopilot's time (under
+        ``tel.lock``): the stiff tether's paid-out length ``max(LINELEN, |p|)``."""
+        sensors = tel.ground_sensors
+        if sensors is None:
+            return
+        position = (float(truth_ned_m[0]), float(truth_ned_m[1]), float(truth_ned_m[2]))
+        length = max(self.line_length_m, math.dist(position, (0.0, 0.0, 0.0)))
+        if not math.isfinite(length):  # the winch not started: the angle needs no length
+            length = 0.0
+        sensors.record(tel.fc_s, length, position, 0.0)
 
-        self._start_sender("sitl-winch", WINCH_RATE_HZ, frame)
+    def _winch_frame(self, packer: mavutil.mavlink.MAVLink, sensors: GroundSensors) -> bytes:
+        length = sensors.winch_length_m(self.telemetry.fc_s)
+        self.winch_sent += 1
+        return mavutil.mavlink.MAVLink_winch_status_message(
+            int(time.time() * 1e6), max(0.0, length), math.nan, math.nan, math.nan, math.nan,
+            32767, mavutil.mavlink.MAV_WINCH_STATUS_HEALTHY,
+        ).pack(packer)  # fmt: skip
 
-    def start_cable_angle(self, noise_std_rad: float = 0.01, seed: int = 250) -> None:
-        """Send the cable's azimuth and elevation at the anchor (DEBUG_VECT ``CABLE_ANG``) at
-        ``ANGLE_RATE_HZ`` (wall time) from now on, with ``noise_std_rad`` [rad] per axis."""
-        rng = np.random.default_rng(seed)
-        packer = mavutil.mavlink.MAVLink(None, srcSystem=GCS_SYSTEM, srcComponent=ANGLE_COMPONENT)
-
-        def frame(truth: np.ndarray) -> bytes | None:
-            distance = float(np.linalg.norm(truth))
-            if distance <= 0.0:
-                return None
-            direction = tuple(float(v) / distance for v in truth)
-            azimuth, elevation = noisy_angles(direction, noise_std_rad, rng)  # type: ignore[arg-type]
-            self.angle_sent += 1
-            return mavutil.mavlink.MAVLink_debug_vect_message(
-                ANGLE_NAME, int(time.time() * 1e6), azimuth, elevation, 0.0
-            ).pack(packer)
-
-        self._start_sender("sitl-cable-angle", ANGLE_RATE_HZ, frame)
+    def _angle_frame(self, packer: mavutil.mavlink.MAVLink, sensors: GroundSensors) -> bytes | None:
+        angle = sensors.cable_angle_rad(self.telemetry.fc_s, _straight_line_direction)
+        if angle is None:
+            return None
+        self.angle_sent += 1
+        return mavutil.mavlink.MAVLink_debug_vect_message(
+            ANGLE_NAME, int(time.time() * 1e6), angle[0], angle[1], 0.0
+        ).pack(packer)
 
     def _start_sender(
-        self, name: str, rate_hz: float, frame: Callable[[np.ndarray], bytes | None]
+        self,
+        name: str,
+        rate_hz: float,
+        frame: Callable[[mavutil.mavlink.MAVLink, GroundSensors], bytes | None],
     ) -> None:
-        """A thread writing ``frame(SITL's truth NED [m])`` at ``rate_hz`` (wall time) once a
-        truth has arrived (None: nothing to send this time)."""
+        """A thread writing ``frame(packer, sensors)`` (under the telemetry lock) at
+        ``rate_hz`` (wall time) once a truth has arrived (None: nothing to send this time)."""
+        component = WINCH_COMPONENT if name == "sitl-winch" else ANGLE_COMPONENT
+        packer = mavutil.mavlink.MAVLink(None, srcSystem=GCS_SYSTEM, srcComponent=component)
         write = self.master.write
         if not self._locked:  # commands (this thread) and the sensors' frames share the socket
             self._locked = True
@@ -200,14 +223,15 @@ class GroundStation:
 
             self.master.write = locked_write  # pymavlink's senders call master.write
         send = self.master.write
+        tel = self.telemetry
 
         def send_loop() -> None:
             while not self._stop.wait(1.0 / rate_hz):
-                with self.telemetry.lock:
-                    truth = self.telemetry.truth_ned_m
-                if truth is None:
-                    continue
-                data = frame(truth)
+                with tel.lock:
+                    sensors = tel.ground_sensors
+                    if tel.truth_ned_m is None or sensors is None:
+                        continue
+                    data = frame(packer, sensors)
                 if data is not None:
                     send(data)
 
@@ -267,6 +291,7 @@ class GroundStation:
             lon = msg.lon_int * 1e-7 if getattr(msg, "lon_int", 0) else msg.lon
             truth = geodetic_to_ned(self.home, Geodetic(lat, lon, msg.alt))
             tel.truth_ned_m = truth
+            self._record_truth(tel, truth)
             hb = tel.heartbeat
             tel.samples.append(
                 Sample(
@@ -442,6 +467,16 @@ class GroundStation:
         self.master.mav.param_set_send(
             FC_SYSTEM, FC_COMPONENT, name.encode(), value, mavutil.mavlink.MAV_PARAM_TYPE_REAL32
         )
+
+
+def _straight_line_direction(
+    position_ned_m: tuple[float, float, float],
+) -> tuple[float, float, float] | None:
+    """SITL's tether at the anchor: the unit vector toward the drone (None at the anchor)."""
+    distance = math.dist(position_ned_m, (0.0, 0.0, 0.0))
+    if distance <= 0.0:
+        return None
+    return tuple(v / distance for v in position_ned_m)  # type: ignore[return-value]
 
 
 def _connect(port: int, timeout_s: float):  # noqa: ANN202 - pymavlink connection type

@@ -120,15 +120,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--winch",
         action="store_true",
-        help="a ground-station winch sends WINCH_STATUS (system 255, component 169, 10 Hz; "
-        "the scenario's emulator.winch section sets the rest)",
+        help="a ground-station winch sends WINCH_STATUS (system 255, component 169; its "
+        "length's rate and errors: the scenario's ground_station section; the rest: its "
+        "emulator.winch section)",
     )
     parser.add_argument(
         "--cable-angle",
         action="store_true",
         help="a ground-station cable-angle sensor sends the cable's direction at the anchor as "
-        "DEBUG_VECT CABLE_ANG (system 255, component 158, 10 Hz, x azimuth, y elevation [rad]; "
-        "the scenario's emulator.cable_angle section sets the rest)",
+        "DEBUG_VECT CABLE_ANG (system 255, component 158, x azimuth, y elevation [rad]; its "
+        "rate and errors: the scenario's ground_station section; the rest: its "
+        "emulator.cable_angle section)",
     )
     parser.add_argument("--quiet", action="store_true", help="no periodic status line")
 

@@ -50,6 +50,7 @@ from tether_companion.emulator.streams import (
 from tether_companion.emulator.winch import EmulatedWinch
 from tether_companion.mavlink import geo
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
+from tether_companion.sim.ground_sensors import GroundSensors
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.simulator import Simulator
 
@@ -144,15 +145,24 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions, Fligh
         self._rangefinder_param_forced = False
         self._after_ack: list[Callable[[], None]] = []
         self._descent = [0.0, 0.0, 0.0]
+        self.ground_sensors = (
+            GroundSensors(scenario.ground_station, scenario.cable.model, scenario.seed)
+            if config.winch.enabled or config.cable_angle.enabled
+            else None
+        )
+        """The ground station's sensors' errors (the scenario's ``ground_station``: the offline
+        simulator's model), recorded at every physics step while a sensor sends, or None."""
         self.winch = (
-            EmulatedWinch(config.winch, scenario, unix_time_at_start_s)
-            if config.winch.enabled
+            EmulatedWinch(config.winch, scenario, self.ground_sensors, unix_time_at_start_s)
+            if self.ground_sensors is not None and config.winch.enabled
             else None
         )
         """The ground station's winch (``emulator.winch``), or None."""
         self.cable_angle = (
-            EmulatedCableAngle(config.cable_angle, scenario, unix_time_at_start_s)
-            if config.cable_angle.enabled
+            EmulatedCableAngle(
+                config.cable_angle, scenario, self.ground_sensors, unix_time_at_start_s
+            )
+            if self.ground_sensors is not None and config.cable_angle.enabled
             else None
         )
         """The ground station's cable-angle sensor (``emulator.cable_angle``), or None."""
@@ -309,6 +319,10 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions, Fligh
                 self._next_mode_tick_s = now + MODE_TICK_S
             if now >= self._next_due_s - tolerance:
                 self._emit_due(now, tolerance)
+            if self.ground_sensors is not None:
+                self.ground_sensors.record(
+                    now, sim.cable.paid_out_m, sim.position_ned_m, sim.cable.tension_n
+                )
             for sensor in self._ground_sensors:
                 if now >= sensor.next_s - tolerance:
                     frame = sensor.frame(sim)

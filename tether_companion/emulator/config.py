@@ -12,7 +12,7 @@ flags, which override the file. Example::
         drop_probability: 0.01
         outages: [{stream: ATTITUDE, start_s: 10, duration_s: 0.5}]
         reboots_s: [30]
-      winch: {enabled: true, rate_hz: 10}
+      winch: {enabled: true, tension_noise_std_n: 0.2}
 """
 
 from __future__ import annotations

@@ -29,6 +29,12 @@ sensors"):
   bias ~ N(0, ``angle_elevation_bias_std_rad``) (its level), each angle quantised to
   ``angle_resolution_rad``.
 
+One implementation for every simulated ground station: the offline bench calls :meth:`read`
+at every IMU tick (the schedule above); a time-driven sender (the emulator's WINCH_STATUS and
+DEBUG_VECT, the ArduPilot SITL ground station's) calls :meth:`GroundSensors.record` with each
+simulated state and :meth:`~GroundSensors.winch_length_m` / :meth:`~GroundSensors.cable_angle_rad`
+when its own report is due; the same seed draws the same calibration everywhere.
+
 Pure and synchronous.
 """
 
@@ -36,7 +42,9 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -169,8 +177,12 @@ class GroundSensors:
                 float(azimuth) * config.angle_azimuth_bias_std_rad,
                 float(elevation) * config.angle_elevation_bias_std_rad,
             )
+        self._keep_s = (
+            max(config.winch_latency_s, config.angle_latency_s) if config.enabled else 0.0
+        )
+        """How far back the reports look [s] (off: no latency)."""
         self._history: deque[tuple[float, float, tuple[float, float, float]]] = deque()
-        """(time [s], encoder's unstretched length [m], position NED [m]) of recent ticks."""
+        """(time [s], encoder's length [m], position NED [m]) of recent states."""
         self._next_winch_s = 0.0
         self._next_angle_s = 0.0
 
@@ -182,41 +194,80 @@ class GroundSensors:
         tension_n: float,
     ) -> GroundReadings:
         """The reports due at ``time_s`` [s] (called at every IMU tick, in time order) of the
-        simulated ``cable`` with the drone at ``position_ned_m`` [m] pulling ``tension_n`` [N]."""
+        simulated ``cable`` with the drone at ``position_ned_m`` [m] pulling ``tension_n`` [N]:
+        the length every tick when off, at ``winch_rate_hz`` when on; the angle at
+        ``angle_rate_hz``."""
         cfg = self.config
         angle_due = time_s >= self._next_angle_s
         if angle_due:
             self._next_angle_s = time_s + 1.0 / cfg.angle_rate_hz
-        if not cfg.enabled:
-            angle = None
-            if angle_due:
-                direction = anchor_direction_ned(cable, position_ned_m)
-                angle = None if direction is None else self._noisy(direction)
-            return GroundReadings(cable.paid_out_m, angle)
-        length = cable.paid_out_m
-        if self._stretched and cfg.cable_axial_stiffness_n > 0.0:
-            length /= 1.0 + max(tension_n, 0.0) / cfg.cable_axial_stiffness_n
-        self._history.append((time_s, length, position_ned_m))
+        self.record(time_s, cable.paid_out_m, position_ned_m, tension_n)
         paid_out = None
-        if time_s >= self._next_winch_s:
+        if not cfg.enabled or time_s >= self._next_winch_s:
             self._next_winch_s = time_s + 1.0 / cfg.winch_rate_hz
-            _, old_length, _ = self._at(time_s - cfg.winch_latency_s)
-            calibration = self.calibration
-            reported = calibration.winch_offset_m + (1.0 + calibration.winch_scale) * old_length
-            paid_out = _quantised(reported, cfg.winch_resolution_m)
+            paid_out = self.winch_length_m(time_s)
         angle = None
         if angle_due:
-            _, _, old_position = self._at(time_s - cfg.angle_latency_s)
-            direction = anchor_direction_ned(cable, old_position)
-            if direction is not None:
-                azimuth, elevation = self._noisy(direction)
-                calibration = self.calibration
-                step = cfg.angle_resolution_rad
-                azimuth = _quantised(azimuth + calibration.azimuth_bias_rad, step)
-                elevation = _quantised(elevation + calibration.elevation_bias_rad, step)
-                angle = ((azimuth + math.pi) % (2.0 * math.pi) - math.pi, elevation)
-        self._forget(time_s - max(cfg.winch_latency_s, cfg.angle_latency_s))
+            angle = self.cable_angle_rad(time_s, partial(anchor_direction_ned, cable))
         return GroundReadings(paid_out, angle)
+
+    def record(
+        self,
+        time_s: float,
+        paid_out_m: float,
+        position_ned_m: tuple[float, float, float],
+        tension_n: float,
+    ) -> None:
+        """Note the simulated cable's state at ``time_s`` [s] (in time order, at least as
+        often as the latencies need resolving): its ``paid_out_m`` [m] (the simulator's), the
+        drone at ``position_ned_m`` [m] (NED from the anchor) pulling ``tension_n`` [N]."""
+        cfg = self.config
+        length = paid_out_m
+        if cfg.enabled and self._stretched and cfg.cable_axial_stiffness_n > 0.0:
+            length /= 1.0 + max(tension_n, 0.0) / cfg.cable_axial_stiffness_n
+        history = self._history
+        history.append((time_s, length, position_ned_m))
+        before_s = time_s - self._keep_s  # drop what no report at time_s or later will need
+        while len(history) > 1 and history[1][0] <= before_s + TIME_TOL_S:
+            history.popleft()
+
+    def winch_length_m(self, time_s: float) -> float:
+        """The encoder's report at ``time_s`` [s] of the recorded states [m] (off: the
+        latest recorded length, exact)."""
+        cfg = self.config
+        if not cfg.enabled:
+            return self._history[-1][1]
+        _, old_length, _ = self._at(time_s - cfg.winch_latency_s)
+        calibration = self.calibration
+        reported = calibration.winch_offset_m + (1.0 + calibration.winch_scale) * old_length
+        return _quantised(reported, cfg.winch_resolution_m)
+
+    def cable_angle_rad(
+        self,
+        time_s: float,
+        direction_at_anchor: Callable[
+            [tuple[float, float, float]], tuple[float, float, float] | None
+        ],
+    ) -> tuple[float, float] | None:
+        """The angle sensor's report at ``time_s`` [s] of the recorded states: (azimuth from
+        north toward east, elevation up) [rad] of ``direction_at_anchor(position)`` (the
+        cable's unit direction at the anchor with the drone at that NED position [m], None
+        without one: then None) for the position ``angle_latency_s`` ago (off: the latest,
+        with the white noise only). Draws the noise from the sensor's generator."""
+        cfg = self.config
+        if not cfg.enabled:
+            direction = direction_at_anchor(self._history[-1][2])
+            return None if direction is None else self._noisy(direction)
+        _, _, old_position = self._at(time_s - cfg.angle_latency_s)
+        direction = direction_at_anchor(old_position)
+        if direction is None:
+            return None
+        azimuth, elevation = self._noisy(direction)
+        calibration = self.calibration
+        step = cfg.angle_resolution_rad
+        azimuth = _quantised(azimuth + calibration.azimuth_bias_rad, step)
+        elevation = _quantised(elevation + calibration.elevation_bias_rad, step)
+        return (azimuth + math.pi) % (2.0 * math.pi) - math.pi, elevation
 
     def _noisy(self, direction: tuple[float, float, float]) -> tuple[float, float]:
         return noisy_angles(direction, self.config.angle_noise_std_rad, self._angle_rng)
@@ -229,12 +280,6 @@ class GroundSensors:
             if entry[0] <= time_s + TIME_TOL_S:
                 return entry
         return history[0]
-
-    def _forget(self, before_s: float) -> None:
-        """Drop the ticks no report will need: all but the last at or before ``before_s``."""
-        history = self._history
-        while len(history) > 1 and history[1][0] <= before_s + TIME_TOL_S:
-            history.popleft()
 
 
 def noisy_angles(

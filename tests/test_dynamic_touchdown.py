@@ -17,11 +17,11 @@ from tether_companion.bench.estimators.registry import kinds
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
-from tether_companion.estimation.dynamic.observability import (
+from tether_companion.estimation.dynamic.offline import run_dynamic
+from tether_companion.estimation.dynamic.on_ground import (
     THRUST_BELOW_WEIGHT,
     on_ground_reason,
 )
-from tether_companion.estimation.dynamic.offline import run_dynamic
 from tether_companion.estimation.dynamic.output import ON_GROUND, NavigationEstimate
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample
 from tether_companion.sim.scenario import load_scenario

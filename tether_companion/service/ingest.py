@@ -19,7 +19,10 @@ Pure and synchronous (the live service and replay share it). For each message:
    :class:`~tether_companion.service.cable_angle.CableAngleGate`: sender, values, the sensor's
    clock mapped to the flight controller's; drops in their counters by reason) and bypass the
    reorder buffer (their stamp is the mapped one; the estimator fuses them at its own time);
-6. order: samples pass an adaptive reorder buffer (:mod:`~tether_companion.service.reorder`:
+6. the flight controller's landed state, EXTENDED_SYS_STATE (no stamp of its own): stamped
+   with the newest believed flight-controller time (``no_fc_time`` before the first), a
+   ``landed_state`` outside MAV_LANDED_STATE ``absurd``; it bypasses the reorder buffer;
+7. order: samples pass an adaptive reorder buffer (:mod:`~tether_companion.service.reorder`:
    no delay until the link is seen to reorder, then a window covering what it showed, at most
    ``inputs.reorder_window_s``) and leave it in stamp order; per message type the stamp must
    then increase: an equal stamp is a ``duplicate``, an older one (later than the window)
@@ -33,7 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tether_companion.mavlink.framing import Received
+from tether_companion.mavlink.framing import Received, dialect
 from tether_companion.mavlink.units import (
     DOWNWARD_ORIENTATION,
     attitude_from_attitude,
@@ -68,7 +71,22 @@ WINCH = "winch"
 """The ground station's WINCH_STATUS (service/winch.py)."""
 CABLE_ANGLE = "cable_angle"
 """The ground station's cable angle, DEBUG_VECT (service/cable_angle.py)."""
-INPUT_KINDS = (IMU, ATTITUDE, PWM, RANGE, TENSION, FC_POSITION, SYSTEM_TIME, WINCH, CABLE_ANGLE)
+LANDED = "landed_state"
+"""The flight controller's landed state, EXTENDED_SYS_STATE."""
+INPUT_KINDS = (
+    IMU,
+    ATTITUDE,
+    PWM,
+    RANGE,
+    TENSION,
+    FC_POSITION,
+    SYSTEM_TIME,
+    WINCH,
+    CABLE_ANGLE,
+    LANDED,
+)
+LANDED_STATES = frozenset(range(5))
+"""MAV_LANDED_STATE: UNDEFINED, ON_GROUND, IN_AIR, TAKEOFF, LANDING (common.xml)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -90,6 +108,21 @@ class FcPosition:
     position_ned_m: tuple[float, float, float]
 
 
+@dataclass(frozen=True, slots=True)
+class LandedState:
+    """The flight controller's landed state (EXTENDED_SYS_STATE.landed_state, a
+    MAV_LANDED_STATE) at flight-controller time [s] (the newest stamp when it arrived)."""
+
+    time_s: float
+    landed_state: int
+
+    @property
+    def on_ground(self) -> bool:
+        """ON_GROUND: the autopilot's land detector says landed. TAKEOFF and LANDING are sent
+        for a whole climb or descent (ArduCopter, PX4): in the air."""
+        return self.landed_state == dialect.MAV_LANDED_STATE_ON_GROUND
+
+
 Sample = (
     ImuSample
     | AttitudeSample
@@ -99,6 +132,7 @@ Sample = (
     | FcPosition
     | WinchReading
     | CableAngleReading
+    | LandedState
 )
 
 
@@ -123,6 +157,9 @@ class IngestCounters:
     """The reorder buffer's current window [s] (0 until the link is seen to reorder)."""
     reorder_widened: int = 0
     """Times the reorder window grew to cover reordering beyond it."""
+    no_fc_time: int = 0
+    """Messages without a stamp of their own (EXTENDED_SYS_STATE) before the flight
+    controller's first believed stamp: no time to put them at."""
     reboots: int = 0
     accepted: dict[str, int] = field(default_factory=lambda: dict.fromkeys(INPUT_KINDS, 0))
 
@@ -136,6 +173,7 @@ class IngestCounters:
             + self.duplicate
             + self.out_of_order
             + self.implausible
+            + self.no_fc_time
         )
 
 
@@ -251,7 +289,7 @@ class Ingest:
         if held is None:
             return []
         kind, sample = held
-        if kind is WINCH or kind is CABLE_ANGLE:  # checked and stamped by its gate, not reordered
+        if kind is WINCH or kind is CABLE_ANGLE or kind is LANDED:  # stamped here: not reordered
             self.counters.accepted[kind] += 1
             return [sample]
         released = self.reorder.push(kind, sample.time_s, sample)
@@ -288,6 +326,8 @@ class Ingest:
         if kind_name == "SYSTEM_TIME":
             self._system_time(msg)
             return None
+        if kind_name == "EXTENDED_SYS_STATE":
+            return self._landed_state(msg)
         known = self._inputs.get(kind_name)
         if known is None:
             counters.not_input += 1
@@ -395,6 +435,17 @@ class Ingest:
             self.counters.implausible += 1
         else:
             self.counters.accepted[SYSTEM_TIME] += 1
+
+    def _landed_state(self, msg: Received) -> tuple[str, LandedState] | None:
+        state = msg.landed_state
+        if state not in LANDED_STATES:
+            self.counters.absurd += 1
+            return None
+        time_s = self.clock.latest_fc_s
+        if not math.isfinite(time_s):
+            self.counters.no_fc_time += 1
+            return None
+        return LANDED, LandedState(time_s, int(state))
 
     # ------------------------------------------------------------------ time checks
     def _timed(self, kind: str, sample: Sample | None) -> tuple[str, Sample] | None:

@@ -23,7 +23,8 @@ Estimators, all fed the same samples:
 The ground station's winch (``winch.enabled``, :mod:`~tether_companion.service.winch`) feeds
 the EKF its paid-out length and, with ``tension.source: winch``, its tension; its cable-angle
 sensor (``cable_angle.enabled``, :mod:`~tether_companion.service.cable_angle`) the cable's
-direction at the anchor.
+direction at the anchor. The flight controller's landed state (EXTENDED_SYS_STATE) gives the
+dynamic filter an on-ground sign of its own (ON_GROUND: on the ground, position withheld).
 """
 
 from __future__ import annotations
@@ -64,7 +65,13 @@ from tether_companion.service.health import (
     STALE_TENSION,
     dynamic_health,
 )
-from tether_companion.service.ingest import FcPosition, Ingest, Sample, TensionReading
+from tether_companion.service.ingest import (
+    FcPosition,
+    Ingest,
+    LandedState,
+    Sample,
+    TensionReading,
+)
 from tether_companion.service.publish import Publication, Publisher
 from tether_companion.service.security import command_refusal
 from tether_companion.service.winch import WinchFeed, WinchReading
@@ -170,6 +177,7 @@ class EstimationSession:
             FcPosition: self._on_fc_position,
             WinchReading: self._on_winch,
             CableAngleReading: self._on_cable_angle,
+            LandedState: self._on_landed_state,
         }
         """The handler of each sample type: one dict lookup per sample, not a chain of
         ``isinstance`` tests."""
@@ -377,6 +385,14 @@ class EstimationSession:
 
     def _on_cable_angle(self, sample: CableAngleReading) -> Step:
         self.cable_angle.on_reading(sample, self.estimator)
+        return Step()
+
+    def _on_landed_state(self, sample: LandedState) -> Step:
+        """The autopilot's landed state: the dynamic filter's independent on-ground sign (the
+        paper's filters have none)."""
+        estimator = self.estimator
+        if isinstance(estimator, DynamicTetherEstimator):
+            estimator.set_autopilot_landed(sample.on_ground, sample.time_s)
         return Step()
 
     def _on_fc_position(self, sample: FcPosition) -> Step:

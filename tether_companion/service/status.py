@@ -74,6 +74,7 @@ def render(service: CompanionService) -> Group:
         "duplicate",
         "out_of_order",
         "implausible",
+        "no_fc_time",
         "reboots",
     ):
         drops.add_row(name.replace("_", " "), str(getattr(counters, name)))

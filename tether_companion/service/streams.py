@@ -21,6 +21,7 @@ from tether_companion.service.ingest import (
     ATTITUDE,
     FC_POSITION,
     IMU,
+    LANDED,
     PWM,
     RANGE,
     SYSTEM_TIME,
@@ -33,6 +34,9 @@ FC_POSITION_RATE_HZ = 20.0
 """LOCAL_POSITION_NED rate asked for (the tension modes' frame) [Hz]."""
 SYSTEM_TIME_RATE_HZ = 5.0
 """SYSTEM_TIME rate asked for: the evidence of a flight-controller reboot [Hz]."""
+LANDED_STATE_RATE_HZ = 5.0
+"""EXTENDED_SYS_STATE rate asked for: the autopilot's landed state, an on-ground sign [Hz]
+(above 1 / ``INPUT_SILENT_S``, so a stream at this rate is never taken for silent)."""
 INTERVAL_ATTEMPTS_BEFORE_FALLBACK = 2
 MAX_AWAITING_ACK = 16
 """Requests remembered while waiting for their COMMAND_ACK (bounded if never acked)."""
@@ -44,8 +48,10 @@ _STREAM_GROUPS = {
     RANGE: dialect.MAV_DATA_STREAM_EXTRA3,
     FC_POSITION: dialect.MAV_DATA_STREAM_POSITION,
     SYSTEM_TIME: dialect.MAV_DATA_STREAM_EXTRA3,
+    LANDED: dialect.MAV_DATA_STREAM_EXTENDED_STATUS,
 }
-"""ArduPilot's REQUEST_DATA_STREAM groups (SRx_RAW_SENS, _EXTRA1, _RC_CHAN, _EXTRA3, _POSITION)."""
+"""ArduPilot's REQUEST_DATA_STREAM groups (SRx_RAW_SENS, _EXTRA1, _RC_CHAN, _EXTRA3, _POSITION,
+_EXT_STAT)."""
 
 
 @dataclass
@@ -104,6 +110,10 @@ class StreamRequests:
         )
         # a reboot is believed only on SYSTEM_TIME's word (service/fc_time.py)
         table[SYSTEM_TIME] = StreamRequest(dialect.MAVLINK_MSG_ID_SYSTEM_TIME, SYSTEM_TIME_RATE_HZ)
+        # the autopilot's land detector: the dynamic filter's on-ground sign
+        table[LANDED] = StreamRequest(
+            dialect.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, LANDED_STATE_RATE_HZ
+        )
         self.table = table
         self._awaiting_ack = []
 

@@ -59,7 +59,7 @@ from tether_companion.estimation.dynamic.noise import (
     accel_measurement_std_mps2,
     process_noise_density,
 )
-from tether_companion.estimation.dynamic.observability import on_ground_reason
+from tether_companion.estimation.dynamic.on_ground import AutopilotLanded, on_ground_reason
 from tether_companion.estimation.dynamic.output import DynamicHealth, NavigationEstimate
 from tether_companion.estimation.dynamic.published import StatusSettings, TickSource
 from tether_companion.estimation.dynamic.sag_range import NO_SAG, mixture_sag
@@ -120,6 +120,8 @@ class DynamicTetherEstimator(InputFeed):
         self._weight_n = vehicle.mass_kg * GRAVITY_MPS2
         self._ground_down_m = config.ground_station.anchor_height_m
         """The ground's down position, NED from the anchor [m] (taken flat)."""
+        self.autopilot_landed = AutopilotLanded()
+        """The flight controller's latest landed state."""
         self._inertial = dynamic.formulation == INERTIAL
         self._ticks_per_fusion = dynamic.imu_ticks_per_fusion if self._inertial else 1
         """IMU ticks per prediction and force-balance fusion (the inertial formulation's
@@ -247,6 +249,13 @@ class DynamicTetherEstimator(InputFeed):
                 calibration_std_rad,
             )
 
+    def set_autopilot_landed(self, landed: bool, time_s: float) -> None:
+        """The flight controller's landed state at ``time_s`` [s] (EXTENDED_SYS_STATE;
+        ``landed``: ON_GROUND): while fresh and landed the drone is on the ground (status
+        ``on_ground``, the force balance not fused: the ground's contact force is not in the
+        model); without one, the filter's own signs alone (thrust, height)."""
+        self.autopilot_landed = AutopilotLanded(landed, time_s)
+
     def on_range(self, sample: RangeSample) -> None:
         """A downward rangefinder reading along the body z axis [m]: the height above the ground
         (tilt and the sensor's ``config.rangefinder.offset_frd_m`` lever arm corrected)."""
@@ -329,7 +338,8 @@ class DynamicTetherEstimator(InputFeed):
             if fusion_tick or not self._inertial:
                 inputs = [*rows[0], *rows[1], *rows[2], aligned.thrust_n]
                 if fusion_tick:
-                    accel_fused = self.accel.fuse(bank, self.constants, inputs, force, t, on_ground)
+                    resting = on_ground or self.autopilot_landed.on_ground(self._time_s)
+                    accel_fused = self.accel.fuse(bank, self.constants, inputs, force, t, resting)
                     self._ticks_since_fusion = 0
                     if accel_fused:
                         self._sample_bearing(t)
@@ -475,6 +485,7 @@ class DynamicTetherEstimator(InputFeed):
                 math.nan if mixture is None else mixture.x_values[2],
                 self._ground_down_m,
                 self.dynamic.touchdown_height_m,
+                self.autopilot_landed.on_ground(self._time_s),
             ),
             stale,
             *sag,

@@ -1,7 +1,7 @@
 """The dynamic filter's observability status: may the position be published, and if not why.
 
 Checked in this order (the first that applies wins): restarted this tick, not initialised,
-on the ground (thrust far below the weight, or touching down: :func:`on_ground_reason`), inputs
+on the ground (:func:`~tether_companion.estimation.dynamic.on_ground.on_ground_reason`), inputs
 stale, cable slack, the horizontal pull no larger than the wind's drag
 could be, horizontal position standard deviation beyond the bound: ``learning`` when the part of the
 horizontal covariance the thrust scale and the wind do not explain is within the bound (the
@@ -248,44 +248,6 @@ def min_horizontal_pull_n(
     return pull_per_wind_n_s_per_m * max(wind_std_mps, math.hypot(wind_n_mps, wind_e_mps))
 
 
-THRUST_BELOW_WEIGHT = "thrust far below the weight: on the ground"
-"""The on-ground reason when the motors' thrust is far below the weight."""
-
-
-def on_ground_reason(
-    thrust_below_weight: bool, down_m: float, ground_down_m: float, touchdown_height_m: float
-) -> str:
-    """Why the drone counts as on the ground at one tick (empty when it does not).
-
-    Parameters
-    ----------
-    thrust_below_weight
-        The thrust is below ``min_thrust_fraction`` of the weight (motors idling: resting).
-    down_m
-        The filter's down position of the centre of mass, NED from the anchor [m].
-    ground_down_m
-        The ground's down position [m]: the anchor's height above the ground, the ground
-        taken as flat.
-    touchdown_height_m
-        Height above the ground [m] below which the drone is touching down (or just lifted
-        off). Then the ground's contact force, which is not in the model, may act (at the
-        first touch the simulated drone stops within one physics step, and no force balance
-        says so), and the rangefinder, below its minimum range, no longer measures the
-        height: on the take-off's landing the down error grew to 0.3-0.6 m within 0.3 s of
-        the touch at a claimed 0.11-0.14 m (docs/estimation.md, "The touchdown (split10)").
-        A NaN height never counts.
-    """
-    if thrust_below_weight:
-        return THRUST_BELOW_WEIGHT
-    height_m = ground_down_m - down_m
-    if height_m < touchdown_height_m:
-        return (
-            f"touching down: {height_m:.2f} m above the ground < {touchdown_height_m:g} m"
-            " (ground contact not modelled, rangefinder at its minimum range)"
-        )
-    return ""
-
-
 def assess(
     *,
     initialised_reason: str | None,
@@ -311,7 +273,9 @@ def assess(
     reset_reason
         Why the filter restarted this tick (None if it did not).
     on_ground
-        Why the drone is on the ground this tick (:func:`on_ground_reason`; empty: it is not).
+        Why the drone is on the ground this tick
+        (:func:`~tether_companion.estimation.dynamic.on_ground.on_ground_reason`; empty: it is
+        not).
     inputs_stale
         Attitude or PWM stale.
     tension_n, slack_tension_n

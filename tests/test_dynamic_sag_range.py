@@ -36,6 +36,45 @@ def _chord_tension(span_m: float, horizontal_n: float) -> float:
     return horizontal_n * math.hypot(span_m, HEIGHT_M) / span_m
 
 
+def _closed_form_arc_length_m(span: float, height: float, horizontal: float, weight: float):
+    """The arc length of the catenary derivation's closed form (the reference sag_range.py
+    wrote out itself before it called the generated model): free, ``sqrt(h^2 + (2 c
+    sinh(a / 2c))^2)``; resting on the ground, ``a - c acosh(1 + h/c) + sqrt(h (h + 2c))``
+    (``c = H/w``)."""
+    c = horizontal / weight
+    rise = c * math.acosh(1.0 + height / c)
+    if span > rise:
+        return span - rise + math.sqrt(height * (height + 2.0 * c))
+    if span / (2.0 * c) > 350.0:
+        return math.inf
+    return math.hypot(height, 2.0 * c * math.sinh(span / (2.0 * c)))
+
+
+def test_the_arc_length_equals_the_closed_form_on_random_cables() -> None:
+    """sag_range's arc length is the generated winch-length model; on 20,000 random cables
+    (free and resting on the ground, light and heavy, taut and slack) it equals the
+    derivation's closed form to 1e-9 relative, and is inf where that overflows."""
+    rng = np.random.default_rng(7)
+    grounded = free = 0
+    for _ in range(20_000):
+        span = float(rng.uniform(0.05, 30.0))
+        height = float(rng.uniform(0.05, 20.0))
+        weight = float(rng.choice([0.0167, 0.1, 1.0])) * 9.81
+        horizontal = float(np.exp(rng.uniform(math.log(0.01), math.log(50.0))))
+        expected = _closed_form_arc_length_m(span, height, horizontal, weight)
+        got = arc_length_m(span, height, horizontal, weight)
+        if math.isinf(expected):
+            assert math.isinf(got)
+            continue
+        assert math.isclose(got, expected, rel_tol=1e-9), (span, height, horizontal, weight)
+        c = horizontal / weight
+        if span > c * math.acosh(1.0 + height / c):
+            grounded += 1
+        else:
+            free += 1
+    assert grounded > 1000 and free > 1000
+
+
 def test_the_arc_length_is_the_generated_models_on_both_sides_of_the_touchdown() -> None:
     constants = (1.5, 0.3, WEIGHT_N_PER_M)
     for span, horizontal in ((5.0, 0.1), (5.0, 0.7), (4.0, 3.0), (6.0, 0.3)):
@@ -124,3 +163,36 @@ def test_without_a_length_a_cable_that_may_rest_on_the_ground_is_withheld() -> N
     taut = _source(4.5, _chord_tension(4.5, 8.0), 0.3, 0.2, winch=False, weight_n_per_m=heavy)
     assert taut.sag_std_m == 0.0
     assert taut.status() == OK
+
+
+def test_the_span_at_a_length_solves_it_on_random_cables() -> None:
+    """Newton on the generated model's slope (bracketed): the span found gives the length to
+    within the tolerance's worth of arc (the arc grows at most ~1-2 m per metre of span here),
+    free and resting on the ground."""
+    rng = np.random.default_rng(11)
+    for _ in range(300):
+        height = float(rng.uniform(0.5, 10.0))
+        length = height + float(rng.uniform(0.5, 20.0))
+        weight = float(rng.choice([0.0167, 0.1])) * 9.81
+        horizontal = float(np.exp(rng.uniform(math.log(0.02), math.log(30.0))))
+        span = span_at_length_m(length, height, horizontal, weight)
+        assert 0.0 < span <= math.sqrt(length**2 - height**2)
+        assert math.isclose(arc_length_m(span, height, horizontal, weight), length, abs_tol=5e-4), (
+            length,
+            height,
+            horizontal,
+            weight,
+        )
+
+
+def test_the_arc_lengths_slope_along_the_span_is_the_finite_difference() -> None:
+    from tether_companion.estimation.dynamic.sag_range import _arc_length_and_slope
+
+    for span, horizontal in ((5.0, 0.1), (5.0, 0.7), (4.0, 3.0), (6.0, 0.3), (2.0, 20.0)):
+        _, slope = _arc_length_and_slope(span, HEIGHT_M, horizontal, WEIGHT_N_PER_M)
+        step = 1e-6
+        difference = (
+            arc_length_m(span + step, HEIGHT_M, horizontal, WEIGHT_N_PER_M)
+            - arc_length_m(span - step, HEIGHT_M, horizontal, WEIGHT_N_PER_M)
+        ) / (2 * step)
+        assert math.isclose(slope, difference, rel_tol=1e-5), (span, horizontal)

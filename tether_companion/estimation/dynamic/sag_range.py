@@ -30,7 +30,12 @@ from collections.abc import Sequence
 
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.mixture import MixtureValues
-from tether_companion.estimation.dynamic.models import ModelConstants, rests_on_ground
+from tether_companion.estimation.dynamic.models import (
+    CATENARY,
+    UNDEFINED,
+    ModelConstants,
+    rests_on_ground,
+)
 
 TENSION_SIGMAS = 3.0
 """How many of the tension's standard deviations either side are taken as plausible: the
@@ -43,41 +48,63 @@ defined only for a positive tension; near zero the span at the length barely cha
 NO_SAG = (0.0, 0.0)
 """:func:`sag_range_variance_m2`'s answer where it does not apply."""
 SPAN_TOLERANCE_M = 1e-4
-"""The bisection's tolerance on the span [m]."""
+"""The span's tolerance [m] (the bracket's width, or a Newton step a tenth of it)."""
 
 
 def arc_length_m(
     span_m: float, height_m: float, horizontal_n: float, weight_n_per_m: float
 ) -> float:
     """The length [m] of a cable of weight ``weight_n_per_m`` [N/m] with horizontal tension
-    ``horizontal_n`` [N] from the anchor to a point ``span_m`` [m] away horizontally and
-    ``height_m`` [m] > 0 above it: the free catenary, or where its lowest point would fall
-    between the ends below the anchor, the catenary touching down on the anchor's level at
-    ``x_t = a - c acosh(1 + b/c)`` with the grounded part straight (``c = H/w``)."""
-    c = horizontal_n / weight_n_per_m
-    rise = c * math.acosh(1.0 + height_m / c)  # span of the rising part from its lowest point
-    if span_m > rise:  # grounded: flat from the anchor to the touchdown, then rising
-        return span_m - rise + math.sqrt(height_m * (height_m + 2.0 * c))
-    half = span_m / (2.0 * c)
-    if half > 350.0:  # sinh overflows: a cable this slack is far longer than any winch's
-        return math.inf
-    chord = 2.0 * c * math.sinh(half)
-    return math.sqrt(height_m * height_m + chord * chord)
+    ``horizontal_n`` [N] from the anchor to a point ``span_m`` [m] > 0 away horizontally and
+    ``height_m`` [m] > 0 above it (:func:`_arc_length_and_slope`); inf where the curve is so
+    slack that it overflows (far longer than any winch's cable)."""
+    return _arc_length_and_slope(span_m, height_m, horizontal_n, weight_n_per_m)[0]
+
+
+def _arc_length_and_slope(
+    span_m: float, height_m: float, horizontal_n: float, weight_n_per_m: float
+) -> tuple[float, float]:
+    """The arc length [m] and its derivative along the span at a fixed horizontal tension
+    [m/m]: the derivation's winch-length model
+    (:data:`~tether_companion.estimation.dynamic.models.CATENARY`, generated: the free
+    catenary, or the one resting on the anchor's level where the free curve's lowest point
+    would fall between the ends below the anchor) and its Jacobian at the state with the
+    position ``(a, 0, -h)`` and the chord tension ``T = H r / a`` (``r = |p|``), so
+    ``dL/da = dL/dp_n + dL/dT dT/da`` with ``dT/da = -H h^2 / (r a^2)``; ``(inf, nan)``
+    where the model overflows."""
+    x = [0.0] * state.N_STATES
+    x[0], x[2] = span_m, -height_m
+    chord = math.hypot(span_m, height_m)
+    x[state.TENSION] = horizontal_n * chord / span_m
+    try:
+        (length,), jacobian = CATENARY.winch_length(x, (), (0.0, 0.0, weight_n_per_m))
+    except UNDEFINED:
+        return math.inf, math.nan
+    tension_per_span = -horizontal_n * height_m * height_m / (chord * span_m * span_m)
+    return length, jacobian[0] + jacobian[state.TENSION] * tension_per_span
 
 
 def span_at_length_m(
     length_m: float, height_m: float, horizontal_n: float, weight_n_per_m: float
 ) -> float:
     """The span [m] at which the cable (as :func:`arc_length_m`) is ``length_m`` [m] long at
-    height ``height_m`` [m]; the arc length grows with the span, so bisection on
-    ``[0, sqrt(L^2 - h^2)]`` (the straight line's span bounds every curve's)."""
+    height ``height_m`` [m]: the arc length grows with the span, so Newton's method on the
+    generated model's slope, kept inside a bracket that starts as ``[0, sqrt(L^2 - h^2)]``
+    (the straight line's span bounds every curve's) and falls back to bisection, to
+    :data:`SPAN_TOLERANCE_M`."""
     low, high = 0.0, math.sqrt(max(length_m * length_m - height_m * height_m, 0.0))
+    span = 0.5 * (low + high)
     while high - low > SPAN_TOLERANCE_M:
-        middle = 0.5 * (low + high)
-        if arc_length_m(middle, height_m, horizontal_n, weight_n_per_m) > length_m:
-            high = middle
+        arc, slope = _arc_length_and_slope(span, height_m, horizontal_n, weight_n_per_m)
+        if arc > length_m:
+            high = span
         else:
-            low = middle
+            low = span
+        step = (length_m - arc) / slope if slope > 0.0 else math.nan
+        if abs(step) < 0.1 * SPAN_TOLERANCE_M:
+            return span
+        newton = span + step
+        span = newton if low < newton < high else 0.5 * (low + high)
     return 0.5 * (low + high)
 
 

@@ -143,6 +143,36 @@ def winch_calibration(
     return (w * h0 * h0, w * h0 * h1, 0.0, w * h1 * h1, 0.0, 0.0)
 
 
+def height_excess(
+    position_ned_m: Sequence[float], variance_m2: float, range_held: bool
+) -> tuple[float, ...]:
+    """The position covariance (nn, ne, nd, ee, ed, dd) [m^2] of a height error of variance
+    ``variance_m2`` [m^2] (the rangefinder innovations' excess: the height error they show
+    beyond the filter's covariance) at ``position_ned_m`` (NED from the anchor [m]).
+
+    With a winch length fused (``range_held``) it is the height's alone (down). Without one
+    the filter's range is its height carried along the cable's direction (the force
+    balance's or the cable angle's: the range is ``h / tan(el)``), so a height off by ``dd``
+    moves the drone along the line from the anchor, ``dp = p dd / d``: the variance goes
+    along ``p / d``, its down part the variance itself, its horizontal part ``rho / |d|``
+    times larger per axis (``|d|`` at least a tenth of ``|p|``, as :func:`angle_calibration`).
+    Measured on the realistic 0.5 N circle with the angle alone, tuning seed 2: the height
+    0.5 m off for 2 s (rangefinder innovations 0.5-0.9 m, the excess 0.36 m), the range
+    0.75 m short at a published 0.22 m, 89 ticks beyond 3 sigma; none with this term."""
+    v = float(variance_m2)
+    if not v > 0.0:
+        return _ZERO6
+    n, e, d = (float(x) for x in position_ned_m)
+    distance = math.sqrt(n * n + e * e + d * d)
+    if range_held or not math.isfinite(distance) or distance == 0.0:
+        return (0.0, 0.0, 0.0, 0.0, 0.0, v)
+    floor = 0.1 * distance
+    if abs(d) < floor:
+        d = math.copysign(floor, d)
+    un, ue = n / d, e / d
+    return (v * un * un, v * un * ue, v * un, v * ue * ue, v * ue, v)
+
+
 class PositionInformation:
     """The unmodelled offset's covariance given the fused cable angles, the angle
     innovations' excess, and the ground station's calibration errors.

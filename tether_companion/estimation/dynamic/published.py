@@ -57,7 +57,10 @@ from tether_companion.estimation.dynamic.observability import (
     unmodelled_position_rows,
 )
 from tether_companion.estimation.dynamic.output import Approximation, ExactValues
-from tether_companion.estimation.dynamic.position_information import reduce_added_rows
+from tether_companion.estimation.dynamic.position_information import (
+    height_excess,
+    reduce_added_rows,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -99,9 +102,12 @@ class TickSource:
     settings
         The filter's status settings.
     height_excess_m2
-        The rangefinder innovations' excess variance at the tick [m^2].
+        The rangefinder innovations' excess variance at the tick [m^2]: down, and without a
+        fused winch length along the line from the anchor too
+        (:func:`~tether_companion.estimation.dynamic.position_information.height_excess`).
     winch_fused
-        Whether a winch length was fused so far (its noise then stays along the cable).
+        Whether a winch length was fused so far (its noise then stays along the cable, and
+        it holds the range a height error would otherwise move).
     force_std_n
         The unmodelled horizontal force's standard deviation at the tick [N]
         (:class:`~tether_companion.estimation.dynamic.consistency.BearingWindow`).
@@ -229,8 +235,13 @@ class TickSource:
             values = x.tolist()
             tension, tension_var = self.constants.tension_at_drone(values, p)
         published = p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy()
-        published[2, 2] += self.height_excess_m2
-        if values is not None:
+        if values is None:
+            published[2, 2] += self.height_excess_m2
+        else:
+            nn, ne, nd, ee, ed, dd = height_excess(
+                values[:3], self.height_excess_m2, self.winch_fused
+            )
+            published[:3, :3] += ((nn, ne, nd), (ne, ee, ed), (nd, ed, dd))
             published[:3, :3] += np.array(
                 reduce_added_rows(
                     unmodelled_position_rows(
@@ -457,10 +468,12 @@ class TickSource:
             ),
             self.position_information,
         )
-        excess = self.height_excess_m2
-        north += unmodelled[0][0]
-        north_east += unmodelled[0][1]
-        east += unmodelled[1][1]
+        excess_nn, excess_ne, _, excess_ee, _, excess = height_excess(
+            x[:3], self.height_excess_m2, self.winch_fused
+        )
+        north += unmodelled[0][0] + excess_nn
+        north_east += unmodelled[0][1] + excess_ne
+        east += unmodelled[1][1] + excess_ee
         if self.sag_m2:
             sag_nn, sag_ne, sag_ee = _along_range(x[0], x[1], self.sag_m2)
             north += sag_nn
@@ -470,7 +483,8 @@ class TickSource:
         self._spread = spread
         self._row_scale = largest
         scale = largest * largest + t * noise.largest
-        scale += unmodelled[0][0] + unmodelled[1][1] + unmodelled[2][2] + excess + self.sag_m2
+        scale += unmodelled[0][0] + unmodelled[1][1] + unmodelled[2][2] + self.sag_m2
+        scale += excess_nn + excess_ee + excess
         # the tension's variance j^T (Phi P Phi^T + T Q) j, bounded the same way
         if jac is None:
             tension_bound = largest * largest + t * noise.largest

@@ -14,6 +14,7 @@ import pytest
 from tether_companion.bench.dynamic import record
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.bearing_ambiguity import bearing_ambiguity
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.observability import (
     HoverUnknowns,
@@ -30,7 +31,10 @@ from tether_companion.estimation.dynamic.output import (
     WEAK_PULL,
     NavigationEstimate,
 )
-from tether_companion.estimation.dynamic.position_information import reduce_added_rows
+from tether_companion.estimation.dynamic.position_information import (
+    height_excess,
+    reduce_added_rows,
+)
 from tether_companion.estimation.dynamic.published import UNKNOWN_VARIANCE
 from tether_companion.estimation.runner import _ATTITUDE, _PWM, _RANGE
 from tether_companion.physics.vehicle import load_vehicle
@@ -67,8 +71,13 @@ def _former_estimate(est: DynamicTetherEstimator, source) -> tuple:  # noqa: ANN
         values = x.tolist()
         tension, tension_var = est.constants.tension_at_drone(values, p)
     published = p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy()
-    published[2, 2] += est.rangefinder.excess.variance
-    if bank is not None:
+    if bank is None:
+        published[2, 2] += est.rangefinder.excess.variance
+    else:  # without a winch length along the line from the anchor too
+        nn, ne, nd, ee, ed, dd = height_excess(
+            values[:3], est.rangefinder.excess.variance, bool(est.health.winch_fused)
+        )
+        published[:3, :3] += ((nn, ne, nd), (ne, ee, ed), (nd, ed, dd))
         added = unmodelled_position_covariance(
             x[state.POSITION],
             tension,
@@ -78,6 +87,21 @@ def _former_estimate(est: DynamicTetherEstimator, source) -> tuple:  # noqa: ANN
         # narrowed by the cable angles fused within the correlation time (none here: None)
         information = est.ground_station.position_information.at(est.time_s)
         published[:3, :3] += np.array(reduce_added_rows(added.tolist(), information))
+        # a tick the pull rule withholds: the bearing's ambiguity
+        settings = est.ground_station.status_settings(est.time_s, bank.bearing_confirmed)
+        wind_n, wind_e = float(x[state.WIND][0]), float(x[state.WIND][1])
+        pull = horizontal_pull_n(values)
+        if pull < min_horizontal_pull_n(
+            settings.pull_per_wind_n_s_per_m, dyn.initial.wind_std_mps, wind_n, wind_e
+        ):
+            drag = min_horizontal_pull_n(
+                settings.drag_per_wind_n_s_per_m, dyn.initial.wind_std_mps, wind_n, wind_e
+            )
+            ring_nn, ring_ne, ring_ee = bearing_ambiguity(values[0], values[1], pull, drag)
+            published[0, 0] += ring_nn
+            published[0, 1] += ring_ne
+            published[1, 0] += ring_ne
+            published[1, 1] += ring_ee
     status, reason = assess(
         initialised_reason=None if bank is not None else est.initialising_reason,
         reset_reason=source.reset_reason,

@@ -141,6 +141,7 @@ class DynamicTetherEstimator(InputFeed):
                 dynamic.min_pull_over_wind_drag * vehicle.mass_kg * self.constants.drag_per_s
             ),
             wind_std_mps=dynamic.initial.wind_std_mps,
+            drag_per_wind_n_s_per_m=vehicle.mass_kg * self.constants.drag_per_s,
         )
         self._mixture: MixtureValues | None = None
         self._sag_key: tuple[MixtureValues, float] | None = None

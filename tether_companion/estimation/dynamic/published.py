@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.bearing_ambiguity import bearing_ambiguity
 from tether_companion.estimation.dynamic.imu_batch import BatchStep
 from tether_companion.estimation.dynamic.mixture import (
     HOVER_UNKNOWNS,
@@ -83,6 +84,9 @@ class StatusSettings:
     winch_length_noise_std_m: float
     pull_per_wind_n_s_per_m: float
     wind_std_mps: float
+    drag_per_wind_n_s_per_m: float = 0.0
+    """The rotor drag per unit airspeed ``m mu`` [N s/m]: with it a tick the pull rule
+    withholds carries the bearing's ambiguity (:mod:`.bearing_ambiguity`); 0: it does not."""
 
 
 class TickSource:
@@ -261,6 +265,11 @@ class TickSource:
                 published[0, 1] += sag_ne
                 published[1, 0] += sag_ne
                 published[1, 1] += sag_ee
+            ring_nn, ring_ne, ring_ee = self._ring(values)
+            published[0, 0] += ring_nn
+            published[0, 1] += ring_ne
+            published[1, 0] += ring_ne
+            published[1, 1] += ring_ee
         status = self._status
         reason = None
         if status is None:
@@ -318,6 +327,23 @@ class TickSource:
                 self.hypotheses,
             ),
         )
+
+    def _ring(self, x: list[float]) -> tuple[float, float, float]:
+        """The bearing's ambiguity (nn, ne, ee) [m^2] at the state's values ``x`` when the
+        pull rule withholds the tick (:mod:`.bearing_ambiguity`), else zeros."""
+        settings = self.settings
+        drag_per_wind = settings.drag_per_wind_n_s_per_m
+        if not drag_per_wind > 0.0:
+            return 0.0, 0.0, 0.0
+        pull = horizontal_pull_n(x)
+        wind_n, wind_e = x[state.WIND.start], x[state.WIND.start + 1]
+        min_pull = min_horizontal_pull_n(
+            settings.pull_per_wind_n_s_per_m, settings.wind_std_mps, wind_n, wind_e
+        )
+        if not pull < min_pull:
+            return 0.0, 0.0, 0.0
+        drag = min_horizontal_pull_n(drag_per_wind, settings.wind_std_mps, wind_n, wind_e)
+        return bearing_ambiguity(x[0], x[1], pull, drag)
 
     # ------------------------------------------------------------------ status
     def status(self) -> str:
@@ -479,12 +505,16 @@ class TickSource:
             north += sag_nn
             north_east += sag_ne
             east += sag_ee
+        ring_nn, ring_ne, ring_ee = self._ring(x)
+        north += ring_nn
+        north_east += ring_ne
+        east += ring_ee
         down += excess + unmodelled[2][2]
         self._spread = spread
         self._row_scale = largest
         scale = largest * largest + t * noise.largest
         scale += unmodelled[0][0] + unmodelled[1][1] + unmodelled[2][2] + self.sag_m2
-        scale += excess_nn + excess_ee + excess
+        scale += excess_nn + excess_ee + excess + ring_nn + ring_ee
         # the tension's variance j^T (Phi P Phi^T + T Q) j, bounded the same way
         if jac is None:
             tension_bound = largest * largest + t * noise.largest

@@ -73,11 +73,7 @@ def _former_estimate(est: DynamicTetherEstimator, source) -> tuple:  # noqa: ANN
     published = p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy()
     if bank is None:
         published[2, 2] += est.rangefinder.excess.variance
-    else:  # without a winch length along the line from the anchor too
-        nn, ne, nd, ee, ed, dd = height_excess(
-            values[:3], est.rangefinder.excess.variance, bool(est.health.winch_fused)
-        )
-        published[:3, :3] += ((nn, ne, nd), (ne, ee, ed), (nd, ed, dd))
+    else:  # each entry: the unmodelled term + the height's excess + the bearing's ambiguity
         added = unmodelled_position_covariance(
             x[state.POSITION],
             tension,
@@ -86,22 +82,29 @@ def _former_estimate(est: DynamicTetherEstimator, source) -> tuple:  # noqa: ANN
         )
         # narrowed by the cable angles fused within the correlation time (none here: None)
         information = est.ground_station.position_information.at(est.time_s)
-        published[:3, :3] += np.array(reduce_added_rows(added.tolist(), information))
+        unmodelled = reduce_added_rows(added.tolist(), information)
+        # without a winch length the height's excess goes along the line from the anchor too
+        excess = height_excess(
+            values[:3], est.rangefinder.excess.variance, bool(est.health.winch_fused)
+        )
         # a tick the pull rule withholds: the bearing's ambiguity
         settings = est.ground_station.status_settings(est.time_s, bank.bearing_confirmed)
         wind_n, wind_e = float(x[state.WIND][0]), float(x[state.WIND][1])
         pull = horizontal_pull_n(values)
+        ring = (0.0, 0.0, 0.0)
         if pull < min_horizontal_pull_n(
             settings.pull_per_wind_n_s_per_m, dyn.initial.wind_std_mps, wind_n, wind_e
         ):
             drag = min_horizontal_pull_n(
                 settings.drag_per_wind_n_s_per_m, dyn.initial.wind_std_mps, wind_n, wind_e
             )
-            ring_nn, ring_ne, ring_ee = bearing_ambiguity(values[0], values[1], pull, drag)
-            published[0, 0] += ring_nn
-            published[0, 1] += ring_ne
-            published[1, 0] += ring_ne
-            published[1, 1] += ring_ee
+            ring = bearing_ambiguity(values[0], values[1], pull, drag)
+        for k, (i, j) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
+            entry = unmodelled[i][j] + excess[k] + 0.0
+            entry += {0: ring[0], 1: ring[1], 3: ring[2]}.get(k, 0.0)
+            published[i, j] += entry
+            if i != j:
+                published[j, i] += entry
     status, reason = assess(
         initialised_reason=None if bank is not None else est.initialising_reason,
         reset_reason=source.reset_reason,

@@ -34,13 +34,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
-from tether_companion.estimation.dynamic.bearing_ambiguity import bearing_ambiguity
 from tether_companion.estimation.dynamic.imu_batch import BatchStep
 from tether_companion.estimation.dynamic.mixture import (
     HOVER_UNKNOWNS,
@@ -55,12 +53,11 @@ from tether_companion.estimation.dynamic.observability import (
     decide,
     horizontal_pull_n,
     min_horizontal_pull_n,
-    unmodelled_position_rows,
 )
 from tether_companion.estimation.dynamic.output import Approximation, ExactValues
-from tether_companion.estimation.dynamic.position_information import (
-    height_excess,
-    reduce_added_rows,
+from tether_companion.estimation.dynamic.published_terms import (
+    StatusSettings,
+    added_position_terms,
 )
 
 FloatArray = NDArray[np.float64]
@@ -73,20 +70,6 @@ FINITE_BOUND = 1e150
 UNKNOWN_VARIANCE = 1e6
 """Variance reported for every component while there is no state [SI units^2]."""
 _HOVER_LIST = list(HOVER_UNKNOWNS)
-
-
-@dataclass(frozen=True, slots=True)
-class StatusSettings:
-    """The dynamic filter's settings the published estimate needs (SI units)."""
-
-    slack_tension_n: float
-    max_horizontal_std_m: float
-    winch_length_noise_std_m: float
-    pull_per_wind_n_s_per_m: float
-    wind_std_mps: float
-    drag_per_wind_n_s_per_m: float = 0.0
-    """The rotor drag per unit airspeed ``m mu`` [N s/m]: with it a tick the pull rule
-    withholds carries the bearing's ambiguity (:mod:`.bearing_ambiguity`); 0: it does not."""
 
 
 class TickSource:
@@ -242,34 +225,8 @@ class TickSource:
         if values is None:
             published[2, 2] += self.height_excess_m2
         else:
-            nn, ne, nd, ee, ed, dd = height_excess(
-                values[:3], self.height_excess_m2, self.winch_fused
-            )
+            nn, ne, nd, ee, ed, dd = self._added(values, tension)
             published[:3, :3] += ((nn, ne, nd), (ne, ee, ed), (nd, ed, dd))
-            published[:3, :3] += np.array(
-                reduce_added_rows(
-                    unmodelled_position_rows(
-                        values[0],
-                        values[1],
-                        values[2],
-                        tension,
-                        self.force_std_n,
-                        self.settings.winch_length_noise_std_m if self.winch_fused else 0.0,
-                    ),
-                    self.position_information,
-                )
-            )
-            if self.sag_m2:
-                sag_nn, sag_ne, sag_ee = _along_range(values[0], values[1], self.sag_m2)
-                published[0, 0] += sag_nn
-                published[0, 1] += sag_ne
-                published[1, 0] += sag_ne
-                published[1, 1] += sag_ee
-            ring_nn, ring_ne, ring_ee = self._ring(values)
-            published[0, 0] += ring_nn
-            published[0, 1] += ring_ne
-            published[1, 0] += ring_ne
-            published[1, 1] += ring_ee
         status = self._status
         reason = None
         if status is None:
@@ -328,22 +285,19 @@ class TickSource:
             ),
         )
 
-    def _ring(self, x: list[float]) -> tuple[float, float, float]:
-        """The bearing's ambiguity (nn, ne, ee) [m^2] at the state's values ``x`` when the
-        pull rule withholds the tick (:mod:`.bearing_ambiguity`), else zeros."""
-        settings = self.settings
-        drag_per_wind = settings.drag_per_wind_n_s_per_m
-        if not drag_per_wind > 0.0:
-            return 0.0, 0.0, 0.0
-        pull = horizontal_pull_n(x)
-        wind_n, wind_e = x[state.WIND.start], x[state.WIND.start + 1]
-        min_pull = min_horizontal_pull_n(
-            settings.pull_per_wind_n_s_per_m, settings.wind_std_mps, wind_n, wind_e
+    def _added(self, x: list[float], tension_n: float) -> tuple[float, ...]:
+        """What the published position covariance adds at the state's values ``x`` and the
+        tension at the drone ``tension_n`` [N] (:func:`.published_terms.added_position_terms`)."""
+        return added_position_terms(
+            x,
+            tension_n,
+            self.settings,
+            self.force_std_n,
+            self.position_information,
+            self.height_excess_m2,
+            self.winch_fused,
+            self.sag_m2,
         )
-        if not pull < min_pull:
-            return 0.0, 0.0, 0.0
-        drag = min_horizontal_pull_n(drag_per_wind, settings.wind_std_mps, wind_n, wind_e)
-        return bearing_ambiguity(x[0], x[1], pull, drag)
 
     # ------------------------------------------------------------------ status
     def status(self) -> str:
@@ -482,39 +436,15 @@ class TickSource:
         # of the stepped state below row_sum max |x| + |(D_p, D_v)|
         largest = mixture.largest_sd * row_sum
         position_scale = mixture.largest_value * row_sum + offset
-        settings = self.settings
-        unmodelled = reduce_added_rows(
-            unmodelled_position_rows(
-                x[0],
-                x[1],
-                x[2],
-                tension,
-                self.force_std_n,
-                settings.winch_length_noise_std_m if self.winch_fused else 0.0,
-            ),
-            self.position_information,
-        )
-        excess_nn, excess_ne, _, excess_ee, _, excess = height_excess(
-            x[:3], self.height_excess_m2, self.winch_fused
-        )
-        north += unmodelled[0][0] + excess_nn
-        north_east += unmodelled[0][1] + excess_ne
-        east += unmodelled[1][1] + excess_ee
-        if self.sag_m2:
-            sag_nn, sag_ne, sag_ee = _along_range(x[0], x[1], self.sag_m2)
-            north += sag_nn
-            north_east += sag_ne
-            east += sag_ee
-        ring_nn, ring_ne, ring_ee = self._ring(x)
-        north += ring_nn
-        north_east += ring_ne
-        east += ring_ee
-        down += excess + unmodelled[2][2]
+        added_nn, added_ne, _, added_ee, _, added_dd = self._added(x, tension)
+        north += added_nn
+        north_east += added_ne
+        east += added_ee
+        down += added_dd
         self._spread = spread
         self._row_scale = largest
         scale = largest * largest + t * noise.largest
-        scale += unmodelled[0][0] + unmodelled[1][1] + unmodelled[2][2] + self.sag_m2
-        scale += excess_nn + excess_ee + excess + ring_nn + ring_ee
+        scale += added_nn + added_ee + added_dd
         # the tension's variance j^T (Phi P Phi^T + T Q) j, bounded the same way
         if jac is None:
             tension_bound = largest * largest + t * noise.largest
@@ -554,13 +484,3 @@ def _tension_and_jacobian(
             return tension, None
         return tension, jac
     return tension, None
-
-
-def _along_range(n: float, e: float, variance_m2: float) -> tuple[float, float, float]:
-    """``variance_m2`` [m^2] along the horizontal range direction of ``(n, e)`` [m] as the
-    (nn, ne, ee) entries it adds [m^2] (none right above the anchor)."""
-    span = math.hypot(n, e)
-    if span == 0.0:
-        return 0.0, 0.0, 0.0
-    h0, h1 = n / span, e / span
-    return variance_m2 * h0 * h0, variance_m2 * h0 * h1, variance_m2 * h1 * h1

@@ -125,6 +125,20 @@ class DynamicFilterConfig:
         doc="winch length's reading noise: a drum encoder's 1 cm steps and its report's age"
         " (0.1 s at the 0.3-0.5 m/s a constant-tension winch reels in a gusty hover) [m]",
     )
+    winch_latency_s: float = spec(
+        0.1,
+        minimum=0.0,
+        maximum=2.0,
+        doc="age of the winch's length when it arrives (the length is fused as the drone's"
+        " distance that long ago, p - latency v) [s]",
+    )
+    cable_angle_latency_s: float = spec(
+        0.05,
+        minimum=0.0,
+        maximum=2.0,
+        doc="age of the ground station's cable angle when it arrives (fused at the drone's"
+        " position that long ago, p - latency v) [s]",
+    )
     winch_length_offset_std_m: float = spec(
         0.1,
         minimum=0.0,

@@ -78,8 +78,10 @@ class GroundStationInputs:
         confirmed_pull_per_wind_n_s_per_m: float,
     ) -> None:
         self.load_cell = LoadCellAid(dynamic.load_cell_noise_std_n)
-        self.winch = WinchAid(dynamic.winch_length_noise_std_m, dynamic.slack_tension_n)
-        self.cable_angle = CableAngleAid(dynamic.slack_tension_n)
+        self.winch = WinchAid(
+            dynamic.winch_length_noise_std_m, dynamic.slack_tension_n, dynamic.winch_latency_s
+        )
+        self.cable_angle = CableAngleAid(dynamic.slack_tension_n, dynamic.cable_angle_latency_s)
         self.position_information = PositionInformation(dynamic.unmodelled_force_correlation_s)
         """What the fused cable angles tell about the position within the unmodelled force's
         correlation time (it narrows the unmodelled term of the published covariance)."""

@@ -25,6 +25,10 @@ row) and its azimuth innovation exceeds :data:`TURN_LIMIT_RAD`, the member's hor
 (:func:`turn_about_anchor`), the exact correction of a bearing, instead of a linearised
 update that moves the drone along the tangent off the circle; counted in
 :attr:`CableAngleAid.turns`.
+
+A reading is ``latency_s`` old when it arrives: fused at the drone's position then
+(:func:`~tether_companion.estimation.dynamic.aiding.at_reading_time`; 0.05 s at the
+take-off's 1.8 m/s descent is 0.09 m, against 0.01 m of noise at the anchor's 1 m).
 """
 
 from __future__ import annotations
@@ -36,7 +40,7 @@ from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.aid.slack import SLACK, surely_slack
-from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
+from tether_companion.estimation.dynamic.aiding import AidStatus, at_reading_time, fuse
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.dynamic.models import UNDEFINED, ModelConstants
@@ -74,8 +78,8 @@ def turn_about_anchor(member: MemberFilter, angle_rad: float) -> None:
 
 
 class CableAngleAid:
-    """Fuses (elevation, azimuth) [rad] unless the chord tension is surely below
-    ``slack_tension_n`` [N].
+    """Fuses (elevation, azimuth) [rad], each taken ``latency_s`` [s] before it arrives, unless
+    the chord tension is surely below ``slack_tension_n`` [N].
 
     Attributes
     ----------
@@ -89,9 +93,10 @@ class CableAngleAid:
     """The azimuth's noise is at most ``sigma / MIN_COS_ELEVATION`` (a cable within 3 degrees
     of the vertical)."""
 
-    def __init__(self, slack_tension_n: float) -> None:
+    def __init__(self, slack_tension_n: float, latency_s: float = 0.0) -> None:
         self.status = AidStatus()
         self.turns = 0
+        self._latency_s = latency_s
         self._slack_n = slack_tension_n
         self._floor_n = max(slack_tension_n, MIN_MODEL_TENSION_N)
 
@@ -119,7 +124,8 @@ class CableAngleAid:
 
         z = np.array((elevation_rad, azimuth_rad))
         r = np.diag([sd**2 for sd in self.noise_std_rad(elevation_rad, noise_std_rad)])
-        return fuse(bank, NAME, self.status, z, measure, r, time_s)
+        delayed = at_reading_time(measure, self._latency_s)
+        return fuse(bank, NAME, self.status, z, delayed, r, time_s)
 
     @classmethod
     def noise_std_rad(cls, elevation_rad: float, noise_std_rad: float) -> tuple[float, float]:

@@ -4,7 +4,9 @@ catenary's, ``|p|`` for a weightless cable). While the filter's tension is below
 farther from the anchor than that: the reading is skipped, unless the filter has the drone
 beyond it, when the distance ``|p|`` itself is fused to the length (the one statement that
 holds for any cable; the catenary's arc, longer than the chord at a deep sag, is not: fused
-there it published wrong positions on the sagging circle)."""
+there it published wrong positions on the sagging circle). The reading is ``latency_s`` old
+when it arrives: it is fused as the length at the drone's position then
+(:func:`~tether_companion.estimation.dynamic.aiding.at_reading_time`)."""
 
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.aid.slack import SLACK
-from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
+from tether_companion.estimation.dynamic.aiding import AidStatus, at_reading_time, fuse
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.models import ModelConstants, evaluate
 
@@ -25,12 +27,14 @@ NAME = "winch"
 class WinchAid:
     """Fuses a paid-out length [m] with noise ``noise_std_m`` [m] while the chord tension is
     above ``slack_tension_n`` [N], and below it as a bound on the distance the filter's drone
-    exceeds."""
+    exceeds; each reading taken ``latency_s`` [s] before it arrives."""
 
-    def __init__(self, noise_std_m: float, slack_tension_n: float) -> None:
+    def __init__(self, noise_std_m: float, slack_tension_n: float, latency_s: float = 0.0) -> None:
         self.status = AidStatus()
         self._r = np.array([[noise_std_m**2]])
         self._slack_n = slack_tension_n
+        self._latency_s = latency_s
+        self._chord = at_reading_time(_chord, latency_s)
 
     def fuse(
         self, bank: FilterBank, constants: ModelConstants, length_m: float, time_s: float
@@ -39,17 +43,18 @@ class WinchAid:
         best = bank.best
         z = np.array((length_m,))
         if best.x[state.TENSION] < self._slack_n:
-            if not float(np.linalg.norm(best.x[state.POSITION])) > length_m:
+            if not float(self._chord(best.x)[0][0]) > length_m:
                 self.status.skip(SLACK)
                 return False
-            return fuse(bank, NAME, self.status, z, _chord, self._r, time_s)
+            return fuse(bank, NAME, self.status, z, self._chord, self._r, time_s)
         c = constants.values()
         model = constants.models.winch_length
 
         def measure(xs: FloatArray) -> tuple[FloatArray, FloatArray]:
             return evaluate(model, xs, (), c, 1)
 
-        return fuse(bank, NAME, self.status, z, measure, self._r, time_s)
+        delayed = at_reading_time(measure, self._latency_s)
+        return fuse(bank, NAME, self.status, z, delayed, self._r, time_s)
 
 
 def _chord(xs: FloatArray) -> tuple[FloatArray, FloatArray]:

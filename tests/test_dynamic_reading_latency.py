@@ -85,6 +85,17 @@ def test_a_winch_length_taken_a_latency_ago_is_no_surprise(latency_s: float) -> 
     assert innovation == pytest.approx(expected, abs=0.01)
 
 
+def test_a_reading_stamped_before_the_filters_time_is_measured_at_its_stamp() -> None:
+    """A sensor that stamps when it measures (latency 0): a length stamped 0.2 s before the
+    filter's time is the drone's distance then (the service maps the stamp to the FC's time;
+    the filter fuses it at its own)."""
+    est, p, v, t = _moving_out(0.0)
+    est.set_paid_out_length_m(float(np.linalg.norm(p - 0.2 * v)), t - 0.2)
+    assert float(est.ground_station.winch.status.last_innovation[0]) == pytest.approx(
+        0.0, abs=0.01
+    )
+
+
 @pytest.mark.parametrize("latency_s", [LATENCY_S, 0.0])
 def test_a_cable_angle_taken_a_latency_ago_is_no_surprise(latency_s: float) -> None:
     """The same for the cable angle, on a drone moving across the cable at 2 m/s."""

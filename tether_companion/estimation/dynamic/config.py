@@ -129,15 +129,15 @@ class DynamicFilterConfig:
         0.1,
         minimum=0.0,
         maximum=2.0,
-        doc="age of the winch's length when it arrives (the length is fused as the drone's"
-        " distance that long ago, p - latency v) [s]",
+        doc="age of the winch's length at its time stamp (fused as the drone's distance that"
+        " long before the stamp, p - latency v; 0 for a sensor that stamps when it measures) [s]",
     )
     cable_angle_latency_s: float = spec(
         0.05,
         minimum=0.0,
         maximum=2.0,
-        doc="age of the ground station's cable angle when it arrives (fused at the drone's"
-        " position that long ago, p - latency v) [s]",
+        doc="age of the ground station's cable angle at its time stamp (fused at the drone's"
+        " position that long before the stamp; 0 for a sensor that stamps when it measures) [s]",
     )
     winch_length_offset_std_m: float = spec(
         0.1,

@@ -222,7 +222,9 @@ class DynamicTetherEstimator(InputFeed):
         self.constants.length_m = length_m
         if self._stepped_to(time_s):
             assert self.bank is not None
-            self.ground_station.fuse_length(self.bank, self.constants, length_m, self._time_s)
+            self.ground_station.fuse_length(
+                self.bank, self.constants, length_m, self._time_s, self._time_s - time_s
+            )
 
     def on_cable_angle(
         self,
@@ -248,6 +250,7 @@ class DynamicTetherEstimator(InputFeed):
                 self._time_s,
                 noise_std_rad,
                 calibration_std_rad,
+                self._time_s - time_s,
             )
 
     def set_autopilot_landed(self, landed: bool, time_s: float) -> None:

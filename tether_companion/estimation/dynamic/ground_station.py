@@ -151,10 +151,16 @@ class GroundStationInputs:
             self._health.load_cell_fused += 1
 
     def fuse_length(
-        self, bank: FilterBank, constants: ModelConstants, length_m: float, time_s: float
+        self,
+        bank: FilterBank,
+        constants: ModelConstants,
+        length_m: float,
+        time_s: float,
+        age_s: float = 0.0,
     ) -> None:
-        """Fuse a winch paid-out length [m] at filter time ``time_s`` [s]."""
-        if self.winch.fuse(bank, constants, length_m, time_s):
+        """Fuse a winch paid-out length [m] at filter time ``time_s`` [s], stamped ``age_s``
+        [s] before it."""
+        if self.winch.fuse(bank, constants, length_m, time_s, age_s):
             self._health.winch_fused += 1
             offset_std_m, scale_std = self._winch_calibration_m
             self.position_information.set_winch_calibration(
@@ -176,15 +182,17 @@ class GroundStationInputs:
         time_s: float,
         noise_std_rad: float,
         calibration_std_rad: tuple[float, float] = (0.0, 0.0),
+        age_s: float = 0.0,
     ) -> None:
         """Fuse a cable angle at the anchor (elevation up, azimuth from north [rad], the
         sensor's direction noise ``noise_std_rad`` [rad], its calibration errors
-        ``calibration_std_rad`` (elevation, azimuth) [rad]) at filter time ``time_s`` [s]; its
-        innovation, and once fused its information, calibration and bearing, are recorded."""
+        ``calibration_std_rad`` (elevation, azimuth) [rad]) at filter time ``time_s`` [s],
+        stamped ``age_s`` [s] before it; its innovation, and once fused its information,
+        calibration and bearing, are recorded."""
         status = self.cable_angle.status
         gated_before = status.gated
         fused = self.cable_angle.fuse(
-            bank, constants, elevation_rad, azimuth_rad, time_s, noise_std_rad
+            bank, constants, elevation_rad, azimuth_rad, time_s, noise_std_rad, age_s
         )
         if fused or status.gated != gated_before:  # an innovation of this reading
             self.position_information.add_angle_innovation(

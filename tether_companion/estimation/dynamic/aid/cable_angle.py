@@ -26,7 +26,8 @@ row) and its azimuth innovation exceeds :data:`TURN_LIMIT_RAD`, the member's hor
 update that moves the drone along the tangent off the circle; counted in
 :attr:`CableAngleAid.turns`.
 
-A reading is ``latency_s`` old when it arrives: fused at the drone's position then
+A reading was taken ``latency_s`` before its time stamp (and the stamp may be older than the
+filter's time): fused at the drone's position then
 (:func:`~tether_companion.estimation.dynamic.aiding.at_reading_time`; 0.05 s at the
 take-off's 1.8 m/s descent is 0.09 m, against 0.01 m of noise at the anchor's 1 m).
 """
@@ -78,7 +79,7 @@ def turn_about_anchor(member: MemberFilter, angle_rad: float) -> None:
 
 
 class CableAngleAid:
-    """Fuses (elevation, azimuth) [rad], each taken ``latency_s`` [s] before it arrives, unless
+    """Fuses (elevation, azimuth) [rad], each taken ``latency_s`` [s] before its stamp, unless
     the chord tension is surely below ``slack_tension_n`` [N].
 
     Attributes
@@ -108,8 +109,11 @@ class CableAngleAid:
         azimuth_rad: float,
         time_s: float,
         noise_std_rad: float,
+        age_s: float = 0.0,
     ) -> bool:
-        """Fuse one reading [rad] of direction noise ``noise_std_rad`` [rad]."""
+        """Fuse one reading [rad] of direction noise ``noise_std_rad`` [rad] at filter time
+        ``time_s`` [s], stamped ``age_s`` [s] before it (so taken ``latency_s + age_s``
+        before)."""
         if surely_slack(bank.best, self._slack_n):
             self.status.skip(SLACK)
             return False
@@ -124,7 +128,7 @@ class CableAngleAid:
 
         z = np.array((elevation_rad, azimuth_rad))
         r = np.diag([sd**2 for sd in self.noise_std_rad(elevation_rad, noise_std_rad)])
-        delayed = at_reading_time(measure, self._latency_s)
+        delayed = at_reading_time(measure, self._latency_s + age_s)
         return fuse(bank, NAME, self.status, z, delayed, r, time_s)
 
     @classmethod

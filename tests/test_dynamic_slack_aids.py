@@ -28,9 +28,14 @@ SURELY_SLACK = (0.05, 0.02)
 
 def _started() -> tuple[DynamicTetherEstimator, np.ndarray, float]:
     """An estimator after 3 s of the paper circle (straight cable), its best member's position
-    [m] (the reference the tests' readings are made from) and the time [s]."""
+    [m] (the reference the tests' readings are made from) and the time [s]; the ground
+    station's readings are taken when stamped (latency 0: the tests' readings are of the
+    position at their stamp)."""
     scenario = dataclasses.replace(load_scenario("paper-circle"), duration_s=3.0, seed=2)
-    run = run_dynamic(scenario, EstimatorConfig(), DynamicFilterConfig())
+    dynamic = dataclasses.replace(
+        DynamicFilterConfig(), winch_latency_s=0.0, cable_angle_latency_s=0.0
+    )
+    run = run_dynamic(scenario, EstimatorConfig(), dynamic)
     assert run.estimator.initialised
     est = run.estimator
     return est, est.bank.best.x[state.POSITION].copy(), float(run.time_s[-1])

@@ -352,26 +352,49 @@ IMU_ONLY_XFAIL = pytest.mark.xfail(
 )
 
 
+REALISTIC_WINCH_XFAIL = pytest.mark.xfail(
+    strict=True,
+    reason="the winch alone with the realistic encoder (1 % scale, 0.1 m offset per flight, "
+    "0.1 s late, 1 cm steps): seed 1 holds within 0.33 m (docs/estimation.md, 'The ground "
+    "station's real errors in the closed loop (groundsim10)')",
+)
+REALISTIC_ANGLE_XFAIL = pytest.mark.xfail(
+    strict=True,
+    reason="the angle alone with the realistic sensor (1.5 deg azimuth and 0.4 deg elevation "
+    "biases per flight, 0.05 s late, 12-bit): beyond 0.3 m on seeds 1-5 (docs/estimation.md, "
+    "'The ground station's real errors in the closed loop (groundsim10)')",
+)
+
+
 @pytest.mark.slow
 @pytest.mark.integration
 @pytest.mark.parametrize(
-    ("winch", "cable_angle"),
+    ("winch", "cable_angle", "ground_station"),
     [
-        pytest.param(False, False, marks=IMU_ONLY_XFAIL, id="imu-only"),
-        pytest.param(True, False, id="winch"),
-        pytest.param(False, True, id="cable-angle"),
-        pytest.param(True, True, id="winch-cable-angle"),
+        pytest.param(False, False, False, marks=IMU_ONLY_XFAIL, id="imu-only"),
+        pytest.param(True, False, False, id="winch"),
+        pytest.param(False, True, False, id="cable-angle"),
+        pytest.param(True, True, False, id="winch-cable-angle"),
+        pytest.param(True, False, True, marks=REALISTIC_WINCH_XFAIL, id="winch-realistic"),
+        pytest.param(False, True, True, marks=REALISTIC_ANGLE_XFAIL, id="cable-angle-realistic"),
+        pytest.param(True, True, True, id="winch-cable-angle-realistic"),
     ],
 )
 def test_closed_loop_gusty_hover_on_the_dynamic_filter_holds_within_0_3_m(
-    tmp_path, winch: bool, cable_angle: bool
+    tmp_path, winch: bool, cable_angle: bool, ground_station: bool
 ) -> None:
     """Issue 10: the emulator's navigation flying on the published estimate holds a 60 s
     gusty hover within 0.3 m, 5 seeds, in lock-step (deterministic; real MAVLink frames):
     with the ground station's winch length, its cable angle, or both (met), IMU-only (not
     met: strict xfail). The angle alone is close to the bound: 0.22-0.27 m here, and on the
-    held-out seeds 6-10 0.24-0.38 m (7, 8 and 10 beyond 0.3 m; docs/estimation.md)."""
-    results = {seed: _closed_loop_hover(tmp_path, seed, winch, cable_angle) for seed in range(1, 6)}
+    held-out seeds 6-10 0.24-0.38 m (7, 8 and 10 beyond 0.3 m; docs/estimation.md). With
+    the ground station's realistic errors (``ground_station``: the offline simulator's
+    calibration, latency and steps) the winch and the angle together still hold it (0.11-0.27
+    m); either alone does not on every seed (strict xfails)."""
+    results = {
+        seed: _closed_loop_hover(tmp_path, seed, winch, cable_angle, ground_station)
+        for seed in range(1, 6)
+    }
     for seed, result in results.items():
         print(f"seed {seed}: {result}")  # the numbers the docs quote (pytest -s)
     for seed, result in results.items():

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 import pytest
+from level_ticks import level_ticks
 
 from tether_companion.bench.estimators.flight import fly
 from tether_companion.bench.estimators.registry import kinds
@@ -23,7 +24,6 @@ from tether_companion.estimation.dynamic.on_ground import (
     on_ground_reason,
 )
 from tether_companion.estimation.dynamic.output import ON_GROUND, NavigationEstimate
-from tether_companion.samples import AttitudeSample, ImuSample, PwmSample
 from tether_companion.sim.scenario import load_scenario
 
 
@@ -45,14 +45,7 @@ def _ticks_at_height(
         x[2] = -height_m  # the ground is at the anchor's level: down = -height
         x[3:6] = 0.0
         member.x = x
-    estimate = None
-    for k in range(1, n + 1):
-        tk = t + 0.005 * k
-        est.on_attitude(AttitudeSample(tk, 0.0, 0.0, 0.0))
-        est.on_pwm(PwmSample(tk, np.full(4, 1700.0)))
-        estimate = est.on_imu(ImuSample(tk, np.array([0.0, 0.0, -9.80665]), np.zeros(3)))
-    assert estimate is not None
-    return estimate
+    return level_ticks(est, t, n)
 
 
 def test_touching_down_withholds_the_position_and_says_why() -> None:

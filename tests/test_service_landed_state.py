@@ -10,6 +10,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from level_ticks import level_ticks
 from lockstep_service import LockstepService
 
 from tether_companion.emulator.lockstep import build_controller
@@ -24,7 +25,6 @@ from tether_companion.estimation.dynamic.output import ON_GROUND
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
 from tether_companion.mavlink.signing import SignatureVerifier, Signer
 from tether_companion.mavlink.trust import REQUIRED, LinkTrust
-from tether_companion.samples import AttitudeSample, ImuSample, PwmSample
 from tether_companion.service.config import load_service_config
 from tether_companion.service.ingest import LANDED, Ingest, LandedState
 from tether_companion.service.streams import StreamRequests
@@ -121,23 +121,12 @@ def _airborne_estimator():
     return run.estimator, float(run.time_s[-1])
 
 
-def _level_ticks(est, t: float, n: int = 10):
-    estimate = None
-    for k in range(1, n + 1):
-        tk = t + 0.005 * k
-        est.on_attitude(AttitudeSample(tk, 0.0, 0.0, 0.0))
-        est.on_pwm(PwmSample(tk, np.full(4, 1700.0)))
-        estimate = est.on_imu(ImuSample(tk, np.array([0.0, 0.0, -9.80665]), np.zeros(3)))
-    assert estimate is not None
-    return estimate
-
-
 def test_on_ground_from_the_autopilot_withholds_and_says_why() -> None:
     est, t = _airborne_estimator()
-    assert _level_ticks(est, t).status != ON_GROUND  # its own signs: airborne
+    assert level_ticks(est, t).status != ON_GROUND  # its own signs: airborne
     fused = est.health.accel_fused
     est.set_autopilot_landed(True, t)
-    estimate = _level_ticks(est, t + 0.05)
+    estimate = level_ticks(est, t + 0.05)
     assert estimate.status == ON_GROUND and estimate.reason == AUTOPILOT_LANDED
     assert not estimate.observable and np.all(np.isfinite(estimate.position_ned_m))
     assert est.health.accel_fused == fused  # the force balance is not fused on the ground
@@ -147,9 +136,9 @@ def test_on_ground_from_the_autopilot_withholds_and_says_why() -> None:
 def test_in_the_air_taking_off_landing_or_a_stale_report_is_no_sign() -> None:
     est, t = _airborne_estimator()
     est.set_autopilot_landed(False, t)  # IN_AIR, TAKEOFF, LANDING, UNDEFINED
-    assert _level_ticks(est, t).status != ON_GROUND
+    assert level_ticks(est, t).status != ON_GROUND
     est.set_autopilot_landed(True, t - AUTOPILOT_LANDED_TIMEOUT_S - 0.1)  # too old
-    assert _level_ticks(est, t + 0.05).status != ON_GROUND
+    assert level_ticks(est, t + 0.05).status != ON_GROUND
 
 
 def test_the_emulator_sends_it_and_the_session_hands_it_to_the_filter() -> None:

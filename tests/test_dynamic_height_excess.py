@@ -9,20 +9,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from status_settings import NO_DRAG_RULE as SETTINGS
 
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.mixture import MixtureValues, ProcessNoise
 from tether_companion.estimation.dynamic.models import ModelConstants
 from tether_companion.estimation.dynamic.position_information import height_excess
-from tether_companion.estimation.dynamic.published import StatusSettings, TickSource
+from tether_companion.estimation.dynamic.published import TickSource
 
-SETTINGS = StatusSettings(
-    slack_tension_n=0.2,
-    max_horizontal_std_m=0.5,
-    winch_length_noise_std_m=0.05,
-    pull_per_wind_n_s_per_m=0.0,
-    wind_std_mps=1.0,
-)
 POSITION = (1.75, 0.0, -1.25)
 """The 0.5 N circle's estimate at 11.5 s (tuning seed 2): the truth was (2.5, 0, -1.77), on
 the same line from the anchor (the cable angle's elevation held it; the height did not)."""

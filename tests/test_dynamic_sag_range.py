@@ -7,12 +7,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from status_settings import NO_DRAG_RULE as SETTINGS
 
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.mixture import MixtureValues, ProcessNoise
 from tether_companion.estimation.dynamic.models import CATENARY, ModelConstants, rests_on_ground
 from tether_companion.estimation.dynamic.observability import OK
-from tether_companion.estimation.dynamic.published import StatusSettings, TickSource
+from tether_companion.estimation.dynamic.published import TickSource
 from tether_companion.estimation.dynamic.sag_range import (
     arc_length_m,
     mixture_sag,
@@ -23,13 +24,6 @@ WEIGHT_N_PER_M = 0.0167 * 9.81
 """ArduPilot's SIM_TETH_DENSITY default's weight [N/m] (realistic-sagging-hover)."""
 LENGTH_M = 7.0
 HEIGHT_M = 3.0
-SETTINGS = StatusSettings(
-    slack_tension_n=0.2,
-    max_horizontal_std_m=0.5,
-    winch_length_noise_std_m=0.05,
-    pull_per_wind_n_s_per_m=0.0,
-    wind_std_mps=1.0,
-)
 
 
 def _chord_tension(span_m: float, horizontal_n: float) -> float:

@@ -1,6 +1,6 @@
 """The bank's bearing hypotheses: members started at the bearings the wind's drag could give
 the first second's pull, kept while the data cannot tell them apart, and the pull rule relaxed
-only once the data left one (docs/estimation.md, "The bearing hypotheses (bearing10)")."""
+only once the data left one (docs/estimation-history.md, "The bearing hypotheses (bearing10)")."""
 
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 cable) must not lock out the angle that would correct it, a drone the filter has beyond the
 paid-out line is pulled in whatever the tension, a surely slack cable skips both, and a bearing
 far off is turned, not linearised (aid/slack.py, aid/winch.py, aid/cable_angle.py; the lock-out
-was found on ArduPilot SITL, docs/estimation.md "The aids' slack lock-out")."""
+was found on ArduPilot SITL, docs/estimation-history.md "The aids' slack lock-out")."""
 
 from __future__ import annotations
 

@@ -1,8 +1,8 @@
 """The touchdown: near the ground the dynamic filter withholds its position (status
 ``on_ground``, the height in the reason), because the ground's contact force is no part of its
-model and the rangefinder is below its minimum range (docs/estimation.md, "The touchdown
-(split10)"). Without the rule the take-off's landing published 0.2-0.5 s of ticks whose down
-error grew to 0.3-0.6 m at a claimed 0.11-0.14 m."""
+model and the rangefinder is below its minimum range (docs/estimation-history.md, "The
+touchdown (split10)"). Without the rule the take-off's landing published 0.2-0.5 s of ticks
+whose down error grew to 0.3-0.6 m at a claimed 0.11-0.14 m."""
 
 from __future__ import annotations
 

@@ -355,13 +355,14 @@ IMU_ONLY_XFAIL = pytest.mark.xfail(
 REALISTIC_WINCH_XFAIL = pytest.mark.xfail(
     strict=True,
     reason="the winch alone with the realistic encoder (1 % scale, 0.1 m offset per flight, "
-    "0.1 s late, 1 cm steps): seed 1 holds within 0.33 m (docs/estimation.md, 'groundsim10')",
+    "0.1 s late, 1 cm steps): seed 1 holds within 0.33 m "
+    "(docs/estimation-history.md, 'groundsim10')",
 )
 REALISTIC_ANGLE_XFAIL = pytest.mark.xfail(
     strict=True,
     reason="the angle alone with the realistic sensor (1.5 deg azimuth and 0.4 deg elevation "
     "biases per flight, 0.05 s late, 12-bit): seeds 3 and 5 hold within 0.35 and 0.32 m "
-    "(docs/estimation.md, 'groundsim10')",
+    "(docs/estimation-history.md, 'groundsim10')",
 )
 
 

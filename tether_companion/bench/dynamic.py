@@ -183,7 +183,7 @@ def run_errors(args: argparse.Namespace) -> int:
 
 FORMER_LABEL = "every tick, 30 s bank"
 """The dynamic filter's settings before ``imu_ticks_per_fusion`` 4 and the 6 s bank became its
-defaults (2-3x dearer: docs/estimation.md, "Cost per IMU tick")."""
+defaults (2-3x dearer: docs/estimation-history.md, "Cost per IMU tick")."""
 
 
 def former_settings() -> DynamicFilterConfig:

@@ -27,7 +27,7 @@ cheaper operations:
 
 Numbers: the generic EKF spent most of a member's tick in numpy calls on 13x13 arrays
 (Joseph form: four 13x13 products; LAPACK Cholesky of S and of P twice); see
-docs/estimation.md ("Cost per IMU tick") for the measured costs. The results equal the
+docs/estimation-history.md ("Cost per IMU tick") for the measured costs. The results equal the
 generic EKF's to rounding (tests: 1e-9).
 
 Straight-line scalar Python for the same algebra (generated with the Jacobians' sparsity, as

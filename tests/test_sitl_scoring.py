@@ -15,7 +15,9 @@ from tether_companion.ardupilot_sitl.scoring import (
 )
 
 
-def _sample(t: float, truth, ekf3=None, ours=None, ratio=0.1, flags=EKF_FLAG_POS_HORIZ_ABS):
+def _sample(
+    t: float, truth, ekf3=None, ours=None, ratio=0.1, flags=EKF_FLAG_POS_HORIZ_ABS, age=0.02
+):
     truth = np.asarray(truth, dtype=float)
     return Sample(
         wall_s=t,
@@ -23,6 +25,7 @@ def _sample(t: float, truth, ekf3=None, ours=None, ratio=0.1, flags=EKF_FLAG_POS
         truth_ned_m=truth,
         fc_ned_m=truth if ekf3 is None else np.asarray(ekf3, dtype=float),
         vision_ned_m=np.full(3, np.nan) if ours is None else np.asarray(ours, dtype=float),
+        vision_age_s=math.nan if ours is None else age,
         ekf_pos_ratio=ratio,
         ekf_flags=flags,
         mode=4,
@@ -53,6 +56,20 @@ def test_score_phase_without_our_estimate_is_nan_not_zero() -> None:
     assert math.isnan(score.ours_error_rms_m) and score.truth_to_target_max_m == 0.0
     empty = score_phase("none", [], lambda _t, p: p)
     assert empty.samples == 0 and math.isnan(empty.truth_to_target_max_m)
+
+
+def test_a_stale_estimate_is_counted_not_scored() -> None:
+    """While the service withholds, the autopilot's last VISION_POSITION_ESTIMATE stands still
+    and the drone flies on: that is no error of an estimate of now."""
+    samples = [
+        _sample(0.0, [6.0, 0.0, -4.0], ours=[6.1, 0.0, -4.0]),
+        _sample(1.0, [6.0, 1.0, -4.0], ours=[6.1, 0.0, -4.0], age=1.0),
+    ]
+    score = score_phase("circle", samples, lambda _t, p: p)
+    assert math.isclose(score.ours_error_max_m, 0.1)
+    assert score.ours_stale_samples == 1
+    fresh = score_phase("circle", samples[:1], lambda _t, p: p)
+    assert fresh.ours_stale_samples == 0
 
 
 def test_settle_time_is_the_last_excursion_after_the_switch() -> None:

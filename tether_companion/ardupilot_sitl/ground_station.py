@@ -78,6 +78,9 @@ class Sample:
     """The autopilot's own LOCAL_POSITION_NED (EKF3) last received."""
     vision_ned_m: np.ndarray
     """The companion's last VISION_POSITION_ESTIMATE (nan before the first)."""
+    vision_age_s: float
+    """Autopilot seconds since that estimate arrived (nan before the first): while the service
+    withholds, the last one grows stale and is no estimate of now."""
     ekf_pos_ratio: float
     """EKF_STATUS_REPORT.pos_horiz_variance: EKF3's horizontal position innovation test ratio."""
     ekf_flags: int
@@ -105,6 +108,8 @@ class Telemetry:
     """VISION_POSITION_ESTIMATEs from our companion (system 1, component 191) routed to us."""
     vision_ned_m: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     """The companion's last VISION_POSITION_ESTIMATE position (NED from the anchor) [m]."""
+    vision_fc_s: float = math.nan
+    """The autopilot time when that estimate arrived [s]."""
     companion_texts: list[tuple[float, str]] = field(default_factory=list)
     origin: object | None = None
     """The autopilot's GPS_GLOBAL_ORIGIN, once received."""
@@ -256,6 +261,7 @@ class GroundStation:
                     if kind == "VISION_POSITION_ESTIMATE":
                         tel.forwarded_vision += 1
                         tel.vision_ned_m = np.array([msg.x, msg.y, msg.z])
+                        tel.vision_fc_s = tel.fc_s
                     elif kind == "STATUSTEXT":
                         tel.companion_texts.append((tel.fc_s, msg.text))
                     elif kind == "COMMAND_ACK":
@@ -300,6 +306,7 @@ class GroundStation:
                     truth_ned_m=truth,
                     fc_ned_m=tel.fc_ned_m.copy(),
                     vision_ned_m=tel.vision_ned_m.copy(),
+                    vision_age_s=tel.fc_s - tel.vision_fc_s,
                     ekf_pos_ratio=float(tel.ekf.pos_horiz_variance) if tel.ekf else math.nan,
                     ekf_flags=int(tel.ekf.flags) if tel.ekf else 0,
                     mode=int(hb.custom_mode) if hb else -1,

@@ -14,10 +14,14 @@ from tether_companion.ardupilot_sitl.ground_station import EKF_FLAG_POS_HORIZ_AB
 
 TRACE_COLUMNS = (
     "fc_s", "truth_n", "truth_e", "truth_d", "ekf3_n", "ekf3_e", "ekf3_d",
-    "ours_n", "ours_e", "ours_d", "test_ratio", "mode", "yaw_error_rad",
+    "ours_n", "ours_e", "ours_d", "test_ratio", "mode", "yaw_error_rad", "ours_age_s",
 )  # fmt: skip
 SETTLE_BAND_M = 0.3
 """Horizontal distance from the target inside which the hold counts as settled [m]."""
+FRESH_ESTIMATE_S = 0.3
+"""Our estimate is scored against the truth only while the last VISION_POSITION_ESTIMATE is at
+most this old (autopilot time; the service sends at 30 Hz while it publishes): a withheld
+stretch leaves the last one standing, and the drone flies on from it [s]."""
 
 
 @dataclass
@@ -38,6 +42,9 @@ class PhaseScore:
     test_ratio_max: float
     position_lost_samples: int
     """Samples whose EKF_STATUS_REPORT lacked 'horizontal absolute position OK'."""
+    ours_stale_samples: int = 0
+    """Samples with no estimate of ours at most FRESH_ESTIMATE_S old (withheld, or none yet):
+    left out of the ``ours_*`` errors."""
     yaw_error_max_deg: float = math.nan
     """Largest |ATTITUDE yaw - SIM_STATE yaw| [deg]: the heading our estimate is rotated by."""
 
@@ -85,12 +92,13 @@ def score_phase(
     goal = np.array([target(s.fc_s, s.truth_ned_m) for s in samples])
     ekf3 = np.array([s.fc_ned_m for s in samples])
     ours = np.array([s.vision_ned_m for s in samples])
+    ages = np.array([s.vision_age_s for s in samples])
     ratio = np.array([s.ekf_pos_ratio for s in samples])
     to_target = _horizontal(truth - goal)
     ekf3_err = _horizontal(ekf3 - truth)
     ours_err = _horizontal(ours - truth)
     ours_3d = np.linalg.norm(ours - truth, axis=1)
-    finite = np.isfinite(ours_err)
+    finite = np.isfinite(ours_err) & (ages <= FRESH_ESTIMATE_S)
     return PhaseScore(
         name=name,
         duration_s=samples[-1].fc_s - samples[0].fc_s,
@@ -106,6 +114,7 @@ def score_phase(
         test_ratio_max=float(np.nanmax(ratio)) if np.isfinite(ratio).any() else math.nan,
         position_lost_samples=sum(not (s.ekf_flags & EKF_FLAG_POS_HORIZ_ABS) for s in samples),
         yaw_error_max_deg=_max_abs_deg([s.yaw_error_rad for s in samples]),
+        ours_stale_samples=int(np.count_nonzero(~finite)),
     )
 
 
@@ -126,6 +135,7 @@ def trace_of(samples: list[Sample]) -> np.ndarray:
             s.ekf_pos_ratio,
             s.mode,
             s.yaw_error_rad,
+            s.vision_age_s,
         ]
         for s in samples
     ]

@@ -112,7 +112,8 @@ def _print(result, speedup: float) -> None:  # noqa: ANN001 - FlightResult (lazy
     table = Table(title=f"{result.name}: SITL '+' quad, speedup {speedup:g}")
     for column in (
         "phase", "s", "truth-target rms/max [m]", "EKF3-truth rms/max [m]",
-        "ours-truth rms/max [m]", "ours 3-D rms [m]", "test ratio mean/max", "pos lost",
+        "ours-truth rms/max [m]", "ours 3-D rms [m]", "ours stale", "test ratio mean/max",
+        "pos lost",
         "yaw err max [deg]",
     ):  # fmt: skip
         table.add_column(column, justify="right" if column != "phase" else "left")
@@ -124,6 +125,7 @@ def _print(result, speedup: float) -> None:  # noqa: ANN001 - FlightResult (lazy
             f"{p.ekf3_error_rms_m:.3f} / {p.ekf3_error_max_m:.3f}",
             f"{p.ours_error_rms_m:.3f} / {p.ours_error_max_m:.3f}",
             f"{p.ours_error_3d_rms_m:.3f}",
+            f"{p.ours_stale_samples}/{p.samples}",
             f"{p.test_ratio_mean:.3f} / {p.test_ratio_max:.3f}",
             str(p.position_lost_samples),
             f"{p.yaw_error_max_deg:.1f}",

@@ -20,7 +20,7 @@ from tether_companion.ardupilot_sitl.companion import (
     companion_config,
 )
 from tether_companion.ardupilot_sitl.flights import GPS_LESS_PARAMS
-from tether_companion.ardupilot_sitl.ground_station import EKF_FLAG_POS_HORIZ_ABS, GroundStation
+from tether_companion.ardupilot_sitl.ground_station import GroundStation
 from tether_companion.ardupilot_sitl.process import (
     SitlFailed,
     SitlOptions,
@@ -29,6 +29,7 @@ from tether_companion.ardupilot_sitl.process import (
     find_sitl,
     ports_of,
 )
+from tether_companion.ardupilot_sitl.telemetry import EKF_FLAG_POS_HORIZ_ABS
 from tether_companion.mavlink.geo import Geodetic
 from tether_companion.physics.vehicle import load_vehicle
 from tether_companion.service.app import CompanionService

@@ -17,8 +17,8 @@ from tether_companion.ardupilot_sitl.ground_station import (
     GCS_SYSTEM,
     WINCH_COMPONENT,
     GroundStation,
-    Telemetry,
 )
+from tether_companion.ardupilot_sitl.telemetry import Telemetry
 from tether_companion.sim.ground_sensors import GroundSensorConfig, GroundSensors
 
 REALISTIC = GroundSensorConfig(enabled=True)

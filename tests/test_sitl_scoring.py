@@ -6,13 +6,13 @@ import math
 
 import numpy as np
 
-from tether_companion.ardupilot_sitl.ground_station import EKF_FLAG_POS_HORIZ_ABS, Sample
 from tether_companion.ardupilot_sitl.scoring import (
     TRACE_COLUMNS,
     score_phase,
     settle_time,
     trace_of,
 )
+from tether_companion.ardupilot_sitl.telemetry import EKF_FLAG_POS_HORIZ_ABS, Sample
 
 
 def _sample(

@@ -25,13 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from tether_companion.ardupilot_sitl.companion import CompanionProcess, companion_config
-from tether_companion.ardupilot_sitl.ground_station import (
-    COPTER_MODES,
-    EKF_FLAG_POS_HORIZ_ABS,
-    FlightError,
-    GroundStation,
-    Sample,
-)
+from tether_companion.ardupilot_sitl.ground_station import COPTER_MODES, FlightError, GroundStation
 from tether_companion.ardupilot_sitl.process import SitlOptions, SitlProcess
 from tether_companion.ardupilot_sitl.scoring import (
     FlightResult,
@@ -39,6 +33,7 @@ from tether_companion.ardupilot_sitl.scoring import (
     settle_time,
     trace_of,
 )
+from tether_companion.ardupilot_sitl.telemetry import EKF_FLAG_POS_HORIZ_ABS, Sample
 from tether_companion.mavlink.geo import Geodetic
 from tether_companion.sim.ground_sensors import GroundSensorConfig
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tether_companion.ardupilot_sitl.ground_station import EKF_FLAG_POS_HORIZ_ABS, Sample
+from tether_companion.ardupilot_sitl.telemetry import EKF_FLAG_POS_HORIZ_ABS, Sample
 
 TRACE_COLUMNS = (
     "fc_s", "truth_n", "truth_e", "truth_d", "ekf3_n", "ekf3_e", "ekf3_d",

@@ -30,6 +30,7 @@ from tether_companion.emulator.command_handlers import CommandHandlers
 from tether_companion.emulator.config import EmulatorConfig
 from tether_companion.emulator.faults import LinkFaultSettings
 from tether_companion.emulator.flight_modes import MODE_TICK_S, FlightModes
+from tether_companion.emulator.land_detector import LandDetector
 from tether_companion.emulator.message_handlers import MESSAGE_HANDLERS, MessageHandlers
 from tether_companion.emulator.modes import (
     CopterMode,
@@ -234,6 +235,7 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions, Fligh
         self._takeoff_target_d: float | None = None
         self._velocity_deadline_s = math.inf
         self._landed_since_s: float | None = None
+        self.land_detector = LandDetector()
         self._rtl_landing = False
         now = self.sim.time_s
         for link_id in self._schedules:

@@ -31,6 +31,7 @@ class FlightModes:
     """The flight controller's mode logic (mixed into ``FlightController``)."""
 
     def _mode_tick(self, now: float) -> None:
+        self.land_detector.update(now, self.armed, self.sim.landed)
         while self._reboot_times and self._reboot_times[0] <= now + 1e-9:
             self._reboot_times.pop(0)
             self.reboot()

@@ -114,8 +114,9 @@ def battery_status(fc: FlightController) -> MAVLinkMessage:
 
 
 def extended_sys_state(fc: FlightController) -> MAVLinkMessage:
-    """EXTENDED_SYS_STATE: landed state (on ground, taking off, in air, landing)."""
-    if fc.sim.landed:
+    """EXTENDED_SYS_STATE: landed state (on ground, taking off, in air, landing), in
+    ArduCopter's order (GCS_MAVLINK_Copter::landed_state): its land detector's verdict first."""
+    if fc.land_detector.complete:
         landed = dialect.MAV_LANDED_STATE_ON_GROUND
     elif fc.taking_off:
         landed = dialect.MAV_LANDED_STATE_TAKEOFF

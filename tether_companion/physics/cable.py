@@ -31,19 +31,21 @@ Models
     line of (b). A cable long enough to reach the ground lies on it from the anchor to a
     touchdown point and rises as a catenary whose lowest point is that touchdown point
     (Martins case 1 over the remaining span).
+(d) :class:`~tether_companion.physics.cable_winch.WinchCatenaryCable`: a real tethered drone's
+    ground station, a winch holding the tension at its outlet on a heavy cable hanging as a
+    catenary (or resting on the ground up to a touchdown point); it pays out what that takes
+    (:mod:`tether_companion.physics.cable_winch`).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol
-
-import numpy as np
-from numpy.typing import ArrayLike, NDArray
 
 from tether_companion.config import ConfigError, spec
 from tether_companion.constants import GRAVITY_MPS2
+from tether_companion.physics.cable_base import MIN_DISTANCE_M, CableBase, CableModel
+from tether_companion.physics.cable_winch import WinchCatenaryCable
 from tether_companion.physics.catenary import (
     CatenaryCurve,
     lowest_point_at_anchor,
@@ -53,13 +55,19 @@ from tether_companion.physics.catenary import (
 from tether_companion.physics.catenary_forces import end_tensions
 from tether_companion.physics.roots import bracketed_root
 
-FloatArray = NDArray[np.float64]
-
-CABLE_MODELS: tuple[str, ...] = ("constant_tension", "elastic", "catenary", "none")
-"""Values of ``cable.model`` in a scenario."""
-
-_MIN_DISTANCE_M = 1e-9
-"""Below this anchor-to-drone distance the cable direction is undefined: zero force."""
+CABLE_MODELS: tuple[str, ...] = (
+    "constant_tension",
+    "elastic",
+    "catenary",
+    "none",
+    "winch_catenary",
+)
+"""Values of ``cable.model`` in a scenario (the emulator's TETH_MODEL is the index)."""
+HEAVY_CABLE_MODELS: tuple[str, ...] = ("elastic", "catenary", "winch_catenary")
+"""The models with the cable's weight (``linear_density_kg_per_m``); the constant-tension line
+is the paper's weightless one whatever that key says."""
+TENSION_CONTROLLED_MODELS: tuple[str, ...] = ("constant_tension", "winch_catenary")
+"""The models whose winch holds a tension set-point (``tension_n``, ``set_tension`` events)."""
 
 
 @dataclass(frozen=True)
@@ -67,7 +75,11 @@ class CableConfig:
     """The ``cable`` section of a scenario (SI units)."""
 
     model: str = spec("constant_tension", choices=CABLE_MODELS, doc="cable model")
-    tension_n: float = spec(4.0, minimum=0.0, doc="winch tension set-point (constant_tension) [N]")
+    tension_n: float = spec(
+        4.0,
+        minimum=0.0,
+        doc="winch tension set-point (constant_tension; winch_catenary: at the anchor) [N]",
+    )
     length_m: float = spec(
         10.0, exclusive_minimum=0.0, doc="initial paid-out length (elastic, catenary) [m]"
     )
@@ -82,7 +94,7 @@ class CableConfig:
     )
     damping_n_s_per_m: float = spec(5.0, minimum=0.0, doc="axial damping of the taut line [N s/m]")
     linear_density_kg_per_m: float = spec(
-        0.0167, minimum=0.0, doc="cable mass per length (elastic, catenary) [kg/m]"
+        0.0167, minimum=0.0, doc="cable mass per length (elastic, catenary, winch_catenary) [kg/m]"
     )
     diameter_m: float = spec(
         0.0,
@@ -113,95 +125,7 @@ class CableConfig:
             )
 
 
-class CableModel(Protocol):
-    """What the simulator needs from a cable model (see the module docstring)."""
-
-    tension_n: float
-    paid_out_m: float
-    released: bool
-    history_free: bool
-    """Whether ``force_components`` gives the same floats for the same arguments whatever it
-    was asked before (the simulator then reuses an evaluation at the same state)."""
-
-    def force_components(
-        self, pn: float, pe: float, pd: float, vn: float, ve: float, vd: float
-    ) -> tuple[float, float, float]:
-        """Force on the drone (north, east, down) [N]; sets ``tension_n``."""
-
-    def force_on_drone_ned_n(
-        self, position_ned_m: ArrayLike, velocity_ned_m_s: ArrayLike
-    ) -> FloatArray:
-        """Force on the drone, shape (3,), NED [N]; sets ``tension_n``."""
-
-    def advance(self, dt_s: float) -> None:
-        """Advance the winch by ``dt_s`` seconds."""
-
-    def set_tension_n(self, tension_n: float) -> None:
-        """Set the winch's tension set-point [N]."""
-
-    def set_winch_rate_mps(self, rate_mps: float) -> None:
-        """Set the winch rate [m/s], positive paying out."""
-
-    def release(self) -> None:
-        """Let the cable go: zero force from now on."""
-
-
-class _CableBase:
-    """Shared state and the array wrapper around ``force_components``."""
-
-    history_free = True
-
-    def __init__(
-        self, paid_out_m: float, winch_rate_mps: float, min_length_m: float, spool_length_m: float
-    ) -> None:
-        self.tension_n = 0.0
-        self.paid_out_m = float(paid_out_m)
-        self.released = False
-        self.winch_rate_mps = float(winch_rate_mps)
-        self.min_length_m = float(min_length_m)
-        self.spool_length_m = float(spool_length_m)
-
-    def force_components(
-        self, pn: float, pe: float, pd: float, vn: float, ve: float, vd: float
-    ) -> tuple[float, float, float]:
-        raise NotImplementedError
-
-    def force_on_drone_ned_n(
-        self, position_ned_m: ArrayLike, velocity_ned_m_s: ArrayLike
-    ) -> FloatArray:
-        """Force on the drone (3,), NED [N], for its position (3,) [m] and velocity (3,) [m/s].
-
-        Sets ``tension_n`` to the tension at the drone end [N].
-        """
-        pn, pe, pd = (float(x) for x in np.asarray(position_ned_m, dtype=float).reshape(3))
-        vn, ve, vd = (float(x) for x in np.asarray(velocity_ned_m_s, dtype=float).reshape(3))
-        return np.array(self.force_components(pn, pe, pd, vn, ve, vd))
-
-    def advance(self, dt_s: float) -> None:
-        """Reel the winch at its rate for ``dt_s`` [s], within [min_length_m, spool_length_m]."""
-        if self.winch_rate_mps != 0.0 and not self.released:
-            length = self.paid_out_m + self.winch_rate_mps * dt_s
-            self.paid_out_m = min(max(length, self.min_length_m), self.spool_length_m)
-
-    def set_winch_rate_mps(self, rate_mps: float) -> None:
-        """Set the winch rate [m/s]: positive pays cable out, negative reels it in."""
-        if not math.isfinite(rate_mps):
-            raise ValueError(f"winch rate must be finite, got {rate_mps!r}")
-        self.winch_rate_mps = float(rate_mps)
-
-    def set_tension_n(self, tension_n: float) -> None:
-        raise ValueError(
-            f"{type(self).__name__} has no tension set-point (tension follows from length); "
-            "use set_winch_rate_mps"
-        )
-
-    def release(self) -> None:
-        """Let the cable go: the force is zero from now on."""
-        self.released = True
-        self.tension_n = 0.0
-
-
-class ConstantTensionCable(_CableBase):
+class ConstantTensionCable(CableBase):
     """The paper's constant-tension winch: ``F = -f_c p/|p|`` (eq. 21-22), zero when released.
 
     The winch pays out and reels in whatever is needed to keep the tension, so ``paid_out_m``
@@ -224,7 +148,7 @@ class ConstantTensionCable(_CableBase):
         """Force (north, east, down) [N] on the drone at position (pn, pe, pd) [m]."""
         distance = math.sqrt(pn * pn + pe * pe + pd * pd)
         self.paid_out_m = distance
-        if self.released or distance < _MIN_DISTANCE_M:
+        if self.released or distance < MIN_DISTANCE_M:
             self.tension_n = 0.0
             return 0.0, 0.0, 0.0
         self.tension_n = tension = self.set_point_n
@@ -232,7 +156,7 @@ class ConstantTensionCable(_CableBase):
         return scale * pn, scale * pe, scale * pd
 
 
-class ElasticCable(_CableBase):
+class ElasticCable(CableBase):
     """A straight elastic line of paid-out length ``L`` with a lifted-cable weight.
 
     With ``d = |p|`` and ``u = p/d`` (anchor to drone)::
@@ -280,7 +204,7 @@ class ElasticCable(_CableBase):
     ) -> tuple[float, float, float]:
         """Force (north, east, down) [N] at (pn, pe, pd) [m] moving at (vn, ve, vd) [m/s]."""
         distance = math.sqrt(pn * pn + pe * pe + pd * pd)
-        if self.released or distance < _MIN_DISTANCE_M:
+        if self.released or distance < MIN_DISTANCE_M:
             self.tension_n = 0.0
             return 0.0, 0.0, 0.0
         inv = 1.0 / distance
@@ -290,7 +214,7 @@ class ElasticCable(_CableBase):
         return scale * pn, scale * pe, scale * pd
 
 
-class CatenaryCable(_CableBase):
+class CatenaryCable(CableBase):
     """A heavy elastic cable hanging as a catenary (see the module docstring, model (c)).
 
     Quasi-static: the cable's shape follows the drone instantly. With horizontal distance
@@ -329,7 +253,7 @@ class CatenaryCable(_CableBase):
         self._grounded_value = (0.0, 0.0, 0.0)
 
     def advance(self, dt_s: float) -> None:
-        """Reel the winch (see :meth:`_CableBase.advance`); the line follows."""
+        """Reel the winch (see :meth:`CableBase.advance`); the line follows."""
         super().advance(dt_s)
         self.elastic.paid_out_m = self.paid_out_m
 
@@ -415,7 +339,7 @@ class CatenaryCable(_CableBase):
         horizontal = math.hypot(pn, pe)
         height = -pd
         chord = math.hypot(horizontal, height)
-        if self.released or chord < _MIN_DISTANCE_M:
+        if self.released or chord < MIN_DISTANCE_M:
             self.tension_n = 0.0
             return 0.0, 0.0, 0.0
         length = self.paid_out_m
@@ -451,7 +375,7 @@ class CatenaryCable(_CableBase):
         return fn, fe, fd
 
 
-class NoCable(_CableBase):
+class NoCable(CableBase):
     """No tether at all (free flight): zero force, zero tension."""
 
     def __init__(self) -> None:
@@ -471,6 +395,13 @@ def make_cable(config: CableConfig, gravity_mps2: float = GRAVITY_MPS2) -> Cable
         return ConstantTensionCable(config.tension_n, spool_length_m=config.spool_length_m)
     if config.model == "none":
         return NoCable()
+    if config.model == "winch_catenary":
+        return WinchCatenaryCable(
+            config.tension_n,
+            config.linear_density_kg_per_m,
+            gravity_mps2,
+            spool_length_m=config.spool_length_m,
+        )
     kwargs = {
         "winch_rate_mps": config.winch_rate_mps,
         "min_length_m": config.min_length_m,

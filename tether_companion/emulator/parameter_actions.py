@@ -14,7 +14,7 @@ from tether_companion.emulator.params import (
     NAV_SOURCE_GPS,
 )
 from tether_companion.mavlink.framing import dialect
-from tether_companion.physics.cable import CABLE_MODELS
+from tether_companion.physics.cable import CABLE_MODELS, TENSION_CONTROLLED_MODELS
 
 
 class ParameterActions:
@@ -36,8 +36,8 @@ class ParameterActions:
         elif name == "TETH_MODEL":
             self._rebuild_cable(model=CABLE_MODELS[int(value)])
         elif name == "TETH_TENSION":
-            if CABLE_MODELS.index("constant_tension") != self.params.value("TETH_MODEL"):
-                raise ValueError("TETH_MODEL is not constant_tension")
+            if CABLE_MODELS[int(self.params.value("TETH_MODEL"))] not in TENSION_CONTROLLED_MODELS:
+                raise ValueError(f"TETH_MODEL is not one of {TENSION_CONTROLLED_MODELS}")
             sim.set_tension_n(value)
         elif name == "TETH_LENGTH":
             sim.set_paid_out_m(value)

@@ -86,7 +86,11 @@ def parameter_definitions(scenario: Scenario, config: EmulatorConfig) -> list[Pa
             True,
         ),
         ParamDef(
-            "TETH_TENSION", cable.tension_n, 0.0, 100.0, "winch tension, constant_tension [N]"
+            "TETH_TENSION",
+            cable.tension_n,
+            0.0,
+            100.0,
+            "winch tension, constant_tension and winch_catenary (at the anchor) [N]",
         ),
         ParamDef(
             "TETH_LENGTH",

@@ -24,12 +24,11 @@ import numpy as np
 from tether_companion.config import spec
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.mavlink.framing import FrameEncoder, dialect
+from tether_companion.physics.cable import HEAVY_CABLE_MODELS
 from tether_companion.sim.ground_sensors import GroundSensors
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.simulator import Simulator
 
-HEAVY_CABLE_MODELS = ("elastic", "catenary")
-"""The simulator's cable models with weight (the constant-tension line is weightless)."""
 _KGF_N = GRAVITY_MPS2
 """WINCH_STATUS.tension is in kilogram-force: newtons per kgf."""
 _SEED_SALT = 9005

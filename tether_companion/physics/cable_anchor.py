@@ -9,8 +9,11 @@ the anchor, in the cases of that model: the free curve of the stretched length
 ends (Martins 2019 case 2: the cable pulls the anchor up by ``w s1``, horizontally by ``w a``,
 :func:`~tether_companion.physics.catenary_forces.end_tensions`), flat toward the drone where
 the cable rests on the ground (a touchdown point beyond the anchor, or a drone at or below
-the anchor's level with the line not stretched). Reads the cable's state, never changes it
-(the flight stays the same with or without the sensor).
+the anchor's level with the line not stretched). For
+:class:`~tether_companion.physics.cable_winch.WinchCatenaryCable` its free catenary's angle at
+the anchor (:func:`~tether_companion.physics.cable_winch.winch_catenary`), flat where it rests
+on the ground, along the chord with the drone at or below the anchor's level. Reads the
+cable's state, never changes it (the flight stays the same with or without the sensor).
 
 NED, anchor at the origin; unit vectors; pure.
 """
@@ -20,11 +23,10 @@ from __future__ import annotations
 import math
 
 from tether_companion.physics.cable import CableModel, CatenaryCable
+from tether_companion.physics.cable_base import MIN_DISTANCE_M
+from tether_companion.physics.cable_winch import WinchCatenaryCable, winch_catenary
 from tether_companion.physics.catenary import solve_known_length, solve_lowest_point_at_anchor
 from tether_companion.physics.catenary_forces import end_tensions
-
-_MIN_DISTANCE_M = 1e-9
-"""Closer to the anchor than this [m] the direction is undefined."""
 
 
 def anchor_direction_ned(
@@ -35,8 +37,14 @@ def anchor_direction_ned(
     pn, pe, pd = (float(v) for v in position_ned_m)
     horizontal = math.hypot(pn, pe)
     chord = math.hypot(horizontal, pd)
-    if cable.released or chord < _MIN_DISTANCE_M:
+    if cable.released or chord < MIN_DISTANCE_M:
         return None
+    if isinstance(cable, WinchCatenaryCable):
+        shape = winch_catenary(horizontal, -pd, cable.set_point_n, cable.weight_per_length_n_per_m)
+        along, up = math.cos(shape.anchor_elevation_rad), math.sin(shape.anchor_elevation_rad)
+        if horizontal <= 0.0:
+            return 0.0, 0.0, -up
+        return along * pn / horizontal, along * pe / horizontal, -up
     if not isinstance(cable, CatenaryCable):
         return pn / chord, pe / chord, pd / chord
     height = -pd

@@ -19,7 +19,9 @@ sensors"):
   unstretched length off the drum (the encoder counts the drum's turns: the cable's elastic
   stretch ``T L / EA`` is not in it; the constant-tension cable's ``paid_out_m`` is the
   anchor-to-drone distance, so it is stretched by ``cable_axial_stiffness_n``; the elastic and
-  catenary cables' ``paid_out_m`` is already unstretched, their stretch is in the physics),
+  catenary cables' ``paid_out_m`` is already unstretched, their stretch is in the physics;
+  the winch catenary's is the length its winch paid out, arc plus the part on the ground, of
+  an inextensible cable),
   ``scale`` ~ N(0, ``winch_scale_error_std``) (the drum's effective radius: cable layering,
   wear), ``offset`` ~ N(0, ``winch_zero_offset_std_m``) (where the count was zeroed);
 * the **cable angle** at ``angle_rate_hz``: the direction at the anchor of the state

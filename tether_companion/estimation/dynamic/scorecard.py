@@ -49,6 +49,7 @@ from tether_companion.estimation.dynamic.crlb_noise import (
 )
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.models import ModelConstants
+from tether_companion.physics.cable import HEAVY_CABLE_MODELS
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.cable_angle import CableAngleConfig
 
@@ -65,9 +66,6 @@ ANGLE_CALIBRATION = (
     ANGLE_CONFIG.azimuth_calibration_std_rad,
 )
 """The calibration errors it is told of, (elevation, azimuth) [rad]."""
-HEAVY_CABLE_MODELS = ("elastic", "catenary")
-"""The simulator's cable models that have weight (``physics/cable.py``); its constant-tension
-winch is the paper's weightless straight line whatever ``linear_density_kg_per_m`` says."""
 
 
 def simulated_cable_weight_n_per_m(context: FlightContext) -> float:

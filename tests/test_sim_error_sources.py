@@ -20,7 +20,7 @@ from tether_companion.physics.rigid_body import RigidBody
 from tether_companion.physics.vehicle import load_vehicle
 from tether_companion.sim.ground import Ground, GroundConfig
 from tether_companion.sim.propulsion import BatteryConfig, PropulsionConfig
-from tether_companion.sim.scenario import REALISTIC_SCENARIOS, load_scenario
+from tether_companion.sim.scenario import REALISTIC_SCENARIOS, WINCH_SAG_SCENARIOS, load_scenario
 from tether_companion.sim.sensors import SensorConfig, SensorSuite
 from tether_companion.sim.simulator import Simulator
 from tether_companion.sim.truth import FlightImpossibleError
@@ -236,13 +236,27 @@ def test_a_landed_start_sits_on_the_ground_below_the_anchor() -> None:
 
 
 def test_every_realistic_scenario_loads_with_every_error_source_on() -> None:
-    for name in REALISTIC_SCENARIOS:
+    for name in REALISTIC_SCENARIOS + WINCH_SAG_SCENARIOS:
         s = load_scenario(name)
         assert s.vehicle == "realistic-quad" and s.sensors.accel_turn_on_bias_std_mps2 > 0, name
         assert s.wind.turbulence_w20_mps > 0 and s.propulsion.thrust_scale != 1.0, name
         assert s.ground.anchor_height_m > 0 and s.ground.terrain_std_m > 0, name
         assert s.propulsion.battery.sag_v_per_cell_per_min > 0, name
         assert s.cable.diameter_m > 0, name
+
+
+def test_the_winch_sag_scenarios_cover_issue_10s_sagging_cables() -> None:
+    """0.0167 and 0.1 kg/m, 5 and 1 N at the anchor, hover, circle and figure-8: each cable
+    at both tensions and each flight on both cables and at both tensions."""
+    cases = set()
+    for name in WINCH_SAG_SCENARIOS:
+        s = load_scenario(name)
+        assert s.cable.model == "winch_catenary" and s.ground_station.enabled, name
+        cases.add((s.cable.linear_density_kg_per_m, s.cable.tension_n, s.trajectory.kind))
+    assert {(d, t) for d, t, _ in cases} == {(d, t) for d in (0.0167, 0.1) for t in (1.0, 5.0)}
+    for kind in ("hover", "circle", "figure8"):
+        assert {d for d, _, k in cases if k == kind} == {0.0167, 0.1}, kind
+        assert {t for _, t, k in cases if k == kind} == {1.0, 5.0}, kind
 
 
 def test_the_paper_scenario_stays_clean() -> None:

@@ -42,8 +42,14 @@ def _hover(cable_model: str, **cable: float) -> Scenario:
             Event(0.5, "winch_rate", winch_rate_mps=-0.3),
             6.0,
         ),
+        # a winch on a heavy cable resting on the ground goes from 2 to 5 N: the cable lifts off
+        (
+            _hover("winch_catenary", tension_n=2.0, linear_density_kg_per_m=0.1),
+            Event(1.0, "set_tension", tension_n=5.0),
+            6.0,
+        ),
     ],
-    ids=["constant_tension", "elastic", "catenary"],
+    ids=["constant_tension", "elastic", "catenary", "winch_catenary"],
 )
 def test_controller_holds_hover_against_each_cable(
     scenario: Scenario, event: Event, duration_s: float

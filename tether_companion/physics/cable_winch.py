@@ -169,6 +169,9 @@ class WinchCatenaryCable(CableBase):
             raise ValueError(f"tension must be a finite number >= 0 N, got {tension_n!r}")
         self.set_point_n = float(tension_n)
 
+    def advance(self, dt_s: float) -> None:
+        """Nothing to reel: the length follows the drone at each force evaluation."""
+
     def force_components(
         self, pn: float, pe: float, pd: float, vn: float, ve: float, vd: float
     ) -> tuple[float, float, float]:

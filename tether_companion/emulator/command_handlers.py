@@ -32,7 +32,7 @@ TUG_COMMAND = dialect.MAV_CMD_USER_1
 RELEASE_COMMAND = dialect.MAV_CMD_USER_2
 """MAV_CMD_USER_2: release the tether; param1 must be 1."""
 TENSION_COMMAND = dialect.MAV_CMD_USER_3
-"""MAV_CMD_USER_3: winch tension; param1 [N] (constant_tension cable)."""
+"""MAV_CMD_USER_3: winch tension; param1 [N] (constant_tension or winch_catenary cable)."""
 _ACCEPTED = dialect.MAV_RESULT_ACCEPTED
 _DENIED = dialect.MAV_RESULT_DENIED
 _FAILED = dialect.MAV_RESULT_FAILED

@@ -22,7 +22,11 @@ from tether_companion.physics.cable import (
     make_cable,
 )
 from tether_companion.physics.cable_anchor import anchor_direction_ned
-from tether_companion.physics.cable_winch import WinchCatenaryCable, winch_catenary
+from tether_companion.physics.cable_winch import (
+    WinchCatenaryCable,
+    tension_at_drone_n,
+    winch_catenary,
+)
 from tether_companion.sim.ground_sensors import GroundSensorConfig, GroundSensors
 
 G = GRAVITY_MPS2
@@ -204,3 +208,26 @@ def test_the_winch_encoder_reads_the_paid_out_length() -> None:
         lengths.append(readings.paid_out_m)
     assert np.all(np.diff(lengths) > 0.0)  # paid out as the drone flies away
     assert lengths[-1] == pytest.approx(winch_catenary(7.0, 3.0, 1.0, 0.1 * G).paid_out_m)
+
+
+def test_the_winch_load_cell_reads_the_set_point() -> None:
+    """The load cell at the winch reads T_a (the drone's T_a + w h less w h): exact when the
+    sensors' errors are off, with its white noise when on (own generator: the length and the
+    angle are the same with or without it)."""
+    rho, t_a = 0.1, 2.0
+    w = rho * G
+    position = (5.0, 0.0, -3.0)
+    cable = WinchCatenaryCable(t_a, rho, G)
+    cable.force_on_drone_ned_n(position, (0, 0, 0))
+    exact = GroundSensors(GroundSensorConfig(), "winch_catenary", 1, w)
+    assert exact.read(0.0, cable, position, cable.tension_n).winch_tension_n == pytest.approx(t_a)
+    assert tension_at_drone_n(t_a, w, 3.0) == pytest.approx(cable.tension_n)
+    assert tension_at_drone_n(t_a, 0.0, math.nan) == t_a
+    assert math.isnan(tension_at_drone_n(t_a, w, math.nan))
+    on = GroundSensorConfig(enabled=True, winch_tension_noise_std_n=0.2, winch_latency_s=0.0)
+    sensors = GroundSensors(on, "winch_catenary", 1, w)
+    readings = [sensors.read(i * 0.005, cable, position, cable.tension_n) for i in range(20000)]
+    tensions = np.array([r.winch_tension_n for r in readings if r.winch_tension_n is not None])
+    assert len(tensions) == sum(r.paid_out_m is not None for r in readings) > 900
+    assert np.mean(tensions) == pytest.approx(t_a, abs=0.03)
+    assert np.std(tensions) == pytest.approx(0.2, rel=0.1)

@@ -24,7 +24,7 @@ import numpy as np
 from tether_companion.config import spec
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.mavlink.framing import FrameEncoder, dialect
-from tether_companion.physics.cable import HEAVY_CABLE_MODELS
+from tether_companion.physics.cable import cable_weight_n_per_m
 from tether_companion.sim.ground_sensors import GroundSensors
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.simulator import Simulator
@@ -77,11 +77,7 @@ class EmulatedWinch:
         self._encoder = FrameEncoder(config.system_id, config.component_id)
         self._rng = np.random.default_rng([scenario.seed, _SEED_SALT])
         cable = scenario.cable
-        self._weight_n_per_m = (
-            cable.linear_density_kg_per_m * GRAVITY_MPS2
-            if cable.model in HEAVY_CABLE_MODELS
-            else 0.0
-        )
+        self._weight_n_per_m = cable_weight_n_per_m(cable)
         self._sensors = sensors
         self._unix0_s = unix_time_at_start_s
         self.period_s = 1.0 / scenario.ground_station.winch_rate_hz

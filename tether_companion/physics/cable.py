@@ -389,6 +389,14 @@ class NoCable(CableBase):
         return 0.0, 0.0, 0.0
 
 
+def cable_weight_n_per_m(config: CableConfig, gravity_mps2: float = GRAVITY_MPS2) -> float:
+    """The weight per length [N/m] of the cable ``config`` simulates: ``linear_density g`` for
+    :data:`HEAVY_CABLE_MODELS`, 0 for the weightless ones."""
+    if config.model not in HEAVY_CABLE_MODELS:
+        return 0.0
+    return config.linear_density_kg_per_m * gravity_mps2
+
+
 def make_cable(config: CableConfig, gravity_mps2: float = GRAVITY_MPS2) -> CableModel:
     """Build the cable model a scenario's ``cable`` section asks for."""
     if config.model == "constant_tension":

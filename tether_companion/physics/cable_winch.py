@@ -83,6 +83,22 @@ class WinchCatenary:
     anchor_elevation_rad: float
 
 
+def tension_at_drone_n(
+    winch_tension_n: float, weight_per_length_n_per_m: float, height_m: float
+) -> float:
+    """The tension at a drone ``height_m`` [m] above the anchor [N] of a cable leaving the winch
+    with ``winch_tension_n`` [N]: ``T_a + w max(h, 0)`` (the catenary's tension grows by ``w h``
+    whatever its shape, the part on the ground included); nan for a heavy cable without a
+    finite height."""
+    if weight_per_length_n_per_m <= 0.0:
+        return winch_tension_n
+    return (
+        winch_tension_n + weight_per_length_n_per_m * max(0.0, height_m)
+        if math.isfinite(height_m)
+        else math.nan
+    )
+
+
 def _span_m(phi: float, big_a: float, height: float, rise_sq: float) -> float:
     """``X(phi)`` [m] for ``A = big_a`` [m], drone height [m] and ``rise_sq = h (2A + h)``."""
     s1 = big_a * math.sin(phi)

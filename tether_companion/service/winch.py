@@ -44,6 +44,7 @@ from typing import ClassVar
 
 from tether_companion.config import spec
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
+from tether_companion.physics.cable_winch import tension_at_drone_n
 from tether_companion.service.ground_sensor import GroundCounters, GroundFeed, GroundGate
 
 STANDARD_GRAVITY_MPS2 = 9.80665
@@ -287,10 +288,10 @@ class WinchFeed(GroundFeed[WinchReading]):
                 estimator.set_paid_out_length_m(reading.length_m, reading.time_s)  # type: ignore[attr-defined]
         if not (self.use_tension and math.isfinite(reading.tension_n)):
             return
-        if self.weight_n_per_m > 0.0 and not math.isfinite(height_m):
+        at_drone_n = tension_at_drone_n(reading.tension_n, self.weight_n_per_m, height_m)
+        if not math.isfinite(at_drone_n):
             return  # a heavy cable's tension at the drone needs the drone's height
-        hanging_n = self.weight_n_per_m * max(0.0, height_m) if self.weight_n_per_m > 0.0 else 0.0
-        estimator.set_known_tension_n(reading.tension_n + hanging_n, reading.time_s)  # type: ignore[attr-defined]
+        estimator.set_known_tension_n(at_drone_n, reading.time_s)  # type: ignore[attr-defined]
 
     def _steep(self, position_ned_m: Sequence[float] | None) -> bool:
         """Whether the estimate puts the cable nearer the vertical than ``min_span_ratio``."""

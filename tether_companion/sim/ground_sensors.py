@@ -24,6 +24,10 @@ sensors"):
   an inextensible cable),
   ``scale`` ~ N(0, ``winch_scale_error_std``) (the drum's effective radius: cable layering,
   wear), ``offset`` ~ N(0, ``winch_zero_offset_std_m``) (where the count was zeroed);
+* the winch's **load cell** with each length report: the tension where the cable leaves the
+  winch, the drone's less the hanging cable's weight ``w h`` for the heavy models (a catenary's
+  tension grows by ``w h`` from the winch to a drone ``h`` above it), of the same state,
+  plus white ``winch_tension_noise_std_n`` (its own generator) when on;
 * the **cable angle** at ``angle_rate_hz``: the direction at the anchor of the state
   ``angle_latency_s`` ago (the drone's position then, the cable as it is now), turned by
   white ``angle_noise_std_rad`` per axis, plus an azimuth bias ~ N(0,
@@ -59,6 +63,8 @@ ANGLE_SEED_SALT = 250
 DEBUG_VECT's message id)."""
 CALIBRATION_SEED_SALT = 9251
 """Mixed into the scenario's seed for the per-flight calibration errors."""
+TENSION_SEED_SALT = 9252
+"""Mixed into the scenario's seed for the winch load cell's white noise."""
 TIME_TOL_S = 1e-9
 """Times closer than this [s] are the same instant (a tick less a latency, rounded)."""
 STRETCHED_PAID_OUT_MODELS = ("constant_tension",)
@@ -95,6 +101,9 @@ class GroundSensorConfig:
         minimum=0.0,
         doc="the cable's axial stiffness EA for the stretch the encoder does not see "
         "(constant_tension cable; 0: none) [N]",
+    )
+    winch_tension_noise_std_n: float = spec(
+        0.2, minimum=0.0, maximum=10.0, doc="winch load cell's white noise [N]"
     )
     angle_rate_hz: float = spec(
         10.0, exclusive_minimum=0.0, maximum=200.0, doc="cable-angle report rate [Hz]"
@@ -142,6 +151,9 @@ class GroundReadings:
     ----------
     paid_out_m
         The winch's reported length [m]; None between its reports.
+    winch_tension_n
+        The winch's load cell [N], the tension where the cable leaves the winch, with each
+        length report; None between them.
     cable_angle_rad
         The angle sensor's (azimuth from north toward east, elevation up) [rad]; None between
         its reports or while the cable has no direction at the anchor.
@@ -149,6 +161,7 @@ class GroundReadings:
 
     paid_out_m: float | None
     cable_angle_rad: tuple[float, float] | None
+    winch_tension_n: float | None = None
 
 
 class GroundSensors:
@@ -162,11 +175,22 @@ class GroundSensors:
         The scenario's ``cable.model`` (whether ``paid_out_m`` is stretched).
     seed
         The scenario's seed.
+    cable_weight_n_per_m
+        The cable's weight per length [N/m] (0 for the weightless constant-tension line): the
+        load cell's tension is the drone's less ``w h``.
     """
 
-    def __init__(self, config: GroundSensorConfig, cable_model: str, seed: int) -> None:
+    def __init__(
+        self,
+        config: GroundSensorConfig,
+        cable_model: str,
+        seed: int,
+        cable_weight_n_per_m: float = 0.0,
+    ) -> None:
         self.config = config
         self._angle_rng = np.random.default_rng([seed, ANGLE_SEED_SALT])
+        self._tension_rng = np.random.default_rng([seed, TENSION_SEED_SALT])
+        self._weight_n_per_m = cable_weight_n_per_m
         self._stretched = cable_model in STRETCHED_PAID_OUT_MODELS
         self.calibration = Calibration(0.0, 0.0, 0.0, 0.0)
         if config.enabled:
@@ -183,8 +207,9 @@ class GroundSensors:
             max(config.winch_latency_s, config.angle_latency_s) if config.enabled else 0.0
         )
         """How far back the reports look [s] (off: no latency)."""
-        self._history: deque[tuple[float, float, tuple[float, float, float]]] = deque()
-        """(time [s], encoder's length [m], position NED [m]) of recent states."""
+        self._history: deque[tuple[float, float, tuple[float, float, float], float]] = deque()
+        """(time [s], encoder's length [m], position NED [m], tension at the drone [N]) of
+        recent states."""
         self._next_winch_s = 0.0
         self._next_angle_s = 0.0
 
@@ -204,14 +229,15 @@ class GroundSensors:
         if angle_due:
             self._next_angle_s = time_s + 1.0 / cfg.angle_rate_hz
         self.record(time_s, cable.paid_out_m, position_ned_m, tension_n)
-        paid_out = None
+        paid_out = tension = None
         if not cfg.enabled or time_s >= self._next_winch_s:
             self._next_winch_s = time_s + 1.0 / cfg.winch_rate_hz
             paid_out = self.winch_length_m(time_s)
+            tension = self.winch_tension_n(time_s)
         angle = None
         if angle_due:
             angle = self.cable_angle_rad(time_s, partial(anchor_direction_ned, cable))
-        return GroundReadings(paid_out, angle)
+        return GroundReadings(paid_out, angle, tension)
 
     def record(
         self,
@@ -228,7 +254,7 @@ class GroundSensors:
         if cfg.enabled and self._stretched and cfg.cable_axial_stiffness_n > 0.0:
             length /= 1.0 + max(tension_n, 0.0) / cfg.cable_axial_stiffness_n
         history = self._history
-        history.append((time_s, length, position_ned_m))
+        history.append((time_s, length, position_ned_m, tension_n))
         before_s = time_s - self._keep_s  # drop what no report at time_s or later will need
         while len(history) > 1 and history[1][0] <= before_s + TIME_TOL_S:
             history.popleft()
@@ -239,10 +265,21 @@ class GroundSensors:
         cfg = self.config
         if not cfg.enabled:
             return self._history[-1][1]
-        _, old_length, _ = self._at(time_s - cfg.winch_latency_s)
+        _, old_length, _, _ = self._at(time_s - cfg.winch_latency_s)
         calibration = self.calibration
         reported = calibration.winch_offset_m + (1.0 + calibration.winch_scale) * old_length
         return _quantised(reported, cfg.winch_resolution_m)
+
+    def winch_tension_n(self, time_s: float) -> float:
+        """The winch load cell's report at ``time_s`` [s] of the recorded states [N]: the
+        tension at the drone less ``w h`` (never below 0) of the state ``winch_latency_s`` ago,
+        plus its white noise (off: the latest state's, exact). Draws from its generator."""
+        cfg = self.config
+        _, _, position, tension = self._at(time_s - cfg.winch_latency_s if cfg.enabled else time_s)
+        at_winch = max(0.0, tension - self._weight_n_per_m * max(0.0, -position[2]))
+        if not cfg.enabled:
+            return at_winch
+        return at_winch + cfg.winch_tension_noise_std_n * float(self._tension_rng.standard_normal())
 
     def cable_angle_rad(
         self,
@@ -260,7 +297,7 @@ class GroundSensors:
         if not cfg.enabled:
             direction = direction_at_anchor(self._history[-1][2])
             return None if direction is None else self._noisy(direction)
-        _, _, old_position = self._at(time_s - cfg.angle_latency_s)
+        _, _, old_position, _ = self._at(time_s - cfg.angle_latency_s)
         direction = direction_at_anchor(old_position)
         if direction is None:
             return None
@@ -274,7 +311,7 @@ class GroundSensors:
     def _noisy(self, direction: tuple[float, float, float]) -> tuple[float, float]:
         return noisy_angles(direction, self.config.angle_noise_std_rad, self._angle_rng)
 
-    def _at(self, time_s: float) -> tuple[float, float, tuple[float, float, float]]:
+    def _at(self, time_s: float) -> tuple[float, float, tuple[float, float, float], float]:
         """The latest recorded tick at or before ``time_s`` [s] (within :data:`TIME_TOL_S`;
         the oldest kept if none)."""
         history = self._history

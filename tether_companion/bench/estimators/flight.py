@@ -21,6 +21,7 @@ from tether_companion.bench.estimators.registry import (
     GroundStation,
 )
 from tether_companion.estimation.runner import _ATTITUDE, _IMU, _PWM, _RANGE, _schedule
+from tether_companion.physics.cable import cable_weight_n_per_m
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.sim.ground_sensors import GroundSensors
 from tether_companion.sim.scenario import Scenario
@@ -139,7 +140,12 @@ def fly(
     tick = 0
     seen = False
     dt_s = sim.physics_dt_s
-    ground = GroundSensors(scenario.ground_station, scenario.cable.model, scenario.seed)
+    ground = GroundSensors(
+        scenario.ground_station,
+        scenario.cable.model,
+        scenario.seed,
+        cable_weight_n_per_m(scenario.cable, sim.gravity_mps2),
+    )
     for step, what in schedule:
         sim.advance_to(step * dt_s)
         if what == _ATTITUDE:
@@ -163,7 +169,11 @@ def fly(
                 imu.time_s, sim.cable, tuple(state.position_ned_m), state.tension_n
             )
             station = GroundStation(
-                imu.time_s, state.tension_n, readings.paid_out_m, readings.cable_angle_rad
+                imu.time_s,
+                state.tension_n,
+                readings.paid_out_m,
+                readings.cable_angle_rad,
+                readings.winch_tension_n,
             )
             angle_seen[tick] = readings.cable_angle_rad is not None
             winch_seen[tick] = readings.paid_out_m is not None

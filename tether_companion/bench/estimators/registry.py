@@ -67,12 +67,16 @@ class GroundStation:
         The cable-angle sensor's (azimuth from north toward east, elevation up) of the cable
         where it leaves the anchor [rad], with its errors; None between its reports or when
         the cable has no direction there.
+    winch_tension_n
+        The winch's load cell [N]: the tension where the cable leaves the winch, with its
+        errors; None between its reports.
     """
 
     time_s: float
     tension_n: float
     paid_out_m: float | None
     cable_angle_rad: tuple[float, float] | None = None
+    winch_tension_n: float | None = None
 
 
 _NAN3 = np.full(3, math.nan)

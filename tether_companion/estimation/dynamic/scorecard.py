@@ -22,6 +22,7 @@ the paper's random-walk bound.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -49,7 +50,8 @@ from tether_companion.estimation.dynamic.crlb_noise import (
 )
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.models import ModelConstants
-from tether_companion.physics.cable import HEAVY_CABLE_MODELS
+from tether_companion.physics.cable import cable_weight_n_per_m
+from tether_companion.physics.cable_winch import tension_at_drone_n
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.cable_angle import CableAngleConfig
 
@@ -73,10 +75,7 @@ def simulated_cable_weight_n_per_m(context: FlightContext) -> float:
     would configure for that cable (0 for the weightless constant-tension line; telling the
     filter 0.164 N/m there bent its cable model by ``w |p| / (2 T)``: 4 degrees at 4 N and
     3 m, 9 degrees for the take-off's 3 N at 5 m)."""
-    cable = context.scenario.cable
-    if cable.model not in HEAVY_CABLE_MODELS:
-        return 0.0
-    return cable.linear_density_kg_per_m * context.gravity_mps2
+    return cable_weight_n_per_m(context.scenario.cable, context.gravity_mps2)
 
 
 def filter_config(context: FlightContext) -> DynamicFilterConfig:
@@ -134,14 +133,34 @@ class DynamicKind:
         Whether the ground station's paid-out length is given to the filter.
     use_angle
         Whether the ground station's cable angle is given to the filter.
+    use_tension
+        Whether the winch's load cell is given to the filter as the service's ``tension.source:
+        winch`` does (:class:`~tether_companion.service.winch.WinchFeed`): carried to the drone
+        with the latest estimate's height, fused as a load cell whose noise is the scenario's
+        ``ground_station.winch_tension_noise_std_n`` (what the winch's data sheet would say).
     """
 
-    def __init__(self, context: FlightContext, use_winch: bool, use_angle: bool = False) -> None:
+    def __init__(
+        self,
+        context: FlightContext,
+        use_winch: bool,
+        use_angle: bool = False,
+        use_tension: bool = False,
+    ) -> None:
         dynamic = filter_config(context)
+        stations = context.scenario.ground_station
+        if use_tension and stations.enabled and stations.winch_tension_noise_std_n > 0.0:
+            dynamic = dataclasses.replace(
+                dynamic, load_cell_noise_std_n=stations.winch_tension_noise_std_n
+            )
         config = context.estimator_config(EstimatorConfig())  # anchor height, rangefinder mounting
         self._estimator = DynamicTetherEstimator(config, context.vehicle, dynamic)
         self._use_winch = use_winch
         self._use_angle = use_angle
+        self._use_tension = use_tension
+        self._weight_n_per_m = dynamic.cable_weight_n_per_m
+        self._height_m = math.nan
+        """The latest estimate's height above the anchor [m] (nan before the first)."""
 
     def on_attitude(self, sample: AttitudeSample) -> None:
         self._estimator.on_attitude(sample)
@@ -155,6 +174,12 @@ class DynamicKind:
     def on_ground_station(self, station: GroundStation) -> None:
         if self._use_winch and station.paid_out_m is not None:
             self._estimator.set_paid_out_length_m(station.paid_out_m, station.time_s)
+        if self._use_tension and station.winch_tension_n is not None:
+            at_drone = tension_at_drone_n(
+                station.winch_tension_n, self._weight_n_per_m, self._height_m
+            )
+            if math.isfinite(at_drone):
+                self._estimator.set_known_tension_n(at_drone, station.time_s)
         angle = station.cable_angle_rad
         if self._use_angle and angle is not None:
             azimuth, elevation = angle
@@ -166,6 +191,7 @@ class DynamicKind:
         estimate = self._estimator.on_imu(sample)
         if estimate is None:
             return None
+        self._height_m = -float(estimate.position_ned_m[2])
         return TickOutput(
             position_ned_m=estimate.position_ned_m,
             position_covariance_m2=estimate.position_covariance_m2,
@@ -201,6 +227,21 @@ register(
         has_tension=True,
         description="the dynamic EKF also given the winch's paid-out length",
         own_bound=lambda context, record: own_model_bound(context, record, winch=True, angle=False),
+    )
+)
+register(
+    EstimatorKind(
+        name="dynamic-winch-angle-tension",
+        label="dynamic+winch+angle+tension",
+        build=lambda context: DynamicKind(
+            context, use_winch=True, use_angle=True, use_tension=True
+        ),
+        own_bound=lambda context, record: own_model_bound(context, record, winch=True, angle=True),
+        crlb_model=UNKNOWN_TENSION,
+        has_velocity=True,
+        has_tension=True,
+        description="the dynamic+winch+angle kind also given the winch's load cell (its "
+        "tension carried to the drone with the estimate's height, as tension.source: winch)",
     )
 )
 for _name, _label, _winch in (

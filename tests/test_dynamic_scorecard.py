@@ -32,3 +32,23 @@ def test_dynamic_kinds_are_registered_and_score_a_flight() -> None:
     # with the paid-out length the position is observable at once: published at the end (the
     # defaults, sized for real flights, withhold the IMU-only kind for longer than 8 s here)
     assert record.traces["dynamic-winch"].published[-1]
+
+
+@pytest.mark.slow
+def test_the_winch_load_cell_kind_fuses_the_winch_tension() -> None:
+    """On a constant-tension winch with a heavy cable the kind given the winch's load cell
+    estimates the tension at the drone (T_a + w h) better than the same kind without it
+    (measured on this seed: 0.125 N against 0.137 N RMS from 8 s on; the same without the
+    fusion)."""
+    registry = kinds()
+    scenario = dataclasses.replace(
+        load_scenario("realistic-winch-heavy-hover-5n"), duration_s=15.0, seed=3
+    )
+    names = ("dynamic-winch-angle", "dynamic-winch-angle-tension")
+    record = fly(scenario, [registry[name] for name in names])
+    late = record.time_s > 8.0
+    errors = {}
+    for name in names:
+        tension = record.traces[name].tension_n[late]
+        errors[name] = float(np.sqrt(np.nanmean((tension - record.tension_n[late]) ** 2)))
+    assert errors["dynamic-winch-angle-tension"] < 0.95 * errors["dynamic-winch-angle"], errors

@@ -214,6 +214,7 @@ class DynamicTetherEstimator(InputFeed):
         if self.ground_station.tension_ok(tension_n, time_s) and self._stepped_to(time_s):
             assert self.bank is not None
             self.ground_station.fuse_tension(self.bank, self.constants, tension_n, self._time_s)
+            self.constants.tension_measured |= self.ground_station.load_cell.status.fused > 0
 
     def set_paid_out_length_m(self, length_m: float, time_s: float) -> None:
         """Winch paid-out length [m]: the cable model's length from now on, and fused."""

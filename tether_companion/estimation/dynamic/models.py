@@ -90,14 +90,18 @@ tension, a catenary parameter so small that ``sinh`` overflows)."""
 
 @dataclass(slots=True)
 class ModelConstants:
-    """Constants of the generated models (the tuple ``c``), SI units, and the winch's
+    """Constants of the generated models (the tuple ``c``), SI units, the winch's
     paid-out length ``length_m`` [m] (``nan`` while none is known; the initialisation uses it,
-    the models do not: the ends, the weight and the tension fix the curve)."""
+    the models do not: the ends, the weight and the tension fix the curve), and whether a
+    measured tension (a load cell, the winch's) has been fused (``tension_measured``: the
+    tension's variance is then a measurement's, not only the weak pull's reading,
+    :mod:`~tether_companion.estimation.dynamic.sag_range`)."""
 
     mass_kg: float
     drag_per_s: float
     weight_n_per_m: float
     length_m: float = math.nan
+    tension_measured: bool = False
 
     @property
     def models(self) -> CableModels:

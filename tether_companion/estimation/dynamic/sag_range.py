@@ -113,6 +113,7 @@ def sag_range_std_m(
     tension_variance_n2: float,
     weight_n_per_m: float,
     length_m: float,
+    tension_measured: bool = False,
 ) -> float:
     """The range's spread at the fused length over the plausible tensions [m]: the larger
     change of the span at ``length_m`` [m] and the state's height (``x``: the state's values,
@@ -123,7 +124,11 @@ def sag_range_std_m(
     read from a horizontal pull of a few tenths of a newton, does not bound how much of the
     cable lies on the ground (realistic-sagging-hover seed 39: the true chord tension 3.3
     sigma below the filter's), and the range is taken as unsure down to the cable lying flat
-    up to the foot of the drone). 0 where it
+    up to the foot of the drone; not when ``tension_measured``: a load cell's or the winch's
+    tension has been fused, the tension's variance is a measurement's, and the lower end stays
+    ``T - TENSION_SIGMAS sigma_T``; realistic-winch-heavy-hover-5n seed 1, the winch's
+    load cell fused: 100 % published, none beyond 3 sigma, where the widening withheld 89 %).
+    0 where it
     does not apply: no weight, no length, the drone at or below the anchor's level, right
     above it, a non-positive tension."""
     span = math.hypot(x[0], x[1])
@@ -142,7 +147,7 @@ def sag_range_std_m(
     spread = TENSION_SIGMAS * math.sqrt(tension_variance_n2)
     centre = span_at_length_m(length_m, height, tension * horizontal_per_chord, weight_n_per_m)
     low_tension = max(tension - spread, LOW_TENSION_FRACTION * tension)
-    if grounded_plausible(x, tension_variance_n2, weight_n_per_m):  # at the low end: to none
+    if not tension_measured and grounded_plausible(x, tension_variance_n2, weight_n_per_m):
         low_tension = LOW_TENSION_FRACTION * tension
     lower = span_at_length_m(length_m, height, low_tension * horizontal_per_chord, weight_n_per_m)
     upper = span_at_length_m(
@@ -157,13 +162,14 @@ def sag_range_variance_m2(
     tension_variance_n2: float,
     weight_n_per_m: float,
     length_m: float,
+    tension_measured: bool = False,
 ) -> tuple[float, float]:
     """:func:`sag_range_std_m` [m] and the variance [m^2] to add along the horizontal range
     direction ``(n, e)/|(n, e)|`` so that the published covariance there is at least that
     squared: that squared less what ``horizontal_covariance_m2`` (nn, ne, ee) [m^2] already
     holds along it, never negative (the linearised part the filter claims is not counted
-    twice)."""
-    std = sag_range_std_m(x, tension_variance_n2, weight_n_per_m, length_m)
+    twice); ``tension_measured`` as :func:`sag_range_std_m`."""
+    std = sag_range_std_m(x, tension_variance_n2, weight_n_per_m, length_m, tension_measured)
     if std == 0.0:
         return NO_SAG
     span = math.hypot(x[0], x[1])
@@ -215,4 +221,5 @@ def mixture_sag(
         tension_variance,
         constants.weight_n_per_m,
         constants.length_m,
+        constants.tension_measured,
     )

@@ -19,6 +19,7 @@ from tether_companion.estimation.dynamic.sag_range import (
     mixture_sag,
     span_at_length_m,
 )
+from tether_companion.physics.cable_winch import winch_catenary
 
 WEIGHT_N_PER_M = 0.0167 * 9.81
 """ArduPilot's SIM_TETH_DENSITY default's weight [N/m] (realistic-sagging-hover)."""
@@ -190,3 +191,27 @@ def test_the_arc_lengths_slope_along_the_span_is_the_finite_difference() -> None
             - arc_length_m(span - step, HEIGHT_M, horizontal, WEIGHT_N_PER_M)
         ) / (2 * step)
         assert math.isclose(slope, difference, rel_tol=1e-5), (span, horizontal)
+
+
+def test_a_measured_tension_bounds_the_range_near_the_touchdown() -> None:
+    """A constant-tension winch holding 5 N on a 0.1 kg/m cable, the drone 5 m out, 3 m up
+    (realistic-winch-heavy-hover-5n): free, 0.36 m short of the touchdown. At 0.2 N of chord
+    tension sd the cable rests on the ground 3 sigma below: read from the pull alone the range
+    is taken as unsure down to a cable lying flat (0.6 m sd, withheld); with a measured tension
+    fused it is the range at T - 3 sigma (1.5 cm)."""
+    heavy = 0.1 * 9.80665
+    cable = winch_catenary(5.0, HEIGHT_M, 5.0, heavy)
+    x = np.zeros(state.N_STATES)
+    x[:3] = (5.0, 0.0, -HEIGHT_M)
+    x[state.TENSION] = cable.pull_n * math.hypot(5.0, HEIGHT_M) / 5.0
+    x[state.SCALE] = 1.0
+    p = np.eye(state.N_STATES) * 1e-4
+    p[0, 0] = p[1, 1] = 0.1**2
+    p[state.TENSION, state.TENSION] = 0.2**2
+    mixture = MixtureValues(x, p)
+    read = mixture_sag(mixture, ModelConstants(1.5, 0.3, heavy, cable.paid_out_m), True)
+    measured = mixture_sag(
+        mixture, ModelConstants(1.5, 0.3, heavy, cable.paid_out_m, tension_measured=True), True
+    )
+    assert read[0] > 0.5 > 0.02 > measured[0] > 0.0
+    assert measured[1] == 0.0  # the filter's own 0.1 m along the range covers it

@@ -45,7 +45,7 @@ from tether_companion.estimation.dynamic.accel_fusion import AccelFusion
 from tether_companion.estimation.dynamic.aid.rangefinder import RangefinderAid
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterConfig, drag_per_s
-from tether_companion.estimation.dynamic.consistency import BearingWindow
+from tether_companion.estimation.dynamic.consistency import BearingWindow, GustWalk
 from tether_companion.estimation.dynamic.divergence import (
     MAX_DISTANCE_M,
     step_bank,
@@ -163,6 +163,8 @@ class DynamicTetherEstimator(InputFeed):
             dynamic.bearing_position_walk_m2ps,
             dynamic.bearing_wind_walk_m2ps3,
         )
+        self.gusts = GustWalk(self.constants.drag_per_s)
+        """The wind's walk the force balance's innovations show (the bearing window's)."""
         drag_n_s_per_m = vehicle.mass_kg * self.constants.drag_per_s
         self.ground_station = GroundStationInputs(
             dynamic,
@@ -347,7 +349,7 @@ class DynamicTetherEstimator(InputFeed):
                     accel_fused = self.accel.fuse(bank, self.constants, inputs, force, t, resting)
                     self._ticks_since_fusion = 0
                     if accel_fused:
-                        self._sample_bearing(t)
+                        self._sample_bearing(t, rows)
                 if not self._inertial:
                     self._inputs = inputs
             if self._inertial:  # the next tick's batch step: R_v^b and the specific force
@@ -409,12 +411,16 @@ class DynamicTetherEstimator(InputFeed):
             return
         self.health.pd_repairs = sum(kf.pd_repairs for kf in bank.filters)
 
-    def _sample_bearing(self, t: float) -> None:
-        """The mixture after a force-balance fusion into the bearing window."""
+    def _sample_bearing(self, t: float, rows: list[list[float]]) -> None:
+        """The mixture after a force-balance fusion into the bearing window, its innovation
+        (``R_v^b``'s ``rows``) into the gusts' walk, which the window then takes."""
         bank = self.bank
         if bank is None or not self.bearing.enabled:
             return
         x, p = bank.mixture()
+        speed_mps = math.hypot(float(x[3]), float(x[4]))
+        self.gusts.add_body(t, self.accel.status.last_innovation.tolist(), rows, speed_mps)
+        self.bearing.set_wind_walk(self.gusts.walk_m2ps3)
         self.bearing.add(t, x[:3].tolist(), float(x[state.TENSION]), (p[0, 0], p[0, 1], p[1, 1]))
 
     def _check_divergence(self, t: float, fusion_tick: bool) -> None:
@@ -437,6 +443,7 @@ class DynamicTetherEstimator(InputFeed):
         self.bank = None
         self._startup.restart()
         self.bearing.clear()
+        self.gusts.clear()
         self.ground_station.clear()
         self._resets += 1
         self.health.resets = self._resets

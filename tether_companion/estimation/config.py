@@ -158,6 +158,15 @@ class GroundStation:
         maximum=100.0,
         doc="anchor (winch outlet) height above the ground under the drone [m] (tripod, truck)",
     )
+    terrain_std_m: float = spec(
+        0.0,
+        minimum=0.0,
+        maximum=2.0,
+        doc="unevenness of the ground under the flight: standard deviation of its height about"
+        " the anchor's ground level [m]; the rangefinder's height is off by the ground's under"
+        " the drone, which a hover does not average away (dynamic filter: added to the"
+        " published height variance)",
+    )
 
 
 ESTIMATOR_KINDS = ("four_state", "three_state", "dynamic")

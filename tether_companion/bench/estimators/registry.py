@@ -142,12 +142,15 @@ class FlightContext:
     def estimator_config(self, base: EstimatorConfig) -> EstimatorConfig:
         """``base`` with what a user measures and writes into ``estimator:`` for this set-up:
         the anchor's height above the ground (``ground_station.anchor_height_m`` [m], the
-        scenario's mean ground level; the terrain's undulation is not known) and the
+        scenario's mean ground level; the terrain's undulation is not known, its standard
+        deviation is: ``ground_station.terrain_std_m``) and the
         rangefinder's mounting point (``rangefinder.offset_frd_m``, body FRD [m])."""
         return dataclasses.replace(
             base,
             ground_station=dataclasses.replace(
-                base.ground_station, anchor_height_m=self.scenario.ground.anchor_height_m
+                base.ground_station,
+                anchor_height_m=self.scenario.ground.anchor_height_m,
+                terrain_std_m=self.scenario.ground.terrain_std_m,
             ),
             rangefinder=dataclasses.replace(
                 base.rangefinder, offset_frd_m=self.scenario.sensors.range_offset_frd_m

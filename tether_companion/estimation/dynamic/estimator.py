@@ -142,6 +142,7 @@ class DynamicTetherEstimator(InputFeed):
             ),
             wind_std_mps=dynamic.initial.wind_std_mps,
             drag_per_wind_n_s_per_m=vehicle.mass_kg * self.constants.drag_per_s,
+            terrain_variance_m2=config.ground_station.terrain_std_m**2,
         )
         self._mixture: MixtureValues | None = None
         self._sag_key: tuple[MixtureValues, float] | None = None

@@ -6,7 +6,9 @@ terms).
 * the unmodelled force's term, narrowed by the cable angles
   (:func:`~tether_companion.estimation.dynamic.observability.unmodelled_position_rows`,
   :func:`~tether_companion.estimation.dynamic.position_information.reduce_added_rows`);
-* the rangefinder innovations' excess, along the line from the anchor without a winch length
+* the rangefinder innovations' excess and the ground's unevenness under the drone (which the
+  readings' white noise model averages away), along the line from the anchor without a
+  winch length
   (:func:`~tether_companion.estimation.dynamic.position_information.height_excess`);
 * a sagging cable's range over the tensions the filter cannot rule out, along the range
   (:mod:`~tether_companion.estimation.dynamic.sag_range`);
@@ -46,6 +48,11 @@ class StatusSettings:
     drag_per_wind_n_s_per_m: float = 0.0
     """The rotor drag per unit airspeed ``m mu`` [N s/m]: with it a tick the pull rule
     withholds carries the bearing's ambiguity (:mod:`.bearing_ambiguity`); 0: it does not."""
+    terrain_variance_m2: float = 0.0
+    """The ground's height variance about the anchor's ground level [m^2]
+    (``ground_station.terrain_std_m`` squared): the rangefinder reads the height above the
+    ground under the drone, an error its white noise model averages away and a hover does not;
+    published as a height error with the innovations' excess (:func:`height_excess`)."""
 
 
 def added_position_terms(
@@ -73,7 +80,9 @@ def added_position_terms(
         ),
         information,
     )
-    h00, h01, h02, h11, h12, h22 = height_excess((n, e, d), height_excess_m2, winch_fused)
+    h00, h01, h02, h11, h12, h22 = height_excess(
+        (n, e, d), height_excess_m2 + settings.terrain_variance_m2, winch_fused
+    )
     s00, s01, s11 = _along_range(n, e, sag_m2) if sag_m2 else (0.0, 0.0, 0.0)
     r00, r01, r11 = _ring(x, settings)
     return (

@@ -242,9 +242,19 @@ class DynamicTetherEstimator(InputFeed):
         the sensor's direction noise ``noise_std_rad`` [rad] (aid/cable_angle.py) and its
         calibration errors (elevation, azimuth) [rad] (position_information.py)."""
         inputs = self.ground_station
-        if inputs.angle_ok(
+        if not inputs.angle_ok(
             elevation_rad, azimuth_rad, time_s, noise_std_rad, calibration_std_rad
-        ) and self._stepped_to(time_s):
+        ):
+            return
+        if self.bank is None:  # it places the start (taken the sensor's latency earlier)
+            self._startup.add_angle(
+                time_s - self.dynamic.cable_angle_latency_s,
+                elevation_rad,
+                azimuth_rad,
+                noise_std_rad,
+                calibration_std_rad,
+            )
+        elif self._stepped_to(time_s):
             assert self.bank is not None
             inputs.fuse_angle(
                 self.bank,

@@ -19,6 +19,20 @@ correct the position when those become known. In a steady hover they do not: the
 scale trades against the cable's vertical pull and the wind against its horizontal pull, and
 the covariance says so.
 
+With a ground-station cable angle read within the window (:meth:`Initialiser.add_angle`) the
+anchor measures the drone's bearing itself: its azimuth is the bearing (a cable hangs in the
+vertical plane through the anchor and the drone), and for a weightless cable its elevation
+places the drone with the winch length ``L`` (along the direction ``(el, az)``: the ground
+station alone fixes it) or, without one, with the height (span ``h / tan(el)``); the tension
+is the window's force along the cable. The force
+alone cannot do this near the anchor: there the cable's horizontal pull is not much larger
+than the wind's drag, which turns the force's bearing (the realistic take-off, 1 m from the
+anchor, 1.4 N of pull against 0.6-0.8 N of drag: started 1 m off, its first angles gated).
+The angle's noise (averaged over the window's readings) and calibration errors enter the
+initial covariance as two more parameters of the construction, and the motion fit places the
+drone at each reading from the angle instead of from that tick's force
+(:mod:`~tether_companion.estimation.dynamic.start_angle`).
+
 Not possible yet (reported, and the window starts again): no height and no winch length,
 thrust far below the weight (on the ground), cable slack, a cable that does not rise to the
 drone, or one resting on the ground when only a height is known.
@@ -35,14 +49,20 @@ from numpy.typing import NDArray
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig, DynamicInitial
+from tether_companion.estimation.dynamic.start_angle import (
+    MIN_RISE,
+    AngleReadings,
+    angle_position,
+    quadratic_fit,
+)
 
 FloatArray = NDArray[np.float64]
 
 _THETA = 13
-"""Parameters of the construction: A (3), s, b (3), w (2), h, L, and two spare (zero)."""
+"""Parameters of the construction: A (3), s, b (3), w (2), h, L, the cable angle's elevation
+and azimuth (``nan`` without one)."""
 _A, _S, _B, _W, _H, _L = slice(0, 3), 3, slice(4, 7), slice(7, 9), 9, 10
-_MIN_RISE = 0.1
-"""``-u_d`` below this: the cable is too close to horizontal for a height to place the drone."""
+_EL, _AZ = 11, 12
 _REL_STEP = 1e-6
 PLACEMENT_FAILED = (
     "the cable does not rise to the drone, or rests on the ground with no winch length:"
@@ -120,6 +140,7 @@ class Initialiser:
         self._sum_height = 0.0
         self._latest_height = math.nan
         self._snapshots: list[tuple[float, FloatArray, FloatArray, float]] = []
+        self._angles = AngleReadings()
 
     def add_tick(
         self,
@@ -154,6 +175,33 @@ class Initialiser:
         self._n_height += 1
         self._sum_height += height_above_anchor_m
         self._latest_height = height_above_anchor_m
+
+    def add_angle(
+        self,
+        time_s: float,
+        elevation_rad: float,
+        azimuth_rad: float,
+        noise_std_rad: float,
+        calibration_std_rad: tuple[float, float],
+        length_m: float = math.nan,
+    ) -> None:
+        """A ground-station cable angle taken at ``time_s`` [s] (its stamp less the sensor's
+        latency): elevation up from horizontal and azimuth from north at the anchor [rad],
+        the sensor's direction noise [rad] and its calibration errors (elevation, azimuth)
+        [rad] (as :meth:`.DynamicTetherEstimator.on_cable_angle` is told), with the winch's
+        latest paid-out length [m] (``nan``: none). Readings taken before the window
+        started are not kept."""
+        if math.isnan(self._start_s) or time_s < self._start_s:
+            return
+        self._angles.add(
+            time_s,
+            elevation_rad,
+            azimuth_rad,
+            noise_std_rad,
+            calibration_std_rad,
+            self._latest_height,
+            length_m,
+        )
 
     def try_start(
         self,
@@ -221,6 +269,7 @@ class Initialiser:
         theta[_W] = wind_ne_mps
         theta[_H] = height
         theta[_L] = length_m
+        theta[_EL], theta[_AZ] = self._angles.mean()
         y = self._solve(theta)
         if y is None or not np.all(np.isfinite(y)):
             return Initialisation(None, None, PLACEMENT_FAILED)
@@ -231,13 +280,17 @@ class Initialiser:
         x, p = self._state_and_covariance(theta, y, n, scale_std)
         if x is None or p is None:
             return Initialisation(None, None, NO_COVARIANCE)
-        motion = self._fitted_motion(time_s, scale, length_m, theta[_W])
+        motion = None
+        if cfg.cable_weight_n_per_m == 0.0:  # straight: the readings place the drone
+            motion = self._angles.motion(time_s, self.range_std_m, cfg.winch_length_noise_std_m)
+        if motion is None:
+            motion = self._fitted_motion(time_s, scale, length_m, theta[_W])
         if motion is not None:  # the window's motion: position now and velocity
             position, velocity, velocity_se = motion
             x[state.POSITION] = position
             x[state.VELOCITY] = velocity
-            p[state.VELOCITY, state.VELOCITY] = np.eye(3) * max(
-                velocity_se**2, cfg.initial.velocity_std_mps**2 * 0.25
+            p[state.VELOCITY, state.VELOCITY] = np.diag(
+                np.maximum(velocity_se**2, cfg.initial.velocity_std_mps**2 * 0.25)
             )
         self.reason = ""
         return Initialisation(x, p, "")
@@ -302,9 +355,16 @@ class Initialiser:
             + theta[_S] * (self._sum_e / n)
             - self.drag_per_s * ((self._sum_d / n)[:, :2] @ theta[_W])
         )
-        return self._place(self.mass_kg * c, theta[_H], theta[_L])
+        return self._place(self.mass_kg * c, theta[_H], theta[_L], theta[_EL], theta[_AZ])
 
-    def _place(self, force: FloatArray, height: float, length: float) -> FloatArray | None:
+    def _place(
+        self,
+        force: FloatArray,
+        height: float,
+        length: float,
+        elevation: float = math.nan,
+        azimuth: float = math.nan,
+    ) -> FloatArray | None:
         """``(p_n, p_e, p_d, T_ch)`` of a cable force on the drone ``force`` (NED [N]) with
         the drone ``height`` [m] above the anchor and/or a cable ``length`` [m] (``nan``:
         unknown); None when the cable does not rise to the drone or the data cannot place it.
@@ -320,15 +380,28 @@ class Initialiser:
         the ground over ``L - rise`` and ``a = L - rise + c acosh(1 + b/c)``; without a
         length a pull with ``cosh`` at or below 1 places nothing. Without a height, the chord of a
         winch length ``L`` along the force (the weight's pull taken as half the cable's, a
-        first guess the filter refines)."""
+        first guess the filter refines).
+
+        With a cable angle at the anchor (``elevation``, ``azimuth`` [rad]; ``nan``: none)
+        the azimuth is the bearing and the pull is the force's horizontal part along it; a
+        weightless cable is then placed by the angle alone (:meth:`_place_by_angle`)."""
         weight = self.config.cable_weight_n_per_m
+        if math.isfinite(azimuth):
+            if weight == 0.0 and math.isfinite(elevation):
+                return self._place_by_angle(force, height, length, elevation, azimuth)
+            bearing = np.array((math.cos(azimuth), math.sin(azimuth)))
+        else:
+            bearing = None
         if math.isnan(height):
             chord = force - np.array((0.0, 0.0, 0.5 * weight * length))
             tension = float(np.linalg.norm(chord))
             if not tension > 0.0:
                 return None
             return np.array((*(-chord / tension * length), tension))
-        pull = math.hypot(float(force[0]), float(force[1]))
+        if bearing is None:
+            pull = math.hypot(float(force[0]), float(force[1]))
+        else:  # the force's horizontal part toward the anchor
+            pull = -float(force[0] * bearing[0] + force[1] * bearing[1])
         down = float(force[2])
         if not (pull > 0.0 and down > 0.0 and height > 0.0):
             return None
@@ -345,17 +418,41 @@ class Initialiser:
         else:
             span = height * pull / down
         distance = math.hypot(span, height)
-        if not span > 0.0 or height / distance < _MIN_RISE:
+        if not span > 0.0 or height / distance < MIN_RISE:
             return None
-        bearing = -np.asarray(force[:2]) / pull
+        if bearing is None:
+            bearing = -np.asarray(force[:2]) / pull
         return np.array((*(bearing * span), -height, pull * distance / span))
+
+    @staticmethod
+    def _place_by_angle(
+        force: FloatArray,
+        height: float,
+        length: float,
+        elevation: float,
+        azimuth: float,
+    ) -> FloatArray | None:
+        """``(p_n, p_e, p_d, T_ch)`` of a weightless cable leaving the anchor at
+        ``elevation`` and ``azimuth`` [rad]: the winch ``length`` [m] along that direction
+        (``nan``: the span ``height / tan(elevation)``, the height [m] above the anchor;
+        :func:`.start_angle.angle_position`), and the tension the cable force on the drone
+        ``force`` (NED [N]) along the cable.
+        None when the cable does not rise (:data:`MIN_RISE`) or the force does not pull
+        toward the anchor."""
+        position = angle_position(elevation, azimuth, height, length)
+        if position is None:
+            return None
+        tension = -float(force @ position) / float(np.linalg.norm(position))
+        if not tension > 0.0:
+            return None
+        return np.array((*position, tension))
 
     def _fitted_motion(
         self, time_s: float, scale: float, length_m: float, wind_ne_mps: FloatArray
-    ) -> tuple[FloatArray, FloatArray, float] | None:
+    ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
         """Position [m] and velocity [m/s] at ``time_s`` from a quadratic fit of the
         window's per-tick positions (thrust scale ``scale``, the wind ``wind_ne_mps``'s drag
-        at the window's mean attitude), and the velocity's standard error [m/s]."""
+        at the window's mean attitude), and the velocity's standard errors per axis [m/s]."""
         times, positions = [], []
         drag = -self.mass_kg * self.drag_per_s * ((self._sum_d / self._n)[:, :2] @ wind_ne_mps)
         for t, accel_force, thrust_vector, height in self._snapshots:
@@ -368,14 +465,7 @@ class Initialiser:
                 positions.append(placed[:3])
         if len(times) < 10:
             return None
-        t = np.asarray(times) - time_s
-        design = np.stack((np.ones_like(t), t, t * t), axis=1)
-        coef, *_ = np.linalg.lstsq(design, np.asarray(positions), rcond=None)
-        residual = np.asarray(positions) - design @ coef
-        sigma = float(np.sqrt(np.mean(residual**2)))
-        # standard error of the slope at t = 0 (the window's end), per axis
-        slope_se = float(sigma * np.sqrt(np.linalg.inv(design.T @ design)[1, 1]))
-        return coef[0], coef[1], slope_se
+        return quadratic_fit(np.asarray(times) - time_s, np.asarray(positions))
 
     def _state_and_covariance(
         self, theta: FloatArray, y: FloatArray, n: int, scale_std: float
@@ -390,6 +480,14 @@ class Initialiser:
         sigma[_W] = init.wind_std_mps
         sigma[_H] = self.range_std_m / math.sqrt(max(self._n_height, 1))
         sigma[_L] = cfg.winch_length_noise_std_m
+        if math.isfinite(theta[_EL]):
+            sigma[_EL], sigma[_AZ] = self._angles.mean_std(float(theta[_EL]))
+            if math.isfinite(theta[_L]):  # the length places the drone: its calibration too
+                sigma[_L] = math.hypot(
+                    sigma[_L],
+                    cfg.winch_length_offset_std_m,
+                    cfg.winch_length_scale_std * float(theta[_L]),
+                )
         active = [i for i in range(_THETA) if math.isfinite(theta[i]) and sigma[i] > 0.0]
         jac = np.zeros((4, _THETA))
         for i in active:

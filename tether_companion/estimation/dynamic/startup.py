@@ -77,6 +77,27 @@ class FilterStartup:
         """A rangefinder height above the anchor [m] (tilt and lever arm corrected)."""
         self._initialiser.add_height(height_above_anchor_m)
 
+    def add_angle(
+        self,
+        time_s: float,
+        elevation_rad: float,
+        azimuth_rad: float,
+        noise_std_rad: float,
+        calibration_std_rad: tuple[float, float],
+    ) -> None:
+        """A ground-station cable angle taken at ``time_s`` [s] (elevation, azimuth [rad],
+        its noise and calibration errors (elevation, azimuth) [rad]) with the winch's latest
+        length (the constants'): they place the drone
+        (:meth:`~tether_companion.estimation.dynamic.initialise.Initialiser.add_angle`)."""
+        self._initialiser.add_angle(
+            time_s,
+            elevation_rad,
+            azimuth_rad,
+            noise_std_rad,
+            calibration_std_rad,
+            self._constants.length_m,
+        )
+
     def add_tick(self, aligned: AlignedInputs) -> FilterBank | None:
         """One IMU tick with its aligned attitude and thrust; the bank of one member per
         hypothesis once the data give hypotheses, else ``None``."""

@@ -283,10 +283,15 @@ class Initialiser:
         motion = None
         if cfg.cable_weight_n_per_m == 0.0:  # straight: the readings place the drone
             motion = self._angles.motion(time_s, self.range_std_m, cfg.winch_length_noise_std_m)
+            if motion is not None:  # the end point as uncertain as the fit says, at least
+                position_var = np.diag(p)[state.POSITION]
+                p[state.POSITION, state.POSITION] += np.diag(
+                    np.maximum(motion[3] ** 2 - position_var, 0.0)
+                )
         if motion is None:
             motion = self._fitted_motion(time_s, scale, length_m, theta[_W])
         if motion is not None:  # the window's motion: position now and velocity
-            position, velocity, velocity_se = motion
+            position, velocity, velocity_se, _ = motion
             x[state.POSITION] = position
             x[state.VELOCITY] = velocity
             p[state.VELOCITY, state.VELOCITY] = np.diag(
@@ -449,10 +454,11 @@ class Initialiser:
 
     def _fitted_motion(
         self, time_s: float, scale: float, length_m: float, wind_ne_mps: FloatArray
-    ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None:
         """Position [m] and velocity [m/s] at ``time_s`` from a quadratic fit of the
         window's per-tick positions (thrust scale ``scale``, the wind ``wind_ne_mps``'s drag
-        at the window's mean attitude), and the velocity's standard errors per axis [m/s]."""
+        at the window's mean attitude), and the velocity's and the position's standard
+        errors per axis [m/s, m] (the position's not used: measured and not taken, start10)."""
         times, positions = [], []
         drag = -self.mass_kg * self.drag_per_s * ((self._sum_d / self._n)[:, :2] @ wind_ne_mps)
         for t, accel_force, thrust_vector, height in self._snapshots:

@@ -82,13 +82,14 @@ class AngleReadings:
 
     def motion(
         self, time_s: float, range_std_m: float, length_std_m: float
-    ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None:
         """Position [m] and velocity [m/s] at ``time_s`` [s] of a weightless cable's drone from
         a quadratic fit of its positions at the readings (:func:`angle_position`), each
         weighted by its variance (:func:`angle_position_variance`, the rangefinder's noise
         ``range_std_m`` [m] and the winch length's ``length_std_m`` [m]: a height through a
-        low elevation places the span poorly), and the velocity's standard errors per axis
-        [m/s]; None with fewer than :data:`MIN_READINGS` placed."""
+        low elevation places the span poorly), and the velocity's and the position's
+        standard errors per axis [m/s, m]; None with fewer than :data:`MIN_READINGS`
+        placed."""
         noise = self._noise[0]
         times, positions, variances = [], [], []
         for t, elevation, azimuth, height, length in self._readings:
@@ -174,21 +175,24 @@ def angle_position_variance(
 
 def quadratic_fit(
     times: FloatArray, positions: FloatArray, weights: FloatArray | None = None
-) -> tuple[FloatArray, FloatArray, FloatArray]:
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Value [m] and slope [m/s] at time 0 of a least-squares quadratic in time through
-    ``positions`` (n, 3) [m] at ``times`` (n,) [s], and the slope's standard errors per axis
-    [m/s]. ``weights`` (n, 3): the positions' inverse variances [1/m^2], the standard errors
-    from them, larger by the residuals' own spread when that is larger than they say (the
-    motion is not quadratic); None: unweighted, the standard errors from the residuals'
-    spread (all axes alike)."""
+    ``positions`` (n, 3) [m] at ``times`` (n,) [s], and the slope's and the value's standard
+    errors per axis [m/s, m]. ``weights`` (n, 3): the positions' inverse variances [1/m^2],
+    the standard errors from them, larger by the residuals' own spread when that is larger
+    than they say (the motion is not quadratic); None: unweighted, the standard errors from
+    the residuals' spread (all axes alike)."""
     design = np.stack((np.ones_like(times), times, times * times), axis=1)
     if weights is None:
         coef, *_ = np.linalg.lstsq(design, positions, rcond=None)
         residual = positions - design @ coef
         sigma = float(np.sqrt(np.mean(residual**2)))
-        slope_se = float(sigma * np.sqrt(np.linalg.inv(design.T @ design)[1, 1]))
-        return coef[0], coef[1], np.full(3, slope_se)
-    value, slope, slope_se = np.zeros(3), np.zeros(3), np.zeros(3)
+        inverse = np.linalg.inv(design.T @ design)
+        slope_se = float(sigma * np.sqrt(inverse[1, 1]))
+        value_se = float(sigma * np.sqrt(inverse[0, 0]))
+        return coef[0], coef[1], np.full(3, slope_se), np.full(3, value_se)
+    value, slope = np.zeros(3), np.zeros(3)
+    slope_se, value_se = np.zeros(3), np.zeros(3)
     dof = max(len(times) - 3, 1)
     for axis in range(3):
         w = weights[:, axis]
@@ -199,4 +203,5 @@ def quadratic_fit(
         spread = max(float(np.sum(w * residual * residual)) / dof, 1.0)
         value[axis], slope[axis] = coef[0], coef[1]
         slope_se[axis] = math.sqrt(cov[1, 1] * spread)
-    return value, slope, slope_se
+        value_se[axis] = math.sqrt(cov[0, 0] * spread)
+    return value, slope, slope_se, value_se

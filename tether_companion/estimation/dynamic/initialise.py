@@ -31,7 +31,9 @@ anchor, 1.4 N of pull against 0.6-0.8 N of drag: started 1 m off, its first angl
 The angle's noise (averaged over the window's readings) and calibration errors enter the
 initial covariance as two more parameters of the construction, and the motion fit places the
 drone at each reading from the angle instead of from that tick's force
-(:mod:`~tether_companion.estimation.dynamic.start_angle`).
+(:mod:`~tether_companion.estimation.dynamic.start_angle`). Only where the force cannot tell
+the bearing (:meth:`Initialiser._pull_weak`) and for a weightless cable (a heavy one keeps the
+force's catenary: not measured with an angle).
 
 Not possible yet (reported, and the window starts again): no height and no winch length,
 thrust far below the weight (on the ground), cable slack, a cable that does not rise to the
@@ -270,7 +272,7 @@ class Initialiser:
         theta[_H] = height
         theta[_L] = length_m
         theta[_EL] = theta[_AZ] = math.nan
-        if self._pull_weak(theta):  # the force alone would not tell the bearing
+        if cfg.cable_weight_n_per_m == 0.0 and self._pull_weak(theta):  # the force would not
             theta[_EL], theta[_AZ] = self._angles.mean()
         y = self._solve(theta)
         if y is None or not np.all(np.isfinite(y)):
@@ -283,7 +285,7 @@ class Initialiser:
         if x is None or p is None:
             return Initialisation(None, None, NO_COVARIANCE)
         motion = None
-        if cfg.cable_weight_n_per_m == 0.0 and math.isfinite(theta[_EL]):  # by the readings
+        if math.isfinite(theta[_EL]):  # a weightless cable placed by the readings
             motion = self._angles.motion(time_s, self.range_std_m, cfg.winch_length_noise_std_m)
             if motion is not None:  # the end point as uncertain as the fit says, at least
                 position_var = np.diag(p)[state.POSITION]
@@ -410,26 +412,19 @@ class Initialiser:
         winch length ``L`` along the force (the weight's pull taken as half the cable's, a
         first guess the filter refines).
 
-        With a cable angle at the anchor (``elevation``, ``azimuth`` [rad]; ``nan``: none)
-        the azimuth is the bearing and the pull is the force's horizontal part along it; a
-        weightless cable is then placed by the angle alone (:meth:`_place_by_angle`)."""
+        With a cable angle at the anchor (``elevation``, ``azimuth`` [rad]; ``nan``: none;
+        given only for a weightless cable whose pull the wind could turn,
+        :meth:`_pull_weak`) the angle places the drone (:meth:`_place_by_angle`)."""
         weight = self.config.cable_weight_n_per_m
-        if math.isfinite(azimuth):
-            if weight == 0.0 and math.isfinite(elevation):
-                return self._place_by_angle(force, height, length, elevation, azimuth)
-            bearing = np.array((math.cos(azimuth), math.sin(azimuth)))
-        else:
-            bearing = None
+        if math.isfinite(azimuth):  # a weightless cable whose pull the wind could turn
+            return self._place_by_angle(force, height, length, elevation, azimuth)
         if math.isnan(height):
             chord = force - np.array((0.0, 0.0, 0.5 * weight * length))
             tension = float(np.linalg.norm(chord))
             if not tension > 0.0:
                 return None
             return np.array((*(-chord / tension * length), tension))
-        if bearing is None:
-            pull = math.hypot(float(force[0]), float(force[1]))
-        else:  # the force's horizontal part toward the anchor
-            pull = -float(force[0] * bearing[0] + force[1] * bearing[1])
+        pull = math.hypot(float(force[0]), float(force[1]))
         down = float(force[2])
         if not (pull > 0.0 and down > 0.0 and height > 0.0):
             return None
@@ -448,8 +443,7 @@ class Initialiser:
         distance = math.hypot(span, height)
         if not span > 0.0 or height / distance < MIN_RISE:
             return None
-        if bearing is None:
-            bearing = -np.asarray(force[:2]) / pull
+        bearing = -np.asarray(force[:2]) / pull
         return np.array((*(bearing * span), -height, pull * distance / span))
 
     @staticmethod

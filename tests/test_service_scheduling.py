@@ -28,6 +28,7 @@ SLOW_FSYNC_S = 1.0
 
 def test_a_slow_disk_does_not_delay_the_estimates(tmp_path, monkeypatch) -> None:
     fsyncs: list[float] = []
+    """Local monotonic start of each (slow) fsync [s]."""
     real_fsync = recording.os.fsync
 
     def slow_fsync(fd: int) -> None:
@@ -82,9 +83,19 @@ def test_a_slow_disk_does_not_delay_the_estimates(tmp_path, monkeypatch) -> None
     assert len(fsyncs) >= 5  # the slow disk was really used (syncs and rotations)
     assert len(list((tmp_path / "rec").glob("*.tlog"))) >= 2
     assert len(ages) > 100
-    # inline, each one-second fsync would have held an estimate back by about a second
-    assert ages.max() < 0.5 * SLOW_FSYNC_S, ages.max()
-    assert np.percentile(ages, 99) < 0.1, np.percentile(ages, 99)
+    # Inline, each one-second fsync would stop the estimates for that second: none would
+    # arrive while a sync runs. Counted against the run's own rate (not a wall-clock bound, so
+    # a busy machine's stalls do not decide it): at least half the expected share arrives
+    # during the syncs, and the typical estimate is prompt.
+    arrivals = np.sort(np.array(list(log.vision_arrival_s.values())))
+    first, last = arrivals[0], arrivals[-1]
+    windows = [(max(t, first), min(t + SLOW_FSYNC_S, last)) for t in fsyncs]
+    windows = [(a, b) for a, b in windows if b > a]
+    in_syncs = sum(int(np.count_nonzero((arrivals >= a) & (arrivals < b))) for a, b in windows)
+    expected = len(arrivals) / (last - first) * sum(b - a for a, b in windows)
+    print(f"estimates during the syncs: {in_syncs} of {expected:.0f} expected")
+    assert expected > 20 and in_syncs > 0.5 * expected, (in_syncs, expected)
+    assert np.median(ages) < 0.1 * SLOW_FSYNC_S, np.median(ages)
     assert service.recorder is not None and service.recorder.dropped == 0
 
 

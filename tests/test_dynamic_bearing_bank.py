@@ -94,6 +94,16 @@ def test_the_ring_can_be_switched_off() -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    reason="not since the realistic ground station (79ec8f5: the encoder's scale, offset and "
+    "0.1 s latency) and the late readings' velocity taken as known (9a632a6; with the exact "
+    "winch alone the test passed before that commit and fails after it, latency told 0 or "
+    "not): seed 18 with the winch alone never publishes in the 9 s flown. The pull rule needs "
+    ">= 2.4 N of horizontal pull against the wind's drag, the take-off's is 1.4-2.84 N, and "
+    "the own-model bound is 0.35-0.59 m in the first 5 s against the 0.5 m publish bound "
+    "(docs/estimation-history.md, takeoff11)",
+)
 def test_a_take_off_publishes_within_five_seconds_of_the_cable_becoming_taut() -> None:
     """Tuning seed 18 of the realistic take-off with the winch length: the bearing
     hypotheses converge to one during the fly-out and the pull rule relaxes, so the position

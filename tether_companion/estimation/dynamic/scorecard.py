@@ -79,9 +79,16 @@ def simulated_cable_weight_n_per_m(context: FlightContext) -> float:
 
 
 def filter_config(context: FlightContext) -> DynamicFilterConfig:
-    """The dynamic filter's settings for the scenario: the defaults and the cable's weight."""
+    """The dynamic filter's settings for the scenario: the defaults, the cable's weight and the
+    ground station's latencies as its data sheet would give them (the scenario's
+    ``ground_station`` section; 0 with it off, where the simulated sensors report the present
+    state)."""
+    stations = context.scenario.ground_station
     return dataclasses.replace(
-        DynamicFilterConfig(), cable_weight_n_per_m=simulated_cable_weight_n_per_m(context)
+        DynamicFilterConfig(),
+        cable_weight_n_per_m=simulated_cable_weight_n_per_m(context),
+        winch_latency_s=stations.winch_latency_s if stations.enabled else 0.0,
+        cable_angle_latency_s=stations.angle_latency_s if stations.enabled else 0.0,
     )
 
 

@@ -9,15 +9,15 @@ thrust, drag and bias:
 (``f`` specific force, FRD body; ``T`` thrust from the map, ``s`` its scale; ``b`` bias;
 ``w`` wind). Its horizontal part points from the drone to the anchor; with the rangefinder's
 height above the anchor the filter's own cable curve (straight, catenary, or resting on the
-ground, :meth:`Initialiser._place`) gives the span and the chord tension ``T_ch``; a cable
-resting on the ground pulls the same at every span beyond its touchdown, so there only the
-winch length places the drone. The prior of everything the window cannot measure (``s``,
-``b``, ``w`` from the config; the accelerometer's and the rangefinder's noise averaged over
-the window) is mapped through this construction by central differences, so the initial covariance
-carries the correlations (position with thrust scale, bias and wind) that let later data
-correct the position when those become known. In a steady hover they do not: the thrust
-scale trades against the cable's vertical pull and the wind against its horizontal pull, and
-the covariance says so.
+ground, :func:`~tether_companion.estimation.dynamic.start_placement.place`) gives the span
+and the chord tension ``T_ch``; a cable resting on the ground pulls the same at every span
+beyond its touchdown, so there only the winch length places the drone. The prior of
+everything the window cannot measure (``s``, ``b``, ``w`` from the config; the
+accelerometer's and the rangefinder's noise averaged over the window) is mapped through this
+construction by central differences, so the initial covariance carries the correlations
+(position with thrust scale, bias and wind) that let later data correct the position when
+those become known. In a steady hover they do not: the thrust scale trades against the
+cable's vertical pull and the wind against its horizontal pull, and the covariance says so.
 
 With a ground-station cable angle read within the window (:meth:`Initialiser.add_angle`) the
 anchor measures the drone's bearing itself: its azimuth is the bearing (a cable hangs in the
@@ -51,12 +51,8 @@ from numpy.typing import NDArray
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig, DynamicInitial
-from tether_companion.estimation.dynamic.start_angle import (
-    MIN_RISE,
-    AngleReadings,
-    angle_position,
-    quadratic_fit,
-)
+from tether_companion.estimation.dynamic.start_angle import AngleReadings, quadratic_fit
+from tether_companion.estimation.dynamic.start_placement import place
 
 FloatArray = NDArray[np.float64]
 
@@ -357,6 +353,18 @@ class Initialiser:
     # ------------------------------------------------------------------ internals
     def _solve(self, theta: FloatArray) -> FloatArray | None:
         """``(p_n, p_e, p_d, T_ch)`` from the parameters, or None (no rising cable)."""
+        return place(
+            self._window_force_n(theta),
+            theta[_H],
+            theta[_L],
+            self.config.cable_weight_n_per_m,
+            theta[_EL],
+            theta[_AZ],
+        )
+
+    def _window_force_n(self, theta: FloatArray) -> FloatArray:
+        """The cable's force on the drone over the window (NED [N]) for the parameters
+        ``theta``: the module docstring's ``c`` times the mass."""
         n = self._n
         c = (
             theta[_A]
@@ -364,7 +372,7 @@ class Initialiser:
             + theta[_S] * (self._sum_e / n)
             - self.drag_per_s * ((self._sum_d / n)[:, :2] @ theta[_W])
         )
-        return self._place(self.mass_kg * c, theta[_H], theta[_L], theta[_EL], theta[_AZ])
+        return self.mass_kg * c
 
     def _pull_weak(self, theta: FloatArray) -> bool:
         """Whether the window's horizontal force (less the drag of the prior's wind) is below
@@ -374,100 +382,12 @@ class Initialiser:
         it as without an angle (measured: the angle's start on the realistic gusty hover,
         4 N at 4 m, published 91 -> 60 % of the ticks, held-out seeds 31-35)."""
         cfg = self.config
-        n = self._n
-        c = (
-            theta[_A]
-            - (self._sum_r / n) @ theta[_B]
-            + theta[_S] * (self._sum_e / n)
-            - self.drag_per_s * ((self._sum_d / n)[:, :2] @ theta[_W])
-        )
-        pull = self.mass_kg * math.hypot(float(c[0]), float(c[1]))
+        force = self._window_force_n(theta)
+        pull = math.hypot(float(force[0]), float(force[1]))
         least = (
             cfg.min_pull_over_wind_drag * self.mass_kg * self.drag_per_s * cfg.initial.wind_std_mps
         )
         return len(self._angles) > 0 and pull < least
-
-    def _place(
-        self,
-        force: FloatArray,
-        height: float,
-        length: float,
-        elevation: float = math.nan,
-        azimuth: float = math.nan,
-    ) -> FloatArray | None:
-        """``(p_n, p_e, p_d, T_ch)`` of a cable force on the drone ``force`` (NED [N]) with
-        the drone ``height`` [m] above the anchor and/or a cable ``length`` [m] (``nan``:
-        unknown); None when the cable does not rise to the drone or the data cannot place it.
-
-        With a height the curve is the filter's own (derive.py): the straight line for a
-        weightless cable; for a heavy one the catenary of parameter ``c = H/w`` (``H`` the
-        force's horizontal part, ``V`` its down part) whose slope at the drone is ``V/H``: the
-        anchor sits where ``cosh(x_a/c) = sqrt(1 + (V/H)^2) - b/c``, so the span is
-        ``a = c (asinh(V/H) - acosh(that))``. A cable resting on the ground has that at
-        exactly 1 (its lowest point, the touchdown, is at the anchor's level) whatever the
-        span beyond the touchdown, so only the winch length places it: a length at least the
-        rise ``sqrt(b^2 + 2 b c)`` (longer than any free curve reaching the height) lies on
-        the ground over ``L - rise`` and ``a = L - rise + c acosh(1 + b/c)``; without a
-        length a pull with ``cosh`` at or below 1 places nothing. Without a height, the chord of a
-        winch length ``L`` along the force (the weight's pull taken as half the cable's, a
-        first guess the filter refines).
-
-        With a cable angle at the anchor (``elevation``, ``azimuth`` [rad]; ``nan``: none;
-        given only for a weightless cable whose pull the wind could turn,
-        :meth:`_pull_weak`) the angle places the drone (:meth:`_place_by_angle`)."""
-        weight = self.config.cable_weight_n_per_m
-        if math.isfinite(azimuth):  # a weightless cable whose pull the wind could turn
-            return self._place_by_angle(force, height, length, elevation, azimuth)
-        if math.isnan(height):
-            chord = force - np.array((0.0, 0.0, 0.5 * weight * length))
-            tension = float(np.linalg.norm(chord))
-            if not tension > 0.0:
-                return None
-            return np.array((*(-chord / tension * length), tension))
-        pull = math.hypot(float(force[0]), float(force[1]))
-        down = float(force[2])
-        if not (pull > 0.0 and down > 0.0 and height > 0.0):
-            return None
-        if weight > 0.0:
-            parameter = pull / weight
-            rise = math.sqrt(height * height + 2.0 * height * parameter)
-            anchor = math.hypot(1.0, down / pull) - height / parameter
-            if length >= rise:  # longer than any free curve to this height: on the ground
-                span = length - rise + parameter * math.acosh(1.0 + height / parameter)
-            elif anchor >= 1.0 or not math.isnan(length):
-                span = parameter * (math.asinh(down / pull) - math.acosh(max(anchor, 1.0)))
-            else:
-                return None
-        else:
-            span = height * pull / down
-        distance = math.hypot(span, height)
-        if not span > 0.0 or height / distance < MIN_RISE:
-            return None
-        bearing = -np.asarray(force[:2]) / pull
-        return np.array((*(bearing * span), -height, pull * distance / span))
-
-    @staticmethod
-    def _place_by_angle(
-        force: FloatArray,
-        height: float,
-        length: float,
-        elevation: float,
-        azimuth: float,
-    ) -> FloatArray | None:
-        """``(p_n, p_e, p_d, T_ch)`` of a weightless cable leaving the anchor at
-        ``elevation`` and ``azimuth`` [rad]: the winch ``length`` [m] along that direction
-        (``nan``: the span ``height / tan(elevation)``, the height [m] above the anchor;
-        :func:`.start_angle.angle_position`), and the tension the cable force on the drone
-        ``force`` (NED [N]) along the cable.
-        None when the cable does not rise (:data:`MIN_RISE`) or the force does not pull
-        toward the anchor."""
-        position = angle_position(elevation, azimuth, height, length)
-        if position is None:
-            return None
-        tension = -float(force @ position) / float(np.linalg.norm(position))
-        if not tension > 0.0:
-            return None
-        return np.array((*position, tension))
 
     def _fitted_motion(
         self, time_s: float, scale: float, length_m: float, wind_ne_mps: FloatArray
@@ -482,7 +402,7 @@ class Initialiser:
             force = accel_force + scale * thrust_vector
             if wind_ne_mps.any():
                 force = force + drag
-            placed = self._place(force, height, length_m)
+            placed = place(force, height, length_m, self.config.cable_weight_n_per_m)
             if placed is not None:
                 times.append(t)
                 positions.append(placed[:3])

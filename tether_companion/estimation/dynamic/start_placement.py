@@ -1,0 +1,103 @@
+"""Where a cable force puts the drone: the geometry the dynamic filter's start
+(:mod:`~tether_companion.estimation.dynamic.initialise`) maps its window's data through.
+
+From the cable's force on the drone (NED [N]) and the drone's height above the anchor, a
+winch's paid-out length or a ground-station cable angle, the position relative to the anchor
+(NED [m]) and the chord tension [N] on the filter's own cable curve (derive.py): the straight
+line, the catenary, or a catenary resting on the ground to a touchdown. Pure.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tether_companion.estimation.dynamic.start_angle import MIN_RISE, angle_position
+
+FloatArray = NDArray[np.float64]
+
+
+def place(
+    force: FloatArray,
+    height: float,
+    length: float,
+    weight: float,
+    elevation: float = math.nan,
+    azimuth: float = math.nan,
+) -> FloatArray | None:
+    """``(p_n, p_e, p_d, T_ch)`` of a cable force on the drone ``force`` (NED [N]) with
+    the drone ``height`` [m] above the anchor and/or a cable ``length`` [m] (``nan``:
+    unknown), on a cable of ``weight`` per length [N/m]; None when the cable does not rise to
+    the drone or the data cannot place it.
+
+    With a height the curve is the filter's own (derive.py): the straight line for a
+    weightless cable; for a heavy one the catenary of parameter ``c = H/w`` (``H`` the
+    force's horizontal part, ``V`` its down part) whose slope at the drone is ``V/H``: the
+    anchor sits where ``cosh(x_a/c) = sqrt(1 + (V/H)^2) - b/c``, so the span is
+    ``a = c (asinh(V/H) - acosh(that))``. A cable resting on the ground has that at
+    exactly 1 (its lowest point, the touchdown, is at the anchor's level) whatever the
+    span beyond the touchdown, so only the winch length places it: a length at least the
+    rise ``sqrt(b^2 + 2 b c)`` (longer than any free curve reaching the height) lies on
+    the ground over ``L - rise`` and ``a = L - rise + c acosh(1 + b/c)``; without a
+    length a pull with ``cosh`` at or below 1 places nothing. Without a height, the chord of a
+    winch length ``L`` along the force (the weight's pull taken as half the cable's, a
+    first guess the filter refines).
+
+    With a cable angle at the anchor (``elevation``, ``azimuth`` [rad]; ``nan``: none;
+    given only for a weightless cable whose pull the wind could turn,
+    :meth:`.initialise.Initialiser._pull_weak`) the angle places the drone
+    (:func:`place_by_angle`)."""
+    if math.isfinite(azimuth):  # a weightless cable whose pull the wind could turn
+        return place_by_angle(force, height, length, elevation, azimuth)
+    if math.isnan(height):
+        chord = force - np.array((0.0, 0.0, 0.5 * weight * length))
+        tension = float(np.linalg.norm(chord))
+        if not tension > 0.0:
+            return None
+        return np.array((*(-chord / tension * length), tension))
+    pull = math.hypot(float(force[0]), float(force[1]))
+    down = float(force[2])
+    if not (pull > 0.0 and down > 0.0 and height > 0.0):
+        return None
+    if weight > 0.0:
+        parameter = pull / weight
+        rise = math.sqrt(height * height + 2.0 * height * parameter)
+        anchor = math.hypot(1.0, down / pull) - height / parameter
+        if length >= rise:  # longer than any free curve to this height: on the ground
+            span = length - rise + parameter * math.acosh(1.0 + height / parameter)
+        elif anchor >= 1.0 or not math.isnan(length):
+            span = parameter * (math.asinh(down / pull) - math.acosh(max(anchor, 1.0)))
+        else:
+            return None
+    else:
+        span = height * pull / down
+    distance = math.hypot(span, height)
+    if not span > 0.0 or height / distance < MIN_RISE:
+        return None
+    bearing = -np.asarray(force[:2]) / pull
+    return np.array((*(bearing * span), -height, pull * distance / span))
+
+
+def place_by_angle(
+    force: FloatArray,
+    height: float,
+    length: float,
+    elevation: float,
+    azimuth: float,
+) -> FloatArray | None:
+    """``(p_n, p_e, p_d, T_ch)`` of a weightless cable leaving the anchor at
+    ``elevation`` and ``azimuth`` [rad]: the winch ``length`` [m] along that direction
+    (``nan``: the span ``height / tan(elevation)``, the height [m] above the anchor;
+    :func:`.start_angle.angle_position`), and the tension the cable force on the drone
+    ``force`` (NED [N]) along the cable.
+    None when the cable does not rise (:data:`MIN_RISE`) or the force does not pull
+    toward the anchor."""
+    position = angle_position(elevation, azimuth, height, length)
+    if position is None:
+        return None
+    tension = -float(force @ position) / float(np.linalg.norm(position))
+    if not tension > 0.0:
+        return None
+    return np.array((*position, tension))

@@ -62,7 +62,7 @@ from tether_companion.estimation.dynamic.noise import (
 from tether_companion.estimation.dynamic.on_ground import AutopilotLanded, on_ground_reason
 from tether_companion.estimation.dynamic.output import DynamicHealth, NavigationEstimate
 from tether_companion.estimation.dynamic.published import StatusSettings, TickSource
-from tether_companion.estimation.dynamic.sag_range import NO_SAG, mixture_sag
+from tether_companion.estimation.dynamic.sag_range import NO_SAG, SagMemo
 from tether_companion.estimation.dynamic.startup import FilterStartup
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
 from tether_companion.estimation.inputs import InputFeed, range_height_m, range_reading_ok
@@ -133,23 +133,12 @@ class DynamicTetherEstimator(InputFeed):
         self._q = process_noise_density(dynamic)
         self._q_matrix = np.diag(self._q)
         self._noise = ProcessNoise(self._q_matrix)
-        status_settings = StatusSettings(
-            slack_tension_n=dynamic.slack_tension_n,
-            max_horizontal_std_m=dynamic.max_horizontal_std_m,
-            winch_length_noise_std_m=dynamic.winch_length_noise_std_m,
-            pull_per_wind_n_s_per_m=(
-                dynamic.min_pull_over_wind_drag * vehicle.mass_kg * self.constants.drag_per_s
-            ),
-            wind_std_mps=dynamic.initial.wind_std_mps,
-            drag_per_wind_n_s_per_m=vehicle.mass_kg * self.constants.drag_per_s,
-            terrain_variance_m2=config.ground_station.terrain_std_m**2,
+        status_settings = StatusSettings.of_filter(
+            dynamic, vehicle.mass_kg, self.constants.drag_per_s, config.ground_station.terrain_std_m
         )
         self._mixture: MixtureValues | None = None
-        self._sag_key: tuple[MixtureValues, float] | None = None
-        self._sag = NO_SAG
-        """The sag's range std and added variance for the mixture and winch length of
-        ``_sag_key``."""
         """The bank's latest mixture with its values as floats (kept while it is the same)."""
+        self._sag = SagMemo()
         self.accel = AccelFusion(
             accel_measurement_std_mps2(dynamic), config.min_cable_length_m, self.health
         )
@@ -460,19 +449,6 @@ class DynamicTetherEstimator(InputFeed):
         self.health.resets = self._resets
         self._reset_reason = f"filter restarted: {reason}"
 
-    def _sag_range(self, mixture: MixtureValues) -> tuple[float, float]:
-        """The range's standard deviation [m] over the tensions the filter cannot rule out at
-        the fused winch length and the variance [m^2] the published covariance then needs
-        along the horizontal range
-        (:func:`~tether_companion.estimation.dynamic.sag_range.mixture_sag`), computed once
-        per mixture and length reading."""
-        winch = bool(self.health.winch_fused)
-        key = (mixture, self.constants.length_m if winch else math.nan)
-        if self._sag_key != key:
-            self._sag_key = key
-            self._sag = mixture_sag(mixture, self.constants, winch)
-        return self._sag
-
     def _estimate(self, accel_fused: bool, stale: bool, on_ground: bool) -> NavigationEstimate:
         """The tick's estimate: what its values are computed from, kept (they are computed
         when read: :mod:`~tether_companion.estimation.dynamic.published`)."""
@@ -487,7 +463,7 @@ class DynamicTetherEstimator(InputFeed):
         batch = self._batch
         sag = NO_SAG
         if mixture is not None and self.constants.weight_n_per_m > 0.0:
-            sag = self._sag_range(mixture)
+            sag = self._sag.at(mixture, self.constants, bool(self.health.winch_fused))
         source = TickSource(
             mixture,
             None if batch is None or bank is None else batch.step(),

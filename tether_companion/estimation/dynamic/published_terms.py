@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.bearing_ambiguity import bearing_ambiguity
+from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.observability import (
     horizontal_pull_n,
     min_horizontal_pull_n,
@@ -53,6 +54,23 @@ class StatusSettings:
     (``ground_station.terrain_std_m`` squared): the rangefinder reads the height above the
     ground under the drone, an error its white noise model averages away and a hover does not;
     published as a height error with the innovations' excess (:func:`height_excess`)."""
+
+    @classmethod
+    def of_filter(
+        cls, dynamic: DynamicFilterConfig, mass_kg: float, drag_per_s: float, terrain_std_m: float
+    ) -> StatusSettings:
+        """The settings of a filter with ``dynamic``'s settings on a drone of ``mass_kg`` [kg]
+        with rotor drag ``drag_per_s`` [1/s] over ground of ``terrain_std_m`` [m]."""
+        drag_n_s_per_m = mass_kg * drag_per_s
+        return cls(
+            slack_tension_n=dynamic.slack_tension_n,
+            max_horizontal_std_m=dynamic.max_horizontal_std_m,
+            winch_length_noise_std_m=dynamic.winch_length_noise_std_m,
+            pull_per_wind_n_s_per_m=dynamic.min_pull_over_wind_drag * drag_n_s_per_m,
+            wind_std_mps=dynamic.initial.wind_std_mps,
+            drag_per_wind_n_s_per_m=drag_n_s_per_m,
+            terrain_variance_m2=terrain_std_m**2,
+        )
 
 
 def added_position_terms(

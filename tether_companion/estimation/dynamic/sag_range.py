@@ -223,3 +223,23 @@ def mixture_sag(
         constants.length_m,
         constants.tension_measured,
     )
+
+
+class SagMemo:
+    """:func:`mixture_sag` computed once per mixture and winch length reading."""
+
+    def __init__(self) -> None:
+        self._key: tuple[MixtureValues, float] | None = None
+        self._value = NO_SAG
+
+    def at(
+        self, mixture: MixtureValues, constants: ModelConstants, winch_fused: bool
+    ) -> tuple[float, float]:
+        """The range's standard deviation [m] over the tensions the filter cannot rule out at
+        the fused winch length (``winch_fused``) and the variance [m^2] the published
+        covariance then needs along the horizontal range (:func:`mixture_sag`)."""
+        key = (mixture, constants.length_m if winch_fused else math.nan)
+        if self._key != key:
+            self._key = key
+            self._value = mixture_sag(mixture, constants, winch_fused)
+        return self._value

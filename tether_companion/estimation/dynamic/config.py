@@ -94,7 +94,7 @@ class DynamicInitial:
         doc="the hypotheses run side by side at most this long, then collapse to their"
         " moments (6 s against 30 s, with imu_ticks_per_fusion 4: 4x cheaper over a 20 s"
         " flight, more accurate IMU-only; with a winch length the NEES is 4-33 % higher;"
-        " docs/estimation.md) [s]",
+        " docs/estimation-history.md) [s]",
     )
 
 
@@ -216,7 +216,7 @@ class DynamicFilterConfig:
         minimum=0.0,
         doc="min_pull_over_wind_drag once every other bearing hypothesis of the bank"
         " (initial.wind_hypotheses) converged to the best member's (the data, not the start,"
-        " chose the bearing), until the filter's cable goes slack (docs/estimation.md, the"
+        " chose the bearing), until the filter's cable goes slack (docs/estimation-history.md, the"
         " bearing hypotheses) [1]",
     )
     imu_ticks_per_fusion: int = spec(
@@ -227,7 +227,7 @@ class DynamicFilterConfig:
         " forces summed, the state as tick by tick) and fuses the force balance then, its"
         " white noise scaled to that interval; the published estimate is stepped every tick"
         " (4 against 1: the same information, the force residual being correlated over ~1 s;"
-        " with the 6 s bank 4x cheaper; docs/estimation.md, Cost per IMU tick) [1]",
+        " with the 6 s bank 4x cheaper; docs/estimation-history.md, Cost per IMU tick) [1]",
     )
     noise: DynamicNoise = spec(default_factory=DynamicNoise, doc="process noise")
     initial: DynamicInitial = spec(default_factory=DynamicInitial, doc="initialisation")

@@ -248,7 +248,7 @@ class GroundStationInputs:
         the elevation the reading measures. Without a length the filter's range comes from
         the height through the elevation (``rho = h / tan(el)``), and the term's vertical part
         stands for that range's error, which the elevation does not remove in the filter
-        (docs/estimation.md, "The unmodelled term and the cable angle (nees10)")."""
+        (docs/estimation-history.md, "The unmodelled term and the cable angle (nees10)")."""
         _, jac_rows = self.cable_angle.evaluate(constants, np.array(x))
         jac = jac_rows.ravel().tolist()
         if not all(math.isfinite(v) for v in jac):

@@ -63,7 +63,7 @@ def on_ground_reason(
         first touch the simulated drone stops within one physics step, and no force balance
         says so), and the rangefinder, below its minimum range, no longer measures the
         height: on the take-off's landing the down error grew to 0.3-0.6 m within 0.3 s of
-        the touch at a claimed 0.11-0.14 m (docs/estimation.md, "The touchdown (split10)").
+        the touch at a claimed 0.11-0.14 m (docs/estimation-history.md, "The touchdown (split10)").
         A NaN height never counts.
     autopilot_landed
         The flight controller's latest landed state (EXTENDED_SYS_STATE, fresh) is ON_GROUND:

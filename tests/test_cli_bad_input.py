@@ -85,6 +85,24 @@ CONFIG_CASES = [
         ["dynamic_filter.anchor_height_m", "unknown key"],
     ),
     (
+        "terrain-negative",
+        "estimator: {ground_station: {terrain_std_m: -0.05}}\n",
+        [],
+        ["estimator.ground_station.terrain_std_m = -0.05", ">= 0"],
+    ),
+    (
+        "terrain-nan",
+        "estimator: {ground_station: {terrain_std_m: .nan}}\n",
+        [],
+        ["estimator.ground_station.terrain_std_m"],
+    ),
+    (
+        "terrain-text",
+        "estimator: {ground_station: {terrain_std_m: bumpy}}\n",
+        [],
+        ["estimator.ground_station.terrain_std_m = 'bumpy'"],
+    ),
+    (
         "winch-speed",
         "winch: {enabled: true, max_speed_mps: -1}\n",
         [],

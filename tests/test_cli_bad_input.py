@@ -103,6 +103,30 @@ CONFIG_CASES = [
         ["estimator.ground_station.terrain_std_m = 'bumpy'"],
     ),
     (
+        "rest-height-negative",
+        "dynamic_filter: {rest_height_m: -0.1}\n",
+        [],
+        ["dynamic_filter.rest_height_m = -0.1", ">= 0"],
+    ),
+    (
+        "rest-height-text",
+        "dynamic_filter: {rest_height_m: legs}\n",
+        [],
+        ["dynamic_filter.rest_height_m = 'legs'"],
+    ),
+    (
+        "rest-velocity-zero",
+        "dynamic_filter: {rest_velocity_std_mps: 0}\n",
+        [],
+        ["dynamic_filter.rest_velocity_std_mps = 0", "> 0"],
+    ),
+    (
+        "rest-height-std-nan",
+        "dynamic_filter: {rest_height_std_m: .nan}\n",
+        [],
+        ["dynamic_filter.rest_height_std_m"],
+    ),
+    (
         "winch-speed",
         "winch: {enabled: true, max_speed_mps: -1}\n",
         [],

@@ -170,6 +170,23 @@ class DynamicFilterConfig:
         "just lifted off: position withheld (status on_ground), the ground's contact force "
         "being no part of the model and the rangefinder at its minimum range [m]",
     )
+    rest_velocity_std_mps: float = spec(
+        0.05,
+        exclusive_minimum=0.0,
+        doc="velocity noise while the drone rests on the ground (motors idle or the autopilot"
+        " says landed, the accelerometer reading g), fused as a zero-velocity update [m/s]",
+    )
+    rest_height_m: float = spec(
+        0.1,
+        minimum=0.0,
+        maximum=2.0,
+        doc="height of the centre of mass above the ground when landed (the landing gear) [m]",
+    )
+    rest_height_std_m: float = spec(
+        0.1,
+        exclusive_minimum=0.0,
+        doc="uncertainty of rest_height_m [m] (with the terrain's, the height's at rest)",
+    )
     max_horizontal_std_m: float = spec(
         0.5, exclusive_minimum=0.0, doc="horizontal std beyond which the pull is too weak [m]"
     )

@@ -43,6 +43,7 @@ from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.accel_fusion import AccelFusion
 from tether_companion.estimation.dynamic.aid.rangefinder import RangefinderAid
+from tether_companion.estimation.dynamic.aid.rest import RestAid
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterConfig, drag_per_s
 from tether_companion.estimation.dynamic.consistency import BearingWindow, GustWalk
@@ -140,7 +141,10 @@ class DynamicTetherEstimator(InputFeed):
         """The bank's latest mixture with its values as floats (kept while it is the same)."""
         self._sag = SagMemo()
         self.accel = AccelFusion(
-            accel_measurement_std_mps2(dynamic), config.min_cable_length_m, self.health
+            accel_measurement_std_mps2(dynamic),
+            config.min_cable_length_m,
+            self.health,
+            RestAid.of_config(dynamic, config.ground_station),
         )
         self.rangefinder = RangefinderAid(
             config.altimeter_noise_variance_m2, config.ground_station.anchor_height_m

@@ -399,6 +399,8 @@ class DynamicHealth:
     load_cell_fused: int = 0
     winch_fused: int = 0
     cable_angle_fused: int = 0
+    rest_fused: int = 0
+    rest_settled: int = 0
     nonfinite_rejected: int = 0
     pwm_invalid: int = 0
     out_of_order: int = 0

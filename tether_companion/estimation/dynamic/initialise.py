@@ -268,7 +268,7 @@ class Initialiser:
         theta[_H] = height
         theta[_L] = length_m
         theta[_EL] = theta[_AZ] = math.nan
-        if cfg.cable_weight_n_per_m == 0.0 and self._pull_weak(theta):  # the force would not
+        if self._pull_weak(theta):  # the force would not tell the bearing
             theta[_EL], theta[_AZ] = self._angles.mean()
         y = self._solve(theta)
         if y is None or not np.all(np.isfinite(y)):
@@ -281,7 +281,8 @@ class Initialiser:
         if x is None or p is None:
             return Initialisation(None, None, NO_COVARIANCE)
         motion = None
-        if math.isfinite(theta[_EL]):  # a weightless cable placed by the readings
+        weightless = cfg.cable_weight_n_per_m == 0.0
+        if math.isfinite(theta[_EL]) and weightless:  # a weightless cable placed by the readings
             motion = self._angles.motion(time_s, self.range_std_m, cfg.winch_length_noise_std_m)
             if motion is not None:  # the end point as uncertain as the fit says, at least
                 position_var = np.diag(p)[state.POSITION]
@@ -289,7 +290,8 @@ class Initialiser:
                     np.maximum(motion[3] ** 2 - position_var, 0.0)
                 )
         if motion is None:
-            motion = self._fitted_motion(time_s, scale, length_m, theta[_W])
+            by_azimuth = math.isfinite(theta[_AZ]) and not weightless
+            motion = self._fitted_motion(time_s, scale, length_m, theta[_W], by_azimuth)
         if motion is not None:  # the window's motion: position now and velocity
             position, velocity, velocity_se, _ = motion
             x[state.POSITION] = position
@@ -390,19 +392,28 @@ class Initialiser:
         return len(self._angles) > 0 and pull < least
 
     def _fitted_motion(
-        self, time_s: float, scale: float, length_m: float, wind_ne_mps: FloatArray
+        self,
+        time_s: float,
+        scale: float,
+        length_m: float,
+        wind_ne_mps: FloatArray,
+        by_azimuth: bool = False,
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None:
         """Position [m] and velocity [m/s] at ``time_s`` from a quadratic fit of the
         window's per-tick positions (thrust scale ``scale``, the wind ``wind_ne_mps``'s drag
-        at the window's mean attitude), and the velocity's and the position's standard
-        errors per axis [m/s, m] (the position's not used: measured and not taken, start10)."""
+        at the window's mean attitude; ``by_azimuth``: each tick's force on the bearing of the
+        cable angle read nearest in time, a heavy cable whose pull the wind could turn), and
+        the velocity's and the position's standard errors per axis [m/s, m] (the position's
+        not used: measured and not taken, start10)."""
         times, positions = [], []
         drag = -self.mass_kg * self.drag_per_s * ((self._sum_d / self._n)[:, :2] @ wind_ne_mps)
+        weight = self.config.cable_weight_n_per_m
         for t, accel_force, thrust_vector, height in self._snapshots:
             force = accel_force + scale * thrust_vector
             if wind_ne_mps.any():
                 force = force + drag
-            placed = place(force, height, length_m, self.config.cable_weight_n_per_m)
+            azimuth = self._angles.azimuth_at(t) if by_azimuth else math.nan
+            placed = place(force, height, length_m, weight, azimuth=azimuth)
             if placed is not None:
                 times.append(t)
                 positions.append(placed[:3])

@@ -60,12 +60,37 @@ def rests_on_ground(x: Sequence[float], c: Sequence[float]) -> bool:
     return span > parameter * math.acosh(1.0 + height / parameter)
 
 
+SLACK_FLOOR_N = 1e-3
+"""The chord tension [N] below which a heavy cable's models continue linearly
+(:func:`_free_or_grounded`)."""
+
+
 def _free_or_grounded(free: Generated, grounded: Generated) -> Generated:
-    """The generated ``free`` model, or ``grounded`` where the cable rests on the ground."""
+    """The generated ``free`` model, or ``grounded`` where the cable rests on the ground.
+
+    Below a chord tension of :data:`SLACK_FLOOR_N` (a cable at or past slack; a cable pulls,
+    it does not push) the resting cable's model at that floor, continued linearly in the
+    tension with its Jacobian there: at a chord tension near 0 a heavy cable lies on the
+    ground up to below the drone and hangs straight up (force ``H`` horizontally and
+    ``w b + H`` at the drone, smooth in ``T_ch``). The free catenary evaluated at ``T_ch < 0``
+    is its mirror image, a cable bowed upward that pushes, whose tension at the drone grows
+    without bound as ``T_ch -> 0-`` (``dh/dT_ch`` 11-110 instead of ~0.9 on the light 1 N
+    figure-8): a filter that went there fused the winch's measured tension with no effect
+    and stayed slack the whole flight (docs/estimation.md, slack12)."""
 
     def model(
         x: Sequence[float], u: Sequence[float], c: Sequence[float]
     ) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        tension = x[state.TENSION]
+        if tension < SLACK_FLOOR_N and c[2] > 0.0 and -x[2] > 0.0:
+            at_floor = list(x)
+            at_floor[state.TENSION] = SLACK_FLOOR_N
+            value, jac = grounded(at_floor, u, c)
+            step = tension - SLACK_FLOOR_N
+            n = state.N_STATES
+            return tuple(
+                v + jac[row * n + state.TENSION] * step for row, v in enumerate(value)
+            ), jac
         return (grounded if rests_on_ground(x, c) else free)(x, u, c)
 
     model.__doc__ = free.__doc__

@@ -46,10 +46,15 @@ def place(
     first guess the filter refines).
 
     With a cable angle at the anchor (``elevation``, ``azimuth`` [rad]; ``nan``: none;
-    given only for a weightless cable whose pull the wind could turn,
-    :meth:`.initialise.Initialiser._pull_weak`) the angle places the drone
-    (:func:`place_by_angle`)."""
-    if math.isfinite(azimuth):  # a weightless cable whose pull the wind could turn
+    given where the wind could turn the pull, :meth:`.initialise.Initialiser._pull_weak`)
+    the angle places the drone: a weightless cable along it (:func:`place_by_angle`); a
+    heavy one on the bearing of the azimuth, its span from the force's pull along that
+    bearing on the curve as above (:func:`along_bearing`; the elevation of a sagging cable
+    at the anchor is not the drone's)."""
+    if math.isfinite(azimuth):  # a pull the wind could turn
+        if weight > 0.0:
+            turned = along_bearing(force, azimuth)
+            return None if turned is None else place(turned, height, length, weight)
         return place_by_angle(force, height, length, elevation, azimuth)
     if math.isnan(height):
         chord = force - np.array((0.0, 0.0, 0.5 * weight * length))
@@ -78,6 +83,19 @@ def place(
         return None
     bearing = -np.asarray(force[:2]) / pull
     return np.array((*(bearing * span), -height, pull * distance / span))
+
+
+def along_bearing(force: FloatArray, azimuth: float) -> FloatArray | None:
+    """The cable force on the drone ``force`` (NED [N]) with its horizontal part replaced by
+    its component toward the anchor on the bearing ``azimuth`` [rad] (from north): a cable
+    hangs in the vertical plane through anchor and drone, so what the force has across that
+    plane is the wind's drag or noise. None when the force does not pull toward the anchor
+    along it."""
+    bearing = np.array((math.cos(azimuth), math.sin(azimuth)))
+    pull = -float(force[:2] @ bearing)
+    if not pull > 0.0:
+        return None
+    return np.array((*(-pull * bearing), float(force[2])))
 
 
 def place_by_angle(

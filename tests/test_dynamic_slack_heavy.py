@@ -1,6 +1,6 @@
 """A heavy cable at a low tension (slack12): the models below a chord tension of zero, the
-winch's measured tension lifting a filter that went slack, and the start's bearing from the
-cable angle where the wind turns a heavy cable's weak pull.
+winch's measured tension lifting a filter that went slack, and the start placed by the cable
+angle (and the winch length) where the wind turns a heavy cable's weak pull.
 
 On the light cable (0.0167 kg/m) at the winch's 1 N the filter's chord tension went below
 zero on tuning seeds of the figure-8; the free catenary there is its mirror image, whose
@@ -25,6 +25,7 @@ from tether_companion.estimation.dynamic.initialise import Initialiser
 from tether_companion.estimation.dynamic.models import CATENARY, SLACK_FLOOR_N
 from tether_companion.estimation.dynamic.offline import run_dynamic
 from tether_companion.estimation.dynamic.output import SLACK
+from tether_companion.estimation.dynamic.start_placement import heavy_by_elevation, place
 from tether_companion.samples import AttitudeSample, ImuSample
 from tether_companion.sim.scenario import load_scenario
 
@@ -141,3 +142,32 @@ def test_a_heavy_cable_start_takes_its_bearing_from_the_cable_angle() -> None:
     assert np.allclose(start.x[state.POSITION], truth, atol=0.05)
     sd = np.sqrt(np.diag(start.p)[:3])
     assert np.all(np.abs(start.x[state.POSITION] - truth) < 3.0 * sd)
+
+
+@pytest.mark.parametrize("anchor_over_c", [-0.3, 0.5, 1.0])
+def test_the_cable_angle_and_length_place_a_heavy_drone_without_its_pull(
+    anchor_over_c: float,
+) -> None:
+    """A free catenary (``y = c cosh(x/c)``, the anchor at ``x = anchor_over_c c``, the drone
+    5 m beyond): from its elevation at the anchor, its arc length and the height the span and
+    the chord tension come back exactly, and on the azimuth's bearing even where the window's
+    force points away from the anchor (the light 1 N hover's seed 9: the wind's drag and the
+    thrust map's error outweigh 1 N of pull, and a start from that force failed for 15 s)."""
+    parameter = HORIZONTAL_N / WEIGHT_N_PER_M
+    x0, x1 = anchor_over_c * parameter, anchor_over_c * parameter + 5.0
+    height = parameter * (math.cosh(x1 / parameter) - math.cosh(x0 / parameter))
+    length = parameter * (math.sinh(x1 / parameter) - math.sinh(x0 / parameter))
+    elevation = math.atan(math.sinh(x0 / parameter))
+    chord_tension = HORIZONTAL_N * math.hypot(5.0, height) / 5.0
+    span, tension = heavy_by_elevation(height, length, WEIGHT_N_PER_M, elevation)
+    assert span == pytest.approx(5.0, abs=1e-9)
+    assert tension == pytest.approx(chord_tension, rel=1e-9)
+    away = np.array((0.2, 0.25, 0.4))  # north-east and down: no pull toward the anchor
+    azimuth = 2.0
+    if math.sin(elevation) >= 0.1:
+        placed = place(away, height, length, WEIGHT_N_PER_M, elevation, azimuth)
+        assert placed is not None
+        expected = (5.0 * math.cos(azimuth), 5.0 * math.sin(azimuth), -height, chord_tension)
+        assert np.allclose(placed, expected, atol=1e-9)
+    else:  # leaving the anchor flat or downward: the force's pull along the bearing places it
+        assert place(away, height, length, WEIGHT_N_PER_M, elevation, azimuth) is None

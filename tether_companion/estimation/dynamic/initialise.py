@@ -32,8 +32,12 @@ The angle's noise (averaged over the window's readings) and calibration errors e
 initial covariance as two more parameters of the construction, and the motion fit places the
 drone at each reading from the angle instead of from that tick's force
 (:mod:`~tether_companion.estimation.dynamic.start_angle`). Only where the force cannot tell
-the bearing (:meth:`Initialiser._pull_weak`) and for a weightless cable (a heavy one keeps the
-force's catenary: not measured with an angle).
+the bearing (:meth:`Initialiser._pull_weak`). A heavy cable there (slack12) is placed on the
+azimuth's bearing by its elevation, the winch length and the height (the free catenary they
+fix, :func:`~tether_companion.estimation.dynamic.start_placement.heavy_by_elevation`), or,
+where it leaves the anchor flat and may rest on the ground, by the force's pull along that
+bearing; each tick of the motion fit by the reading nearest in time. On the light cable at
+the winch's 1 N the force alone started the figure-8 up to 7 m off (tuning seeds).
 
 Not possible yet (reported, and the window starts again): no height and no winch length,
 thrust far below the weight (on the ground), cable slack, a cable that does not rise to the
@@ -401,8 +405,8 @@ class Initialiser:
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None:
         """Position [m] and velocity [m/s] at ``time_s`` from a quadratic fit of the
         window's per-tick positions (thrust scale ``scale``, the wind ``wind_ne_mps``'s drag
-        at the window's mean attitude; ``by_azimuth``: each tick's force on the bearing of the
-        cable angle read nearest in time, a heavy cable whose pull the wind could turn), and
+        at the window's mean attitude; ``by_azimuth``: each tick placed with the cable angle read
+        nearest in time, a heavy cable whose pull the wind could turn), and
         the velocity's and the position's standard errors per axis [m/s, m] (the position's
         not used: measured and not taken, start10)."""
         times, positions = [], []
@@ -412,8 +416,8 @@ class Initialiser:
             force = accel_force + scale * thrust_vector
             if wind_ne_mps.any():
                 force = force + drag
-            azimuth = self._angles.azimuth_at(t) if by_azimuth else math.nan
-            placed = place(force, height, length_m, weight, azimuth=azimuth)
+            elevation, azimuth = self._angles.angle_at(t) if by_azimuth else (math.nan, math.nan)
+            placed = place(force, height, length_m, weight, elevation, azimuth)
             if placed is not None:
                 times.append(t)
                 positions.append(placed[:3])

@@ -68,12 +68,13 @@ class AngleReadings:
         )
         return float(np.mean(angles[:, 0])), azimuth
 
-    def azimuth_at(self, time_s: float) -> float:
-        """The azimuth [rad] of the reading taken nearest ``time_s`` [s]; ``nan`` without a
-        reading."""
+    def angle_at(self, time_s: float) -> tuple[float, float]:
+        """(elevation, azimuth) [rad] of the reading taken nearest ``time_s`` [s]; ``nan``
+        without a reading."""
         if not self._readings:
-            return math.nan
-        return min(self._readings, key=lambda reading: abs(reading[0] - time_s))[2]
+            return math.nan, math.nan
+        nearest = min(self._readings, key=lambda reading: abs(reading[0] - time_s))
+        return nearest[1], nearest[2]
 
     def mean_std(self, elevation_rad: float) -> tuple[float, float]:
         """Standard deviations of the mean elevation and azimuth [rad] at ``elevation_rad``:

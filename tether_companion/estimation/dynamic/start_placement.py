@@ -47,14 +47,11 @@ def place(
 
     With a cable angle at the anchor (``elevation``, ``azimuth`` [rad]; ``nan``: none;
     given where the wind could turn the pull, :meth:`.initialise.Initialiser._pull_weak`)
-    the angle places the drone: a weightless cable along it (:func:`place_by_angle`); a
-    heavy one on the bearing of the azimuth, its span from the force's pull along that
-    bearing on the curve as above (:func:`along_bearing`; the elevation of a sagging cable
-    at the anchor is not the drone's)."""
+    the angle places the drone: a weightless cable along it (:func:`place_by_angle`), a
+    heavy one by :func:`place_heavy_by_angle`."""
     if math.isfinite(azimuth):  # a pull the wind could turn
         if weight > 0.0:
-            turned = along_bearing(force, azimuth)
-            return None if turned is None else place(turned, height, length, weight)
+            return place_heavy_by_angle(force, height, length, weight, elevation, azimuth)
         return place_by_angle(force, height, length, elevation, azimuth)
     if math.isnan(height):
         chord = force - np.array((0.0, 0.0, 0.5 * weight * length))
@@ -83,6 +80,53 @@ def place(
         return None
     bearing = -np.asarray(force[:2]) / pull
     return np.array((*(bearing * span), -height, pull * distance / span))
+
+
+def place_heavy_by_angle(
+    force: FloatArray,
+    height: float,
+    length: float,
+    weight: float,
+    elevation: float,
+    azimuth: float,
+) -> FloatArray | None:
+    """``(p_n, p_e, p_d, T_ch)`` of a drone ``height`` [m] above the anchor on a cable of
+    ``weight`` per length [N/m] leaving the anchor at ``elevation`` and ``azimuth`` [rad]:
+    the bearing is the azimuth (the cable hangs in the vertical plane through anchor and
+    drone). With the winch ``length`` [m] and a rising cable (``sin(el)`` at least
+    :data:`MIN_RISE`) the ground station places it alone (:func:`heavy_by_elevation`: a
+    weak pull's force, turned and shortened by the wind's drag, is not needed); else (a
+    cable leaving the anchor flat may rest on the ground over any stretch) the span is the
+    force's pull along that bearing on the filter's curve (:func:`along_bearing`,
+    :func:`place`). None when neither places it."""
+    if math.isfinite(length) and height > 0.0 and math.sin(elevation) >= MIN_RISE:
+        placed = heavy_by_elevation(height, length, weight, elevation)
+        if placed is not None:
+            span, tension = placed
+            return np.array((span * math.cos(azimuth), span * math.sin(azimuth), -height, tension))
+    turned = along_bearing(force, azimuth)
+    return None if turned is None else place(turned, height, length, weight)
+
+
+def heavy_by_elevation(
+    height: float, length: float, weight: float, elevation: float
+) -> tuple[float, float] | None:
+    """The span [m] and chord tension [N] of the free catenary (weight ``weight`` [N/m]) of
+    arc length ``length`` [m] that leaves the anchor at ``elevation`` [rad] and reaches
+    ``height`` [m] above it. With ``c = H/w`` and the anchor's slope ``S = tan(el)``,
+    ``C = sqrt(1 + S^2)``, the drone's end has ``sinh = S + L/c`` and ``cosh = C + b/c``;
+    ``cosh^2 - sinh^2 = 1`` gives ``c = (L^2 - b^2) / (2 (C b - S L))``, the span
+    ``a = c (asinh(S + L/c) - asinh(S))`` and ``T_ch = w c |p| / a``. None where no such
+    curve exists (``L <= b`` or ``C b <= S L``: a cable that long cannot rise that steeply)."""
+    slope = math.tan(elevation)
+    denominator = 2.0 * (math.hypot(1.0, slope) * height - slope * length)
+    if not (length > height and denominator > 0.0):
+        return None
+    parameter = (length * length - height * height) / denominator
+    span = parameter * (math.asinh(slope + length / parameter) - math.asinh(slope))
+    if not span > 0.0:
+        return None
+    return span, weight * parameter * math.hypot(span, height) / span
 
 
 def along_bearing(force: FloatArray, azimuth: float) -> FloatArray | None:

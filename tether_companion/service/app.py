@@ -257,6 +257,7 @@ class CompanionService:
             self.recorder.write(bytes(msg.get_msgbuf()))
         self.state.received += 1
         session = self.session
+        kind = None
         if session.ingest.from_flight_controller(msg):
             self._fc_heard_s = now_s
             if not self.state.link_up:
@@ -273,10 +274,10 @@ class CompanionService:
                 return
         if self.vehicle_fetch is not None and not self._vehicle_read(link, now_s):
             return
-        step = session.on_message(msg, now_s)
+        step = session.on_message(msg, now_s, kind)
         if session.ingest.rebooted:
             self._on_fc_reboot()
-        latest = session.ingest.latest_fc_s
+        latest = session.ingest.clock.latest_fc_s
         if latest > self._last_latest_fc_s:
             self._last_latest_fc_s = latest
             self.clock.observe(latest, now_s)

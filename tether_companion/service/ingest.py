@@ -52,13 +52,14 @@ from tether_companion.service.cable_angle import (
     CableAngleGate,
     CableAngleReading,
 )
-from tether_companion.service.fc_time import BACKSTEP, IMPLAUSIBLE, REBOOT, FcTimeGate
+from tether_companion.service.fc_time import ACCEPT, BACKSTEP, IMPLAUSIBLE, REBOOT, FcTimeGate
 from tether_companion.service.input_config import InputLimitsConfig, TensionConfig
 from tether_companion.service.link_config import LinkConfig
 from tether_companion.service.reorder import ReorderBuffer
 from tether_companion.service.winch import WinchConfig, WinchGate, WinchReading
 
 _UINT32_US = 1 << 32
+_NEVER = -math.inf
 IMU = "imu"
 ATTITUDE = "attitude"
 PWM = "pwm"
@@ -211,6 +212,8 @@ class Ingest:
         cable_angle: CableAngleConfig | None = None,
     ) -> None:
         self.link = link
+        self._fc_system_id = link.fc_system_id
+        self._fc_component_id = link.fc_component_id
         self.limits = limits
         self._output_range = (
             (limits.pwm_min_us, limits.pwm_max_us)
@@ -256,8 +259,8 @@ class Ingest:
     def from_flight_controller(self, msg: Received) -> bool:
         """Whether ``msg`` was sent by the configured flight controller."""
         return (
-            msg.get_srcSystem() == self.link.fc_system_id
-            and msg.get_srcComponent() == self.link.fc_component_id
+            msg.get_srcSystem() == self._fc_system_id
+            and msg.get_srcComponent() == self._fc_component_id
         )
 
     @property
@@ -265,16 +268,23 @@ class Ingest:
         """Newest believed flight-controller stamp [s] (-inf before the first)."""
         return self.clock.latest_fc_s
 
-    def receive(self, msg: Received, local_s: float | None = None) -> list[Sample]:
+    def receive(
+        self, msg: Received, local_s: float | None = None, kind_name: str | None = None
+    ) -> list[Sample]:
         """The checked SI samples ``msg`` releases from the reorder buffer, oldest first.
 
         ``local_s`` is the local time [s] it arrived at (None in replay: no plausibility check
-        against the clock model).
+        against the clock model); ``kind_name`` is ``msg.get_type()`` when the caller has it.
         """
         self._local_s = local_s
-        kind_name = msg.get_type()
+        if kind_name is None:
+            kind_name = msg.get_type()
         known = self._inputs.get(kind_name)
-        if known is not None and self.from_flight_controller(msg):
+        if (
+            known is not None
+            and msg.get_srcSystem() == self._fc_system_id
+            and msg.get_srcComponent() == self._fc_component_id
+        ):
             # the flight controller's input streams: none of _decode's other cases has their
             # names, so this is its outcome for them, without its tests for the other cases
             self.rebooted = False
@@ -283,16 +293,20 @@ class Ingest:
             sample = decode(msg)
             if sample is None:
                 return []
-            held = self._timed(kind, sample)
+            time_s = sample.time_s
+            verdict = self.clock.check(time_s, local_s)
+            if verdict != ACCEPT and not self._believed(verdict):
+                return []
+            released = self.reorder.push(kind, time_s, sample)
         else:
             held = self._decode(msg, kind_name)
-        if held is None:
-            return []
-        kind, sample = held
-        if kind is WINCH or kind is CABLE_ANGLE or kind is LANDED:  # stamped here: not reordered
-            self.counters.accepted[kind] += 1
-            return [sample]
-        released = self.reorder.push(kind, sample.time_s, sample)
+            if held is None:
+                return []
+            kind, sample = held
+            if kind is WINCH or kind is CABLE_ANGLE or kind is LANDED:  # stamped here
+                self.counters.accepted[kind] += 1  # not reordered
+                return [sample]
+            released = self.reorder.push(kind, sample.time_s, sample)
         if len(released) == 1:  # the clean link's path (one in, one out)
             kind, sample = released[0]
             return [sample] if self._in_order(kind, sample) else []
@@ -453,19 +467,26 @@ class Ingest:
         if sample is None:
             return None
         verdict = self.clock.check(sample.time_s, self._local_s)
+        if verdict != ACCEPT and not self._believed(verdict):
+            return None
+        return kind, sample
+
+    def _believed(self, verdict: str) -> bool:
+        """Count a clock verdict other than ``ACCEPT``; whether its sample goes on (a confirmed
+        reboot: the stamps and the reorder buffer start afresh)."""
         counters = self.counters
         if verdict == IMPLAUSIBLE:
             counters.implausible += 1
-            return None
+            return False
         if verdict == BACKSTEP:
             counters.out_of_order += 1
-            return None
+            return False
         if verdict == REBOOT:
             counters.reboots += 1
             self.rebooted = True
             self._latest_by_kind.clear()
             self.reorder.clear()
-        return kind, sample
+        return True
 
     def _in_order(self, kind: str, sample: Sample) -> bool:
         """Per message type, stamps must increase after the reorder buffer."""
@@ -475,14 +496,15 @@ class Ingest:
         counters.reordered = reorder.reordered
         counters.reorder_window_s = reorder.window_s
         counters.reorder_widened = reorder.widened
-        previous = self._latest_by_kind.get(kind, -math.inf)
+        latest = self._latest_by_kind
+        previous = latest.get(kind, _NEVER)
         if t == previous:
             counters.duplicate += 1
             return False
         if t < previous:
             counters.out_of_order += 1
             return False
-        self._latest_by_kind[kind] = t
+        latest[kind] = t
         counters.accepted[kind] += 1
         return True
 

@@ -217,31 +217,34 @@ def read_tlog(path: str | Path, *, allow_truncated: bool = False) -> Iterator[tu
         raise InputError(f"{path}: the log file is empty")
     offset = 0
     count = 0
-    while offset < len(data):
-        if offset + _STAMP.size > len(data):
+    size = len(data)
+    stamp_of = _STAMP.unpack_from
+    while offset < size:
+        start = offset + _STAMP.size
+        if start > size:
             if allow_truncated:
                 return
             raise InputError(
-                f"{path}: truncated at byte {offset} of {len(data)} (cut inside a record header)"
+                f"{path}: truncated at byte {offset} of {size} (cut inside a record header)"
             )
-        (stamp_us,) = _STAMP.unpack_from(data, offset)
-        start = offset + _STAMP.size
+        (stamp_us,) = stamp_of(data, offset)
         length = frame_length(data, start)
         if length is None:
-            if start >= len(data) - 1 and allow_truncated:
+            if start >= size - 1 and allow_truncated:
                 return
             raise InputError(
                 f"{path}: byte {start} is not the start of a MAVLink frame (record {count}); "
                 "not a .tlog file, or corrupted"
             )
-        if start + length > len(data):
+        end = start + length
+        if end > size:
             if allow_truncated:
                 return
             raise InputError(
                 f"{path}: truncated: record {count} at byte {offset} needs {length} frame bytes, "
-                f"only {len(data) - start} remain "
+                f"only {size - start} remain "
                 "(use --allow-truncated to replay what is complete)"
             )
-        yield stamp_us, data[start : start + length]
-        offset = start + length
+        yield stamp_us, data[start:end]
+        offset = end
         count += 1

@@ -276,22 +276,27 @@ class EstimationSession:
             return None
         return CatenaryPositionEstimator(self.config.catenary)
 
-    def on_message(self, msg: MAVLinkMessage, local_s: float | None = None) -> Step:
+    def on_message(
+        self, msg: MAVLinkMessage, local_s: float | None = None, kind: str | None = None
+    ) -> Step:
         """Process one received message (any sender, any type) that arrived at local time
-        ``local_s`` [s] (None in replay: stamps are not checked against the clock model)."""
-        kind = msg.get_type()
+        ``local_s`` [s] (None in replay: stamps are not checked against the clock model);
+        ``kind`` is ``msg.get_type()`` when the caller has it."""
+        if kind is None:
+            kind = msg.get_type()
         if kind == "COMMAND_LONG" and self._for_us(msg):
             return Step(messages=[self._mode_command(msg)])
         if kind in BATTERY_MESSAGES and self.ingest.from_flight_controller(msg):
             self.on_battery_voltage_v(battery_voltage_v(msg))
-        samples = self.ingest.receive(msg, local_s)
-        if self.ingest.rebooted:
+        ingest = self.ingest
+        samples = ingest.receive(msg, local_s, kind)
+        if ingest.rebooted:
             self.restart()
+        if len(samples) == 1:
+            return self.on_sample(samples[0])
         return self._on_samples(samples)
 
     def _on_samples(self, samples: list[Sample]) -> Step:
-        if len(samples) == 1:
-            return self.on_sample(samples[0])
         step = Step()
         for sample in samples:
             out = self.on_sample(sample)

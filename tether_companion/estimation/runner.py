@@ -76,8 +76,10 @@ def _schedule(scenario: Scenario) -> list[tuple[int, int]]:
         (_RANGE, sensors.range_rate_hz),
     ):
         count = int(scenario.duration_s * rate_hz + 1e-9)
-        events.extend((int(round(k * physics_hz / rate_hz)), kind) for k in range(1, count + 1))
-    return sorted(e for e in events if e[0] <= steps_total)
+        events += [(int(round(k * physics_hz / rate_hz)), kind) for k in range(1, count + 1)]
+    due = [e for e in events if e[0] <= steps_total]
+    due.sort()
+    return due
 
 
 def run_scenario(
@@ -110,7 +112,7 @@ def run_scenario(
         dataclasses.replace(config, kind="three_state"), vehicle, aligner=est4.aligner
     )
     schedule = _schedule(scenario)
-    n_ticks = sum(1 for _, kind in schedule if kind == _IMU)
+    n_ticks = [kind for _, kind in schedule].count(_IMU)
     # one row of Python floats per tick, made into arrays at the end (no array per tick)
     rows: list[tuple[float, ...]] = []
     missing = (math.nan,) * (4 + 4 + 3 + 3)

@@ -89,11 +89,11 @@ class StaticThrustInput:
         """
         if len(pwm_us) != self.n_motors:
             raise ValueError(f"expected {self.n_motors} pulse widths, got {len(pwm_us)}")
-        c1, c2 = self._c1, self._c2
+        c1, c2, pwm_min_us, per_us = self._c1, self._c2, self._pwm_min_us, self._per_us
         scale = self._full_scale * self.voltage_ratio
         total = self._c0 * self.n_motors
         for pwm in pwm_us.tolist() if isinstance(pwm_us, np.ndarray) else pwm_us:
-            u = (pwm - self._pwm_min_us) * self._per_us
+            u = (pwm - pwm_min_us) * per_us
             cmd = (0.0 if u < 0.0 else 1.0 if u > 1.0 else u) * scale
             total += cmd * (c1 + c2 * cmd)
         return total

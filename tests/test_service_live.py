@@ -221,7 +221,7 @@ def test_an_unexpected_handler_error_is_counted_not_fatal(tmp_path, capsys) -> N
     service = CompanionService(config, load_vehicle_for(config), notifier=SystemdNotifier({}))
     calls = []
 
-    def broken(msg, local_s=None):
+    def broken(msg, local_s=None, kind=None):
         calls.append(msg)
         raise RuntimeError("bug")
 

@@ -127,6 +127,24 @@ CONFIG_CASES = [
         ["dynamic_filter.rest_height_std_m"],
     ),
     (
+        "terrain-correlation-zero",
+        "estimator: {ground_station: {terrain_correlation_m: 0}}\n",
+        [],
+        ["estimator.ground_station.terrain_correlation_m = 0", "> 0"],
+    ),
+    (
+        "terrain-correlation-nan",
+        "estimator: {ground_station: {terrain_correlation_m: .nan}}\n",
+        [],
+        ["estimator.ground_station.terrain_correlation_m"],
+    ),
+    (
+        "terrain-correlation-text",
+        "estimator: {ground_station: {terrain_correlation_m: wavy}}\n",
+        [],
+        ["estimator.ground_station.terrain_correlation_m = 'wavy'"],
+    ),
+    (
         "winch-speed",
         "winch: {enabled: true, max_speed_mps: -1}\n",
         [],

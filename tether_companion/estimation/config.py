@@ -165,7 +165,17 @@ class GroundStation:
         doc="unevenness of the ground under the flight: standard deviation of its height about"
         " the anchor's ground level [m]; the rangefinder's height is off by the ground's under"
         " the drone, which a hover does not average away (dynamic filter: added to the"
-        " published height variance)",
+        " published height variance, less what the drone's motion averages:"
+        " terrain_correlation_m)",
+    )
+    terrain_correlation_m: float = spec(
+        1.0,
+        exclusive_minimum=0.0,
+        maximum=1000.0,
+        doc="distance over which the ground's height stays correlated [m] (the integral of its"
+        " correlation along a line; undulations of wavelength L: L / 2 pi): a drone moving"
+        " over more ground than this within the height's memory averages terrain_std_m down"
+        " (dynamic filter)",
     )
 
 

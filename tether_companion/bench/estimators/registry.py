@@ -143,14 +143,18 @@ class FlightContext:
         """``base`` with what a user measures and writes into ``estimator:`` for this set-up:
         the anchor's height above the ground (``ground_station.anchor_height_m`` [m], the
         scenario's mean ground level; the terrain's undulation is not known, its standard
-        deviation is: ``ground_station.terrain_std_m``) and the
-        rangefinder's mounting point (``rangefinder.offset_frd_m``, body FRD [m])."""
+        deviation is: ``ground_station.terrain_std_m``, and the distance over which it stays
+        correlated: ``ground_station.terrain_correlation_m``, the undulations' wavelength over
+        2 pi) and the rangefinder's mounting point (``rangefinder.offset_frd_m``, body FRD
+        [m])."""
+        ground = self.scenario.ground
         return dataclasses.replace(
             base,
             ground_station=dataclasses.replace(
                 base.ground_station,
-                anchor_height_m=self.scenario.ground.anchor_height_m,
-                terrain_std_m=self.scenario.ground.terrain_std_m,
+                anchor_height_m=ground.anchor_height_m,
+                terrain_std_m=ground.terrain_std_m,
+                terrain_correlation_m=ground.terrain_wavelength_m / (2.0 * math.pi),
             ),
             rangefinder=dataclasses.replace(
                 base.rangefinder, offset_frd_m=self.scenario.sensors.range_offset_frd_m

@@ -135,7 +135,7 @@ class DynamicTetherEstimator(InputFeed):
         self._q_matrix = np.diag(self._q)
         self._noise = ProcessNoise(self._q_matrix)
         status_settings = StatusSettings.of_filter(
-            dynamic, vehicle.mass_kg, self.constants.drag_per_s, config.ground_station.terrain_std_m
+            dynamic, vehicle.mass_kg, self.constants.drag_per_s
         )
         self._mixture: MixtureValues | None = None
         """The bank's latest mixture with its values as floats (kept while it is the same)."""
@@ -146,8 +146,12 @@ class DynamicTetherEstimator(InputFeed):
             self.health,
             RestAid.of_config(dynamic, config.ground_station),
         )
+        ground = config.ground_station
         self.rangefinder = RangefinderAid(
-            config.altimeter_noise_variance_m2, config.ground_station.anchor_height_m
+            config.altimeter_noise_variance_m2,
+            ground.anchor_height_m,
+            ground.terrain_std_m,
+            ground.terrain_correlation_m,
         )
         self.bearing = BearingWindow(
             vehicle.mass_kg * self.constants.drag_per_s,
@@ -448,6 +452,7 @@ class DynamicTetherEstimator(InputFeed):
         self._startup.restart()
         self.bearing.clear()
         self.gusts.clear()
+        self.rangefinder.ground.clear()
         self.ground_station.clear()
         self._resets += 1
         self.health.resets = self._resets
@@ -492,6 +497,7 @@ class DynamicTetherEstimator(InputFeed):
             ),
             stale,
             *sag,
+            terrain_m2=self.rangefinder.ground.variance_m2,
         )
         return NavigationEstimate.of_tick(
             self._time_s,

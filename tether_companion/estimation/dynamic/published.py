@@ -117,6 +117,10 @@ class TickSource:
         The variance added along the horizontal range ``(n, e)/|(n, e)|`` for the tensions
         the filter cannot rule out at a fused winch length on a sagging cable [m^2]
         (:func:`~tether_companion.estimation.dynamic.sag_range.sag_range_variance_m2`).
+    terrain_m2
+        The ground's variance the height carries at the tick [m^2]
+        (:class:`~tether_companion.estimation.dynamic.terrain.GroundFootprint`), published
+        with the rangefinder innovations' excess.
     """
 
     __slots__ = (
@@ -141,6 +145,7 @@ class TickSource:
         "sag_std_m",
         "settings",
         "step",
+        "terrain_m2",
         "winch_fused",
     )
 
@@ -162,6 +167,7 @@ class TickSource:
         inputs_stale: bool,
         sag_std_m: float = 0.0,
         sag_m2: float = 0.0,
+        terrain_m2: float = 0.0,
     ) -> None:
         self.mixture = mixture
         self.step = step if step is not None and step.ticks else None
@@ -179,6 +185,7 @@ class TickSource:
         self.inputs_stale = inputs_stale
         self.sag_std_m = sag_std_m
         self.sag_m2 = sag_m2
+        self.terrain_m2 = terrain_m2
         self._exact: ExactValues | None = None
         self._status: str | None = None
         self._assess_inputs: tuple | None = None
@@ -297,6 +304,7 @@ class TickSource:
             self.height_excess_m2,
             self.winch_fused,
             self.sag_m2,
+            self.terrain_m2,
         )
 
     # ------------------------------------------------------------------ status

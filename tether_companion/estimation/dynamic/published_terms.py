@@ -6,9 +6,10 @@ terms).
 * the unmodelled force's term, narrowed by the cable angles
   (:func:`~tether_companion.estimation.dynamic.observability.unmodelled_position_rows`,
   :func:`~tether_companion.estimation.dynamic.position_information.reduce_added_rows`);
-* the rangefinder innovations' excess and the ground's unevenness under the drone (which the
-  readings' white noise model averages away), along the line from the anchor without a
-  winch length
+* the rangefinder innovations' excess and the ground's unevenness the height carries (which
+  the readings' white noise model averages away:
+  :mod:`~tether_companion.estimation.dynamic.terrain`), along the line from the anchor
+  without a winch length
   (:func:`~tether_companion.estimation.dynamic.position_information.height_excess`);
 * a sagging cable's range over the tensions the filter cannot rule out, along the range
   (:mod:`~tether_companion.estimation.dynamic.sag_range`);
@@ -49,18 +50,13 @@ class StatusSettings:
     drag_per_wind_n_s_per_m: float = 0.0
     """The rotor drag per unit airspeed ``m mu`` [N s/m]: with it a tick the pull rule
     withholds carries the bearing's ambiguity (:mod:`.bearing_ambiguity`); 0: it does not."""
-    terrain_variance_m2: float = 0.0
-    """The ground's height variance about the anchor's ground level [m^2]
-    (``ground_station.terrain_std_m`` squared): the rangefinder reads the height above the
-    ground under the drone, an error its white noise model averages away and a hover does not;
-    published as a height error with the innovations' excess (:func:`height_excess`)."""
 
     @classmethod
     def of_filter(
-        cls, dynamic: DynamicFilterConfig, mass_kg: float, drag_per_s: float, terrain_std_m: float
+        cls, dynamic: DynamicFilterConfig, mass_kg: float, drag_per_s: float
     ) -> StatusSettings:
         """The settings of a filter with ``dynamic``'s settings on a drone of ``mass_kg`` [kg]
-        with rotor drag ``drag_per_s`` [1/s] over ground of ``terrain_std_m`` [m]."""
+        with rotor drag ``drag_per_s`` [1/s]."""
         drag_n_s_per_m = mass_kg * drag_per_s
         return cls(
             slack_tension_n=dynamic.slack_tension_n,
@@ -69,7 +65,6 @@ class StatusSettings:
             pull_per_wind_n_s_per_m=dynamic.min_pull_over_wind_drag * drag_n_s_per_m,
             wind_std_mps=dynamic.initial.wind_std_mps,
             drag_per_wind_n_s_per_m=drag_n_s_per_m,
-            terrain_variance_m2=terrain_std_m**2,
         )
 
 
@@ -82,6 +77,7 @@ def added_position_terms(
     height_excess_m2: float,
     winch_fused: bool,
     sag_m2: float,
+    terrain_m2: float = 0.0,
 ) -> tuple[float, float, float, float, float, float]:
     """The position covariance (nn, ne, nd, ee, ed, dd) [m^2] added to the filter's own at
     the state's values ``x`` (Python floats) and the tension at the drone ``tension_n`` [N]
@@ -99,7 +95,7 @@ def added_position_terms(
         information,
     )
     h00, h01, h02, h11, h12, h22 = height_excess(
-        (n, e, d), height_excess_m2 + settings.terrain_variance_m2, winch_fused
+        (n, e, d), height_excess_m2 + terrain_m2, winch_fused
     )
     s00, s01, s11 = _along_range(n, e, sag_m2) if sag_m2 else (0.0, 0.0, 0.0)
     r00, r01, r11 = _ring(x, settings)

@@ -1,8 +1,9 @@
 """Rangefinder: the tilt-corrected reading is the height above the ground,
 ``-p_d + anchor_height_m`` (the anchor's height above the ground under the drone; flat
 ground). Validity (range, tilt, staleness) is checked by the estimator, which counts it. The
-innovations' variance beyond the predicted (:class:`InnovationExcess`) is kept for the
-published height variance."""
+innovations' variance beyond the predicted (:class:`InnovationExcess`) and the ground's
+unevenness the height carries (:class:`GroundFootprint`: the readings' gains and where they
+were taken) are kept for the published height variance."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from tether_companion.estimation.dynamic import generated, state
 from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.observability import InnovationExcess
+from tether_companion.estimation.dynamic.terrain import GroundFootprint
 
 FloatArray = NDArray[np.float64]
 
@@ -32,12 +34,23 @@ class RangefinderAid:
         Reading noise [m^2].
     anchor_height_m
         Height of the anchor above the ground [m].
+    terrain_std_m, terrain_correlation_m
+        The ground's unevenness about the anchor's ground level [m] and the distance over
+        which it stays correlated [m] (:class:`GroundFootprint`).
     """
 
-    def __init__(self, noise_variance_m2: float, anchor_height_m: float) -> None:
+    def __init__(
+        self,
+        noise_variance_m2: float,
+        anchor_height_m: float,
+        terrain_std_m: float = 0.0,
+        terrain_correlation_m: float = 1.0,
+    ) -> None:
         self.status = AidStatus()
         self.excess = InnovationExcess(EXCESS_TIME_CONSTANT_S)
         """Height variance [m^2] the innovations show beyond the filter's (published only)."""
+        self.ground = GroundFootprint(terrain_std_m, terrain_correlation_m)
+        """The ground's variance the height carries [m^2] (published only)."""
         self._r = np.array([[noise_variance_m2]])
         self._u = [anchor_height_m]
         # the model is linear: its Jacobian is the same everywhere
@@ -56,9 +69,9 @@ class RangefinderAid:
         status = self.status
         fused = fuse(bank, NAME, status, z, measure, self._r, time_s)
         if status.last_innovation.size:
-            self.excess.add(
-                float(status.last_innovation[0]),
-                float(status.last_innovation_variance[0]),
-                time_s,
-            )
+            variance = float(status.last_innovation_variance[0])
+            self.excess.add(float(status.last_innovation[0]), variance, time_s)
+            if fused and variance > 0.0:  # the best member's gain on the height: P / S
+                north, east = bank.best.x_values()[:2]
+                self.ground.add(1.0 - float(self._r[0, 0]) / variance, north, east)
         return fused

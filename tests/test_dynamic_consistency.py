@@ -95,3 +95,49 @@ def test_a_cable_angle_tells_the_bearing_in_a_hover() -> None:
             window.add_bearing(4.0 * 0.02)
         t += 0.02
     assert window.force_std_n == BASE
+
+
+def test_a_hovers_bearing_starts_unknown_whatever_the_filter_claims() -> None:
+    """The window's first sample takes the filter's range but not its bearing: in the first
+    seconds of a hover (the thrust-scale bank's hypotheses collapsing, the filter claiming
+    0.2 m) the across-cable standard deviation is at least the wind prior's turn of the cable
+    (the winch alone on the realistic gusty hover published 1.2-1.4 s after taut, the
+    window then adding nothing)."""
+    hover = [4.0, 0.0, -2.5]
+    distance = math.dist(hover, (0.0, 0.0, 0.0))
+    prior_bound = DRAG * WIND_STD / (4.0 / distance)
+    for seconds in (0.3, 1.5, 3.0):
+        window = _window()
+        _fly(window, lambda t: hover, 4.0, seconds, 0.04)
+        assert _across_std_m(window, distance, 4.0) >= prior_bound
+
+
+def test_the_floor_applies_at_once_when_the_filter_narrows_between_samples() -> None:
+    """The thrust-scale bank's collapse narrows the filter's covariance between two of the
+    window's samples (the realistic gusty hover with the winch, seed 42: 0.68 -> 0.46 m across
+    at 7.1 s, 1.7 m off): the window's floor applies to the narrowed covariance at once."""
+    hover = [4.0, 0.0, -2.5]
+    distance = math.dist(hover, (0.0, 0.0, 0.0))
+    window = _window()
+    _fly(window, lambda t: hover, 4.0, 6.0, 1.0)  # a wide mixture: nothing missing
+    wide = window.force_std_n
+    window.add(6.01, hover, 4.0, (0.04, 0.0, 0.04))  # within the sample interval
+    assert window.force_std_n > wide
+    assert _across_std_m(window, distance, 4.0) >= DRAG * WIND_STD / (4.0 / distance)
+
+
+def test_while_the_thrust_scale_is_unknown_in_a_hover_the_force_tells_nothing() -> None:
+    """While several thrust-scale hypotheses run in a hover (``pull_known`` False) the window
+    keeps the bearing's prior (a radian at the range) whatever the samples; a cable angle
+    still measures it."""
+    hover = [4.0, 0.0, -2.5]
+    distance = math.dist(hover, (0.0, 0.0, 0.0))
+    window = _window()
+    t = 0.0
+    while t <= 5.0:
+        window.add(t, hover, 4.0, (0.04, 0.0, 0.04), pull_known=False)
+        t += 0.02
+    assert _across_std_m(window, distance, 4.0) >= 4.0  # BEARING_PRIOR_RAD x 4 m
+    window.add_bearing(4.0 * 0.02)
+    window.add(t, hover, 4.0, (0.04, 0.0, 0.04), pull_known=False)
+    assert window.force_std_n == BASE

@@ -21,9 +21,9 @@ their relative positions), each sample worth ``dt / correlation_s`` of an indepe
 force sample of ``force_std_n`` (the unmodelled force is correlated over about a second),
 with exponential forgetting over ``memory_s`` (the wind changes), the wind's prior
 standard deviation, and the filter's own radial variance (the range is not this module's
-question). The variance across the cable it leaves, less what the published covariance
-already holds there, is returned as a horizontal force standard deviation, which the
-published estimate adds through
+question); the bearing starts unknown (:data:`BEARING_PRIOR_RAD`). The variance across the
+cable it leaves, less what the published covariance already holds there, is returned as a
+horizontal force standard deviation, which the published estimate adds through
 :func:`~tether_companion.estimation.dynamic.observability.unmodelled_position_covariance`
 (the same ``|p| (I - u u^T) dF / T`` the unmodelled force already uses). The filter's state
 and covariance are untouched. Pure.
@@ -37,6 +37,8 @@ from collections import deque
 import numpy as np
 from numpy.typing import NDArray
 
+from tether_companion.estimation.dynamic import state
+
 FloatArray = NDArray[np.float64]
 
 _PARAMETERS = 5
@@ -44,8 +46,19 @@ _PARAMETERS = 5
 LOW_PULL_SIGMAS = 2.0
 """The window's rows are taken at the pull this many of its standard deviations below the
 filter's (at least half of it)."""
+STEADY_SPEED_MPS = 0.3
+"""Estimated horizontal speed [m/s] below which the drone holds still: its bearing does not
+turn (:class:`BearingWindow`) and its force balance's innovations show the gusts
+(:class:`GustWalk`)."""
 _PULL_PRIOR_N2 = 100.0
 """Prior variance of the horizontal pull's offset [N^2] (left to the data)."""
+BEARING_PRIOR_RAD = 1.0
+"""Prior standard deviation of the bearing at the window's first sample [rad]: the offset
+across the cable starts as unknown as this times the horizontal range, so what the window
+then holds is what its own samples and the wind's prior tell (not the filter's covariance,
+which a hover's thrust-scale bank makes confident before the data tell the bearing:
+docs/estimation.md, "The ground a moving drone averages, and the bearing before the data
+tell it (terrain12)")."""
 
 
 class BearingWindow:
@@ -99,6 +112,8 @@ class BearingWindow:
         self._last_s = math.nan
         self._bearing = (1.0, 0.0)
         self._base_std_n = force_std_n
+        self._window_m2 = 0.0
+        """The window's variance across the cable at its last sample [m^2]."""
         self.force_std_n = force_std_n
         """The unmodelled horizontal force standard deviation [N] the published covariance
         takes: ``force_std_n``, widened until it holds the window's variance across the
@@ -128,6 +143,7 @@ class BearingWindow:
         ph = p @ row
         p -= np.outer(ph, ph) / (row @ ph + across_std_m * across_std_m)
         p[:] = 0.5 * (p + p.T)
+        self._window_m2 = float(row @ p @ row)
 
     def add(
         self,
@@ -135,15 +151,20 @@ class BearingWindow:
         position_ned_m: list[float],
         tension_n: float,
         filter_horizontal_m2: tuple[float, float, float],
+        pull_known: bool = True,
     ) -> None:
         """One sample of the estimate at ``time_s`` [s]: its position from the anchor (NED
         [m]), tension at the drone [N] and the filter's horizontal position covariance
-        ``(nn, ne, ee)`` [m^2]. Updates :attr:`force_std_n`; samples closer than
-        ``sample_interval_s`` to the last are ignored."""
+        ``(nn, ne, ee)`` [m^2]; ``pull_known`` False while several thrust-scale hypotheses
+        run in a hover (the pull trades against the thrust scale and the bearing does not
+        turn, so the force tells nothing of the bearing yet: the window keeps its prior, a
+        cable angle's bearing and the walk; realistic gusty hover with the winch, seeds 2,
+        17, 41-49: published 1.2-4.4 s after the start, the estimate 1-2 m off at 0.3-0.5 m).
+        Updates :attr:`force_std_n`; samples closer than
+        ``sample_interval_s`` to the last only update it against the filter's covariance now
+        (the thrust-scale bank's collapse narrows it at once: the window's floor then
+        applies at once, not at the next sample)."""
         if not self.enabled:
-            return
-        last = self._last_s
-        if not math.isnan(last) and time_s - last < self._interval_s:
             return
         north, east, down = position_ned_m
         rho = math.hypot(north, east)
@@ -152,20 +173,33 @@ class BearingWindow:
             self.force_std_n = self._base_std_n
             return
         nn, ne, ee = filter_horizontal_m2
+        last = self._last_s
+        if not math.isnan(last) and time_s - last < self._interval_s:
+            self._widen(self._window_m2, north / rho, east / rho, distance / tension_n, nn, ne, ee)
+            return
         un, ue = north / rho, east / rho
         self._bearing = (un, ue)
         radial = max(un * un * nn + 2.0 * un * ue * ne + ue * ue * ee, 1e-12)
         p = self._covariance
-        if math.isnan(last):  # the prior: the filter's position, the wind's prior, any pull
+        if math.isnan(last):  # the prior: the filter's range, any bearing, the wind's prior
             dt = self._interval_s
             p[:] = 0.0
-            p[:2, :2] = ((nn, ne), (ne, ee))
+            across = (BEARING_PRIOR_RAD * rho) ** 2  # along (-ue, un)
+            p[:2, :2] = (
+                (nn + across * ue * ue, ne - across * un * ue),
+                (ne - across * un * ue, ee + across * un * un),
+            )
             p[2, 2] = _PULL_PRIOR_N2
             p[3, 3] = p[4, 4] = self._wind_variance
         else:
             dt = time_s - last
             p[np.diag_indices(_PARAMETERS)] += self._walk * dt
         self._last_s = time_s
+        across_axis = np.array([-ue, un, 0.0, 0.0, 0.0])
+        if not pull_known:
+            self._window_m2 = float(across_axis @ p @ across_axis)
+            self._widen(self._window_m2, un, ue, distance / tension_n, nn, ne, ee)
+            return
         # the horizontal pull over the horizontal range, at the least pull the window does
         # not exclude (the bearing's turn per unit of force is larger at a smaller pull)
         least = max(
@@ -187,16 +221,50 @@ class BearingWindow:
         gain = np.linalg.solve(rows @ ph + noise, ph.T).T
         p -= gain @ ph.T
         p[:] = 0.5 * (p + p.T)
-        across_axis = np.array([-ue, un, 0.0, 0.0, 0.0])
-        window = float(across_axis @ p @ across_axis)
-        # across the cable the published covariance holds the filter's and the unmodelled
-        # force's |p| sigma / T
-        gain_m_per_n = distance / tension_n
+        self._window_m2 = float(across_axis @ p @ across_axis)
+        self._widen(self._window_m2, un, ue, distance / tension_n, nn, ne, ee)
+
+    def _widen(
+        self,
+        window_m2: float,
+        un: float,
+        ue: float,
+        gain_m_per_n: float,
+        nn: float,
+        ne: float,
+        ee: float,
+    ) -> None:
+        """:attr:`force_std_n` from the window's variance across the cable ``window_m2``
+        [m^2] at the bearing ``(un, ue)``, the published term's ``|p| / T`` [m/N] and the
+        filter's horizontal covariance ``(nn, ne, ee)`` [m^2]: across the cable the published
+        covariance holds the filter's and the unmodelled force's ``|p| sigma / T``."""
         base = self._base_std_n
         across = ue * ue * nn - 2.0 * un * ue * ne + un * un * ee + (gain_m_per_n * base) ** 2
-        missing = window - across
+        missing = window_m2 - across
         extra2 = missing / (gain_m_per_n * gain_m_per_n) if missing > 0.0 else 0.0
         self.force_std_n = math.sqrt(base * base + extra2)
+
+
+def sample_bearing(
+    window: BearingWindow,
+    gusts: GustWalk,
+    time_s: float,
+    mixture: tuple[FloatArray, FloatArray],
+    decided: bool,
+    innovation_body: list[float],
+    rows: list[list[float]],
+) -> None:
+    """The bank's mixture ``(x, P)`` after a force-balance fusion at ``time_s`` [s] into the
+    bearing window, and that fusion's innovation (body, [m/s^2]; ``R_v^b``'s ``rows``) into
+    the gusts' walk, which the window then takes; ``decided``: one thrust-scale hypothesis
+    left (else the force tells the window nothing while the drone holds still)."""
+    x, p = mixture
+    speed_mps = math.hypot(float(x[3]), float(x[4]))
+    gusts.add_body(time_s, innovation_body, rows, speed_mps)
+    window.set_wind_walk(gusts.walk_m2ps3)
+    pull_known = decided or speed_mps >= STEADY_SPEED_MPS
+    horizontal = (p[0, 0], p[0, 1], p[1, 1])
+    window.add(time_s, x[:3].tolist(), float(x[state.TENSION]), horizontal, pull_known)
 
 
 class GustWalk:
@@ -237,7 +305,7 @@ class GustWalk:
         smoothing_s: float = 0.5,
         lag_s: float = 1.0,
         memory_s: float = 10.0,
-        steady_speed_mps: float = 0.3,
+        steady_speed_mps: float = STEADY_SPEED_MPS,
     ) -> None:
         self._mu_sq = drag_per_s * drag_per_s
         self._smoothing_s = smoothing_s

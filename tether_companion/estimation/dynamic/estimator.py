@@ -46,7 +46,11 @@ from tether_companion.estimation.dynamic.aid.rangefinder import RangefinderAid
 from tether_companion.estimation.dynamic.aid.rest import RestAid
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterConfig, drag_per_s
-from tether_companion.estimation.dynamic.consistency import BearingWindow, GustWalk
+from tether_companion.estimation.dynamic.consistency import (
+    BearingWindow,
+    GustWalk,
+    sample_bearing,
+)
 from tether_companion.estimation.dynamic.divergence import (
     MAX_DISTANCE_M,
     step_bank,
@@ -146,13 +150,7 @@ class DynamicTetherEstimator(InputFeed):
             self.health,
             RestAid.of_config(dynamic, config.ground_station),
         )
-        ground = config.ground_station
-        self.rangefinder = RangefinderAid(
-            config.altimeter_noise_variance_m2,
-            ground.anchor_height_m,
-            ground.terrain_std_m,
-            ground.terrain_correlation_m,
-        )
+        self.rangefinder = RangefinderAid.of_config(config)
         self.bearing = BearingWindow(
             vehicle.mass_kg * self.constants.drag_per_s,
             dynamic.initial.wind_std_mps,
@@ -425,11 +423,8 @@ class DynamicTetherEstimator(InputFeed):
         bank = self.bank
         if bank is None or not self.bearing.enabled:
             return
-        x, p = bank.mixture()
-        speed_mps = math.hypot(float(x[3]), float(x[4]))
-        self.gusts.add_body(t, self.accel.status.last_innovation.tolist(), rows, speed_mps)
-        self.bearing.set_wind_walk(self.gusts.walk_m2ps3)
-        self.bearing.add(t, x[:3].tolist(), float(x[state.TENSION]), (p[0, 0], p[0, 1], p[1, 1]))
+        innovation = self.accel.status.last_innovation.tolist()
+        sample_bearing(self.bearing, self.gusts, t, bank.mixture(), bank.decided, innovation, rows)
 
     def _check_divergence(self, t: float, fusion_tick: bool) -> None:
         bank = self.bank

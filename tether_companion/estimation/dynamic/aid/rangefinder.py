@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic import generated, state
 from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
 from tether_companion.estimation.dynamic.bank import FilterBank
@@ -56,6 +57,18 @@ class RangefinderAid:
         # the model is linear: its Jacobian is the same everywhere
         _, jac = generated.height_above_ground([0.0] * state.N_STATES, self._u, _NO_CONSTANTS)
         self._jacobian = np.array(jac, dtype=float).reshape(1, state.N_STATES)
+
+    @classmethod
+    def of_config(cls, config: EstimatorConfig) -> RangefinderAid:
+        """The aid with ``config``'s reading noise and ground station (the anchor's height,
+        the terrain's unevenness and correlation)."""
+        ground = config.ground_station
+        return cls(
+            config.altimeter_noise_variance_m2,
+            ground.anchor_height_m,
+            ground.terrain_std_m,
+            ground.terrain_correlation_m,
+        )
 
     def fuse(self, bank: FilterBank, height_above_ground_m: float, time_s: float) -> bool:
         """Fuse one tilt-corrected reading [m]."""

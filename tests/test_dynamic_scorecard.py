@@ -34,6 +34,22 @@ def test_dynamic_kinds_are_registered_and_score_a_flight() -> None:
     assert record.traces["dynamic-winch"].published[-1]
 
 
+def test_ticks_before_the_filter_has_a_state_are_not_scored() -> None:
+    """The first second gives the filter its state: before it the kind gives no estimate (nan
+    rows, not the placeholder zeros, which the scores would count as a position metres off
+    with a NEES of nothing)."""
+    registry = kinds()
+    scenario = dataclasses.replace(load_scenario("paper-circle"), duration_s=3.0)
+    record = fly(scenario, [registry["dynamic"]])
+    position = record.traces["dynamic"].position_ned_m
+    has_state = np.isfinite(position).all(axis=1)
+    first = int(np.argmax(has_state))
+    assert 0 < first and has_state[first:].all()
+    assert np.isnan(position[:first]).all()
+    assert record.time_s[first] >= 0.9  # the first second's window
+    assert np.all(position[first] != 0.0)
+
+
 @pytest.mark.slow
 def test_the_winch_load_cell_kind_fuses_the_winch_tension() -> None:
     """On a constant-tension winch with a heavy cable the kind given the winch's load cell

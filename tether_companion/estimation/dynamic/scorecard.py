@@ -195,8 +195,12 @@ class DynamicKind:
             )
 
     def on_imu(self, sample: ImuSample) -> TickOutput | None:
+        """The tick's estimate; ``None`` (no estimate: not scored) while the filter has no
+        state yet (``initialising``: its placeholder zeros with an "unknown" covariance are
+        not a position, and scored they made a late start look metres off while their NEES
+        claimed nothing)."""
         estimate = self._estimator.on_imu(sample)
-        if estimate is None:
+        if estimate is None or not self._estimator.initialised:
             return None
         self._height_m = -float(estimate.position_ned_m[2])
         return TickOutput(

@@ -141,3 +141,16 @@ def test_while_the_thrust_scale_is_unknown_in_a_hover_the_force_tells_nothing() 
     window.add_bearing(4.0 * 0.02)
     window.add(t, hover, 4.0, (0.04, 0.0, 0.04), pull_known=False)
     assert window.force_std_n == BASE
+
+
+def test_the_floor_starts_at_the_second_sample() -> None:
+    """Its first sample adds nothing (a cable angle tells the bearing within the sample
+    interval; the prior's floor in those 0.07 s held the take-off figure-8's angle alone back
+    from 1.5 to 2.9 s after taut, tuning seed 1); from the second it holds the prior."""
+    hover = [4.0, 0.0, -2.5]
+    window = _window()
+    window.add(0.0, hover, 4.0, (0.04, 0.0, 0.04), pull_known=False)
+    window.add(0.1, hover, 4.0, (0.04, 0.0, 0.04), pull_known=False)
+    assert window.force_std_n == BASE
+    window.add(0.3, hover, 4.0, (0.04, 0.0, 0.04), pull_known=False)
+    assert window.force_std_n > BASE

@@ -196,6 +196,10 @@ class BearingWindow:
             p[np.diag_indices(_PARAMETERS)] += self._walk * dt
         self._last_s = time_s
         across_axis = np.array([-ue, un, 0.0, 0.0, 0.0])
+        if math.isnan(last):  # no floor before a second sample: a cable angle tells the
+            self._window_m2 = 0.0  # bearing within it (the prior would stay in the angles'
+            self.force_std_n = self._base_std_n  # position information for a second)
+            return
         if not pull_known:
             self._window_m2 = float(across_axis @ p @ across_axis)
             self._widen(self._window_m2, un, ue, distance / tension_n, nn, ne, ee)

@@ -1,10 +1,11 @@
-"""The ground station's calibration errors in the published covariance
-(estimation/dynamic/position_information.py: ``angle_calibration``, ``winch_calibration``):
-their geometry, and that the published term carries them from the first fused reading until
-a restart."""
+"""The ground station's calibration errors as states of the dynamic filter (``state.py``:
+winch offset and scale, the angle sensor's elevation and azimuth zeros): their prior enters
+with the sensor's first reading (``ground_station.open_calibration``), a circle teaches them,
+a hover leaves what it cannot tell at the prior; absurd values are dropped."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -12,92 +13,106 @@ import pytest
 
 from tether_companion.config import ConfigError
 from tether_companion.estimation.config import EstimatorConfig
+from tether_companion.estimation.dynamic import generated, state
+from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
-from tether_companion.estimation.dynamic.observability import unmodelled_position_rows
-from tether_companion.estimation.dynamic.position_information import (
-    PositionInformation,
-    angle_calibration,
-    reduce_added_rows,
-    winch_calibration,
-)
+from tether_companion.estimation.dynamic.ground_station import open_calibration
+from tether_companion.estimation.dynamic.member import MemberFilter
+from tether_companion.estimation.dynamic.models import ModelConstants
 from tether_companion.physics.vehicle import load_vehicle
 from tether_companion.service.config import load_service_config
 
-P = (3.0, 4.0, -2.0)
-"""A drone 5 m out horizontally, 2 m above the anchor."""
+WINCH = (state.WINCH_OFFSET, state.WINCH_SCALE)
+ANGLE = (state.ELEVATION_ZERO, state.AZIMUTH_ZERO)
 
 
-def _matrix(six) -> np.ndarray:
-    nn, ne, nd, ee, ed, dd = six
-    return np.array([[nn, ne, nd], [ne, ee, ed], [nd, ed, dd]])
+def _bank(members: int = 2) -> FilterBank:
+    x = np.zeros(state.N_STATES)
+    x[state.POSITION] = (3.0, 4.0, -2.0)
+    x[state.TENSION], x[state.SCALE] = 4.0, 1.0
+    p = np.eye(state.N_STATES) * 0.01
+    p[state.CALIBRATION, state.CALIBRATION] = np.eye(4) * state.UNSET_CALIBRATION_VARIANCE
+    constants = ModelConstants(1.5, 0.2, 0.0)
+    q = np.full(state.N_STATES, 1e-6)
+    filters = [MemberFilter(x, p, q, constants, generated.inertial) for _ in range(members)]
+    return FilterBank(filters, 0.0, 6.0)
 
 
-def _variance(six, direction) -> float:
-    v = np.asarray(direction, dtype=float)
-    v = v / np.linalg.norm(v)
-    return float(v @ _matrix(six) @ v)
+def test_the_prior_enters_with_the_first_reading_and_only_where_none_was_given() -> None:
+    bank = _bank()
+    before = [m.P.copy() for m in bank.filters]
+    open_calibration(bank, WINCH, (0.1, 0.01))
+    for member, p in zip(bank.filters, before, strict=True):
+        expected = p.copy()
+        expected[state.WINCH_OFFSET, state.WINCH_OFFSET] = 0.1**2
+        expected[state.WINCH_SCALE, state.WINCH_SCALE] = 0.01**2
+        np.testing.assert_array_equal(member.P, expected)  # nothing else moves
+    # learnt since: a later reading leaves it
+    bank.filters[0].P[state.WINCH_OFFSET, state.WINCH_OFFSET] = 0.03**2
+    open_calibration(bank, WINCH, (0.1, 0.01))
+    assert bank.filters[0].P[state.WINCH_OFFSET, state.WINCH_OFFSET] == 0.03**2
+    # the angle's states still wait for their sensor; a zero prior (known) stays at the floor
+    assert np.all(np.diag(bank.filters[1].P)[list(ANGLE)] == state.UNSET_CALIBRATION_VARIANCE)
+    open_calibration(bank, ANGLE, (0.0, 0.026))
+    p = bank.filters[1].P
+    assert p[state.ELEVATION_ZERO, state.ELEVATION_ZERO] == state.UNSET_CALIBRATION_VARIANCE
+    assert p[state.AZIMUTH_ZERO, state.AZIMUTH_ZERO] == 0.026**2
 
 
-def test_an_azimuth_zero_error_turns_the_drone_across_the_cable() -> None:
-    term = angle_calibration(P, 0.026, 0.0, with_length=True)
-    assert _variance(term, (-4.0, 3.0, 0.0)) == pytest.approx((5.0 * 0.026) ** 2)
-    assert _variance(term, P) == pytest.approx(0.0, abs=1e-15)
-    assert _variance(term, (0.0, 0.0, 1.0)) == pytest.approx(0.0, abs=1e-15)
+def _fly(name: str, seed: int, duration_s: float):
+    """Fly the realistic scenario ``name`` with the winch and the cable angle (the bench's
+    ``dynamic-winch-angle`` kind); returns the estimator at the end and the flight's drawn
+    calibration (sim/ground_sensors.py)."""
+    from tether_companion.bench.estimators.flight import fly
+    from tether_companion.bench.estimators.registry import UNKNOWN_TENSION, EstimatorKind
+    from tether_companion.estimation.dynamic.scorecard import DynamicKind
+    from tether_companion.sim.ground_sensors import GroundSensors
+    from tether_companion.sim.scenario import load_scenario
+
+    scenario = dataclasses.replace(load_scenario(name), seed=seed, duration_s=duration_s)
+    built: list[DynamicKind] = []
+
+    def build(context):
+        built.append(DynamicKind(context, use_winch=True, use_angle=True))
+        return built[-1]
+
+    kind = EstimatorKind("probe", "probe", build, UNKNOWN_TENSION, True, True, "probe")
+    fly(scenario, [kind])
+    truth = GroundSensors(scenario.ground_station, scenario.cable.model, seed).calibration
+    return built[0]._estimator, truth
 
 
-def test_an_elevation_zero_error_moves_the_drone_in_the_cables_vertical_plane() -> None:
-    distance = math.sqrt(29.0)
-    with_length = angle_calibration(P, 0.0, 0.007, with_length=True)
-    # perpendicular to the cable in its vertical plane: (n d, e d, -rho^2) / (rho |p|)
-    across = (3.0 * -2.0, 4.0 * -2.0, -25.0)
-    assert _variance(with_length, across) == pytest.approx((distance * 0.007) ** 2)
-    assert _variance(with_length, P) == pytest.approx(0.0, abs=1e-15)
-    # without a length the range is h / tan(el): |p|^2 / h per radian along the range
-    without = angle_calibration(P, 0.0, 0.007, with_length=False)
-    assert _variance(without, (3.0, 4.0, 0.0)) == pytest.approx((29.0 / 2.0 * 0.007) ** 2)
-    assert _variance(without, (0.0, 0.0, 1.0)) == pytest.approx(0.0, abs=1e-15)
+@pytest.mark.slow
+def test_a_circle_teaches_the_calibration_and_a_hover_keeps_what_it_cannot_tell() -> None:
+    """Realistic 4 N circle, tuning seed 1, 30 s: the length's error at the flight's length
+    (offset + scale L: on a circle of one radius the two are one number) and the azimuth
+    zero are learnt well inside their priors, within 3 sigma of the truth. Gusty hover, same
+    seed: the azimuth zero (it only turns the hover's bearing) and the elevation zero (it
+    trades against the range) stay near their priors, and the position across the cable
+    keeps the azimuth's spread (``rho`` times it)."""
+    estimator, truth = _fly("realistic-circle", 1, 30.0)
+    member = estimator.bank.best
+    x, p = member.x, member.P
+    length = float(np.linalg.norm(x[state.POSITION]))
+    row = np.zeros(state.N_STATES)
+    row[state.WINCH_OFFSET], row[state.WINCH_SCALE] = 1.0, length
+    prior_sd = math.hypot(0.1, 0.01 * length)
+    sd = math.sqrt(row @ p @ row)
+    error = row @ x - (truth.winch_offset_m + truth.winch_scale * length)
+    assert sd < 0.5 * prior_sd and abs(error) < 3.0 * sd, (sd, error)
+    sd_az = math.sqrt(p[state.AZIMUTH_ZERO, state.AZIMUTH_ZERO])
+    assert sd_az < 0.5 * 0.026
+    assert abs(x[state.AZIMUTH_ZERO] - truth.azimuth_bias_rad) < 3.0 * sd_az
 
-
-def test_the_winchs_zero_and_scale_errors_move_the_drone_along_its_horizontal_range() -> None:
-    """Without an angle the rangefinder holds the height: a length off by ``dL`` moves the
-    drone horizontally by ``dL |p| / rho``, ``dL`` along the cable."""
-    term = winch_calibration(P, 5.5, 0.1, 0.01, with_angle=False)
-    length_var = 0.1**2 + (0.01 * 5.5) ** 2
-    assert _variance(term, (3.0, 4.0, 0.0)) == pytest.approx(length_var * 29.0 / 25.0)
-    assert _variance(term, P) == pytest.approx(length_var)
-    assert _variance(term, (-4.0, 3.0, 0.0)) == pytest.approx(0.0, abs=1e-15)
-    assert _variance(term, (0.0, 0.0, 1.0)) == pytest.approx(0.0, abs=1e-15)
-    steep = winch_calibration((0.1, 0.0, -5.0), 5.0, 0.1, 0.0, with_angle=False)
-    assert _variance(steep, (1.0, 0.0, 0.0)) == pytest.approx(0.1**2 * 9.0)  # at most 3x
-    assert winch_calibration((0.0, 0.0, -3.0), 5.5, 0.1, 0.01, False) == (0.0,) * 6
-    assert angle_calibration((0.0, 0.0, -3.0), 0.026, 0.007, True) == (0.0,) * 6
-
-
-def test_with_an_angle_the_winchs_errors_lie_along_the_cable() -> None:
-    """The angle holds the direction: a length off by ``dL`` moves the drone along it."""
-    term = winch_calibration(P, 5.5, 0.1, 0.01, with_angle=True)
-    assert _variance(term, P) == pytest.approx(0.1**2 + (0.01 * 5.5) ** 2)
-    assert _variance(term, (-4.0, 3.0, 0.0)) == pytest.approx(0.0, abs=1e-15)
-    assert _variance(term, (3.0 * -2.0, 4.0 * -2.0, -25.0)) == pytest.approx(0.0, abs=1e-15)
-
-
-def test_the_published_term_carries_them_from_the_first_reading_until_a_restart() -> None:
-    rows = unmodelled_position_rows(*P, 4.0, 0.2, 0.02)
-    info = PositionInformation(1.0)
-    assert info.at(1.0) is None
-    winch = winch_calibration(P, 5.5, 0.1, 0.01, with_angle=False)
-    info.set_winch_calibration(winch)
-    # no angle yet: the unmodelled term as it is, and the winch's calibration
-    added = np.array(reduce_added_rows(rows, info.at(1.0)))
-    assert added == pytest.approx(np.array(rows) + _matrix(winch))
-    angle = angle_calibration(P, 0.026, 0.007, True)
-    info.set_angle_calibration(angle)
-    added = np.array(reduce_added_rows(rows, info.at(2.0)))
-    assert added == pytest.approx(np.array(rows) + _matrix(winch) + _matrix(angle))
-    info.set_angle_calibration((math.nan,) * 6)  # ignored
-    assert np.array(reduce_added_rows(rows, info.at(2.0))) == pytest.approx(added)
-    info.clear()
-    assert info.at(3.0) is None
+    estimator, truth = _fly("realistic-gusty-hover", 1, 30.0)
+    member = estimator.bank.best
+    x, p = member.x, member.P
+    assert math.sqrt(p[state.AZIMUTH_ZERO, state.AZIMUTH_ZERO]) > 0.8 * 0.026
+    assert math.sqrt(p[state.ELEVATION_ZERO, state.ELEVATION_ZERO]) > 0.8 * 0.007
+    n, e = x[0], x[1]
+    rho = math.hypot(n, e)
+    across = np.array([-e / rho, n / rho, 0.0])
+    assert math.sqrt(across @ p[:3, :3] @ across) > 0.8 * 0.026 * rho
 
 
 @pytest.mark.parametrize(

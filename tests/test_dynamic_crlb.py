@@ -29,7 +29,8 @@ from tether_companion.estimation.dynamic.crlb_noise import residual_density_m2ps
 from tether_companion.estimation.dynamic.models import ModelConstants
 from tether_companion.frames import rotation_ned_to_body_rows
 
-N = state.N_STATES
+N = state.CALIBRATION.start
+"""The bound's state (the filter's without the calibration, which the bound augments)."""
 ACCEL_VAR = (0.3**2, 0.4**2, 0.2**2)
 
 

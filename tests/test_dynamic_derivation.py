@@ -32,6 +32,8 @@ PROCESS_MODELS = {
     "inertial",
 }
 ALL_MODELS = [name for name, *_ in derive.models()]
+NO_CALIBRATION = [0.0] * (state.N_STATES - state.CALIBRATION.start)
+"""The ground station's calibration states at zero (a perfect winch and angle sensor)."""
 
 
 def test_regenerating_gives_the_committed_file() -> None:
@@ -57,6 +59,7 @@ def _random_case(rng: np.random.Generator, name: str) -> tuple[list, list, list]
     x[state.SCALE] = rng.uniform(0.8, 1.2)
     x[state.BIAS] = rng.normal(scale=0.2, size=3)
     x[state.WIND] = rng.normal(scale=3.0, size=2)
+    x[state.CALIBRATION] = rng.normal(scale=(0.1, 0.01, 0.01, 0.03))
     rotation = rotation_ned_to_body(*rng.uniform(-0.6, 0.6, size=2), rng.uniform(-3, 3))
     if name == "inertial":
         u = [*rotation.ravel(), *rng.normal(scale=3.0, size=3)]
@@ -142,7 +145,20 @@ def test_catenary_models_match_the_simulators_catenary(
     ends = end_tensions(curve, weight_n_per_m)
     bearing = 0.7
     p = np.array([span_m * math.cos(bearing), span_m * math.sin(bearing), -height_m])
-    x = [*p, 0, 0, 0, ends.horizontal_n * np.linalg.norm(p) / span_m, 1.0, 0, 0, 0, 0, 0]
+    x = [
+        *p,
+        0,
+        0,
+        0,
+        ends.horizontal_n * np.linalg.norm(p) / span_m,
+        1.0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        *NO_CALIBRATION,
+    ]
     mass = 1.5
     c = [mass, 0.0, weight_n_per_m]
     xdot, _ = generated.force_balance_catenary(x, [*np.eye(3).ravel(), 0.0], c)
@@ -165,7 +181,7 @@ def test_catenary_models_match_the_simulators_catenary(
 
 
 def test_the_straight_line_is_the_catenarys_taut_limit() -> None:
-    x = [3.0, 4.0, -12.0, 0, 0, 0, 5.0, 1.0, 0, 0, 0, 0, 0]
+    x = [3.0, 4.0, -12.0, 0, 0, 0, 5.0, 1.0, 0, 0, 0, 0, 0, *NO_CALIBRATION]
     light = [1.5, 0.0, 1e-7]
     for name in ("tension", "winch_length", "cable_angle"):
         straight, _ = getattr(generated, f"{name}_straight")(x, [], light)
@@ -209,7 +225,7 @@ def test_a_cable_resting_on_the_ground_matches_the_simulators(
     p = np.array([span_m * math.cos(bearing), span_m * math.sin(bearing), -height_m])
     expected = np.array(cable.force_components(*p, 0.0, 0.0, 0.0))
     pull = math.hypot(expected[0], expected[1])
-    x = [*p, 0, 0, 0, pull * np.linalg.norm(p) / span_m, 1.0, 0, 0, 0, 0, 0]
+    x = [*p, 0, 0, 0, pull * np.linalg.norm(p) / span_m, 1.0, 0, 0, 0, 0, 0, *NO_CALIBRATION]
     c = [1.5, 0.0, density_kg_per_m * 9.80665]
     assert models_module.rests_on_ground(x, c)
     cable_models = models_module.CATENARY
@@ -239,7 +255,7 @@ def test_the_free_and_the_grounded_cable_meet_where_the_lowest_point_is_the_anch
     curve = solve_lowest_point_at_anchor(span, height)
     pull = end_tensions(curve, weight).horizontal_n
     p = np.array([span, 0.0, -height])
-    x = [*p, 0.2, -0.1, 0.0, pull * np.linalg.norm(p) / span, 1.0, 0, 0, 0, 0, 0]
+    x = [*p, 0.2, -0.1, 0.0, pull * np.linalg.norm(p) / span, 1.0, 0, 0, 0, 0, 0, *NO_CALIBRATION]
     c = [1.5, 0.2, weight]
     u_rotation = [*rotation_ned_to_body(0.1, -0.2, 0.5).ravel(), 14.0]
     for name, u in (
@@ -254,3 +270,26 @@ def test_the_free_and_the_grounded_cable_meet_where_the_lowest_point_is_the_anch
         np.testing.assert_allclose(ground_value, free_value, atol=1e-6, err_msg=name)
         if name != "cable_angle":
             np.testing.assert_allclose(ground_jac, free_jac, atol=1e-4, err_msg=name)
+
+
+@pytest.mark.parametrize("cable", ["straight", "catenary", "grounded"])
+def test_the_calibration_states_enter_the_readings_as_the_sensors_apply_them(cable):
+    """The winch reads ``offset + (1 + scale) L`` and the angle sensor the angles plus its
+    zero errors (``sim/ground_sensors.py``); the other models do not read them."""
+    p = [4.0, 1.0, -2.0] if cable != "grounded" else [6.5, 0.5, -1.0]
+    x = [*p, 0.3, -0.2, 0.1, 3.0, 1.0, 0, 0, 0, 0, 0, *NO_CALIBRATION]
+    c = [1.5, 0.2, 0.3 if cable != "straight" else 0.0]
+    calibrated = list(x)
+    calibrated[state.WINCH_OFFSET : state.AZIMUTH_ZERO + 1] = [0.1, 0.02, 0.007, -0.026]
+    length = getattr(generated, f"winch_length_{cable}")
+    assert length(calibrated, (), c)[0][0] == pytest.approx(0.1 + 1.02 * length(x, (), c)[0][0])
+    angle = getattr(generated, f"cable_angle_{cable}")
+    (el, az), (el_cal, az_cal) = angle(x, (), c)[0], angle(calibrated, (), c)[0]
+    assert (el_cal, az_cal) == pytest.approx((el + 0.007, az - 0.026))
+    rotation = [*np.eye(3).ravel(), 15.0]
+    for name in (f"accel_{cable}", f"tension_{cable}"):
+        model = getattr(generated, name)
+        u = rotation if name.startswith("accel") else ()
+        value, jac = model(calibrated, u, c)
+        assert value == model(x, u, c)[0]
+        assert not np.reshape(jac, (-1, state.N_STATES))[:, state.CALIBRATION].any()

@@ -20,6 +20,9 @@ CONSTANTS = (MASS_KG, ROTOR_DRAG_PER_S, 0.0)
 POSITION_M = np.array([4.0, 0.0, -2.5])
 """The realistic gusty hover's point: 4 m north of the anchor, 2.5 m above it."""
 TENSION_N = 4.0
+N = state.CALIBRATION.start
+"""The states looked at: the ground station's calibration known (a calibrated winch)."""
+NO_CALIBRATION = [0.0] * (state.N_STATES - N)
 WIND_MPS = (-2.0, 2.2)
 """Its mean wind, north and east [m/s]."""
 
@@ -27,7 +30,7 @@ WIND_MPS = (-2.0, 2.2)
 def _hover_equilibrium() -> tuple[list[float], list[float]]:
     """State and inputs ``(R_v^b row-major, thrust)`` at which the hover is at rest: the
     thrust tilted against weight, pull and rotor drag (the drag depends on the tilt: iterated)."""
-    x = [*POSITION_M, 0.0, 0.0, 0.0, TENSION_N, 1.0, 0.0, 0.0, 0.0, *WIND_MPS]
+    x = [*POSITION_M, 0.0, 0.0, 0.0, TENSION_N, 1.0, 0.0, 0.0, 0.0, *WIND_MPS, *NO_CALIBRATION]
     rotation = np.eye(3)
     thrust = MASS_KG * GRAVITY_MPS2
     for _ in range(60):
@@ -44,19 +47,20 @@ def _hover_equilibrium() -> tuple[list[float], list[float]]:
 
 def _observability_matrix(x: list[float], u: list[float]) -> np.ndarray:
     """``[H; H F; ...; H F^12]`` of the force-balance formulation with the accelerometer, the
-    winch length and the rangefinder's height as measurements."""
+    winch length and the rangefinder's height as measurements, over the first :data:`N`
+    states (the winch's calibration known)."""
     _, jac = generated.force_balance_straight(x, u, CONSTANTS)
-    f = np.zeros((state.N_STATES, state.N_STATES))
+    f = np.zeros((N, N))
     f[state.POSITION, state.VELOCITY] = np.eye(3)
-    f[state.VELOCITY, :] = np.array(jac).reshape(3, state.N_STATES)
+    f[state.VELOCITY, :] = np.array(jac).reshape(3, state.N_STATES)[:, :N]
     rows = [
         np.array(generated.accel_straight(x, u, CONSTANTS)[1]).reshape(3, state.N_STATES),
         np.array(generated.winch_length_straight(x, (), CONSTANTS)[1]).reshape(1, -1),
         np.array(generated.height_above_ground(x, (1.0,), CONSTANTS)[1]).reshape(1, -1),
     ]
-    h = np.vstack(rows)
+    h = np.vstack(rows)[:, :N]
     blocks, power = [], h
-    for _ in range(state.N_STATES):
+    for _ in range(N):
         blocks.append(power)
         power = power @ f
     return np.vstack(blocks)
@@ -80,12 +84,12 @@ def test_a_steady_hover_does_not_observe_the_bearing_against_the_cross_wind() ->
 
     _, _, vt = np.linalg.svd(_observability_matrix(x, u))
     null = vt[-2:].T  # (13, 2) orthonormal basis
-    across = np.zeros(state.N_STATES)
+    across = np.zeros(N)
     across[1] = 1.0  # east: across the cable of a drone north of the anchor
     across[12] = TENSION_N / (np.linalg.norm(POSITION_M) * MASS_KG * ROTOR_DRAG_PER_S)
     across /= np.linalg.norm(across)
     assert np.linalg.norm(null.T @ across) > 0.999
 
-    bearing_alone = np.zeros(state.N_STATES)
+    bearing_alone = np.zeros(N)
     bearing_alone[1] = 1.0  # with the wind known, the bearing is observable
     assert np.linalg.norm(null.T @ bearing_alone) < 0.5

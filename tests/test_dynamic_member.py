@@ -52,8 +52,28 @@ def _start(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray
     x[state.BIAS] = rng.normal(scale=0.05, size=3)
     x[state.WIND] = (1.0, -0.5)
     a = rng.normal(size=(N, N)) * 0.05
-    p0 = a @ a.T + np.diag([0.3, 0.3, 0.05, 0.2, 0.2, 0.2, 1.0, 0.01, 0.01, 0.01, 0.01, 1.0, 1.0])
-    q = np.array([1e-6] * 3 + [1e-4] * 3 + [2.0, 1e-5] + [1e-4] * 3 + [0.05] * 2)
+    p0 = a @ a.T + np.diag(
+        [
+            0.3,
+            0.3,
+            0.05,
+            0.2,
+            0.2,
+            0.2,
+            1.0,
+            0.01,
+            0.01,
+            0.01,
+            0.01,
+            1.0,
+            1.0,
+            0.01,
+            1e-4,
+            1e-4,
+            1e-3,
+        ]
+    )
+    q = np.array([1e-6] * 3 + [1e-4] * 3 + [2.0, 1e-5] + [1e-4] * 3 + [0.05] * 2 + [0.0] * 4)
     return x, p0, q
 
 

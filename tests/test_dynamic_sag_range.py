@@ -73,7 +73,7 @@ def test_the_arc_length_equals_the_closed_form_on_random_cables() -> None:
 def test_the_arc_length_is_the_generated_models_on_both_sides_of_the_touchdown() -> None:
     constants = (1.5, 0.3, WEIGHT_N_PER_M)
     for span, horizontal in ((5.0, 0.1), (5.0, 0.7), (4.0, 3.0), (6.0, 0.3)):
-        x = [span, 0.0, -HEIGHT_M] + [0.0] * 10
+        x = [span, 0.0, -HEIGHT_M] + [0.0] * (state.N_STATES - 3)
         x[state.TENSION] = _chord_tension(span, horizontal)
         (expected,), _ = CATENARY.winch_length(x, (), constants)
         assert math.isclose(arc_length_m(span, HEIGHT_M, horizontal, WEIGHT_N_PER_M), expected)

@@ -23,9 +23,11 @@ from tether_companion.estimation.dynamic.observability import (
 from tether_companion.estimation.dynamic.output import LEARNING, OK, WEAK_PULL
 from tether_companion.estimation.dynamic.published import StatusSettings, TickSource
 
-_SCALES = np.array([1.0, 1.0, 0.3, 0.5, 0.5, 0.2, 1.0, 0.05, 0.1, 0.1, 0.1, 2.0, 2.0])
-"""Typical standard deviations of the 13 states (position, velocity, tension, thrust scale,
-bias, wind) [SI units]."""
+_SCALES = np.array(
+    [1.0, 1.0, 0.3, 0.5, 0.5, 0.2, 1.0, 0.05, 0.1, 0.1, 0.1, 2.0, 2.0, 0.1, 0.01, 0.007, 0.026]
+)
+"""Typical standard deviations of the states (position, velocity, tension, thrust scale,
+bias, wind, the ground station's calibration) [SI units]."""
 
 
 def _case(rng: np.random.Generator) -> tuple[TickSource, TickSource]:

@@ -254,7 +254,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"per IMU tick, best of {args.repeat} (same {args.duration:g} s of samples):")
     print(f"  paper 4-state EKF           {us['paper_4s']:8.1f} us")
     former = result["ratio_dynamic_former_to_paper"]
-    print(f"  dynamic 13-state, whole run {us['dynamic']:8.1f} us  ({whole:.2f}x)")
+    print(f"  dynamic 17-state, whole run {us['dynamic']:8.1f} us  ({whole:.2f}x)")
     status = result["ratio_dynamic_status_to_paper"]
     print(f"  same, status read each tick {us['dynamic_status']:8.1f} us  ({status:.2f}x)")
     print(f"  same, {FORMER_LABEL:21s} {us['dynamic_former']:8.1f} us  ({former:.2f}x)")

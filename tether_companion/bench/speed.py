@@ -12,7 +12,7 @@
    .bin, through the service pipeline with the service's default estimator (the dynamic
    filter) and with the paper 4-state, and prints each one's CPU real-time factor.
 4. Replays the same 20 s of the realistic circle's samples through the paper 4-state
-   estimator and the dynamic 13-state one (whole pipelines, ``bench dynamic``'s
+   estimator and the dynamic 17-state one (whole pipelines, ``bench dynamic``'s
    measurement, CPU time), with its default settings and its former, dearer ones, and prints
    each one's time per IMU tick and the ratios.
 """
@@ -372,7 +372,7 @@ def run(args: argparse.Namespace) -> int:
     label = f"{FILTER_SCENARIO} {replay_flight_s:.0f} s, per IMU tick"
     table.add_row(f"paper 4-state estimator, {label}", f"{us['paper_4s']:.1f} us")
     table.add_row(
-        f"dynamic 13-state estimator (whole run), {label}",
+        f"dynamic 17-state estimator (whole run), {label}",
         f"{us['dynamic']:.1f} us = {filters['ratio_dynamic_to_paper']:.2f}x the 4-state",
     )
     former_ratio = filters["ratio_dynamic_former_to_paper"]

@@ -181,9 +181,9 @@ class GroundStation:
 
 ESTIMATOR_KINDS = ("four_state", "three_state", "dynamic")
 """``kind``: the paper's 4-state (position and tension) and 3-state (tension known) EKFs, and
-the 13-state dynamic filter (``estimation/dynamic``)."""
+the 17-state dynamic filter (``estimation/dynamic``)."""
 ESTIMATOR_KIND_DOC = (
-    "four_state / three_state: the paper's random-walk EKF; dynamic: the 13-state filter with "
+    "four_state / three_state: the paper's random-walk EKF; dynamic: the 17-state filter with "
     "velocity, thrust scale, accelerometer bias and wind (the service's dynamic_filter section; "
     "docs/estimation.md)"
 )

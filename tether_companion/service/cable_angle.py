@@ -98,14 +98,14 @@ class CableAngleConfig:
         minimum=0.0,
         maximum=0.5,
         doc="how well azimuth_offset_rad is known (the sensor's alignment to true north: 1-2"
-        " degrees with a compass), carried across the cable in the published covariance [rad]",
+        " degrees with a compass): the prior of the dynamic filter's azimuth-zero state [rad]",
     )
     elevation_calibration_std_rad: float = spec(
         0.007,
         minimum=0.0,
         maximum=0.5,
         doc="how well elevation_offset_rad is known (the sensor's levelling: 0.3-0.5 degrees"
-        " with a bubble level), carried in the published covariance [rad]",
+        " with a bubble level): the prior of the dynamic filter's elevation-zero state [rad]",
     )
     max_elevation_rad: float = spec(
         1.4,

@@ -143,15 +143,15 @@ class DynamicFilterConfig:
         0.1,
         minimum=0.0,
         maximum=10.0,
-        doc="winch length's zero error (where the encoder count was zeroed), carried along the"
-        " cable in the published covariance [m]",
+        doc="winch length's zero error (where the encoder count was zeroed): the prior of the"
+        " filter's winch-offset state [m]",
     )
     winch_length_scale_std: float = spec(
         0.01,
         minimum=0.0,
         maximum=0.5,
-        doc="winch length's scale error (the drum's effective radius: layering, wear), times"
-        " the length along the cable in the published covariance [1]",
+        doc="winch length's scale error (the drum's effective radius: layering, wear): the"
+        " prior of the filter's winch-scale state [1]",
     )
     slack_tension_n: float = spec(
         0.2, minimum=0.0, doc="below this tension the cable is reported slack [N]"

@@ -47,7 +47,13 @@ from tether_companion.frames import rotation_ned_to_body_rows
 
 FloatArray = NDArray[np.float64]
 
-_N = state.N_STATES
+_N = state.CALIBRATION.start
+"""The bound's state: the filter's without the ground station's calibration, which
+:class:`CalibrationPrior` adds when the flight has it (the generated Jacobians' calibration
+columns are left out; :func:`_add` writes them at the augmented state's columns)."""
+_CALIBRATION_AT_TRUTH = (0.0,) * (state.N_STATES - _N)
+"""The calibration states at which the generated models are evaluated (no Jacobian depends
+on their values but the scale's ``1 + scale`` factor, taken as 1)."""
 _NO_CONSTANTS = (0.0, 0.0, 0.0)
 _ANCHOR_LEVEL = (0.0,)
 """The height model's input (the anchor's height: its Jacobian does not depend on it)."""
@@ -106,7 +112,17 @@ class TrueTrack:
         tension = pull * distance / span if span > 1e-6 else math.sqrt(float(force @ force))
         wind = self.wind_ned_mps[k]
         v = self.velocity_ned_mps[k]
-        return [*map(float, p), *map(float, v), tension, 1.0, 0.0, 0.0, 0.0, *map(float, wind[:2])]
+        return [
+            *map(float, p),
+            *map(float, v),
+            tension,
+            1.0,
+            0.0,
+            0.0,
+            0.0,
+            *map(float, wind[:2]),
+            *_CALIBRATION_AT_TRUTH,
+        ]
 
 
 @dataclass(frozen=True)
@@ -273,7 +289,7 @@ def force_balance_at_truth(
         residuals.append(track.specific_force_body_mps2[k] - np.array(value))
     return ForceBalanceAtTruth(
         np.array(ticks, dtype=np.int64),
-        np.reshape(np.array(jacobians, dtype=float), (len(ticks), 3, _N)),
+        np.reshape(np.array(jacobians, dtype=float), (len(ticks), 3, state.N_STATES))[:, :, :_N],
         np.reshape(np.array(residuals, dtype=float), (len(ticks), 3)),
     )
 
@@ -328,7 +344,7 @@ def posterior_bound(
         previous_s = track.time_s[k]
         _, dv = generated.inertial(x, (*rows[0], *rows[1], *rows[2], *zero_force), c)
         transition[0:3, 3:6] = dt * np.eye(3)
-        transition[3:6, :_N] = dt * np.reshape(dv, (3, _N))
+        transition[3:6, :_N] = dt * np.reshape(dv, (3, state.N_STATES))[:, :_N]
         transition[3:6, 3:6] += np.eye(3)
         if k in accel_information:
             gathered[:_N, :_N] += accel_information[k]
@@ -389,7 +405,7 @@ def _add(
     except UNDEFINED:
         return 0
     jacobian = np.zeros((rows, len(gathered)))
-    jacobian[:, :_N] = np.reshape(jac, (rows, _N))
+    jacobian[:, :_N] = np.reshape(jac, (rows, state.N_STATES))[:, :_N]
     if not np.isfinite(jacobian).all():
         return 0
     for row, columns in enumerate(calibration_columns):

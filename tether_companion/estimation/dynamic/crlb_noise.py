@@ -149,14 +149,14 @@ def bound_noise(
     (the scenario's ``ground_station`` sensor)."""
     imu_step_s = 1.0 / scenario.sensors.imu_rate_hz
     accel_var = accel_variance_mps2(scenario)
-    density = process_noise_density(dynamic)
+    density = process_noise_density(dynamic)[: state.CALIBRATION.start]  # crlb.CalibrationPrior
     density[state.VELOCITY] = accel_var * imu_step_s
     density[state.BIAS] = bias_density_m2ps5(scenario)
     density[state.WIND] = wind_density_m2ps3(scenario)
     interval_s = imu_step_s * dynamic.imu_ticks_per_fusion
     ground = scenario.ground
     initial = dynamic.initial
-    prior = np.empty(state.N_STATES)
+    prior = np.empty(len(density))
     prior[state.POSITION] = UNINFORMED_POSITION_STD_M
     prior[state.VELOCITY] = initial.velocity_std_mps
     prior[state.TENSION] = UNINFORMED_TENSION_STD_N

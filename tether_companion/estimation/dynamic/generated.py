@@ -3,9 +3,9 @@
 Regenerate with ``python -m tether_companion.estimation.dynamic.derivation.derive``; the
 models and their meaning are documented there. sympy 1.14.0.
 
-Every function takes the state ``x`` (13 floats, layout in ``state.py``), the inputs ``u``
+Every function takes the state ``x`` (17 floats, layout in ``state.py``), the inputs ``u``
 and the constants ``c = (mass_kg, drag_per_s, weight_n_per_m)`` and returns the
-values and the Jacobian with respect to ``x`` (row-major, 13 columns).
+values and the Jacobian with respect to ``x`` (row-major, 17 columns).
 """
 
 # ruff: noqa
@@ -16,8 +16,8 @@ from collections.abc import Sequence
 
 
 def force_balance_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Formulation (a): ``x' = f(x, u)`` with ``u = (R_v^b row-major, thrust_n)``; returns ``(x' (13,), dv'/dx (3x13 row-major))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Formulation (a): ``x' = f(x, u)`` with ``u = (R_v^b row-major, thrust_n)``; returns ``(x' (17,), dv'/dx (3x17 row-major))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
     mass_kg, drag_per_s, weight_n_per_m = c
     t0 = 1/mass_kg
@@ -52,12 +52,12 @@ def force_balance_straight(x: Sequence[float], u: Sequence[float], c: Sequence[f
     t29 = drag_per_s*(r01**2 + r11**2)
     t30 = drag_per_s*(r01*r02 + r11*r12)
     t31 = -t30
-    return (v_n, v_e, v_d, -r00*t11 - r10*t12 - scale*t2 - t8*tension, -r01*t11 - r11*t12 - scale*t13 - t14*tension, -r02*t11 - r12*t12 - scale*t15 - t16*tension + 9.80665, 0, 0, 0, 0, 0, 0, 0,), (t18*(t17*t5 - 1), t21, t22, -t23, t25, t27, -t8, -t2, 0, 0, 0, t23, t24, t21, t18*(t17*t4 - 1), t28, t25, -t29, t31, -t14, -t13, 0, 0, 0, t24, t29, t22, t28, t18*(t17*t3 - 1), t27, t31, -drag_per_s*(r02**2 + r12**2), -t16, -t15, 0, 0, 0, t26, t30,)
+    return (v_n, v_e, v_d, -r00*t11 - r10*t12 - scale*t2 - t8*tension, -r01*t11 - r11*t12 - scale*t13 - t14*tension, -r02*t11 - r12*t12 - scale*t15 - t16*tension + 9.80665, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,), (t18*(t17*t5 - 1), t21, t22, -t23, t25, t27, -t8, -t2, 0, 0, 0, t23, t24, 0, 0, 0, 0, t21, t18*(t17*t4 - 1), t28, t25, -t29, t31, -t14, -t13, 0, 0, 0, t24, t29, 0, 0, 0, 0, t22, t28, t18*(t17*t3 - 1), t27, t31, -drag_per_s*(r02**2 + r12**2), -t16, -t15, 0, 0, 0, t26, t30, 0, 0, 0, 0,)
 
 
 def accel_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Accelerometer force balance ``h = f + b`` [m/s^2], FRD body, with ``u = (R_v^b row-major, thrust_n)``; returns ``(h (3,), H (3x13 row-major))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Accelerometer force balance ``h = f + b`` [m/s^2], FRD body, with ``u = (R_v^b row-major, thrust_n)``; returns ``(h (3,), H (3x17 row-major))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
     mass_kg, drag_per_s, weight_n_per_m = c
     t0 = v_n - wind_n
@@ -93,12 +93,12 @@ def accel_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -
     t30 = drag_per_s*r01
     t31 = drag_per_s*r10
     t32 = drag_per_s*r11
-    return (b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t11*tension, b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t15*tension, b_z - scale*t16 - t20*tension,), (t24*(r00*t23 - r00 + t2*t22 + t22*t3), t24*(r01*t26 - r01 + t2*t25 + t25*t4), t24*(r02*t28 - r02 + t27*t3 + t27*t4), -t29, -t30, -drag_per_s*r02, -t11, 0, 1, 0, 0, t29, t30, t24*(r10*t23 - r10 + t12*t22 + t13*t22), t24*(r11*t26 - r11 + t12*t25 + t14*t25), t24*(r12*t28 - r12 + t13*t27 + t14*t27), -t31, -t32, -drag_per_s*r12, -t15, 0, 0, 1, 0, t31, t32, t24*(r20*t23 - r20 + t17*t22 + t18*t22), t24*(r21*t26 - r21 + t17*t25 + t19*t25), t24*(r22*t28 - r22 + t18*t27 + t19*t27), 0, 0, 0, -t20, -t16, 0, 0, 1, 0, 0,)
+    return (b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t11*tension, b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t15*tension, b_z - scale*t16 - t20*tension,), (t24*(r00*t23 - r00 + t2*t22 + t22*t3), t24*(r01*t26 - r01 + t2*t25 + t25*t4), t24*(r02*t28 - r02 + t27*t3 + t27*t4), -t29, -t30, -drag_per_s*r02, -t11, 0, 1, 0, 0, t29, t30, 0, 0, 0, 0, t24*(r10*t23 - r10 + t12*t22 + t13*t22), t24*(r11*t26 - r11 + t12*t25 + t14*t25), t24*(r12*t28 - r12 + t13*t27 + t14*t27), -t31, -t32, -drag_per_s*r12, -t15, 0, 0, 1, 0, t31, t32, 0, 0, 0, 0, t24*(r20*t23 - r20 + t17*t22 + t18*t22), t24*(r21*t26 - r21 + t17*t25 + t19*t25), t24*(r22*t28 - r22 + t18*t27 + t19*t27), 0, 0, 0, -t20, -t16, 0, 0, 1, 0, 0, 0, 0, 0, 0,)
 
 
 def tension_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Load cell at the drone: ``|F_c|`` [N]; returns ``(h (1,), H (1x13))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Load cell at the drone: ``|F_c|`` [N]; returns ``(h (1,), H (1x17))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     mass_kg, drag_per_s, weight_n_per_m = c
     t0 = abs(tension)
     t1 = p_d**2
@@ -107,12 +107,12 @@ def tension_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float])
     t4 = 1/(t1 + t2 + t3)
     t5 = 1/t0
     t6 = t4*t5*tension**2*(t1*t4 + t2*t4 + t3*t4 - 1)
-    return (t0,), (-p_n*t6, -p_e*t6, -p_d*t6, 0, 0, 0, t5*tension, 0, 0, 0, 0, 0, 0,)
+    return (t0,), (-p_n*t6, -p_e*t6, -p_d*t6, 0, 0, 0, t5*tension, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
 
 
 def cable_angle_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Ground-station cable angle: (elevation up, azimuth from north) [rad]; returns ``(h (2,), H (2x13))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Ground-station cable angle as read: (elevation up, azimuth from north) plus their zero errors [rad]; returns ``(h (2,), H (2x17))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     mass_kg, drag_per_s, weight_n_per_m = c
     t0 = p_d**2
     t1 = p_e**2
@@ -131,12 +131,12 @@ def cable_angle_straight(x: Sequence[float], u: Sequence[float], c: Sequence[flo
     t14 = t0*t9
     t15 = t8*t9
     t16 = 1/t3
-    return (math.atan2(-p_d*t6, t5*t7*t8), math.atan2(p_e*t6, p_n*t6),), (p_n*t13, p_e*t13, t15*(t10*t7*(t14 - 1) - t12*t14), 0, 0, 0, p_d*t15*(t11 - t7/tension**2), 0, 0, 0, 0, 0, 0, -p_e*t16, p_n*t16, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
+    return (elevation_zero + math.atan2(-p_d*t6, t5*t7*t8), azimuth_zero + math.atan2(p_e*t6, p_n*t6),), (p_n*t13, p_e*t13, t15*(t10*t7*(t14 - 1) - t12*t14), 0, 0, 0, p_d*t15*(t11 - t7/tension**2), 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, -p_e*t16, p_n*t16, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1,)
 
 
 def force_balance_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Formulation (a): ``x' = f(x, u)`` with ``u = (R_v^b row-major, thrust_n)``; returns ``(x' (13,), dv'/dx (3x13 row-major))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Formulation (a): ``x' = f(x, u)`` with ``u = (R_v^b row-major, thrust_n)``; returns ``(x' (17,), dv'/dx (3x17 row-major))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
     mass_kg, drag_per_s, weight_n_per_m = c
     t0 = 1/mass_kg
@@ -205,12 +205,12 @@ def force_balance_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[f
     t63 = 2*t4 + 2*t5
     t64 = t21*t25*t56
     t65 = t21*t50*t7
-    return (v_n, v_e, v_d, -r00*t15 - r10*t16 - scale*t2 - t12, -r01*t15 - r11*t16 - scale*t17 - t19, -r02*t15 - r12*t16 - scale*t20 - 1/2*t34*t35 + 9.80665, 0, 0, 0, 0, 0, 0, 0,), (t35*(t36*t5 - 1), t40, p_d*t39, -t41, t43, t45, -t11, -t2, 0, 0, 0, t41, t42, t40, t35*(t36*t4 - 1), p_e*t0*t38*t46, t43, -t47, t49, -t18, -t17, 0, 0, 0, t42, t47, t12*t58, t19*t58, (1/8)*t10*(t46*t55 - weight_n_per_m*(-p_d*t54 - p_d*t64*(-t28*t3 + t62 + t63) + t27*t62*t9 - t52*t59 + t59 + t61)), t45, t49, -drag_per_s*(r02**2 + r12**2), -t10*(p_d*t23*t27 + (1/8)*t21*(-p_d*t61 + t3*t64*(-t21*t27*t37 + t57 + t63) + t32*t60 + t52*t65 - t65) - t33), -t20, 0, 0, 0, t44, t48,)
+    return (v_n, v_e, v_d, -r00*t15 - r10*t16 - scale*t2 - t12, -r01*t15 - r11*t16 - scale*t17 - t19, -r02*t15 - r12*t16 - scale*t20 - 1/2*t34*t35 + 9.80665, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,), (t35*(t36*t5 - 1), t40, p_d*t39, -t41, t43, t45, -t11, -t2, 0, 0, 0, t41, t42, 0, 0, 0, 0, t40, t35*(t36*t4 - 1), p_e*t0*t38*t46, t43, -t47, t49, -t18, -t17, 0, 0, 0, t42, t47, 0, 0, 0, 0, t12*t58, t19*t58, (1/8)*t10*(t46*t55 - weight_n_per_m*(-p_d*t54 - p_d*t64*(-t28*t3 + t62 + t63) + t27*t62*t9 - t52*t59 + t59 + t61)), t45, t49, -drag_per_s*(r02**2 + r12**2), -t10*(p_d*t23*t27 + (1/8)*t21*(-p_d*t61 + t3*t64*(-t21*t27*t37 + t57 + t63) + t32*t60 + t52*t65 - t65) - t33), -t20, 0, 0, 0, t44, t48, 0, 0, 0, 0,)
 
 
 def accel_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Accelerometer force balance ``h = f + b`` [m/s^2], FRD body, with ``u = (R_v^b row-major, thrust_n)``; returns ``(h (3,), H (3x13 row-major))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Accelerometer force balance ``h = f + b`` [m/s^2], FRD body, with ``u = (R_v^b row-major, thrust_n)``; returns ``(h (3,), H (3x17 row-major))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
     mass_kg, drag_per_s, weight_n_per_m = c
     t0 = v_n - wind_n
@@ -283,12 +283,12 @@ def accel_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -
     t67 = r22*t38
     t68 = (1/8)*r22
     t69 = t47*t68
-    return (b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t29*(-r02*t24 + 2*t2 + 2*t3), b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t29*(-r12*t24 + 2*t30 + 2*t31), b_z - scale*t32 - t29*(-r22*t24 + 2*t33 + 2*t34),), (t28*(p_n*t49 + r00*t37 - r00 + t2*t36 + t36*t39), t28*(p_e*t49 + r01*t51 - r01 + t3*t50 + t39*t50), t27*(t2*t52 + t3*t52 + t39*t52 - t48*t58), -t59, -t60, -drag_per_s*r02, -t27*(t2 + t3 + t39 - t48*t61), 0, 1, 0, 0, t59, t60, t28*(p_n*t64 + r10*t37 - r10 + t30*t36 + t36*t62), t28*(p_e*t64 + r11*t51 - r11 + t31*t50 + t50*t62), t27*(t30*t52 + t31*t52 + t52*t62 - t58*t63), -t65, -t66, -drag_per_s*r12, -t27*(t30 + t31 - t61*t63 + t62), 0, 0, 1, 0, t65, t66, t28*(p_n*t69 + r20*t37 - r20 + t33*t36 + t36*t67), t28*(p_e*t69 + r21*t51 - r21 + t34*t50 + t50*t67), t27*(t33*t52 + t34*t52 + t52*t67 - t58*t68), 0, 0, 0, -t27*(t33 + t34 - t61*t68 + t67), -t32, 0, 0, 1, 0, 0,)
+    return (b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t29*(-r02*t24 + 2*t2 + 2*t3), b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t29*(-r12*t24 + 2*t30 + 2*t31), b_z - scale*t32 - t29*(-r22*t24 + 2*t33 + 2*t34),), (t28*(p_n*t49 + r00*t37 - r00 + t2*t36 + t36*t39), t28*(p_e*t49 + r01*t51 - r01 + t3*t50 + t39*t50), t27*(t2*t52 + t3*t52 + t39*t52 - t48*t58), -t59, -t60, -drag_per_s*r02, -t27*(t2 + t3 + t39 - t48*t61), 0, 1, 0, 0, t59, t60, 0, 0, 0, 0, t28*(p_n*t64 + r10*t37 - r10 + t30*t36 + t36*t62), t28*(p_e*t64 + r11*t51 - r11 + t31*t50 + t50*t62), t27*(t30*t52 + t31*t52 + t52*t62 - t58*t63), -t65, -t66, -drag_per_s*r12, -t27*(t30 + t31 - t61*t63 + t62), 0, 0, 1, 0, t65, t66, 0, 0, 0, 0, t28*(p_n*t69 + r20*t37 - r20 + t33*t36 + t36*t67), t28*(p_e*t69 + r21*t51 - r21 + t34*t50 + t50*t67), t27*(t33*t52 + t34*t52 + t52*t67 - t58*t68), 0, 0, 0, -t27*(t33 + t34 - t61*t68 + t67), -t32, 0, 0, 1, 0, 0, 0, 0, 0, 0,)
 
 
 def tension_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Load cell at the drone: ``|F_c|`` [N]; returns ``(h (1,), H (1x13))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Load cell at the drone: ``|F_c|`` [N]; returns ``(h (1,), H (1x17))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     mass_kg, drag_per_s, weight_n_per_m = c
     t0 = abs(tension)
     t1 = p_d**2
@@ -337,12 +337,12 @@ def tension_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float])
     t44 = t12*t33*t8
     t45 = t35*weight_n_per_m
     t46 = t27*t5*t8
-    return (t0*t23,), (-p_n*t37, -p_e*t37, -t36*tension*(t24*t38 + t25*t38 + t26*t38 - t45*(-p_d*t32 - p_d*t44*(-t1*t15 + t42 + t43) + t14*t30*t42 - t29*t39 + t39 + t41)), 0, 0, 0, t36*(t2*tension + t22*tension + t3*tension + t45*(-p_d*t41 + t1*t44*(-t14*t5**(3/2)*t8 + t34 + t43) + t20*t40 + t29*t46 - t46)), 0, 0, 0, 0, 0, 0,)
+    return (t0*t23,), (-p_n*t37, -p_e*t37, -t36*tension*(t24*t38 + t25*t38 + t26*t38 - t45*(-p_d*t32 - p_d*t44*(-t1*t15 + t42 + t43) + t14*t30*t42 - t29*t39 + t39 + t41)), 0, 0, 0, t36*(t2*tension + t22*tension + t3*tension + t45*(-p_d*t41 + t1*t44*(-t14*t5**(3/2)*t8 + t34 + t43) + t20*t40 + t29*t46 - t46)), 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
 
 
 def cable_angle_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Ground-station cable angle: (elevation up, azimuth from north) [rad]; returns ``(h (2,), H (2x13))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Ground-station cable angle as read: (elevation up, azimuth from north) plus their zero errors [rad]; returns ``(h (2,), H (2x17))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     mass_kg, drag_per_s, weight_n_per_m = c
     t0 = p_d**2
     t1 = p_e**2
@@ -411,12 +411,12 @@ def cable_angle_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[flo
     t64 = 2*t1 + 2*t2
     t65 = t29*t32*t40
     t66 = 1/t3
-    return (math.atan2(-t18 - 1/2*t31, t29*t34), math.atan2(t35, t36),), (t36*t61, t35*t61, t65*(t14*t42*t5*t53 - 1/2*t33*(p_d*t46*tension + 8*p_d*t51*weight_n_per_m*(-t16*t50 + t47*t49 + 1) - t29*weight_n_per_m*(4*p_d*t19*t26*t29 + p_d*t20*t59*t8*weight_n_per_m*(-t0*t22 + t63 + t64) + 2*t0*t23*t55*t8*weight_n_per_m - t21*t62 - t58*t63 - t60*t9))), 0, 0, 0, t65*((1/2)*t33*(-4*t28*t29 + t29*t8*weight_n_per_m*(4*p_d*t19*t20*t7 + 2*p_d*t4*t8*weight_n_per_m - t0*t20*t59*t9*(-t21*t44*t9 + t60 + t64) - t19*t26*t62 - t4*t53*t56*t9) - t3*t52*(t48 - t57)) - t43), 0, 0, 0, 0, 0, 0, -p_e*t66, p_n*t66, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
+    return (elevation_zero + math.atan2(-t18 - 1/2*t31, t29*t34), azimuth_zero + math.atan2(t35, t36),), (t36*t61, t35*t61, t65*(t14*t42*t5*t53 - 1/2*t33*(p_d*t46*tension + 8*p_d*t51*weight_n_per_m*(-t16*t50 + t47*t49 + 1) - t29*weight_n_per_m*(4*p_d*t19*t26*t29 + p_d*t20*t59*t8*weight_n_per_m*(-t0*t22 + t63 + t64) + 2*t0*t23*t55*t8*weight_n_per_m - t21*t62 - t58*t63 - t60*t9))), 0, 0, 0, t65*((1/2)*t33*(-4*t28*t29 + t29*t8*weight_n_per_m*(4*p_d*t19*t20*t7 + 2*p_d*t4*t8*weight_n_per_m - t0*t20*t59*t9*(-t21*t44*t9 + t60 + t64) - t19*t26*t62 - t4*t53*t56*t9) - t3*t52*(t48 - t57)) - t43), 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, -p_e*t66, p_n*t66, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1,)
 
 
 def force_balance_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Formulation (a): ``x' = f(x, u)`` with ``u = (R_v^b row-major, thrust_n)``; returns ``(x' (13,), dv'/dx (3x13 row-major))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Formulation (a): ``x' = f(x, u)`` with ``u = (R_v^b row-major, thrust_n)``; returns ``(x' (17,), dv'/dx (3x17 row-major))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
     mass_kg, drag_per_s, weight_n_per_m = c
     t0 = 1/mass_kg
@@ -459,12 +459,12 @@ def force_balance_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[f
     t37 = 1/t23
     t38 = p_d*t37
     t39 = t38*(t20*t24 - 1/t20)
-    return (v_n, v_e, v_d, -r00*t14 - r10*t15 - scale*t2 - t11, -r01*t14 - r11*t15 - scale*t16 - t18, -r02*t14 - r12*t15 - scale*t19 + t0*t23*weight_n_per_m + 9.80665, 0, 0, 0, 0, 0, 0, 0,), (t25*(t24*t5 - 1), t28, p_d*t27, -t29, t31, t33, -t10, -t2, 0, 0, 0, t29, t30, t28, t25*(t24*t4 - 1), p_d*p_e*t0*t26*tension, t31, -t34, t36, -t17, -t16, 0, 0, 0, t30, t34, t11*t39, t18*t39, t0*t37*weight_n_per_m*(p_d + t21*t26*t3 - t22), t33, t36, -drag_per_s*(r02**2 + r12**2), -t20*t38*t9, -t19, 0, 0, 0, t32, t35,)
+    return (v_n, v_e, v_d, -r00*t14 - r10*t15 - scale*t2 - t11, -r01*t14 - r11*t15 - scale*t16 - t18, -r02*t14 - r12*t15 - scale*t19 + t0*t23*weight_n_per_m + 9.80665, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,), (t25*(t24*t5 - 1), t28, p_d*t27, -t29, t31, t33, -t10, -t2, 0, 0, 0, t29, t30, 0, 0, 0, 0, t28, t25*(t24*t4 - 1), p_d*p_e*t0*t26*tension, t31, -t34, t36, -t17, -t16, 0, 0, 0, t30, t34, 0, 0, 0, 0, t11*t39, t18*t39, t0*t37*weight_n_per_m*(p_d + t21*t26*t3 - t22), t33, t36, -drag_per_s*(r02**2 + r12**2), -t20*t38*t9, -t19, 0, 0, 0, t32, t35, 0, 0, 0, 0,)
 
 
 def accel_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Accelerometer force balance ``h = f + b`` [m/s^2], FRD body, with ``u = (R_v^b row-major, thrust_n)``; returns ``(h (3,), H (3x13 row-major))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Accelerometer force balance ``h = f + b`` [m/s^2], FRD body, with ``u = (R_v^b row-major, thrust_n)``; returns ``(h (3,), H (3x17 row-major))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
     mass_kg, drag_per_s, weight_n_per_m = c
     t0 = v_n - wind_n
@@ -512,12 +512,12 @@ def accel_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -
     t42 = drag_per_s*r11
     t43 = r22*t25
     t44 = t27*t43
-    return (b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t2*(-r02*t16 + t10*t11 + t10*t3), b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t2*(-r12*t16 + t10*t17 + t10*t18), b_z - scale*t19 - t2*(-r22*t16 + t10*t20 + t10*t21),), (t30*(p_n*t28 + r00*t24 - r00 + t23*t3), t30*(p_e*t28 + r01*t32 - r01 + t11*t31), t2*(t11*t34 + t26*t35 + t3*t34), -t36, -t37, -drag_per_s*r02, -t29*(t11 + t26*t38 + t3), 0, 1, 0, 0, t36, t37, t30*(p_n*t40 + r10*t24 - r10 + t17*t23), t30*(p_e*t40 + r11*t32 - r11 + t18*t31), t2*(t17*t34 + t18*t34 + t35*t39), -t41, -t42, -drag_per_s*r12, -t29*(t17 + t18 + t38*t39), 0, 0, 1, 0, t41, t42, t30*(p_n*t44 + r20*t24 - r20 + t20*t23), t30*(p_e*t44 + r21*t32 - r21 + t21*t31), t2*(t20*t34 + t21*t34 + t35*t43), 0, 0, 0, -t29*(t20 + t21 + t38*t43), -t19, 0, 0, 1, 0, 0,)
+    return (b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t2*(-r02*t16 + t10*t11 + t10*t3), b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t2*(-r12*t16 + t10*t17 + t10*t18), b_z - scale*t19 - t2*(-r22*t16 + t10*t20 + t10*t21),), (t30*(p_n*t28 + r00*t24 - r00 + t23*t3), t30*(p_e*t28 + r01*t32 - r01 + t11*t31), t2*(t11*t34 + t26*t35 + t3*t34), -t36, -t37, -drag_per_s*r02, -t29*(t11 + t26*t38 + t3), 0, 1, 0, 0, t36, t37, 0, 0, 0, 0, t30*(p_n*t40 + r10*t24 - r10 + t17*t23), t30*(p_e*t40 + r11*t32 - r11 + t18*t31), t2*(t17*t34 + t18*t34 + t35*t39), -t41, -t42, -drag_per_s*r12, -t29*(t17 + t18 + t38*t39), 0, 0, 1, 0, t41, t42, 0, 0, 0, 0, t30*(p_n*t44 + r20*t24 - r20 + t20*t23), t30*(p_e*t44 + r21*t32 - r21 + t21*t31), t2*(t20*t34 + t21*t34 + t35*t43), 0, 0, 0, -t29*(t20 + t21 + t38*t43), -t19, 0, 0, 1, 0, 0, 0, 0, 0, 0,)
 
 
 def tension_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Load cell at the drone: ``|F_c|`` [N]; returns ``(h (1,), H (1x13))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Load cell at the drone: ``|F_c|`` [N]; returns ``(h (1,), H (1x17))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     mass_kg, drag_per_s, weight_n_per_m = c
     t0 = p_e**2
     t1 = p_d**2
@@ -539,98 +539,102 @@ def tension_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float])
     t17 = p_d*t9*weight_n_per_m
     t18 = t14*tension*(t0*t16*tension - t15 + t16*t2*tension - t17*(t10*t5 - 1/t10))
     t19 = p_d*t16*t6
-    return (t13,), (-p_n*t18, -p_e*t18, -t14*(t0*t19 + t19*t2 - t8*(p_d + t1*t11/t4**(3/2) - t12)), 0, 0, 0, t14*(t0*t15 - t10*t17 + t15*t2), 0, 0, 0, 0, 0, 0,)
+    return (t13,), (-p_n*t18, -p_e*t18, -t14*(t0*t19 + t19*t2 - t8*(p_d + t1*t11/t4**(3/2) - t12)), 0, 0, 0, t14*(t0*t15 - t10*t17 + t15*t2), 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
 
 
 def cable_angle_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Ground-station cable angle: (elevation up, azimuth from north) [rad]; returns ``(h (2,), H (2x13))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Ground-station cable angle as read: (elevation up, azimuth from north) plus their zero errors [rad]; returns ``(h (2,), H (2x17))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     mass_kg, drag_per_s, weight_n_per_m = c
     t0 = p_e**2 + p_n**2
     t1 = 1/math.sqrt(p_d**2 + t0)
     t2 = t1*tension
     t3 = 1/t0
-    return (math.atan2(0, math.sqrt(t0)*t1*abs(tension)), math.atan2(p_e*t2, p_n*t2),), (0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, -p_e*t3, p_n*t3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
+    return (elevation_zero + math.atan2(0, math.sqrt(t0)*t1*abs(tension)), azimuth_zero + math.atan2(p_e*t2, p_n*t2),), (0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, -p_e*t3, p_n*t3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1,)
 
 
 def inertial(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Formulation (b): ``x' = f(x, u)`` with ``u = (R_v^b row-major, f_x, f_y, f_z)`` (accelerometer as the input); returns ``(x' (13,), dv'/dx (3x13))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Formulation (b): ``x' = f(x, u)`` with ``u = (R_v^b row-major, f_x, f_y, f_z)`` (accelerometer as the input); returns ``(x' (17,), dv'/dx (3x17))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, f_x, f_y, f_z = u
     mass_kg, drag_per_s, weight_n_per_m = c
     t0 = b_x - f_x
     t1 = b_y - f_y
     t2 = b_z - f_z
-    return (v_n, v_e, v_d, -r00*t0 - r10*t1 - r20*t2, -r01*t0 - r11*t1 - r21*t2, -r02*t0 - r12*t1 - r22*t2 + 9.80665, 0, 0, 0, 0, 0, 0, 0,), (0, 0, 0, 0, 0, 0, 0, 0, -r00, -r10, -r20, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, -r01, -r11, -r21, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, -r02, -r12, -r22, 0, 0,)
+    return (v_n, v_e, v_d, -r00*t0 - r10*t1 - r20*t2, -r01*t0 - r11*t1 - r21*t2, -r02*t0 - r12*t1 - r22*t2 + 9.80665, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,), (0, 0, 0, 0, 0, 0, 0, 0, -r00, -r10, -r20, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, -r01, -r11, -r21, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, -r02, -r12, -r22, 0, 0, 0, 0, 0, 0,)
 
 
 def winch_length_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Winch paid-out length: the cable's arc length [m]; returns ``(h (1,), H (1x13))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Winch paid-out length as read: ``offset + (1 + scale)`` times the cable's arc length [m]; returns ``(h (1,), H (1x17))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     mass_kg, drag_per_s, weight_n_per_m = c
-    t0 = math.sqrt(p_d**2 + p_e**2 + p_n**2)
-    t1 = 1/t0
-    return (t0,), (p_n*t1, p_e*t1, p_d*t1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
+    t0 = winch_scale + 1
+    t1 = math.sqrt(p_d**2 + p_e**2 + p_n**2)
+    t2 = t0/t1
+    return (t0*t1 + winch_offset,), (p_n*t2, p_e*t2, p_d*t2, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, t1, 0, 0,)
 
 
 def winch_length_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Winch paid-out length: the cable's arc length [m]; returns ``(h (1,), H (1x13))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Winch paid-out length as read: ``offset + (1 + scale)`` times the cable's arc length [m]; returns ``(h (1,), H (1x17))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     mass_kg, drag_per_s, weight_n_per_m = c
-    t0 = p_d**2
-    t1 = p_e**2 + p_n**2
-    t2 = t0 + t1
-    t3 = 1/t2
-    t4 = math.sqrt(t2)
-    t5 = (1/2)*t4*weight_n_per_m/tension
-    t6 = math.sinh(t5)
-    t7 = 4*t1*t6**2*tension**2/weight_n_per_m**2
-    t8 = math.sqrt(t0 + t3*t7)
-    t9 = 1/t8
-    t10 = 2*t6/weight_n_per_m
+    t0 = winch_scale + 1
+    t1 = p_d**2
+    t2 = p_e**2 + p_n**2
+    t3 = t1 + t2
+    t4 = 1/t3
+    t5 = math.sqrt(t3)
+    t6 = (1/2)*t5*weight_n_per_m/tension
+    t7 = math.sinh(t6)
+    t8 = 4*t2*t7**2*tension**2/weight_n_per_m**2
+    t9 = math.sqrt(t1 + t4*t8)
+    t10 = 2*t7/weight_n_per_m
     t11 = t10*tension
-    t12 = t11*t3
-    t13 = math.cosh(t5)
-    t14 = t1*t13/t2**(3/2)
-    t15 = t2**(-2)
-    t16 = t11*t9*(-t1*t11*t15 + t12 + t14)
-    return (t8,), (p_n*t16, p_e*t16, p_d*t9*(t11*t14 - t15*t7 + 1), 0, 0, 0, t1*t10*t9*(t12 - t13/t4), 0, 0, 0, 0, 0, 0,)
+    t12 = t11*t4
+    t13 = math.cosh(t6)
+    t14 = t13*t2/t3**(3/2)
+    t15 = t3**(-2)
+    t16 = t0/t9
+    t17 = t11*t16*(-t11*t15*t2 + t12 + t14)
+    return (t0*t9 + winch_offset,), (p_n*t17, p_e*t17, p_d*t16*(t11*t14 - t15*t8 + 1), 0, 0, 0, t10*t16*t2*(t12 - t13/t5), 0, 0, 0, 0, 0, 0, 1, t9, 0, 0,)
 
 
 def winch_length_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Winch paid-out length: the cable's arc length [m]; returns ``(h (1,), H (1x13))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Winch paid-out length as read: ``offset + (1 + scale)`` times the cable's arc length [m]; returns ``(h (1,), H (1x17))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     mass_kg, drag_per_s, weight_n_per_m = c
-    t0 = p_e**2 + p_n**2
-    t1 = math.sqrt(t0)
-    t2 = p_d**2
-    t3 = t0 + t2
-    t4 = math.sqrt(t3)
-    t5 = 1/t4
-    t6 = 1/weight_n_per_m
-    t7 = t1*t5*t6
-    t8 = t7*tension
-    t9 = math.sqrt(p_d*(p_d - 2*t8))
-    t10 = 1/t1
-    t11 = p_d/tension
-    t12 = t10*t11*weight_n_per_m
-    t13 = t12*t4
-    t14 = math.acosh(1 - t13)
-    t15 = t6*tension
-    t16 = t14*t15
-    t17 = t1/t3**(3/2)
-    t18 = t16*t17
-    t19 = 1/t9
-    t20 = p_d*t19
-    t21 = 1/(math.sqrt(-t12)*math.sqrt(2 - t13))
-    t22 = t21/t3**(3/4)
-    t23 = p_d*t22*(t5 - t4/t0) - t10*t16*t5 + t10 + t15*t20*t5*(t1/t3 - t10) + t18
-    return (t1 - t14*t8 + t9,), (p_n*t23, p_e*t23, p_d*t18 + t19*(p_d + t15*t17*t2 - t8) + t22*(t2*t5 + t4), 0, 0, 0, -t11*t21/t3**(1/4) - t14*t7 - t20*t7, 0, 0, 0, 0, 0, 0,)
+    t0 = winch_scale + 1
+    t1 = p_e**2 + p_n**2
+    t2 = math.sqrt(t1)
+    t3 = p_d**2
+    t4 = t1 + t3
+    t5 = math.sqrt(t4)
+    t6 = 1/t5
+    t7 = 1/weight_n_per_m
+    t8 = t2*t6*t7
+    t9 = t8*tension
+    t10 = math.sqrt(p_d*(p_d - 2*t9))
+    t11 = 1/t2
+    t12 = p_d/tension
+    t13 = t11*t12*weight_n_per_m
+    t14 = t13*t5
+    t15 = math.acosh(1 - t14)
+    t16 = t10 - t15*t9 + t2
+    t17 = t7*tension
+    t18 = t15*t17
+    t19 = t2/t4**(3/2)
+    t20 = t18*t19
+    t21 = 1/t10
+    t22 = p_d*t21
+    t23 = 1/(math.sqrt(-t13)*math.sqrt(2 - t14))
+    t24 = t23/t4**(3/4)
+    t25 = t0*(p_d*t24*(t6 - t5/t1) - t11*t18*t6 + t11 + t17*t22*t6*(-t11 + t2/t4) + t20)
+    return (t0*t16 + winch_offset,), (p_n*t25, p_e*t25, t0*(p_d*t20 + t21*(p_d + t17*t19*t3 - t9) + t24*(t3*t6 + t5)), 0, 0, 0, -t0*(t12*t23/t4**(1/4) + t15*t8 + t22*t8), 0, 0, 0, 0, 0, 0, 1, t16, 0, 0,)
 
 
 def height_above_ground(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Rangefinder: height above the ground ``-p_d + anchor_height_m`` [m] with ``u = (anchor_height_m,)``; returns ``(h (1,), H (1x13))``."""
-    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e = x
+    """Rangefinder: height above the ground ``-p_d + anchor_height_m`` [m] with ``u = (anchor_height_m,)``; returns ``(h (1,), H (1x17))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     anchor_height_m, = u
     mass_kg, drag_per_s, weight_n_per_m = c
-    return (anchor_height_m - p_d,), (0, 0, -1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
+    return (anchor_height_m - p_d,), (0, 0, -1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)

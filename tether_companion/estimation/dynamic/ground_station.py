@@ -12,10 +12,12 @@ Three optional sensors at the anchor, each with its own measurement module under
   waives the weak-pull rule (:meth:`GroundStationInputs.status_settings`).
 
 The winch's and the angle's calibration errors (the encoder's zero and scale, the angle
-sensor's zero against north and its level) are not white: the filter follows them, and
-:class:`PositionInformation` carries them in the published covariance from the first fused
-reading (:func:`~tether_companion.estimation.dynamic.position_information.winch_calibration`,
-:func:`~tether_companion.estimation.dynamic.position_information.angle_calibration`).
+sensor's zero against north and its level) are not white: they are states of the filter
+(``state.py``), constants of the flight whose prior (the configured standard deviations)
+enters with the sensor's first reading (:func:`open_calibration`). Where the flight makes
+them observable (a circle: the rangefinder's height against the length and the elevation, the
+INS's acceleration against the bearing) the filter learns them; in a hover they stay at their
+prior and the position's covariance keeps their spread.
 
 Each reading is checked here (a non-finite or impossible value is counted in
 ``health.nonfinite_rejected`` and dropped); when to fuse it (the filter initialised, the reading
@@ -40,11 +42,7 @@ from tether_companion.estimation.dynamic.consistency import BearingWindow
 from tether_companion.estimation.dynamic.models import ModelConstants
 from tether_companion.estimation.dynamic.observability import unmodelled_position_rows
 from tether_companion.estimation.dynamic.output import DynamicHealth
-from tether_companion.estimation.dynamic.position_information import (
-    PositionInformation,
-    angle_calibration,
-    winch_calibration,
-)
+from tether_companion.estimation.dynamic.position_information import PositionInformation
 from tether_companion.estimation.dynamic.published import StatusSettings
 
 ANGLE_FRESH_S = 1.0
@@ -90,7 +88,8 @@ class GroundStationInputs:
             dynamic.winch_length_offset_std_m,
             dynamic.winch_length_scale_std,
         )
-        """The winch length's zero error [m] and scale error [1] (standard deviations)."""
+        """The winch length's zero error [m] and scale error [1] (standard deviations): the
+        prior of the calibration states."""
         self._bearing = bearing
         self._health = health
         self._status_settings = status_settings
@@ -160,18 +159,9 @@ class GroundStationInputs:
     ) -> None:
         """Fuse a winch paid-out length [m] at filter time ``time_s`` [s], stamped ``age_s``
         [s] before it."""
+        open_calibration(bank, (state.WINCH_OFFSET, state.WINCH_SCALE), self._winch_calibration_m)
         if self.winch.fuse(bank, constants, length_m, time_s, age_s):
             self._health.winch_fused += 1
-            offset_std_m, scale_std = self._winch_calibration_m
-            self.position_information.set_winch_calibration(
-                winch_calibration(
-                    bank.best.x_values()[:3],
-                    length_m,
-                    offset_std_m,
-                    scale_std,
-                    bool(self._health.cable_angle_fused),
-                )
-            )
 
     def fuse_angle(
         self,
@@ -189,6 +179,7 @@ class GroundStationInputs:
         ``calibration_std_rad`` (elevation, azimuth) [rad]) at filter time ``time_s`` [s],
         stamped ``age_s`` [s] before it; its innovation, and once fused its information,
         calibration and bearing, are recorded."""
+        open_calibration(bank, (state.ELEVATION_ZERO, state.AZIMUTH_ZERO), calibration_std_rad)
         status = self.cable_angle.status
         gated_before = status.gated
         fused = self.cable_angle.fuse(
@@ -205,14 +196,6 @@ class GroundStationInputs:
             self._health.cable_angle_fused += 1
             x = bank.best.x_values()
             self._add_angle_information(constants, x, elevation_rad, noise_std_rad, time_s)
-            self.position_information.set_angle_calibration(
-                angle_calibration(
-                    x[:3],
-                    calibration_std_rad[1],
-                    calibration_std_rad[0],
-                    bool(self._health.winch_fused),
-                )
-            )
             # the azimuth's noise across the cable: times the span
             azimuth_std_rad = CableAngleAid.noise_std_rad(elevation_rad, noise_std_rad)[1]
             self._bearing.add_bearing(math.hypot(x[0], x[1]) * azimuth_std_rad)
@@ -229,7 +212,7 @@ class GroundStationInputs:
         return self._status_settings
 
     def clear(self) -> None:
-        """Forget the angles' information and the calibration terms (the filter restarts)."""
+        """Forget the angles' information (the filter restarts)."""
         self.position_information.clear()
 
     def _add_angle_information(
@@ -269,3 +252,22 @@ class GroundStationInputs:
             self._winch_length_noise_std_m if winch else 0.0,
         )
         self.position_information.add(rows, variances, time_s, added)
+
+
+def open_calibration(bank: FilterBank, indices: tuple[int, int], std: tuple[float, float]) -> None:
+    """Give the calibration states ``indices`` of every member their prior standard
+    deviations ``std`` (state units) where they have had none yet (their variance still at
+    the start's :data:`~tether_companion.estimation.dynamic.state.UNSET_CALIBRATION_VARIANCE`:
+    no reading of the sensor since the member started). Exact: until a model reads them
+    they are uncorrelated with the rest, so this is the prior they would have had from the
+    start."""
+    unset = 2.0 * state.UNSET_CALIBRATION_VARIANCE
+    for member in bank.filters:
+        p = member.P
+        if p[indices[0], indices[0]] > unset and p[indices[1], indices[1]] > unset:
+            continue
+        p = p.copy()
+        for i, sd in zip(indices, std, strict=True):
+            if p[i, i] <= unset:
+                p[i, i] = max(sd * sd, state.UNSET_CALIBRATION_VARIANCE)
+        member.P = p

@@ -79,7 +79,7 @@ NO_COVARIANCE = (
 
 @dataclass(frozen=True, slots=True)
 class Hypothesis:
-    """One bank member's start: state (13,), covariance (13, 13), log prior weight, and
+    """One bank member's start: state (n,), covariance (n, n), log prior weight, and
     whether it is a bearing hypothesis (a wind other than the prior's mean)."""
 
     x: FloatArray
@@ -469,7 +469,8 @@ class Initialiser:
         p = np.zeros((state.N_STATES, state.N_STATES))
         p[np.ix_(order, order)] = joint
         p[state.VELOCITY, state.VELOCITY] = np.eye(3) * init.velocity_std_mps**2
-        p += np.eye(state.N_STATES) * 1e-9  # keep it positive definite when a prior is exact
+        # keep it positive definite when a prior is exact (the calibration's enters later)
+        p += np.eye(state.N_STATES) * state.UNSET_CALIBRATION_VARIANCE
         p = 0.5 * (p + p.T)
         if not np.all(np.isfinite(p)):
             return None, None

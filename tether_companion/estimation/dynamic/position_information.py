@@ -28,16 +28,8 @@ rangefinder's height) is added in the directions they measure, the azimuth's tim
 horizontal range across the cable, the elevation's times the range in the cable's vertical
 plane (a straight cable's geometry).
 
-And the ground station's calibration errors, which no number of readings averages away: the
-filter fuses each reading as if its error were white, so it follows a sensor's bias (its
-bearing turned by the angle sensor's azimuth zero, its range off by the winch encoder's zero
-offset and scale error) with a covariance that shrinks as the readings come. The published
-covariance carries them as a constant error of the stated size (:func:`angle_calibration`,
-:func:`winch_calibration`), from the first fused reading until a restart. They are not
-estimated: a bearing bias is observable only against another bearing (the force balance's, to
-0.1-0.3 rad on these flights against a 0.03 rad bias), a length offset only against the
-range the elevation and the rangefinder's height give (``r^2 / h`` times the elevation's
-error: as large as the offset itself).
+The ground station's calibration errors (zero and scale) are not here: they are states of the
+filter (``state.py``), whose own covariance carries what it has not learnt of them.
 
 The filter's own state and covariance are untouched. Pure.
 """
@@ -53,94 +45,14 @@ Rows = list[list[float]]
 """A 3x3 position covariance as rows of Python floats [m^2]."""
 Terms = tuple[float, ...]
 """The offset's covariance at the last reading (nn, ne, nd, ee, ed, dd) [m^2], the weight
-``a`` it keeps now [1], and the innovation excess with the calibration errors (the same six)
-[m^2]."""
+``a`` it keeps now [1], and the innovation excess (the same six) [m^2]."""
 ANGLE_EXCESS_TIME_CONSTANT_S = 2.0
 """Averaging time of the cable angle's innovation excess [s] (the rangefinder's)."""
 _ZERO6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-MAX_RANGE_GAIN = 3.0
-"""The most a length error moves the drone along the horizontal range, per metre
-(:func:`winch_calibration`): ``1 / cos(el)`` up to 70 degrees of elevation."""
 
 
 def _upper(rows: Rows) -> list[float]:
     return [rows[0][0], rows[0][1], rows[0][2], rows[1][1], rows[1][2], rows[2][2]]
-
-
-def angle_calibration(
-    position_ned_m: Sequence[float],
-    azimuth_std_rad: float,
-    elevation_std_rad: float,
-    with_length: bool,
-) -> tuple[float, ...]:
-    """The position covariance (nn, ne, nd, ee, ed, dd) [m^2] a cable-angle sensor's
-    calibration errors leave at ``position_ned_m`` (NED from the anchor [m]) when the filter
-    follows its readings: the azimuth's zero error ``azimuth_std_rad`` [rad] turns the drone
-    across the cable by ``rho`` times it (``rho`` the horizontal range); the elevation's
-    ``elevation_std_rad`` [rad] moves it in the cable's vertical plane, by ``|p|`` times it
-    across the cable when a winch length holds the range (``with_length``), otherwise along
-    the horizontal range by ``|p|^2 / h`` times it (the range ``h / tan(el)`` from the height
-    ``h``; ``h`` at least a tenth of ``|p|``). Zeros where the direction is undefined."""
-    n, e, d = (float(v) for v in position_ned_m)
-    rho = math.hypot(n, e)
-    distance = math.hypot(rho, d)
-    if not (rho > 0.0 and math.isfinite(distance)):
-        return _ZERO6
-    tn, te = -e / rho, n / rho
-    across = (azimuth_std_rad * rho) ** 2
-    if with_length:  # perpendicular to p in its vertical plane
-        vn, ve, vd = n * d / (rho * distance), e * d / (rho * distance), -rho / distance
-        vertical = (elevation_std_rad * distance) ** 2
-    else:  # along the horizontal range
-        vn, ve, vd = n / rho, e / rho, 0.0
-        gain = distance * distance / max(abs(d), 0.1 * distance)
-        vertical = (elevation_std_rad * gain) ** 2
-    return (
-        across * tn * tn + vertical * vn * vn,
-        across * tn * te + vertical * vn * ve,
-        vertical * vn * vd,
-        across * te * te + vertical * ve * ve,
-        vertical * ve * vd,
-        vertical * vd * vd,
-    )
-
-
-def winch_calibration(
-    position_ned_m: Sequence[float],
-    length_m: float,
-    offset_std_m: float,
-    scale_std: float,
-    with_angle: bool,
-) -> tuple[float, ...]:
-    """The position covariance (nn, ne, nd, ee, ed, dd) [m^2] a winch encoder's calibration
-    errors leave at ``position_ned_m`` (NED from the anchor [m]) when the filter follows its
-    length ``length_m`` [m]: the zero offset ``offset_std_m`` [m] and the scale error
-    ``scale_std`` [1] times the length, ``s_L``, moving the drone to where the length meets
-    what holds the rest of the position:
-
-    * with a cable angle (``with_angle``) the direction from the anchor is measured, so a
-      length off by ``dL`` moves the drone along the cable by ``dL``;
-    * without, the rangefinder holds the height, so it moves the drone along the horizontal
-      range, by ``dL |p| / rho`` (``rho`` the horizontal range; at most
-      :data:`MAX_RANGE_GAIN` times ``dL``, a cable within 20 degrees of the vertical): along
-      the cable ``dL`` and across it in its vertical plane ``dL tan(el)`` (measured on the
-      realistic 10 N circle, seed 1: 0.21 m along and 0.09-0.28 m across, where a term along
-      the cable left the across part out).
-
-    Zeros where the direction is undefined."""
-    n, e, d = (float(v) for v in position_ned_m)
-    rho = math.hypot(n, e)
-    distance = math.hypot(rho, d)
-    if not (rho > 0.0 and math.isfinite(distance + length_m)):
-        return _ZERO6
-    w = offset_std_m * offset_std_m + (scale_std * length_m) ** 2
-    if with_angle:
-        u0, u1, u2 = n / distance, e / distance, d / distance
-        return (w * u0 * u0, w * u0 * u1, w * u0 * u2, w * u1 * u1, w * u1 * u2, w * u2 * u2)
-    gain = min(distance / rho, MAX_RANGE_GAIN)
-    w *= gain * gain
-    h0, h1 = n / rho, e / rho
-    return (w * h0 * h0, w * h0 * h1, 0.0, w * h1 * h1, 0.0, 0.0)
 
 
 def height_excess(
@@ -155,7 +67,7 @@ def height_excess(
     balance's or the cable angle's: the range is ``h / tan(el)``), so a height off by ``dd``
     moves the drone along the line from the anchor, ``dp = p dd / d``: the variance goes
     along ``p / d``, its down part the variance itself, its horizontal part ``rho / |d|``
-    times larger per axis (``|d|`` at least a tenth of ``|p|``, as :func:`angle_calibration`).
+    times larger per axis (``|d|`` at least a tenth of ``|p|``).
     Measured on the realistic 0.5 N circle with the angle alone, tuning seed 2: the height
     0.5 m off for 2 s (rangefinder innovations 0.5-0.9 m, the excess 0.36 m), the range
     0.75 m short at a published 0.22 m, 89 ticks beyond 3 sigma; none with this term."""
@@ -174,8 +86,8 @@ def height_excess(
 
 
 class PositionInformation:
-    """The unmodelled offset's covariance given the fused cable angles, the angle
-    innovations' excess, and the ground station's calibration errors.
+    """The unmodelled offset's covariance given the fused cable angles, and the angle
+    innovations' excess.
 
     Parameters
     ----------
@@ -185,14 +97,12 @@ class PositionInformation:
     """
 
     __slots__ = (
-        "_angle_calibration",
         "_azimuth",
         "_elevation",
         "_excess",
         "_last_s",
         "_p",
         "_tau_s",
-        "_winch_calibration",
     )
 
     def __init__(self, correlation_s: float) -> None:
@@ -206,10 +116,6 @@ class PositionInformation:
         self._azimuth = InnovationExcess(ANGLE_EXCESS_TIME_CONSTANT_S)
         self._excess = _ZERO6
         """The angle innovations' excess as a position covariance (nn, ne, nd, ee, ed, dd)."""
-        self._angle_calibration: tuple[float, ...] | None = None
-        self._winch_calibration: tuple[float, ...] | None = None
-        """The sensors' calibration errors as position covariances (the same six) at their
-        last fused readings; None: none fused."""
 
     def clear(self) -> None:
         """Forget every reading (a restart)."""
@@ -218,19 +124,6 @@ class PositionInformation:
         self._elevation = InnovationExcess(ANGLE_EXCESS_TIME_CONSTANT_S)
         self._azimuth = InnovationExcess(ANGLE_EXCESS_TIME_CONSTANT_S)
         self._excess = _ZERO6
-        self._angle_calibration = None
-        self._winch_calibration = None
-
-    def set_angle_calibration(self, term: Sequence[float]) -> None:
-        """A fused angle reading's :func:`angle_calibration` (kept until the next; ignored
-        when not finite)."""
-        if all(math.isfinite(v) for v in term):
-            self._angle_calibration = tuple(float(v) for v in term)
-
-    def set_winch_calibration(self, term: Sequence[float]) -> None:
-        """A fused winch length's :func:`winch_calibration` (as :meth:`set_angle_calibration`)."""
-        if all(math.isfinite(v) for v in term):
-            self._winch_calibration = tuple(float(v) for v in term)
 
     def _kept(self, time_s: float) -> float:
         """The weight ``a = exp(-2 dt / tau)`` the last reading's covariance keeps at
@@ -315,26 +208,17 @@ class PositionInformation:
         )
 
     def at(self, time_s: float) -> Terms | None:
-        """The terms at ``time_s`` [s] (:data:`Terms`, the calibration errors added to the
-        excess); before the first fused angle the offset's covariance is ``C`` itself (weight
-        ``a`` = 0); None before any fused angle or length (the added covariance is then left
-        exactly as it is)."""
-        extra = self._excess
-        for term in (self._angle_calibration, self._winch_calibration):
-            if term is not None:
-                extra = tuple(a + b for a, b in zip(extra, term, strict=True))
+        """The terms at ``time_s`` [s] (:data:`Terms`); None before any fused angle (the
+        added covariance is then left exactly as it is)."""
         p = self._p
         if p is None:
-            if self._winch_calibration is None:
-                return None
-            return (*_ZERO6, 0.0, *extra)
-        return (*p, self._kept(time_s) if math.isfinite(time_s) else 1.0, *extra)
+            return None
+        return (*p, self._kept(time_s) if math.isfinite(time_s) else 1.0, *self._excess)
 
 
 def reduce_added_rows(rows: Rows, information: Terms | None) -> Rows:
     """The added position covariance ``C`` (rows, [m^2], at the tick's state) given the
-    readings: ``a P + (1 - a) C`` plus the angle innovations' excess and the calibration
-    errors, from the terms of
+    readings: ``a P + (1 - a) C`` plus the angle innovations' excess, from the terms of
     :meth:`PositionInformation.at`; ``rows`` itself when ``information`` is None. Python
     floats (read every IMU tick by the status)."""
     if information is None:

@@ -1,5 +1,6 @@
 """Optional ground-station cable angle: elevation (up from horizontal) and azimuth (from
-north) of the cable where it leaves the anchor [rad] (generated ``cable_angle_*``: the
+north) of the cable where it leaves the anchor [rad] as the sensor reads them, each with its
+zero error (states ``elevation_zero``, ``azimuth_zero``; generated ``cable_angle_*``: the
 catenary's tangent there, flat where the cable rests on the ground). The azimuth innovation is
 wrapped to [-pi, pi). The sensor's noise is a direction noise ``sigma`` per axis [rad]: the
 elevation's is ``sigma``, the azimuth's ``sigma / cos(elevation)`` (a direction error across
@@ -140,7 +141,7 @@ class CableAngleAid:
         return noise_std_rad, noise_std_rad / cos_elevation
 
     def evaluate(self, constants: ModelConstants, x: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """The angles (elevation, azimuth) [rad] (2,) and their Jacobian (2, 13) as fused at the
+        """The angles (elevation, azimuth) [rad] (2,) and their Jacobian (2, n) as fused at the
         state ``x``: the chord tension floored (module docstring), ``nan`` where the model is
         undefined."""
         low = x[state.TENSION] < self._floor_n
@@ -164,7 +165,7 @@ class CableAngleAid:
         if sensor is None or not 0 < limit <= sensor.consecutive_rejections:
             return
         x = member.x
-        off = wrap_pi(azimuth_rad - math.atan2(x[1], x[0]))
+        off = wrap_pi(azimuth_rad - x[state.AZIMUTH_ZERO] - math.atan2(x[1], x[0]))
         if abs(off) > TURN_LIMIT_RAD:
             turn_about_anchor(member, off)
             self.turns += 1

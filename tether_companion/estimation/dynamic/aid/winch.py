@@ -1,12 +1,13 @@
-"""Optional winch paid-out length: the cable's arc length (generated ``winch_length_*``: the
-catenary's, ``|p|`` for a weightless cable). While the filter's tension is below
-``slack_tension_n`` the cable may be slack and its length says only that the drone is no
-farther from the anchor than that: the reading is skipped, unless the filter has the drone
-beyond it, when the distance ``|p|`` itself is fused to the length (the one statement that
-holds for any cable; the catenary's arc, longer than the chord at a deep sag, is not: fused
-there it published wrong positions on the sagging circle). The reading was taken ``latency_s``
-before its time stamp (and the stamp may be older than the filter): it is fused as the length
-at the drone's position then
+"""Optional winch paid-out length: the cable's arc length as the encoder reads it, with its
+zero offset and scale error (states ``winch_offset``, ``winch_scale``; generated
+``winch_length_*``: the catenary's, ``|p|`` for a weightless cable). While the filter's
+tension is below ``slack_tension_n`` the cable may be slack and its length says only that the
+drone is no farther from the anchor than that: the reading is skipped, unless the filter has
+the drone beyond it, when the distance ``|p|`` itself (as read) is fused to the length (the
+one statement that holds for any cable; the catenary's arc, longer than the chord at a deep
+sag, is not: fused there it published wrong positions on the sagging circle). The reading was
+taken ``latency_s`` before its time stamp (and the stamp may be older than the filter): it is
+fused as the length at the drone's position then
 (:func:`~tether_companion.estimation.dynamic.aiding.at_reading_time`)."""
 
 from __future__ import annotations
@@ -66,9 +67,13 @@ class WinchAid:
 
 
 def _chord(xs: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """The anchor-to-drone distance [m] and its Jacobian (1, 13)."""
+    """The anchor-to-drone distance as the encoder reads it, ``offset + (1 + scale) |p|``
+    [m], and its Jacobian (1, n)."""
     p = xs[state.POSITION]
     distance = float(np.linalg.norm(p))
+    gain = 1.0 + float(xs[state.WINCH_SCALE])
     jac = np.zeros((1, state.N_STATES))
-    jac[0, state.POSITION] = p / distance
-    return np.array((distance,)), jac
+    jac[0, state.POSITION] = gain * p / distance
+    jac[0, state.WINCH_OFFSET] = 1.0
+    jac[0, state.WINCH_SCALE] = distance
+    return np.array((float(xs[state.WINCH_OFFSET]) + gain * distance,)), jac

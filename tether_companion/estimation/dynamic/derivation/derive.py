@@ -38,14 +38,16 @@ The model (SI units, NED world, FRD body, ``R = R_v^b`` maps NED to body; state 
   the force balance ``f_meas = f + b`` as the measurement (same function as (a)'s).
 * Rangefinder: height above the ground ``-p_d + h_anchor``.
 * Load cell at the drone: ``|F_c|``.
-* Winch paid-out length: the catenary's arc length ``sqrt(b^2 + a^2 (sinh z / z)^2)``
-  (``|p|`` for the straight line).
+* Winch paid-out length: the encoder reads ``offset + (1 + scale) L`` with ``L`` the
+  catenary's arc length ``sqrt(b^2 + a^2 (sinh z / z)^2)`` (``|p|`` for the straight line) and
+  the calibration states ``winch_offset``, ``winch_scale``.
 * Ground-station cable angle: the cable leaves the anchor along
   ``t_a = (T_ch p_n/|p|, T_ch p_e/|p|, w L - F_d)`` (NED; ``L`` the arc length, the straight
   line's ``T_ch p/|p|`` at ``w = 0``): elevation ``atan2(-t_a_d, |t_a_ne|)`` [rad, up positive]
-  and azimuth ``atan2(t_a_e, t_a_n)`` [rad from north].
+  and azimuth ``atan2(t_a_e, t_a_n)`` [rad from north], each read plus its zero error
+  (the calibration states ``elevation_zero``, ``azimuth_zero``).
 
-All other states are random walks (derivative 0).
+All other states are random walks or constants (derivative 0).
 """
 
 from __future__ import annotations
@@ -66,8 +68,13 @@ P = X[0:3, 0]
 V = X[3:6, 0]
 TCH = X[state.TENSION]
 SCALE = X[state.SCALE]
-B = X[8:11, 0]
-WIND = sp.Matrix([X[11], X[12], 0])
+B = X[state.BIAS, 0]
+WIND = sp.Matrix([X[state.WIND.start], X[state.WIND.start + 1], 0])
+WINCH_OFFSET, WINCH_SCALE = X[state.WINCH_OFFSET], X[state.WINCH_SCALE]
+ELEVATION_ZERO, AZIMUTH_ZERO = X[state.ELEVATION_ZERO], X[state.AZIMUTH_ZERO]
+N = state.N_STATES
+N_CONSTANT = N - 6
+"""States after position and velocity: zero derivative."""
 R = sp.Matrix(3, 3, sp.symbols("r00 r01 r02 r10 r11 r12 r20 r21 r22", real=True))
 THRUST = sp.Symbol("thrust_n", real=True)
 F_MEAS = sp.Matrix(sp.symbols("f_x f_y f_z", real=True))
@@ -161,9 +168,9 @@ def models() -> list[tuple[str, str, list[sp.Symbol], list[sp.Expr], sp.Matrix |
             (
                 f"force_balance_{suffix}",
                 "Formulation (a): ``x' = f(x, u)`` with ``u = (R_v^b row-major, thrust_n)``;"
-                " returns ``(x' (13,), dv'/dx (3x13 row-major))``.",
+                f" returns ``(x' ({N},), dv'/dx (3x{N} row-major))``.",
                 [*R, THRUST],
-                list(V) + list(vdot) + [0] * 7,
+                list(V) + list(vdot) + [0] * N_CONSTANT,
                 vdot,
                 "process",
             )
@@ -173,7 +180,8 @@ def models() -> list[tuple[str, str, list[sp.Symbol], list[sp.Expr], sp.Matrix |
             (
                 f"accel_{suffix}",
                 "Accelerometer force balance ``h = f + b`` [m/s^2], FRD body, with"
-                " ``u = (R_v^b row-major, thrust_n)``; returns ``(h (3,), H (3x13 row-major))``.",
+                " ``u = (R_v^b row-major, thrust_n)``;"
+                f" returns ``(h (3,), H (3x{N} row-major))``.",
                 [*R, THRUST],
                 list(h),
                 h,
@@ -185,7 +193,7 @@ def models() -> list[tuple[str, str, list[sp.Symbol], list[sp.Expr], sp.Matrix |
         out.append(
             (
                 f"tension_{suffix}",
-                "Load cell at the drone: ``|F_c|`` [N]; returns ``(h (1,), H (1x13))``.",
+                f"Load cell at the drone: ``|F_c|`` [N]; returns ``(h (1,), H (1x{N}))``.",
                 [],
                 [tension],
                 sp.Matrix([tension]),
@@ -195,15 +203,15 @@ def models() -> list[tuple[str, str, list[sp.Symbol], list[sp.Expr], sp.Matrix |
         tangent = anchor_tangent_ned(suffix)
         angles = sp.Matrix(
             [
-                sp.atan2(-tangent[2], sp.sqrt(tangent[0] ** 2 + tangent[1] ** 2)),
-                sp.atan2(tangent[1], tangent[0]),
+                sp.atan2(-tangent[2], sp.sqrt(tangent[0] ** 2 + tangent[1] ** 2)) + ELEVATION_ZERO,
+                sp.atan2(tangent[1], tangent[0]) + AZIMUTH_ZERO,
             ]
         )
         out.append(
             (
                 f"cable_angle_{suffix}",
-                "Ground-station cable angle: (elevation up, azimuth from north) [rad];"
-                " returns ``(h (2,), H (2x13))``.",
+                "Ground-station cable angle as read: (elevation up, azimuth from north) plus"
+                f" their zero errors [rad]; returns ``(h (2,), H (2x{N}))``.",
                 [],
                 list(angles),
                 angles,
@@ -215,22 +223,23 @@ def models() -> list[tuple[str, str, list[sp.Symbol], list[sp.Expr], sp.Matrix |
         (
             "inertial",
             "Formulation (b): ``x' = f(x, u)`` with ``u = (R_v^b row-major, f_x, f_y, f_z)``"
-            " (accelerometer as the input); returns ``(x' (13,), dv'/dx (3x13))``.",
+            f" (accelerometer as the input); returns ``(x' ({N},), dv'/dx (3x{N}))``.",
             [*R, *F_MEAS],
-            list(V) + list(ins_vdot) + [0] * 7,
+            list(V) + list(ins_vdot) + [0] * N_CONSTANT,
             ins_vdot,
             "process",
         )
     )
     for suffix, arc in ARC_LENGTH.items():
+        reading = WINCH_OFFSET + (1 + WINCH_SCALE) * arc
         out.append(
             (
                 f"winch_length_{suffix}",
-                "Winch paid-out length: the cable's arc length [m];"
-                " returns ``(h (1,), H (1x13))``.",
+                "Winch paid-out length as read: ``offset + (1 + scale)`` times the cable's"
+                f" arc length [m]; returns ``(h (1,), H (1x{N}))``.",
                 [],
-                [arc],
-                sp.Matrix([arc]),
+                [reading],
+                sp.Matrix([reading]),
                 "measurement",
             )
         )
@@ -239,7 +248,7 @@ def models() -> list[tuple[str, str, list[sp.Symbol], list[sp.Expr], sp.Matrix |
         (
             "height_above_ground",
             "Rangefinder: height above the ground ``-p_d + anchor_height_m`` [m] with"
-            " ``u = (anchor_height_m,)``; returns ``(h (1,), H (1x13))``.",
+            f" ``u = (anchor_height_m,)``; returns ``(h (1,), H (1x{N}))``.",
             [ANCHOR_H],
             [height],
             sp.Matrix([height]),
@@ -283,9 +292,9 @@ HEADER = '''"""GENERATED by tether_companion/estimation/dynamic/derivation/deriv
 Regenerate with ``python -m tether_companion.estimation.dynamic.derivation.derive``; the
 models and their meaning are documented there. sympy {version}.
 
-Every function takes the state ``x`` (13 floats, layout in ``state.py``), the inputs ``u``
+Every function takes the state ``x`` ({n} floats, layout in ``state.py``), the inputs ``u``
 and the constants ``c = (mass_kg, drag_per_s, weight_n_per_m)`` and returns the
-values and the Jacobian with respect to ``x`` (row-major, 13 columns).
+values and the Jacobian with respect to ``x`` (row-major, {n} columns).
 """
 
 # ruff: noqa
@@ -298,7 +307,7 @@ from collections.abc import Sequence
 
 def generate_source() -> str:
     """The text of ``generated.py``."""
-    parts = [HEADER.format(version=sp.__version__)]
+    parts = [HEADER.format(version=sp.__version__, n=N)]
     for model in models():
         parts.append("\n\n" + _function_source(*model) + "\n")
     return "".join(parts)

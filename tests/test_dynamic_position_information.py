@@ -106,9 +106,10 @@ def test_with_the_ground_stations_errors_the_published_covariance_covers_them() 
     """The realistic 4 N circle flown with the winch length and the cable angle (the bench's
     ``dynamic-winch-angle`` kind, seed 1, 5-14 s) with the ground station's real errors
     (sim/ground_sensors.py: seed 1 draws the encoder 0.15 m short and 1.7 % small, the
-    angle's level 0.4 degrees off): the filter follows them, and the published covariance
-    carries them (position_information.py's calibration terms): NEES mean 3.47, in the one-run
-    band, no published tick beyond 3 sigma. Without the terms (calibration told 0): NEES 53.3,
+    angle's level 0.4 degrees off): the filter learns them as states (``state.py``) and its
+    covariance carries what it has not learnt: NEES mean 1.16, in the one-run band, no
+    published tick beyond 3 sigma. Before the calibration states the filter followed them and
+    the published covariance added them as fixed terms (NEES 3.47); without either, 53.3 and
     928 ticks beyond."""
     from tether_companion.bench.estimators.flight import fly
     from tether_companion.bench.estimators.registry import kinds

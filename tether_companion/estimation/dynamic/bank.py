@@ -156,7 +156,7 @@ class FilterBank:
 
     def predict_batch(self, batch: ImuBatch, q: FloatArray) -> None:
         """Step every member over the IMU ticks summed in ``batch`` (inertial formulation;
-        ``q`` the process noise spectral density (13, 13)), all members in stacked arrays."""
+        ``q`` the process noise spectral density (n, n)), all members in stacked arrays."""
         filters = self.filters
         xs = batch.step_state(_stack([kf.x for kf in filters]), q)
         ps = batch.step_covariance(_stack([kf.P for kf in filters]), q)
@@ -217,7 +217,7 @@ class FilterBank:
         self, sensor: str, z: float, measure: MeasurementFunction, r_variance: float
     ) -> tuple[list[UpdateResult], list[FloatArray], list[FloatArray]]:
         """Fuse a scalar measurement ``z`` with noise ``r_variance`` into every member
-        (``measure(x)`` gives ``(h(x) (1,), H (1, 13))`` at a state array): ``P h``, the gain
+        (``measure(x)`` gives ``(h(x) (1,), H (1, n))`` at a state array): ``P h``, the gain
         ``K = P h / s`` and ``P - K (P h)^T`` for all members in stacked arrays, the test and
         gate per member
         (:meth:`~tether_companion.estimation.dynamic.member.MemberFilter.test_scalar`).
@@ -397,7 +397,7 @@ def _stack(arrays: list[FloatArray]) -> FloatArray:
 
 
 def _finite_and_definite(xs: FloatArray, ps: FloatArray) -> bool:
-    """Whether the states (m, 13) and covariances (m, 13, 13) are all finite and every
+    """Whether the states (m, n) and covariances (m, n, n) are all finite and every
     covariance passes the Cholesky test."""
     if not math.isfinite(float(xs.sum()) + float(ps.sum())):
         return False

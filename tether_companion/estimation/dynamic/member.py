@@ -8,8 +8,9 @@ cheaper operations:
 
 * prediction (one Euler step, ``x + h f``, ``P + h (F P + (F P)^T + Q)``): ``F`` is known in
   structure: the position rows are ``p' = v`` (so ``(F P)`` there is ``P``'s velocity rows,
-  copied, not multiplied), the velocity rows are the generated ``dv'/dx`` (one 3x13 by 13x13
-  product), the other rows are zero (random walks); ``Q`` diagonal. No 13x13x13 product.
+  copied, not multiplied), the velocity rows are the generated ``dv'/dx`` (one 3xn by nxn
+  product; ``n`` = 17 states), the other rows are zero (random walks and constants); ``Q``
+  diagonal. No nxnxn product.
 * the force-balance update with ``R = r I``: ``P H^T``, the 3x3 ``S`` tested for definiteness
   (Sylvester's leading minors) and inverted in scalars, ``NIS = y^T S^-1 y``, the gate,
   ``K = P H^T S^-1``, ``x + K y`` and ``P - K (P H^T)^T`` made exactly symmetric. That is the
@@ -68,13 +69,13 @@ class MemberFilter(ExtendedKalmanFilter):
     Parameters
     ----------
     x0, p0
-        Initial state (13,) and covariance (13, 13).
+        Initial state (n,) and covariance (n, n).
     q_diagonal
-        Process noise spectral density, diagonal (13,) [state units^2 / s].
+        Process noise spectral density, diagonal (n,) [state units^2 / s].
     constants
         The models' constants (mass, drag, cable weight).
     process
-        The generated process function ``(x, u, c) -> (x' (13,), dv'/dx (39,))``
+        The generated process function ``(x, u, c) -> (x' (n,), dv'/dx (3n,))``
         (``generated.inertial`` or a ``force_balance_*``).
     gate_probability, max_consecutive_rejections
         As for :class:`~tether_companion.estimation.ekf.ExtendedKalmanFilter`.
@@ -140,7 +141,7 @@ class MemberFilter(ExtendedKalmanFilter):
         return True
 
     def set_predicted(self, x: FloatArray, p: FloatArray, *, healthy: bool) -> None:
-        """Keep a state (13,) and covariance (13, 13) predicted for the whole bank at once
+        """Keep a state (n,) and covariance (n, n) predicted for the whole bank at once
         (:meth:`~tether_companion.estimation.dynamic.bank.FilterBank.predict_batch`); unless
         known ``healthy`` (finite and positive definite) they are checked as after
         :meth:`predict`: reset when not finite, repaired when not positive definite."""
@@ -213,7 +214,7 @@ class MemberFilter(ExtendedKalmanFilter):
     def accept_update(
         self, sensor: str, nis: float, x: FloatArray, p: FloatArray, *, checked: bool
     ) -> UpdateResult:
-        """Keep the updated state (13,) and covariance (13, 13) of a sample that
+        """Keep the updated state (n,) and covariance (n, n) of a sample that
         :meth:`test_force_balance` or :meth:`test_scalar` let through: when ``checked``
         (finite, exactly symmetric and positive definite, tested for the whole bank at once)
         counted and stored, otherwise through the generic EKF's finite check, symmetrisation and

@@ -30,7 +30,7 @@ from scipy.linalg.lapack import dpotrf
 
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.imu_batch import ImuBatch
-from tether_companion.estimation.dynamic.member import MemberFilter
+from tether_companion.estimation.dynamic.member import MemberFilter, hold_consider
 from tether_companion.estimation.ekf import MeasurementFunction, UpdateResult
 
 FloatArray = NDArray[np.float64]
@@ -86,6 +86,9 @@ class FilterBank:
         other than the best member's are dropped when their weight falls below
         :data:`DROP_WEIGHT`, and those that converged to it (:data:`MERGE_DISTANCE_M`); when
         every other bearing converged so, :attr:`bearing_confirmed`.
+    consider
+        The states every member holds as consider (Schmidt) states until :meth:`release`
+        (default: the ground station's calibration, ``state.CALIBRATION``; None: none).
     """
 
     def __init__(
@@ -96,8 +99,15 @@ class FilterBank:
         ticks_per_force_balance: int = 1,
         log_priors: list[float] | None = None,
         bearings: list[int] | None = None,
+        consider: slice | None = state.CALIBRATION,
     ) -> None:
         self.filters = filters
+        self.consider = consider
+        """The states held as consider states: every update (here, stacked, and the
+        members' own) keeps their means and their own covariance block
+        (:func:`~tether_companion.estimation.dynamic.member.hold_consider`)."""
+        for kf in filters:
+            kf.consider = consider
         self.force_balance_tempering = LIKELIHOOD_TEMPERING / ticks_per_force_balance
         """What a force-balance sample's log-likelihood is divided by."""
         self.log_weight = [0.0] * len(filters) if log_priors is None else list(log_priors)
@@ -148,6 +158,12 @@ class FilterBank:
         self.filters = [self.filters[i] for i in indices]
         self.log_weight = [self.log_weight[i] for i in indices]
         self.bearings = [self.bearings[i] for i in indices]
+
+    def release(self) -> None:
+        """Let the consider states learn from now on (ordinary states of every member)."""
+        self.consider = None
+        for kf in self.filters:
+            kf.consider = None
 
     def predict(self, dt_s: float, u: list[float]) -> None:
         """Predict every member over ``dt_s`` [s] (``u`` the inputs as floats)."""
@@ -203,11 +219,13 @@ class FilterBank:
                 p, pht = p[index], pht[index]
             s_inv = np.array([solved[1:10] for _, solved in chosen]).reshape(len(index), 3, 3)
             w = np.array([solved[10:] for _, solved in chosen])
-            xs = _stack([filters[i].x for i in index])
-            xs = xs + (pht @ w[:, :, None])[:, :, 0]
+            prior_xs = _stack([filters[i].x for i in index])
+            xs = prior_xs + (pht @ w[:, :, None])[:, :, 0]
             ps = p - (pht @ s_inv) @ pht.swapaxes(1, 2)
             ps += ps.swapaxes(1, 2)
             ps *= 0.5
+            if self.consider is not None:
+                hold_consider(xs, ps, prior_xs, p, self.consider)
             checked = _finite_and_definite(xs, ps)
             for (i, solved), x, p_new in zip(chosen, xs, ps, strict=True):
                 results[i] = filters[i].accept_update(sensor, solved[0], x, p_new, checked=checked)
@@ -243,11 +261,13 @@ class FilterBank:
             if len(index) < len(filters):
                 p, pht = p[index], pht[index]
             gain = pht / np.array([s_values[i] for i in index])[:, None]
-            xs = _stack([filters[i].x for i in index])
-            xs = xs + gain * np.array([innovations[i] for i in index])[:, None]
+            prior_xs = _stack([filters[i].x for i in index])
+            xs = prior_xs + gain * np.array([innovations[i] for i in index])[:, None]
             ps = p - gain[:, :, None] * pht[:, None, :]
             ps += ps.swapaxes(1, 2)
             ps *= 0.5
+            if self.consider is not None:
+                hold_consider(xs, ps, prior_xs, p, self.consider)
             checked = _finite_and_definite(xs, ps)
             for i, x, p_new in zip(index, xs, ps, strict=True):
                 nis = innovations[i] * innovations[i] / s_values[i]

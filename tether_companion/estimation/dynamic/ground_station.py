@@ -14,10 +14,13 @@ Three optional sensors at the anchor, each with its own measurement module under
 The winch's and the angle's calibration errors (the encoder's zero and scale, the angle
 sensor's zero against north and its level) are not white: they are states of the filter
 (``state.py``), constants of the flight whose prior (the configured standard deviations)
-enters with the sensor's first reading (:func:`open_calibration`). Where the flight makes
+enters with the start where a reading placed it (``initialise.py``, correlated with the
+position) or else with the sensor's first reading (:func:`open_calibration`). They are held as
+consider states until the filter has settled (:mod:`.calibration_release`: the readings move
+the position, not them, while the start may be wrong), then learnt where the flight makes
 them observable (a circle: the rangefinder's height against the length and the elevation, the
-INS's acceleration against the bearing) the filter learns them; in a hover they stay at their
-prior and the position's covariance keeps their spread.
+INS's acceleration against the bearing); in a hover they stay at their prior and the
+position's covariance keeps their spread.
 
 Each reading is checked here (a non-finite or impossible value is counted in
 ``health.nonfinite_rejected`` and dropped); when to fuse it (the filter initialised, the reading
@@ -33,10 +36,13 @@ import math
 import numpy as np
 
 from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.aid.cable_angle import NAME as ANGLE_NAME
 from tether_companion.estimation.dynamic.aid.cable_angle import CableAngleAid
 from tether_companion.estimation.dynamic.aid.load_cell import LoadCellAid
+from tether_companion.estimation.dynamic.aid.winch import NAME as WINCH_NAME
 from tether_companion.estimation.dynamic.aid.winch import WinchAid
 from tether_companion.estimation.dynamic.bank import FilterBank
+from tether_companion.estimation.dynamic.calibration_release import CalibrationRelease
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.consistency import BearingWindow
 from tether_companion.estimation.dynamic.models import ModelConstants
@@ -83,6 +89,8 @@ class GroundStationInputs:
         self.position_information = PositionInformation(dynamic.unmodelled_force_correlation_s)
         """What the fused cable angles tell about the position within the unmodelled force's
         correlation time (it narrows the unmodelled term of the published covariance)."""
+        self.calibration_release = CalibrationRelease()
+        """When the bank's calibration states stop being consider states."""
         self._winch_length_noise_std_m = dynamic.winch_length_noise_std_m
         self._winch_calibration_m = (
             dynamic.winch_length_offset_std_m,
@@ -160,8 +168,12 @@ class GroundStationInputs:
         """Fuse a winch paid-out length [m] at filter time ``time_s`` [s], stamped ``age_s``
         [s] before it."""
         open_calibration(bank, (state.WINCH_OFFSET, state.WINCH_SCALE), self._winch_calibration_m)
-        if self.winch.fuse(bank, constants, length_m, time_s, age_s):
+        gated_before = self.winch.status.gated
+        fused = self.winch.fuse(bank, constants, length_m, time_s, age_s)
+        if fused:
             self._health.winch_fused += 1
+        if fused or self.winch.status.gated != gated_before:
+            self._settle(bank, WINCH_NAME, time_s, 1)
 
     def fuse_angle(
         self,
@@ -192,6 +204,7 @@ class GroundStationInputs:
                 bank.best.x_values()[:3],
                 time_s,
             )
+            self._settle(bank, ANGLE_NAME, time_s, 2)
         if fused:
             self._health.cable_angle_fused += 1
             x = bank.best.x_values()
@@ -212,8 +225,17 @@ class GroundStationInputs:
         return self._status_settings
 
     def clear(self) -> None:
-        """Forget the angles' information (the filter restarts)."""
+        """Forget the angles' information and the innovations the calibration's release
+        watches (the filter restarts)."""
         self.position_information.clear()
+        self.calibration_release.clear()
+
+    def _settle(self, bank: FilterBank, sensor: str, time_s: float, dof: int) -> None:
+        """The best member's NIS of the ``sensor``'s sample just tested (``dof`` degrees of
+        freedom) at filter time ``time_s`` [s] to the calibration's release rule."""
+        status = bank.best.sensors.get(sensor)
+        if status is not None:
+            self.calibration_release.add(bank, time_s, status.last_nis, dof)
 
     def _add_angle_information(
         self,

@@ -28,8 +28,11 @@ is the window's force along the cable. The force
 alone cannot do this near the anchor: there the cable's horizontal pull is not much larger
 than the wind's drag, which turns the force's bearing (the realistic take-off, 1 m from the
 anchor, 1.4 N of pull against 0.6-0.8 N of drag: started 1 m off, its first angles gated).
-The angle's noise (averaged over the window's readings) and calibration errors enter the
-initial covariance as two more parameters of the construction, and the motion fit places the
+The angle's noise (averaged over the window's readings) enters the initial covariance as two
+more parameters of the construction; its calibration errors (and, wherever the winch length
+places the drone, the length's offset and scale error) as parameters too, which are also the
+filter's calibration states (``state.CALIBRATION``): their prior enters here, correlated with
+the position it moved, not again at the sensor's first reading. The motion fit places the
 drone at each reading from the angle instead of from that tick's force
 (:mod:`~tether_companion.estimation.dynamic.start_angle`). Only where the force cannot tell
 the bearing (:meth:`Initialiser._pull_weak`). A heavy cable there (slack12) is placed on the
@@ -438,14 +441,15 @@ class Initialiser:
         sigma[_W] = init.wind_std_mps
         sigma[_H] = self.range_std_m / math.sqrt(max(self._n_height, 1))
         sigma[_L] = cfg.winch_length_noise_std_m
+        # the ground station's calibration errors: parameters of the construction beside
+        # theta (the reading's error is the noise's plus theirs) and states of their own
+        # (state.CALIBRATION, whose estimate 0 is off by minus them): one spread, correlated
+        calibration_std = np.zeros(4)
+        if math.isfinite(theta[_L]):  # the length places the drone: its calibration too
+            calibration_std[0:2] = cfg.winch_length_offset_std_m, cfg.winch_length_scale_std
         if math.isfinite(theta[_EL]):
-            sigma[_EL], sigma[_AZ] = self._angles.mean_std(float(theta[_EL]))
-            if math.isfinite(theta[_L]):  # the length places the drone: its calibration too
-                sigma[_L] = math.hypot(
-                    sigma[_L],
-                    cfg.winch_length_offset_std_m,
-                    cfg.winch_length_scale_std * float(theta[_L]),
-                )
+            sigma[_EL], sigma[_AZ] = self._angles.mean_noise_std(float(theta[_EL]))
+            calibration_std[2:4] = self._angles.calibration_std()
         active = [i for i in range(_THETA) if math.isfinite(theta[i]) and sigma[i] > 0.0]
         jac = np.zeros((4, _THETA))
         for i in active:
@@ -457,19 +461,29 @@ class Initialiser:
             if y_plus is None or y_minus is None:
                 return None, None
             jac[:, i] = (y_plus - y_minus) / (2.0 * step)
-        # rows: p (3), T_ch, s, b (3), w (2) as functions of theta
-        rows = np.zeros((10, _THETA))
-        rows[0:4] = jac
+        length_m = float(theta[_L]) if math.isfinite(theta[_L]) else 0.0
+        # offset + scale L and the angles' zeros move the drone as their readings do
+        calibration_columns = np.stack(
+            (jac[:, _L], jac[:, _L] * length_m, jac[:, _EL], jac[:, _AZ]), axis=1
+        )
+        # rows: p (3), T_ch, s, b (3), w (2), calibration (4) as functions of theta and the
+        # calibration errors
+        rows = np.zeros((14, _THETA + 4))
+        rows[0:4, :_THETA] = jac
+        rows[0:4, _THETA:] = calibration_columns
         rows[4, _S] = 1.0
         rows[5:8, _B] = np.eye(3)
         rows[8:10, _W] = np.eye(2)
-        theta_cov = np.diag(np.where(np.isfinite(sigma), sigma, 0.0) ** 2)
-        joint = rows @ theta_cov @ rows.T
-        order = [0, 1, 2, state.TENSION, state.SCALE, 8, 9, 10, 11, 12]
+        rows[10:14, _THETA:] = -np.eye(4)
+        parameter_std = np.concatenate((np.where(np.isfinite(sigma), sigma, 0.0), calibration_std))
+        joint = (rows * parameter_std**2) @ rows.T
+        calibration = range(state.CALIBRATION.start, state.CALIBRATION.stop)
+        order = [0, 1, 2, state.TENSION, state.SCALE, 8, 9, 10, 11, 12, *calibration]
         p = np.zeros((state.N_STATES, state.N_STATES))
         p[np.ix_(order, order)] = joint
         p[state.VELOCITY, state.VELOCITY] = np.eye(3) * init.velocity_std_mps**2
-        # keep it positive definite when a prior is exact (the calibration's enters later)
+        # keep it positive definite when a prior is exact (a calibration not given here
+        # enters with its sensor's first reading: ground_station.open_calibration)
         p += np.eye(state.N_STATES) * state.UNSET_CALIBRATION_VARIANCE
         p = 0.5 * (p + p.T)
         if not np.all(np.isfinite(p)):

@@ -109,6 +109,10 @@ class MemberFilter(ExtendedKalmanFilter):
         self.last_log_det_s = math.nan
         """``log det S`` of the last sample :meth:`test_force_balance` or :meth:`test_scalar`
         tested (the Gaussian likelihood's normalisation, for the bank's weights)."""
+        self.consider: slice | None = None
+        """The states held as consider (Schmidt) states, or None: every update keeps their
+        mean and their own covariance block as they were (:func:`hold_consider`); set by the
+        bank (:attr:`~tether_companion.estimation.dynamic.bank.FilterBank.consider`)."""
 
     def predict(self, dt_s: float, u: Sequence[float] | None = None) -> bool:  # type: ignore[override]
         """One Euler step of the state and the covariance over ``dt_s`` [s] with the inputs
@@ -228,6 +232,15 @@ class MemberFilter(ExtendedKalmanFilter):
         status.consecutive_rejections = 0
         return UpdateResult(FUSED, nis)
 
+    def _accept(
+        self, status: SensorStatus, nis: float, x: FloatArray, p: FloatArray
+    ) -> UpdateResult:
+        """The generic EKF's update (:meth:`update`: a 2-D cable angle) with the consider
+        states held (:func:`hold_consider`) before it is kept."""
+        if self.consider is not None:
+            hold_consider(x[None], p[None], self.x[None], self.P[None], self.consider)
+        return super()._accept(status, nis, x, p)
+
     @staticmethod
     def _rejected(status: SensorStatus, s_sum: float) -> UpdateResult:
         """Count an innovation covariance that is not positive definite."""
@@ -236,3 +249,19 @@ class MemberFilter(ExtendedKalmanFilter):
             return UpdateResult(NONFINITE, math.nan)
         status.singular += 1
         return UpdateResult(SINGULAR, math.nan)
+
+
+def hold_consider(
+    xs: FloatArray, ps: FloatArray, prior_xs: FloatArray, prior_ps: FloatArray, consider: slice
+) -> None:
+    """Make optimal updates of stacked states (m, n) and covariances (m, n, n) Schmidt
+    updates, in place: the ``consider`` states' means and their own covariance block back to
+    the priors ``prior_xs``, ``prior_ps``.
+
+    With the optimal gain ``K = [K_s; K_c]`` the Schmidt gain is ``[K_s; 0]``: the other
+    states and their covariance update exactly as with ``K`` (their gain is the optimal one),
+    the cross block ``P_sc`` too (``P_sc - K_s H P_c``, the same in both), and ``P_cc`` keeps
+    its prior; the result is the optimal covariance plus ``K_c S K_c^T`` in the consider
+    block, so it stays positive definite."""
+    xs[:, consider] = prior_xs[:, consider]
+    ps[:, consider, consider] = prior_ps[:, consider, consider]

@@ -202,7 +202,9 @@ def mixture_sag(
 ) -> tuple[float, float]:
     """What the sag leaves open of the range at the bank's mixture (its state, horizontal
     position covariance and chord tension variance) on the cable of ``constants``: with a
-    fused winch length (``winch``), :func:`sag_range_variance_m2` at ``constants.length_m``;
+    fused winch length (``winch``), :func:`sag_range_variance_m2` at the length the reading
+    ``constants.length_m`` [m] means with the mixture's calibration states, ``(L - o) / (1 +
+    s)`` (the encoder reads ``o + (1 + s) L``);
     without one, ``(inf, 0)`` where the cable may rest on the ground
     (:func:`grounded_plausible`: the pull at the drone and the anchor's angle then do not
     depend on the range, only the grounded part's length does; the estimate is withheld),
@@ -215,12 +217,14 @@ def mixture_sag(
         if grounded_plausible(mixture.x_values, tension_variance, constants.weight_n_per_m):
             return math.inf, 0.0
         return NO_SAG
+    x = mixture.x_values
+    length_m = (constants.length_m - x[state.WINCH_OFFSET]) / (1.0 + x[state.WINCH_SCALE])
     return sag_range_variance_m2(
-        mixture.x_values,
+        x,
         (float(p[0, 0]), float(p[0, 1]), float(p[1, 1])),
         tension_variance,
         constants.weight_n_per_m,
-        constants.length_m,
+        length_m,
         constants.tension_measured,
     )
 

@@ -5,7 +5,8 @@ the anchor and the drone, so the azimuth of the cable where it leaves the anchor
 drone's bearing, and for a weightless (straight) cable the elevation with the winch's length,
 or with the height above the anchor, is its position (:func:`angle_position`). The window of
 the start (:mod:`~tether_companion.estimation.dynamic.initialise`) keeps its readings here:
-their mean and its standard deviations (the noise averages, the calibration does not), and
+their mean and its standard deviations (the noise averages; the calibration does not, and is
+the filter's calibration states' prior, correlated with the start's position), and
 the motion they show (:meth:`AngleReadings.motion`: a quadratic in time through the positions
 of the readings, each weighted by its variance, :func:`angle_position_variance`). Pure.
 """
@@ -76,17 +77,21 @@ class AngleReadings:
         nearest = min(self._readings, key=lambda reading: abs(reading[0] - time_s))
         return nearest[1], nearest[2]
 
-    def mean_std(self, elevation_rad: float) -> tuple[float, float]:
-        """Standard deviations of the mean elevation and azimuth [rad] at ``elevation_rad``:
-        the direction noise averaged over the readings (the azimuth's ``1 / cos(el)``
-        larger) and the calibration errors, which do not average."""
-        noise, elevation_cal, azimuth_cal = self._noise
+    def mean_noise_std(self, elevation_rad: float) -> tuple[float, float]:
+        """Standard deviations of the mean elevation and azimuth [rad] at ``elevation_rad``
+        from the direction noise, averaged over the readings (the azimuth's ``1 / cos(el)``
+        larger); the calibration errors, which do not average, are
+        :meth:`calibration_std`."""
+        noise = self._noise[0]
         count = max(len(self._readings), 1)
         azimuth_noise = noise / max(math.cos(elevation_rad), MIN_RISE)
-        return (
-            math.sqrt(noise * noise / count + elevation_cal * elevation_cal),
-            math.sqrt(azimuth_noise * azimuth_noise / count + azimuth_cal * azimuth_cal),
-        )
+        return noise / math.sqrt(count), azimuth_noise / math.sqrt(count)
+
+    def calibration_std(self) -> tuple[float, float]:
+        """The sensor's calibration errors (elevation, azimuth zero) [rad] as the latest
+        reading gave them: the prior of the filter's calibration states, which the start
+        correlates with the position it places (``initialise.py``)."""
+        return self._noise[1], self._noise[2]
 
     def motion(
         self, time_s: float, range_std_m: float, length_std_m: float

@@ -1,0 +1,81 @@
+"""When the ground station's calibration states start to learn: :class:`CalibrationRelease`.
+
+The calibration states (``state.CALIBRATION``: the winch's offset and scale, the angle
+sensor's elevation and azimuth zeros) are constants of the flight. Learnt from the first
+reading on, they took a bad start's error as the sensor's and kept it (docs/
+estimation-history.md, calib11: the gusty hover's azimuth zero 0.198 rad at 2 s, sd 0.016,
+truth -0.005; 17.9 % of its published ticks beyond 3 sigma). So the bank starts with them as
+consider (Schmidt) states (:attr:`~tether_companion.estimation.dynamic.bank.FilterBank.consider`):
+every update leaves their means and their own covariance block as they were, the cross block
+and everything else as the optimal update has them, so the position's covariance keeps their
+spread while the readings correct the position alone. They are released to learning once the
+filter has settled:
+
+* the bank has decided (one member left: the thrust-scale and bearing hypotheses chosen,
+  merged or collapsed), and
+* since then, for :data:`SETTLE_S` at least, the ground station's innovations are in band:
+  their normalised squared innovations (NIS per degree of freedom, the best member's, gated
+  samples included) average at most :data:`MAX_MEAN_NIS` over the last :data:`SETTLE_S`.
+
+A filter that restarts starts a new bank, with the states held again (:meth:`clear`). Pure.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+from tether_companion.estimation.dynamic.bank import FilterBank
+
+SETTLE_S = 3.0
+"""How long [s] the ground station's innovations must have been in band, after the bank
+decided, before the calibration states learn."""
+MAX_MEAN_NIS = 2.0
+"""The band: the mean NIS per degree of freedom over the last :data:`SETTLE_S` (1 for a
+consistent filter; a bad start's bearing shows tens)."""
+
+
+class CalibrationRelease:
+    """Watches the ground station's innovations and releases the bank's consider states
+    by the module's rule.
+
+    Attributes
+    ----------
+    released_time_s
+        Filter time [s] at which the states were released (``nan``: held, or none).
+    """
+
+    def __init__(self) -> None:
+        self._samples: deque[tuple[float, float]] = deque()
+        """(filter time [s], NIS per degree of freedom) since the bank decided, the last
+        :data:`SETTLE_S`."""
+        self._decided_s = math.nan
+        """The filter time of the first sample after the bank decided [s]."""
+        self.released_time_s = math.nan
+
+    def add(self, bank: FilterBank, time_s: float, nis: float, dof: int) -> None:
+        """A ground-station sample's NIS (``dof`` degrees of freedom) at filter time
+        ``time_s`` [s], tested against ``bank``'s best member; the bank's consider states
+        are released when the rule holds."""
+        if bank.consider is None or not math.isfinite(nis):
+            return
+        if not bank.decided:
+            self.clear()
+            return
+        if math.isnan(self._decided_s):
+            self._decided_s = time_s
+        samples = self._samples
+        samples.append((time_s, nis / dof))
+        while samples[0][0] < time_s - SETTLE_S:
+            samples.popleft()
+        if time_s - self._decided_s < SETTLE_S:
+            return
+        if sum(v for _, v in samples) <= MAX_MEAN_NIS * len(samples):
+            bank.release()
+            self.released_time_s = time_s
+
+    def clear(self) -> None:
+        """Forget the samples (the bank is undecided, or the filter restarts)."""
+        self._samples.clear()
+        self._decided_s = math.nan
+        self.released_time_s = math.nan

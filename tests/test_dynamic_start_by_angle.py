@@ -106,6 +106,34 @@ def test_the_winch_length_with_the_angle_places_the_start_without_the_height() -
     assert np.allclose(x[state.POSITION], POSITION, atol=0.02)
 
 
+def test_the_start_gives_the_calibration_states_their_prior_tied_to_the_position() -> None:
+    """Placed by the angle and the winch length: the four calibration states get their
+    configured prior at the start (not again at the first reading), correlated with the
+    position they moved: the azimuth zero turns the drone across the cable (east here) by
+    the span times it, the length's offset moves it along the cable; knowing the zero would
+    take its part of the across-cable variance away (counted once, not twice)."""
+    hover = lambda t: POSITION  # noqa: E731
+    length = float(np.linalg.norm(POSITION))
+    x, p = _start(_window(hover, angles=True, length=True), length)
+    config = DynamicFilterConfig()
+    az, el = state.AZIMUTH_ZERO, state.ELEVATION_ZERO
+    offset, scale = state.WINCH_OFFSET, state.WINCH_SCALE
+    assert np.all(x[state.CALIBRATION] == 0.0)
+    assert p[az, az] == pytest.approx(CALIBRATION_RAD[1] ** 2, rel=1e-3)
+    assert p[el, el] == pytest.approx(CALIBRATION_RAD[0] ** 2, rel=1e-3)
+    assert p[offset, offset] == pytest.approx(config.winch_length_offset_std_m**2, rel=1e-3)
+    assert p[scale, scale] == pytest.approx(config.winch_length_scale_std**2, rel=1e-3)
+    span = math.hypot(POSITION[0], POSITION[1])
+    # reading = truth + zero, the state's estimate 0: position error +span a_0, state's -a_0
+    assert p[1, az] == pytest.approx(-span * CALIBRATION_RAD[1] ** 2, rel=0.05)
+    along = POSITION / length
+    assert along @ p[state.POSITION, offset] == pytest.approx(
+        -(config.winch_length_offset_std_m**2), rel=0.05
+    )
+    conditioned = p[1, 1] - p[1, az] ** 2 / p[az, az]
+    assert conditioned < p[1, 1] - 0.9 * (span * CALIBRATION_RAD[1]) ** 2
+
+
 def test_the_angle_readings_give_the_start_its_motion() -> None:
     """A drone flying out at (0.8, 0.4, -0.1) m/s: the readings' positions give the start's
     velocity (the window's force, the same at every tick, says nothing of it) and its

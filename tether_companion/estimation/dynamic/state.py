@@ -19,9 +19,12 @@ angle_cal   15-16  cable-angle sensor's zero errors: elevation, azimuth; it     
 ==========  =====  ==========================================================  ========
 
 The four ground-station calibration states are constants of a flight (no process noise).
-Their prior enters with their sensor's first reading (``ground_station.py``): until then
-their variance is at most :data:`UNSET_CALIBRATION_VARIANCE` and no model depends on them, so a
-filter without a ground station is unchanged by them.
+Their prior enters with the start where a reading placed the drone (``initialise.py``,
+correlated with the position), else with their sensor's first reading (``ground_station.py``):
+until then their variance is at most :data:`UNSET_CALIBRATION_VARIANCE` and no model depends
+on them, so a filter without a ground station is unchanged by them. They are consider
+(Schmidt) states until the filter has settled (``calibration_release.py``): updates leave
+their means and their own covariance block as they were.
 """
 
 from __future__ import annotations

@@ -15,7 +15,10 @@ filter has settled:
   merged or collapsed), and
 * since then, for :data:`SETTLE_S` at least, the ground station's innovations are in band:
   their normalised squared innovations (NIS per degree of freedom, the best member's, gated
-  samples included) average at most :data:`MAX_MEAN_NIS` over the last :data:`SETTLE_S`.
+  samples included) average at most :data:`MAX_MEAN_NIS` over the last :data:`SETTLE_S`;
+* and a cable angle has been fused (``ground_station.py`` gives the samples only then: the
+  winch's calibration without an angle is told only through the force balance's cable
+  direction, and stays a consider state).
 
 A filter that restarts starts a new bank, with the states held again (:meth:`clear`). Pure.
 """

@@ -61,7 +61,7 @@ def test_the_prior_enters_with_the_first_reading_and_only_where_none_was_given()
 
 def _fly(name: str, seed: int, duration_s: float):
     """Fly the realistic scenario ``name`` with the winch and the cable angle (the bench's
-    ``dynamic-winch-angle`` kind); returns the estimator at the end and the flight's drawn
+    ``dynamic-winch-angle`` kind) learning the calibration; returns the estimator at the end and the flight's drawn
     calibration (sim/ground_sensors.py)."""
     from tether_companion.bench.estimators.flight import fly
     from tether_companion.bench.estimators.registry import UNKNOWN_TENSION, EstimatorKind
@@ -74,6 +74,8 @@ def _fly(name: str, seed: int, duration_s: float):
 
     def build(context):
         built.append(DynamicKind(context, use_winch=True, use_angle=True))
+        # dynamic_filter.learn_calibration on (off by default: docs/estimation.md)
+        built[-1]._estimator.ground_station.calibration_release.enabled = True
         return built[-1]
 
     kind = EstimatorKind("probe", "probe", build, UNKNOWN_TENSION, True, True, "probe")

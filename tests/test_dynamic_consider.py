@@ -15,6 +15,7 @@ from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic import generated, state
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.calibration_release import MAX_MEAN_NIS, SETTLE_S
+from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.dynamic.models import STRAIGHT, ModelConstants
@@ -146,8 +147,25 @@ def _fly_angles(bank: FilterBank, start_s: float, end_s: float, estimator) -> No
         )
 
 
-def _estimator() -> DynamicTetherEstimator:
-    return DynamicTetherEstimator(EstimatorConfig(), load_vehicle("default-quad"))
+def _estimator(learn: bool = True) -> DynamicTetherEstimator:
+    """The estimator with ``dynamic_filter.learn_calibration`` = ``learn``."""
+    return DynamicTetherEstimator(
+        EstimatorConfig(),
+        load_vehicle("default-quad"),
+        DynamicFilterConfig(learn_calibration=learn),
+    )
+
+
+def test_by_default_the_calibration_is_never_released() -> None:
+    """``learn_calibration`` off (the default: learning cost 2-6x our error on ArduPilot
+    SITL's flight): decided and in band far beyond SETTLE_S, the states stay consider
+    states."""
+    assert not DynamicFilterConfig().learn_calibration
+    bank = _bad_start_bank(1)
+    estimator = _estimator(learn=False)
+    _fly_angles(bank, 0.0, 10.0 + SETTLE_S, estimator)
+    assert bank.consider == C
+    assert math.isnan(estimator.ground_station.calibration_release.released_time_s)
 
 
 def test_a_bad_start_moves_the_position_not_the_held_calibration_and_then_releases() -> None:

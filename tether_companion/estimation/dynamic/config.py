@@ -170,6 +170,13 @@ class DynamicFilterConfig:
         "just lifted off: position withheld (status on_ground), the ground's contact force "
         "being no part of the model and the rangefinder at its minimum range [m]",
     )
+    learn_calibration: bool = spec(
+        False,
+        doc="let the ground station's calibration states (winch offset and scale, the angle's"
+        " zeros) learn once the filter has settled; off, they stay consider states (their"
+        " spread kept in the covariance, never estimated): learning helped on the simulator's"
+        " flights and cost 2-6x our error on ArduPilot SITL's (docs/estimation.md)",
+    )
     rest_velocity_std_mps: float = spec(
         0.05,
         exclusive_minimum=0.0,

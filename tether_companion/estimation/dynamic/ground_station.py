@@ -89,7 +89,7 @@ class GroundStationInputs:
         self.position_information = PositionInformation(dynamic.unmodelled_force_correlation_s)
         """What the fused cable angles tell about the position within the unmodelled force's
         correlation time (it narrows the unmodelled term of the published covariance)."""
-        self.calibration_release = CalibrationRelease()
+        self.calibration_release = CalibrationRelease(dynamic.learn_calibration)
         """When the bank's calibration states stop being consider states."""
         self._winch_length_noise_std_m = dynamic.winch_length_noise_std_m
         self._winch_calibration_m = (

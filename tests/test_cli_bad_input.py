@@ -145,6 +145,12 @@ CONFIG_CASES = [
         ["estimator.ground_station.terrain_correlation_m = 'wavy'"],
     ),
     (
+        "learn-calibration-text",
+        "dynamic_filter: {learn_calibration: maybe}\n",
+        [],
+        ["dynamic_filter.learn_calibration = 'maybe'", "true or false"],
+    ),
+    (
         "winch-speed",
         "winch: {enabled: true, max_speed_mps: -1}\n",
         [],

@@ -14,9 +14,9 @@ from paper_filter import with_paper_filter
 
 from tether_companion.cli import main
 from tether_companion.errors import InputError
-from tether_companion.mavlink.framing import FrameEncoder
+from tether_companion.mavlink.framing import FrameEncoder, FrameParser
 from tether_companion.service.config import load_service_config, load_vehicle_for
-from tether_companion.service.recording import RecordingLimits, TlogWriter
+from tether_companion.service.recording import RecordingLimits, TlogWriter, read_tlog
 from tether_companion.service.replay import ReplaySummary, replay_log
 from tether_companion.service.synthetic import HoverStreams, hover_state
 
@@ -234,7 +234,6 @@ def test_a_session_without_messages_publishes_the_same(tmp_path: Path, overrides
     """Replay's session builds no messages (nobody reads them) and skips the tension modes;
     its publication records, counters and reset counter equal the live session's, message for
     message, on a flight with a 1 s attitude outage (unhealthy, then a resumed publication)."""
-    from tether_companion.service.replay import _tlog_messages
     from tether_companion.service.session import EstimationSession
 
     config = load_service_config(None, {"recording": {"enabled": False}, **overrides})
@@ -251,7 +250,13 @@ def test_a_session_without_messages_publishes_the_same(tmp_path: Path, overrides
     live = EstimationSession(config, vehicle)
     quiet = EstimationSession(config, vehicle, messages=False)
     sent = 0
-    for msg, received_s in _tlog_messages(writer.current_path, False):
+    parser = FrameParser()
+    received = (
+        (msg, stamp_us * 1e-6)
+        for stamp_us, frame in read_tlog(writer.current_path)
+        for msg in parser.feed(frame)
+    )
+    for msg, received_s in received:
         a, b = live.on_message(msg, received_s), quiet.on_message(msg, received_s)
         assert a.publication == b.publication
         assert b.messages == []

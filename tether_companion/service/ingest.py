@@ -38,6 +38,7 @@ import numpy as np
 from tether_companion.mavlink.framing import Received
 from tether_companion.mavlink.units import (
     DOWNWARD_ORIENTATION,
+    Vector3,
     attitude_from_attitude,
     highres_imu_si,
     raw_imu_si,
@@ -188,26 +189,37 @@ class Ingest:
         ):
             # the flight controller's input streams: none of _decode's other cases has their
             # names, so this is its outcome for them, without its tests for the other cases
-            self.rebooted = False
-            self.counters.messages += 1
             kind, decode = known
-            sample = decode(msg)
-            if sample is None:
-                return []
-            time_s = sample.time_s
-            verdict = self.clock.check(time_s, local_s)
-            if verdict != ACCEPT and not self._believed(verdict):
-                return []
-            released = self.reorder.push(kind, time_s, sample)
-        else:
-            held = self._decode(msg, kind_name)
-            if held is None:
-                return []
-            kind, sample = held
-            if kind is WINCH or kind is CABLE_ANGLE or kind is LANDED:  # stamped here
-                self.counters.accepted[kind] += 1  # not reordered
-                return [sample]
-            released = self.reorder.push(kind, sample.time_s, sample)
+            return self.receive_input(kind, decode(msg), local_s)
+        held = self._decode(msg, kind_name)
+        if held is None:
+            return []
+        kind, sample = held
+        if kind is WINCH or kind is CABLE_ANGLE or kind is LANDED:  # stamped here
+            self.counters.accepted[kind] += 1  # not reordered
+            return [sample]
+        return self._ordered(self.reorder.push(kind, sample.time_s, sample))
+
+    def receive_input(
+        self, kind: str, sample: Sample | None, local_s: float | None
+    ) -> list[Sample]:
+        """:meth:`receive` for a message of the flight controller's input streams whose sample
+        of ``kind`` the caller has decoded and checked (``None``: dropped by the checks, and
+        counted): the message counted, the stamp checked by the clock, then reordered and
+        checked for order. ``local_s`` as for :meth:`receive`."""
+        self._local_s = local_s
+        self.rebooted = False
+        self.counters.messages += 1
+        if sample is None:
+            return []
+        time_s = sample.time_s
+        verdict = self.clock.check(time_s, local_s)
+        if verdict != ACCEPT and not self._believed(verdict):
+            return []
+        return self._ordered(self.reorder.push(kind, time_s, sample))
+
+    def _ordered(self, released: list[tuple[str, Sample]]) -> list[Sample]:
+        """The released samples that pass :meth:`_in_order`."""
         if len(released) == 1:  # the clean link's path (one in, one out)
             kind, sample = released[0]
             return [sample] if self._in_order(kind, sample) else []
@@ -252,14 +264,37 @@ class Ingest:
 
     # ------------------------------------------------------------------ per message
     def _imu(self, msg: Received) -> ImuSample | None:
-        if (
-            getattr(msg, "id", 0) != 0
-        ):  # only the first IMU (ArduPilot sends others as SCALED_IMU2/3)
+        return self.imu_sample(getattr(msg, "id", 0), *self._imu_si(msg))
+
+    def _attitude(self, msg: Received) -> AttitudeSample | None:
+        return self.attitude_sample(attitude_from_attitude(msg))
+
+    def _pwm(self, msg: Received) -> PwmSample | None:
+        return self.pwm_sample(msg.port, msg.time_usec, servo_outputs(msg, self.n_motors))
+
+    def _range(self, msg: Received) -> RangeSample | None:
+        return self.range_sample(
+            msg.orientation,
+            msg.time_boot_ms,
+            msg.current_distance,
+            msg.min_distance,
+            msg.max_distance,
+        )
+
+    # ------------------------------------------------------------------ per input, in values
+    # (shared by the messages above and by service.ingest_frames, which reads the same fields
+    # straight from the frame's bytes; drops counted here)
+    def imu_sample(
+        self, imu_id: int, time_s: float, force: Vector3, rate: Vector3
+    ) -> ImuSample | None:
+        """The checked sample of the flight controller's IMU message: IMU ``imu_id`` (only the
+        first, 0, is an input: ArduPilot sends others as SCALED_IMU2/3), FC time [s], specific
+        force (FRD) [m/s^2] and body rates [rad/s] in SI scalars."""
+        if imu_id != 0:
             self.counters.not_input += 1
             return None
         # checked in scalars, arrays made for a sample kept: numpy's per-call overhead is most
         # of the cost of checking 3-vectors
-        time_s, force, rate = self._imu_si(msg)
         fx, fy, fz = force
         p, q, r = rate
         if not math.isfinite(fx + fy + fz + p + q + r):  # NaN/inf in any
@@ -274,8 +309,8 @@ class Ingest:
             return None
         return ImuSample(time_s, np.array(force), np.array(rate))
 
-    def _attitude(self, msg: Received) -> AttitudeSample | None:
-        sample = attitude_from_attitude(msg)
+    def attitude_sample(self, sample: AttitudeSample) -> AttitudeSample | None:
+        """``sample`` (an ATTITUDE's) if its angles are finite and plausible."""
         if not (
             math.isfinite(sample.roll_rad)
             and math.isfinite(sample.pitch_rad)
@@ -292,30 +327,42 @@ class Ingest:
             return None
         return sample
 
-    def _pwm(self, msg: Received) -> PwmSample | None:
-        if msg.port != 0:  # channels 9-16 come as port 1; motors are on 1..n of port 0
+    def pwm_sample(
+        self, port: int, time_usec: int, outputs: tuple[int, ...]
+    ) -> PwmSample | None:
+        """The checked sample of a SERVO_OUTPUT_RAW: its ``port``, uint32 ``time_usec`` and
+        channels 1..n_motors ``outputs`` as sent."""
+        if port != 0:  # channels 9-16 come as port 1; motors are on 1..n of port 0
             self.counters.not_input += 1
             return None
-        outputs = servo_outputs(msg, self.n_motors)
         low, high = self._output_range
         if min(outputs) < low or max(outputs) > high:
             self.counters.absurd += 1
             return None
-        return PwmSample(self._unwrap_uint32_us(msg.time_usec), np.array(outputs, dtype=float))
+        return PwmSample(self._unwrap_uint32_us(time_usec), np.array(outputs, dtype=float))
 
-    def _range(self, msg: Received) -> RangeSample | None:
-        if msg.orientation != DOWNWARD_ORIENTATION:
+    def range_sample(
+        self,
+        orientation: int,
+        time_boot_ms: int,
+        current_cm: int,
+        min_cm: int,
+        max_cm: int,
+    ) -> RangeSample | None:
+        """The checked sample of a DISTANCE_SENSOR (its fields as sent: orientation, time
+        [ms], current, minimum and maximum distance [cm]); only a downward one is an input."""
+        if orientation != DOWNWARD_ORIENTATION:
             self.counters.not_input += 1
             return None
-        distance_m = msg.current_distance * 0.01
-        in_sensor_range = msg.min_distance <= msg.current_distance <= msg.max_distance
+        distance_m = current_cm * 0.01
+        in_sensor_range = min_cm <= current_cm <= max_cm
         if (
             not in_sensor_range
             or not self.limits.range_min_m <= distance_m <= self.limits.range_max_m
         ):
             self.counters.out_of_range += 1
             return None
-        return RangeSample(time_s=msg.time_boot_ms * 1e-3, distance_m=distance_m)
+        return RangeSample(time_s=time_boot_ms * 1e-3, distance_m=distance_m)
 
     def _fc_position(self, msg: Received) -> FcPosition | None:
         position = (float(msg.x), float(msg.y), float(msg.z))

@@ -26,7 +26,7 @@ import numpy as np
 from tether_companion.errors import InputError
 from tether_companion.frames import wrap_pi
 from tether_companion.mavlink.dataflash import DataflashReader, RecordFormat
-from tether_companion.mavlink.framing import FrameParser, MAVLinkMessage
+from tether_companion.mavlink.framing import FrameParser
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.config import ServiceConfig
@@ -34,7 +34,8 @@ from tether_companion.service.health import OK, health_text
 from tether_companion.service.ingest import ATTITUDE, IMU, PWM, Sample
 from tether_companion.service.publish import Publication
 from tether_companion.service.recording import read_tlog
-from tether_companion.service.session import EstimationSession
+from tether_companion.service.ingest_frames import FrameIngest
+from tether_companion.service.session import EstimationSession, Step
 
 DATAFLASH_DOWNWARD = 25
 """RFND ``Orient`` of a downward rangefinder (ROTATION_PITCH_270)."""
@@ -108,10 +109,7 @@ def replay_log(
         # as live: each message at the time it was received (the clock checks), and samples
         # still in the reorder buffer at the end (only if the log shows reordering) are not
         # processed
-        steps = (
-            session.on_message(msg, received_s)
-            for msg, received_s in _tlog_messages(path, allow_truncated)
-        )
+        steps = _tlog_steps(session, path, allow_truncated)
     elif suffix in (".bin", ".log"):
         dataflash = DataflashSource(path, vehicle.n_motors, allow_truncated=allow_truncated)
         steps = (session.on_sample(sample) for sample in dataflash)
@@ -161,13 +159,23 @@ def _check_inputs(path: Path, config: ServiceConfig, accepted: dict[str, int], s
     )
 
 
-def _tlog_messages(path: Path, allow_truncated: bool) -> Iterator[tuple[MAVLinkMessage, float]]:
-    """Every message of a .tlog with the Unix time [s] it was recorded at (received, for
-    what the service received)."""
+def _tlog_steps(session: EstimationSession, path: Path, allow_truncated: bool) -> Iterator[Step]:
+    """The session's step for every message of a .tlog, each at the Unix time [s] it was
+    recorded at (received, for what the service received): the flight controller's input
+    streams straight from their frames
+    (:class:`~tether_companion.service.ingest_frames.FrameIngest`), everything else through
+    the frame parser and :meth:`EstimationSession.on_message`."""
     parser = FrameParser()
+    frames = FrameIngest(session.ingest, parser)
+    receive, on_received, on_message = frames.receive, session.on_received, session.on_message
     for stamp_us, frame in read_tlog(path, allow_truncated=allow_truncated):
+        received_s = stamp_us * 1e-6
+        samples = receive(frame, received_s)
+        if samples is not None:
+            yield on_received(samples)
+            continue
         for msg in parser.feed(frame):
-            yield msg, stamp_us * 1e-6
+            yield on_message(msg, received_s)
         parser.end_datagram()
 
 

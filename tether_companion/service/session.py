@@ -288,9 +288,14 @@ class EstimationSession:
             return Step(messages=[self._mode_command(msg)])
         if kind in BATTERY_MESSAGES and self.ingest.from_flight_controller(msg):
             self.on_battery_voltage_v(battery_voltage_v(msg))
-        ingest = self.ingest
-        samples = ingest.receive(msg, local_s, kind)
-        if ingest.rebooted:
+        return self.on_received(self.ingest.receive(msg, local_s, kind))
+
+    def on_received(self, samples: list[Sample]) -> Step:
+        """Process the samples the ingest just released for one message (its
+        :meth:`~tether_companion.service.ingest.Ingest.receive`, or
+        :class:`~tether_companion.service.ingest_frames.FrameIngest` for a frame): a reboot
+        the message confirmed restarts the estimation first."""
+        if self.ingest.rebooted:
             self.restart()
         if len(samples) == 1:
             return self.on_sample(samples[0])

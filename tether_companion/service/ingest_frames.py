@@ -1,0 +1,201 @@
+"""The flight controller's input streams straight from frame bytes to checked samples.
+
+:class:`FrameIngest` takes one intact, unsigned MAVLink 2 frame of the flight controller's
+input streams (its IMU message, ATTITUDE, SERVO_OUTPUT_RAW, DISTANCE_SENSOR) and gives what
+:class:`~tether_companion.mavlink.framing.FrameParser` followed by
+:meth:`Ingest.receive <tether_companion.service.ingest.Ingest.receive>` gives for it, without
+the message object in between: one function per message unpacks the fields it reads with the
+dialect's own wire-order ``struct`` (MAVLink 2's truncated trailing zeros padded back, as
+pymavlink does) and hands them to the same checks (``Ingest.imu_sample``...) and the same
+clock, reorder and order steps (``Ingest.receive_input``). Everything else, a frame that is
+not exactly one such frame (signed, another sender, another message, a bad length or
+checksum, bytes waiting in the parser), is left to the caller's generic path (``None``), which
+counts it under its own reasons. ``.tlog`` replay runs on it (a record is one frame); the
+tests check it gives the generic path's samples bit for bit and the same counts, frame by
+frame, on recorded and fuzzed frames.
+
+Pure and synchronous.
+"""
+
+from __future__ import annotations
+
+import operator
+from collections.abc import Callable
+
+from fastcrc.crc16 import mcrf4xx
+
+from tether_companion.mavlink.framing import FrameParser, dialect
+from tether_companion.mavlink.units import MILLI_G_TO_MPS2, MILLI_RAD_TO_RAD
+from tether_companion.samples import AttitudeSample
+from tether_companion.service.ingest import ATTITUDE, IMU, PWM, RANGE, Ingest, Sample
+
+__all__ = ["FrameIngest"]
+
+_STX_V2 = dialect.PROTOCOL_MARKER_V2
+_HEADER_V2 = dialect.HEADER_LEN_V2
+_CRC_LEN = 2
+
+Convert = Callable[[tuple], Sample | None]
+"""A message's unpacked wire-order fields to its checked sample (None: dropped, counted)."""
+
+
+def _fields(message_class: type[dialect.MAVLink_message], *names: str) -> list[int]:
+    """Indices of ``names`` among the message's unpacked wire-order items (scalar fields)."""
+    index, flat = {}, 0
+    for name, length in zip(message_class.ordered_fieldnames, message_class.lengths, strict=True):
+        index[name] = flat
+        flat += length
+    return [index[name] for name in names]
+
+
+class FrameIngest:
+    """Frames of the flight controller's input streams to checked samples, through ``ingest``.
+
+    Parameters
+    ----------
+    ingest
+        The session's :class:`~tether_companion.service.ingest.Ingest` (its flavour, flight
+        controller ids, motor count, checks and counters).
+    parser
+        The frame parser the caller feeds every other frame to: an intact frame taken here is
+        counted in its :class:`~tether_companion.mavlink.framing.FramingCounters` as it would
+        count it (``bytes_in``, ``frames_ok``). It must have no gate (signatures and sender
+        addresses are the gate's to check).
+
+    Raises
+    ------
+    ValueError
+        For a parser with a gate.
+    """
+
+    def __init__(self, ingest: Ingest, parser: FrameParser) -> None:
+        if parser.gate is not None:
+            raise ValueError("FrameIngest bypasses the parser: not for a gated link")
+        self._ingest = ingest
+        self._parser = parser
+        self._sender = (ingest.link.fc_system_id, ingest.link.fc_component_id)
+        self._table: dict[int, tuple] = {}
+        """msg id -> (struct, payload size, crc_extra byte, kind, convert)."""
+        if ingest.link.autopilot == "ardupilot":
+            self._add(dialect.MAVLink_raw_imu_message, IMU, self._raw_imu)
+        else:
+            self._add(dialect.MAVLink_highres_imu_message, IMU, self._highres_imu)
+        self._add(dialect.MAVLink_attitude_message, ATTITUDE, self._attitude)
+        self._add(dialect.MAVLink_servo_output_raw_message, PWM, self._servo_output_raw)
+        self._add(dialect.MAVLink_distance_sensor_message, RANGE, self._distance_sensor)
+
+    def _add(
+        self,
+        message_class: type[dialect.MAVLink_message],
+        kind: str,
+        make: Callable[[type[dialect.MAVLink_message]], Convert],
+    ) -> None:
+        unpacker = message_class.unpacker
+        self._table[message_class.id] = (
+            unpacker,
+            unpacker.size,
+            bytes((message_class.crc_extra,)),
+            kind,
+            make(message_class),
+        )
+
+    def receive(self, frame: bytes | bytearray, local_s: float | None) -> list[Sample] | None:
+        """The samples ``frame`` releases, as ``Ingest.receive`` gives them for the message the
+        parser would decode from it (received at local time ``local_s`` [s], or None), when
+        ``frame`` is exactly one intact unsigned MAVLink 2 frame of an input stream from the
+        flight controller; ``None`` (nothing counted or changed) for anything else: feed it
+        to the parser then."""
+        n = len(frame)
+        if n <= _HEADER_V2 or frame[0] != _STX_V2 or frame[2] or self._parser.pending_bytes:
+            return None
+        entry = self._table.get(frame[7] | (frame[8] << 8) | (frame[9] << 16))
+        if entry is None or (frame[5], frame[6]) != self._sender:
+            return None
+        unpacker, size, crc_extra, kind, convert = entry
+        length = frame[1]
+        end = n - _CRC_LEN
+        if end != _HEADER_V2 + length or length > size:
+            return None
+        if mcrf4xx(crc_extra, mcrf4xx(frame[1:end], 0xFFFF)) != frame[end] | (frame[end + 1] << 8):
+            return None
+        counters = self._parser.counters
+        counters.bytes_in += n
+        counters.frames_ok += 1
+        if length == size:
+            values = unpacker.unpack_from(frame, _HEADER_V2)
+        else:  # MAVLink 2 trailing zeros truncated by the sender
+            values = unpacker.unpack(bytes(frame[_HEADER_V2:end]) + bytes(size - length))
+        return self._ingest.receive_input(kind, convert(values), local_s)
+
+    # ------------------------------------------------------------------ per message
+    def _raw_imu(self, message_class: type[dialect.MAVLink_message]) -> Convert:
+        """RAW_IMU (milli-g, milli-rad/s, ``time_usec``), as ``units.raw_imu_si``."""
+        t, ax, ay, az, gx, gy, gz, imu_id = _fields(
+            message_class, "time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "id"
+        )
+        check = self._ingest.imu_sample
+        g, rad = MILLI_G_TO_MPS2, MILLI_RAD_TO_RAD
+
+        def convert(f: tuple) -> Sample | None:
+            return check(
+                f[imu_id],
+                f[t] * 1e-6,
+                (f[ax] * g, f[ay] * g, f[az] * g),
+                (f[gx] * rad, f[gy] * rad, f[gz] * rad),
+            )
+
+        return convert
+
+    def _highres_imu(self, message_class: type[dialect.MAVLink_message]) -> Convert:
+        """HIGHRES_IMU (m/s^2, rad/s, ``time_usec``; floats on the wire), as
+        ``units.highres_imu_si``."""
+        t, ax, ay, az, gx, gy, gz, imu_id = _fields(
+            message_class, "time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "id"
+        )
+        check = self._ingest.imu_sample
+
+        def convert(f: tuple) -> Sample | None:
+            return check(f[imu_id], f[t] * 1e-6, (f[ax], f[ay], f[az]), (f[gx], f[gy], f[gz]))
+
+        return convert
+
+    def _attitude(self, message_class: type[dialect.MAVLink_message]) -> Convert:
+        """ATTITUDE, as ``units.attitude_from_attitude``."""
+        t, roll, pitch, yaw = _fields(message_class, "time_boot_ms", "roll", "pitch", "yaw")
+        check = self._ingest.attitude_sample
+
+        def convert(f: tuple) -> Sample | None:
+            return check(AttitudeSample(f[t] * 1e-3, f[roll], f[pitch], f[yaw]))
+
+        return convert
+
+    def _servo_output_raw(self, message_class: type[dialect.MAVLink_message]) -> Convert:
+        """SERVO_OUTPUT_RAW's port, ``time_usec`` and channels 1..n_motors."""
+        channels = _fields(
+            message_class, *(f"servo{i + 1}_raw" for i in range(self._ingest.n_motors))
+        )
+        outputs = operator.itemgetter(*channels, channels[0])  # a tuple for one motor too
+        port, t = _fields(message_class, "port", "time_usec")
+        check = self._ingest.pwm_sample
+
+        def convert(f: tuple) -> Sample | None:
+            return check(f[port], f[t], outputs(f)[:-1])
+
+        return convert
+
+    def _distance_sensor(self, message_class: type[dialect.MAVLink_message]) -> Convert:
+        """DISTANCE_SENSOR's orientation, time and distances [cm]."""
+        orientation, t, current, low, high = _fields(
+            message_class,
+            "orientation",
+            "time_boot_ms",
+            "current_distance",
+            "min_distance",
+            "max_distance",
+        )
+        check = self._ingest.range_sample
+
+        def convert(f: tuple) -> Sample | None:
+            return check(f[orientation], f[t], f[current], f[low], f[high])
+
+        return convert

@@ -99,7 +99,7 @@ class BatchStep:
         phi = self._phi
         if phi is None:
             t = self.duration_s
-            phi = np.eye(_N)
+            phi = _IDENTITY.copy()
             phi.flat[_TRANSITION_ENTRIES] = (t, t, t, *self.b_p, *self.b_v)
             self._phi = phi
         return phi
@@ -114,9 +114,7 @@ class BatchStep:
     def step_state(self, x: FloatArray) -> FloatArray:
         """States (..., 13) stepped over the batch (new array): ``Phi x + (D_p, D_v, 0...)``."""
         out = x @ self.phi.T
-        offset = np.zeros(_N)
-        offset[:6] = (*self.d_p, *self.d_v)
-        out += offset
+        out += np.array((*self.d_p, *self.d_v, *_ZERO_STATE[6:]))
         return out
 
     def step_covariance(self, p: FloatArray, q: FloatArray) -> FloatArray:
@@ -131,6 +129,8 @@ class BatchStep:
 
 
 _NO_ARRAY = np.zeros((0, 0))
+_IDENTITY = np.eye(_N)
+"""Copied for each ``Phi`` (cheaper than making it)."""
 
 
 class ImuBatch:

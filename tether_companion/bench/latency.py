@@ -16,14 +16,16 @@ withholds its position for as long as the hover lasts; inflate sends it anyway, 
 the inflated variance, after the same computation, so every estimator has a latency to
 measure (the paper's filters are healthy in the hover and send as usual).
 
-Floors, measured in the same run with the same datagrams (absolute figures on a shared machine
-swing 3x from run to run; the ratios are what to read):
+Floors, measured in the same run with the same datagrams and as many seconds as the service
+(absolute figures on a shared machine swing 3x from run to run; the ratios are what to read):
 
 * bare receiver (CPU and latency floor): a process that only receives the datagrams with a
   plain asyncio ``DatagramProtocol`` and answers every n-th RAW_IMU (n: IMU rate over the
   publication rate, as the service publishes) with a pre-built VISION_POSITION_ESTIMATE
   carrying its ``time_usec`` (read from the frame bytes: no framing,
-  no decoding, no estimator);
+  no decoding, no estimator), run for half the duration just before the service and half
+  just after it, so that a load that drifts during the run moves the floor as it moves the
+  service (both halves are printed; the ratio is to their time-weighted mean);
 * link echo: the same answer through this project's link stack (framing, pymavlink decode
   of every message), no estimator.
 """
@@ -52,8 +54,6 @@ from tether_companion.service.synthetic import FakeFlightController, HoverStream
 
 HELP = "Latency from IMU arrival to VISION_POSITION_ESTIMATE, and service CPU at 200/400 Hz input."
 WARMUP_S = 3.0
-FLOOR_S = 10.0
-"""Seconds of the floor measurement (a bare UDP echo process instead of the service)."""
 OTHER_STREAMS_HZ = 200.0
 """ATTITUDE and SERVO_OUTPUT_RAW rate [Hz] (the issue's default streams)."""
 RANGE_HZ = 20.0
@@ -110,6 +110,9 @@ async def _measure(args: argparse.Namespace) -> dict:
     publish_hz = args.publish_hz if args.publish_hz is not None else config.publish.rate_hz
     every = str(max(1, round(args.imu_rate / publish_hz)))  # the floors answer as often
     trip = {"vehicle": vehicle, "seed": args.seed, "imu_hz": args.imu_rate}
+    bare_command = [sys.executable, "-m", "tether_companion.bench.latency", "--bare", every]
+    half_s = args.duration / 2.0
+    bare_before = await _round_trip(bare_command, duration_s=half_s, **trip)
     with tempfile.TemporaryDirectory(prefix="tether-bench-") as scratch:
         config_path = Path(scratch) / "companion.yaml"
         config_path.write_text(yaml.safe_dump(data))
@@ -123,20 +126,20 @@ async def _measure(args: argparse.Namespace) -> dict:
         ]
         service += ["--no-record", "--connect"]
         result = await _round_trip(service, duration_s=args.duration, **trip)
+    bare_after = await _round_trip(bare_command, duration_s=half_s, **trip)
     floor = await _round_trip(
         [sys.executable, "-m", "tether_companion.bench.latency", "--echo", every],
-        duration_s=FLOOR_S,
+        duration_s=args.duration,
         **trip,
     )
     result["floor_ms"] = floor["latency_ms"]
     result["floor_cpu_share"] = floor["cpu_share"]
-    bare = await _round_trip(
-        [sys.executable, "-m", "tether_companion.bench.latency", "--bare", every],
-        duration_s=FLOOR_S,
-        **trip,
+    halves = (bare_before, bare_after)
+    result["bare_ms"] = np.concatenate([half["latency_ms"] for half in halves])
+    result["bare_cpu_halves"] = tuple(half["cpu_share"] for half in halves)
+    result["bare_cpu_share"] = sum(h["cpu_share"] * h["wall_s"] for h in halves) / sum(
+        h["wall_s"] for h in halves
     )
-    result["bare_ms"] = bare["latency_ms"]
-    result["bare_cpu_share"] = bare["cpu_share"]
     return result
 
 
@@ -279,17 +282,30 @@ def _print(result: dict, args: argparse.Namespace) -> None:
     bare, floor = result["bare_ms"], result["floor_ms"]
     if bare.size:
         b50, b99 = np.percentile(bare, [50, 99])
-        table.add_row("floor: bare asyncio UDP echo p50 / p99", f"{b50:.3f} / {b99:.3f} ms", "")
+        table.add_row(
+            "floor: bare asyncio UDP echo p50 / p99",
+            f"{b50:.3f} / {b99:.3f} ms ({bare.size} replies)",
+            "",
+        )
         if lat.size:
             extra = np.percentile(lat, 99) - b99
             table.add_row("service p99 - bare echo p99", f"{extra:.3f} ms", "<= 0.3 ms")
     if floor.size:
         f50, f99 = np.percentile(floor, [50, 99])
-        table.add_row("peer: link-stack echo p50 / p99", f"{f50:.3f} / {f99:.3f} ms", "")
+        table.add_row(
+            "peer: link-stack echo p50 / p99",
+            f"{f50:.3f} / {f99:.3f} ms ({floor.size} replies)",
+            "",
+        )
     cpu, bare_cpu = result["cpu_share"], result["bare_cpu_share"]
     cpu_target = "<= 5 %" if args.imu_rate <= OTHER_STREAMS_HZ else "<= 10 %"
     table.add_row("service CPU (user + system)", f"{100 * cpu:.1f} % of one core", cpu_target)
-    table.add_row("floor: bare receiver CPU", f"{100 * bare_cpu:.1f} % of one core", "")
+    before, after = result["bare_cpu_halves"]
+    table.add_row(
+        "floor: bare receiver CPU (before / after the service)",
+        f"{100 * bare_cpu:.1f} % of one core ({100 * before:.1f} / {100 * after:.1f})",
+        "",
+    )
     table.add_row(
         "peer: link-stack echo CPU", f"{100 * result['floor_cpu_share']:.1f} % of one core", ""
     )

@@ -159,11 +159,12 @@ class FilterBank:
         self.log_weight = [self.log_weight[i] for i in indices]
         self.bearings = [self.bearings[i] for i in indices]
 
-    def release(self) -> None:
-        """Let the consider states learn from now on (ordinary states of every member)."""
-        self.consider = None
+    def release(self, still_held: slice | None = None) -> None:
+        """Let the consider states learn from now on (ordinary states of every member), all
+        but ``still_held`` (None: all), which stay consider states."""
+        self.consider = still_held
         for kf in self.filters:
-            kf.consider = None
+            kf.consider = still_held
 
     def predict(self, dt_s: float, u: list[float]) -> None:
         """Predict every member over ``dt_s`` [s] (``u`` the inputs as floats)."""

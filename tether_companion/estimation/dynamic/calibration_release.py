@@ -8,8 +8,8 @@ truth -0.005; 17.9 % of its published ticks beyond 3 sigma). So the bank starts 
 consider (Schmidt) states (:attr:`~tether_companion.estimation.dynamic.bank.FilterBank.consider`):
 every update leaves their means and their own covariance block as they were, the cross block
 and everything else as the optimal update has them, so the position's covariance keeps their
-spread while the readings correct the position alone. They are released to learning once the
-filter has settled:
+spread while the readings correct the position alone. The winch's offset and scale and the
+elevation zero are released to learning once the filter has settled:
 
 * the bank has decided (one member left: the thrust-scale and bearing hypotheses chosen,
   merged or collapsed), and
@@ -19,6 +19,16 @@ filter has settled:
 * and a cable angle has been fused (``ground_station.py`` gives the samples only then: the
   winch's calibration without an angle is told only through the force balance's cable
   direction, and stays a consider state).
+
+The azimuth zero is never released (``state.NEVER_RELEASED``): the angle sensor is the
+companion's only absolute bearing, and the flight cannot tell its zero from the autopilot's
+heading error (the force balance's and the INS's horizontal directions turn with it) nor from
+the unmodelled sideways force the wind state takes. On ArduPilot SITL's taut hold (EKF3's heading
+0.5-2 degrees off SIM_STATE's, SITL's air calm) the released azimuth zero learnt 0.05 rad
+within 3 s of its release at the end of the fly-out, with the filter's wind at 1.1 m/s across
+the cable, and turned our position 0.3 m about the anchor for the rest of the hold (the
+flight's .tlog replayed, docs/estimation.md, sitlcal13); held, the angle keeps the bearing
+(0.03-0.05 m RMS).
 
 A filter that restarts starts a new bank, with the states held again (:meth:`clear`).
 
@@ -36,6 +46,7 @@ from __future__ import annotations
 import math
 from collections import deque
 
+from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.bank import FilterBank
 
 SETTLE_S = 3.0
@@ -70,7 +81,7 @@ class CalibrationRelease:
         """A ground-station sample's NIS (``dof`` degrees of freedom) at filter time
         ``time_s`` [s], tested against ``bank``'s best member; the bank's consider states
         are released when the rule holds."""
-        if not self.enabled or bank.consider is None or not math.isfinite(nis):
+        if not self.enabled or bank.consider != state.CALIBRATION or not math.isfinite(nis):
             return
         if not bank.decided:
             self.clear()
@@ -84,7 +95,7 @@ class CalibrationRelease:
         if time_s - self._decided_s < SETTLE_S:
             return
         if sum(v for _, v in samples) <= MAX_MEAN_NIS * len(samples):
-            bank.release()
+            bank.release(state.NEVER_RELEASED)
             self.released_time_s = time_s
 
     def clear(self) -> None:

@@ -173,9 +173,10 @@ class DynamicFilterConfig:
     learn_calibration: bool = spec(
         False,
         doc="let the ground station's calibration states (winch offset and scale, the angle's"
-        " zeros) learn once the filter has settled; off, they stay consider states (their"
+        " elevation zero; the azimuth zero never, the autopilot's heading error would be taken"
+        " as it) learn once the filter has settled; off, they stay consider states (their"
         " spread kept in the covariance, never estimated): learning helped on the simulator's"
-        " flights and cost 2-6x our error on ArduPilot SITL's (docs/estimation.md)",
+        " flights and cost up to 2x our error on ArduPilot SITL's (docs/estimation.md)",
     )
     rest_velocity_std_mps: float = spec(
         0.05,

@@ -24,7 +24,8 @@ correlated with the position), else with their sensor's first reading (``ground_
 until then their variance is at most :data:`UNSET_CALIBRATION_VARIANCE` and no model depends
 on them, so a filter without a ground station is unchanged by them. They are consider
 (Schmidt) states until the filter has settled (``calibration_release.py``): updates leave
-their means and their own covariance block as they were.
+their means and their own covariance block as they were; the azimuth zero stays one for the
+whole flight (:data:`NEVER_RELEASED`).
 """
 
 from __future__ import annotations
@@ -63,6 +64,11 @@ WINCH_SCALE = 14
 ELEVATION_ZERO = 15
 AZIMUTH_ZERO = 16
 CALIBRATION = slice(13, 17)
+NEVER_RELEASED = slice(16, 17)
+"""The calibration states that stay consider states when the others are released: the
+azimuth zero (``calibration_release.py``: the companion has no other absolute bearing, so
+learning it takes the autopilot's heading error and the force balance's unmodelled sideways
+force as the sensor's zero)."""
 
 UNSET_CALIBRATION_VARIANCE = 1e-9
 """The floor every state's variance starts with (``initialise.py``; it keeps the covariance

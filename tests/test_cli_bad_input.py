@@ -151,6 +151,12 @@ CONFIG_CASES = [
         ["dynamic_filter.learn_calibration = 'maybe'", "true or false"],
     ),
     (
+        "winch-tension-walk-zero",
+        "dynamic_filter: {noise: {winch_tension_n2ps: 0}}\n",
+        [],
+        ["dynamic_filter.noise.winch_tension_n2ps = 0", "> 0"],
+    ),
+    (
         "winch-speed",
         "winch: {enabled: true, max_speed_mps: -1}\n",
         [],

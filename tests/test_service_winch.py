@@ -208,6 +208,30 @@ def test_feed_carries_the_tension_to_the_drone_and_forgets_a_silent_winch() -> N
     assert other.tensions == [] and other.lengths == [(4.0, 1.0)]
 
 
+class _DynamicEstimator(_Estimator):
+    """Records what the feed hands to the dynamic filter, which models the winch's end."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.winch_tensions: list[tuple[float, float]] = []
+
+    def set_winch_tension_n(self, tension_n: float, time_s: float) -> None:
+        self.winch_tensions.append((tension_n, time_s))
+
+
+def test_feed_gives_the_dynamic_filter_the_tension_at_the_winch() -> None:
+    """The dynamic filter gets the winch's own tension (its model has the cable's shape), also
+    before its first estimate; nothing carried to the drone."""
+    feed = WinchFeed(
+        WinchConfig(enabled=True), use_tension=True, cable_weight_n_per_m=0.2, uses_length=True
+    )
+    estimator = _DynamicEstimator()
+    feed.on_reading(WinchReading(20.0, 6.0, 3.0, 0.0, HEALTHY), estimator, (5.0, 0.0, -2.5))
+    feed.on_reading(WinchReading(20.1, 6.0, 3.2, 0.0, HEALTHY), estimator, None)
+    assert estimator.winch_tensions == [(3.0, 20.0), (3.2, 20.1)]
+    assert estimator.tensions == []
+
+
 def test_the_paper_filters_say_once_that_they_do_not_use_the_length() -> None:
     feed = WinchFeed(
         WinchConfig(enabled=True), use_tension=False, cable_weight_n_per_m=0.0, uses_length=False

@@ -25,9 +25,13 @@ hands accepted readings to the estimator: the length to ``set_paid_out_length_m`
 filter) while the cable is not steeper than ``min_span_ratio`` (near the vertical the span
 ``a = sqrt(L^2 - h^2)`` from length and height is ill-conditioned: a length error ``e`` moves
 it by ``e L/a``; measured in ArduPilot SITL above the anchor, docs/ardupilot.md), the
-tension, when ``tension.source`` is ``winch``, to ``set_known_tension_n`` at the drone: on a
-cable of weight ``w`` per length the tension grows by ``w h`` from the winch to a
-drone ``h`` above it (catenary, or the part resting on the ground: the same sum). A winch
+tension, when ``tension.source`` is ``winch``, to the dynamic filter's
+``set_winch_tension_n`` as the tension where the cable leaves the winch (its model has the
+cable's shape, so no height is needed; a winch's tension fused also slows the filter's chord
+tension walk to ``noise.winch_tension_n2ps``), and to the paper filters'
+``set_known_tension_n`` at the drone: on a cable of weight ``w`` per length the tension grows
+by ``w h`` from the winch to a drone ``h`` above it (catenary, or the part resting on the
+ground: the same sum). A winch
 silent for ``timeout_s`` is stale: its length is forgotten (a restarting filter does not
 initialise from it). The paper's 3-/4-state filters have no length input: the length is read,
 checked and counted, and :attr:`WinchFeed.note` says once that it is not used.
@@ -242,8 +246,8 @@ class WinchFeed(GroundFeed[WinchReading]):
     config
         The ``winch`` section.
     use_tension
-        ``tension.source`` is ``winch``: the winch's tension, carried to the drone, is the
-        estimator's known tension.
+        ``tension.source`` is ``winch``: the winch's tension is the dynamic filter's winch
+        tension, or (the paper's filters) carried to the drone their known tension.
     cable_weight_n_per_m
         The cable's weight per length [N/m] (``dynamic_filter.cable_weight_n_per_m``).
     uses_length
@@ -287,6 +291,10 @@ class WinchFeed(GroundFeed[WinchReading]):
             else:
                 estimator.set_paid_out_length_m(reading.length_m, reading.time_s)  # type: ignore[attr-defined]
         if not (self.use_tension and math.isfinite(reading.tension_n)):
+            return
+        at_winch = getattr(estimator, "set_winch_tension_n", None)
+        if at_winch is not None:  # the dynamic filter models the winch's end of the cable
+            at_winch(reading.tension_n, reading.time_s)
             return
         at_drone_n = tension_at_drone_n(reading.tension_n, self.weight_n_per_m, height_m)
         if not math.isfinite(at_drone_n):

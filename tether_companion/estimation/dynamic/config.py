@@ -42,6 +42,13 @@ class DynamicNoise:
     )
     position_m2ps: float = spec(1e-6, exclusive_minimum=0.0, doc="position [m^2/s]")
     tension_n2ps: float = spec(2.0, exclusive_minimum=0.0, doc="chord tension [N^2/s]")
+    winch_tension_n2ps: float = spec(
+        0.1,
+        exclusive_minimum=0.0,
+        doc="chord tension while a constant-tension winch's tension is fused: what its control"
+        " lets through and the chord tension's change with the geometry at a held anchor"
+        " tension [N^2/s]",
+    )
     thrust_scale_per_s: float = spec(
         1e-5, exclusive_minimum=0.0, doc="thrust scale factor (battery sag) [1/s]"
     )

@@ -11,7 +11,9 @@ service, replay and the offline runner can use either:
   predicts to the IMU time with the previous tick's inputs (force balance, or the previous
   specific force in the inertial formulation) and fuses the accelerometer force balance;
 * ``on_range``: the tilt-corrected height above the ground (validity checked and counted);
-* ``set_known_tension_n`` (load cell), ``set_paid_out_length_m`` (winch; also switches the
+* ``set_known_tension_n`` (load cell at the drone), ``set_winch_tension_n`` (the winch's load
+  cell; while fused the chord tension walks at ``noise.winch_tension_n2ps``),
+  ``set_paid_out_length_m`` (winch; also switches the
   cable model to the known length), ``on_cable_angle`` (ground-station cable angle): checked
   and fused by :class:`~tether_companion.estimation.dynamic.ground_station.GroundStationInputs`
   once the filter is initialised and the reading is fresh.
@@ -58,17 +60,15 @@ from tether_companion.estimation.dynamic.divergence import (
 )
 from tether_companion.estimation.dynamic.ground_station import GroundStationInputs
 from tether_companion.estimation.dynamic.imu_batch import ImuBatch
-from tether_companion.estimation.dynamic.mixture import MixtureValues, ProcessNoise
+from tether_companion.estimation.dynamic.mixture import MixtureValues
 from tether_companion.estimation.dynamic.models import ModelConstants
-from tether_companion.estimation.dynamic.noise import (
-    accel_measurement_std_mps2,
-    process_noise_density,
-)
+from tether_companion.estimation.dynamic.noise import accel_measurement_std_mps2
 from tether_companion.estimation.dynamic.on_ground import AutopilotLanded, on_ground_reason
 from tether_companion.estimation.dynamic.output import DynamicHealth, NavigationEstimate
 from tether_companion.estimation.dynamic.published import StatusSettings, TickSource
 from tether_companion.estimation.dynamic.sag_range import NO_SAG, SagMemo
 from tether_companion.estimation.dynamic.startup import FilterStartup
+from tether_companion.estimation.dynamic.tension_walk import TensionWalk
 from tether_companion.estimation.ekf import ExtendedKalmanFilter
 from tether_companion.estimation.inputs import InputFeed, range_height_m, range_reading_ok
 from tether_companion.estimation.pipeline import default_thrust_input
@@ -135,9 +135,8 @@ class DynamicTetherEstimator(InputFeed):
         self._ticks_since_fusion = 0
         self._batch = ImuBatch() if self._inertial else None
         """The inertial prediction summed over the ticks since the members last stepped."""
-        self._q = process_noise_density(dynamic)
-        self._q_matrix = np.diag(self._q)
-        self._noise = ProcessNoise(self._q_matrix)
+        self._walk = TensionWalk(dynamic, config.staleness.tension_s)
+        """The members' process noise: the chord tension's walk as the winch's tension allows."""
         status_settings = StatusSettings.of_filter(
             dynamic, vehicle.mass_kg, self.constants.drag_per_s
         )
@@ -175,7 +174,7 @@ class DynamicTetherEstimator(InputFeed):
             config,
             dynamic,
             self.constants,
-            self._q,
+            self._walk.default,
             inertial=self._inertial,
             ticks_per_fusion=self._ticks_per_fusion,
         )
@@ -213,6 +212,23 @@ class DynamicTetherEstimator(InputFeed):
             assert self.bank is not None
             self.ground_station.fuse_tension(self.bank, self.constants, tension_n, self._time_s)
             self.constants.tension_measured |= self.ground_station.load_cell.status.fused > 0
+
+    def set_winch_tension_n(self, tension_n: float, time_s: float) -> None:
+        """The winch's load cell at ``time_s`` [s]: the tension where the cable leaves the
+        winch [N], fused when initialised as the anchor's end of the filter's cable
+        (``|F_c| - w b``, generated ``anchor_tension_*``). While these readings are fused
+        (each within ``staleness.tension_s`` of the last) the chord tension walks at
+        ``noise.winch_tension_n2ps`` instead of ``noise.tension_n2ps``: a constant-tension
+        winch holds the anchor's tension, and the chord tension then moves only as far as
+        the winch's control lets it and the geometry turns a held anchor tension into a
+        chord tension (docs/estimation.md, sag13)."""
+        if self.ground_station.tension_ok(tension_n, time_s) and self._stepped_to(time_s):
+            assert self.bank is not None
+            if self.ground_station.fuse_winch_tension(
+                self.bank, self.constants, tension_n, self._time_s
+            ):
+                self.constants.tension_measured = True
+                self._walk.winch_fused(self._time_s, self.bank.filters)
 
     def set_paid_out_length_m(self, length_m: float, time_s: float) -> None:
         """Winch paid-out length [m]: the cable model's length from now on, and fused."""
@@ -337,6 +353,7 @@ class DynamicTetherEstimator(InputFeed):
         elif not batch.add(dt_s, self._inputs, self.constants.values()):
             health.nonfinite_rejected += 1
         if fusion_tick:
+            self._walk.check(t, self.bank.filters)
             self._step_batch()
         bank = self.bank
         if bank is None:  # the prediction diverged and restarted
@@ -404,7 +421,7 @@ class DynamicTetherEstimator(InputFeed):
         batch = self._batch
         if batch is None or batch.ticks == 0 or self.bank is None:
             return
-        self._step_members(lambda bank: bank.predict_batch(batch, self._q_matrix))
+        self._step_members(lambda bank: bank.predict_batch(batch, self._walk.matrix))
         batch.clear()
 
     def _step_members(self, step: Callable[[FilterBank], None]) -> None:
@@ -449,6 +466,7 @@ class DynamicTetherEstimator(InputFeed):
         self.gusts.clear()
         self.rangefinder.ground.clear()
         self.ground_station.clear()
+        self._walk.restart()
         self._resets += 1
         self.health.resets = self._resets
         self._reset_reason = f"filter restarted: {reason}"
@@ -471,7 +489,7 @@ class DynamicTetherEstimator(InputFeed):
         source = TickSource(
             mixture,
             None if batch is None or bank is None else batch.step(),
-            self._noise,
+            self._walk.noise,
             self.constants,
             self.ground_station.status_settings(
                 self._time_s, bank is not None and bank.bearing_confirmed

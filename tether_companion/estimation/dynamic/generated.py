@@ -110,6 +110,20 @@ def tension_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float])
     return (t0,), (-p_n*t6, -p_e*t6, -p_d*t6, 0, 0, 0, t5*tension, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
 
 
+def anchor_tension_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Winch's load cell at the anchor: ``|F_c| - w b`` [N]; returns ``(h (1,), H (1x17))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
+    mass_kg, drag_per_s, weight_n_per_m = c
+    t0 = abs(tension)
+    t1 = p_d**2
+    t2 = p_e**2
+    t3 = p_n**2
+    t4 = 1/(t1 + t2 + t3)
+    t5 = 1/t0
+    t6 = t4*t5*tension**2*(t1*t4 + t2*t4 + t3*t4 - 1)
+    return (p_d*weight_n_per_m + t0,), (-p_n*t6, -p_e*t6, -p_d*t6 + weight_n_per_m, 0, 0, 0, t5*tension, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
+
+
 def cable_angle_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Ground-station cable angle as read: (elevation up, azimuth from north) plus their zero errors [rad]; returns ``(h (2,), H (2x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
@@ -340,6 +354,62 @@ def tension_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float])
     return (t0*t23,), (-p_n*t37, -p_e*t37, -t36*tension*(t24*t38 + t25*t38 + t26*t38 - t45*(-p_d*t32 - p_d*t44*(-t1*t15 + t42 + t43) + t14*t30*t42 - t29*t39 + t39 + t41)), 0, 0, 0, t36*(t2*tension + t22*tension + t3*tension + t45*(-p_d*t41 + t1*t44*(-t14*t5**(3/2)*t8 + t34 + t43) + t20*t40 + t29*t46 - t46)), 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
 
 
+def anchor_tension_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Winch's load cell at the anchor: ``|F_c| - w b`` [N]; returns ``(h (1,), H (1x17))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
+    mass_kg, drag_per_s, weight_n_per_m = c
+    t0 = p_d*weight_n_per_m
+    t1 = abs(tension)
+    t2 = p_d**2
+    t3 = p_e**2
+    t4 = p_n**2
+    t5 = t3 + t4
+    t6 = t2 + t5
+    t7 = 1/t6
+    t8 = math.sqrt(t6)
+    t9 = 1/tension
+    t10 = t9*weight_n_per_m
+    t11 = t10*t8
+    t12 = (1/2)*t11
+    t13 = math.sinh(t12)
+    t14 = 1/t13
+    t15 = math.cosh(t12)
+    t16 = t14*t15
+    t17 = t0*t9
+    t18 = t13**(-2)
+    t19 = tension**2
+    t20 = weight_n_per_m**2/t19
+    t21 = t18*t20
+    t22 = math.sqrt((1/4)*t2*t21*t6 + t5)
+    t23 = -2*t13*t22 + t16*t17*t8
+    t24 = t23**2
+    t25 = (1/4)*t24
+    t26 = math.sqrt(t7*(t25 + t5))
+    t27 = t3*t7
+    t28 = t4*t7
+    t29 = 2*p_d*t20
+    t30 = t15**2*t18
+    t31 = 1/t8
+    t32 = 4*t15
+    t33 = t31*t32
+    t34 = t22*t33
+    t35 = 1/t22
+    t36 = 2*t2
+    t37 = (1/16)*t23
+    t38 = t7/(t1*t26)
+    t39 = t19*t38*(t25*t7 + t27 + t28 + t37*(t10*t34 + t13*t35*(t21*t36 + 8 - t15*t2*t8*weight_n_per_m**3/(t13**3*tension**3)) - t14*t17*t33 + t29*t30 - t29) - 1)
+    t40 = p_d*tension
+    t41 = 16*t40
+    t42 = t10*t36
+    t43 = t32*t8
+    t44 = t14*t43
+    t45 = 4*t2
+    t46 = 2*t3 + 2*t4
+    t47 = t14*t35
+    t48 = 2*t17*t6
+    return (t0 + t1*t26,), (-p_n*t39, -p_e*t39, -1/16*t38*tension*(-t23*weight_n_per_m*(-p_d*t34 + t16*t31*t45 - t17*t47*(-t11*t16*t2 + t45 + t46) - t30*t42 + t42 + t44) + 4*t24*t40*t7 + t27*t41 + t28*t41) + weight_n_per_m, 0, 0, 0, t38*(t25*tension + t3*tension + t37*weight_n_per_m*(-p_d*t44 + t10*t2*t47*(-t10*t16*t6**(3/2) + t36 + t46) + t22*t43 + t30*t48 - t48) + t4*tension), 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
+
+
 def cable_angle_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Ground-station cable angle as read: (elevation up, azimuth from north) plus their zero errors [rad]; returns ``(h (2,), H (2x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
@@ -540,6 +610,34 @@ def tension_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float])
     t18 = t14*tension*(t0*t16*tension - t15 + t16*t2*tension - t17*(t10*t5 - 1/t10))
     t19 = p_d*t16*t6
     return (t13,), (-p_n*t18, -p_e*t18, -t14*(t0*t19 + t19*t2 - t8*(p_d + t1*t11/t4**(3/2) - t12)), 0, 0, 0, t14*(t0*t15 - t10*t17 + t15*t2), 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
+
+
+def anchor_tension_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Winch's load cell at the anchor: ``|F_c| - w b`` [N]; returns ``(h (1,), H (1x17))``."""
+    p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
+    mass_kg, drag_per_s, weight_n_per_m = c
+    t0 = p_d*weight_n_per_m
+    t1 = p_e**2
+    t2 = p_d**2
+    t3 = p_n**2
+    t4 = t1 + t3
+    t5 = t2 + t4
+    t6 = 1/t5
+    t7 = tension**2
+    t8 = t6*t7
+    t9 = weight_n_per_m**2
+    t10 = 1/math.sqrt(t5)
+    t11 = math.sqrt(t4)
+    t12 = t11*tension/weight_n_per_m
+    t13 = t10*t12
+    t14 = math.sqrt(p_d*t9*(p_d - 2*t13) + t1*t8 + t3*t8)
+    t15 = 1/t14
+    t16 = t6*tension
+    t17 = t5**(-2)
+    t18 = t0*t10
+    t19 = t15*tension*(t1*t17*tension - t16 + t17*t3*tension - t18*(t11*t6 - 1/t11))
+    t20 = p_d*t17*t7
+    return (t0 + t14,), (-p_n*t19, -p_e*t19, -t15*(t1*t20 + t20*t3 - t9*(p_d + t12*t2/t5**(3/2) - t13)) + weight_n_per_m, 0, 0, 0, t15*(t1*t16 - t11*t18 + t16*t3), 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
 
 
 def cable_angle_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:

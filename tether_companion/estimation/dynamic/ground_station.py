@@ -2,7 +2,8 @@
 
 Three optional sensors at the anchor, each with its own measurement module under ``aid/``:
 
-* the load cell's tension at the drone [N] (:class:`LoadCellAid`);
+* the load cell's tension at the drone [N] (:class:`LoadCellAid`), or the winch's where the
+  cable leaves it [N] (the same aid at the anchor: ``|F_c| - w b``);
 * the winch's paid-out cable length [m] (:class:`WinchAid`);
 * the cable angle at the anchor [rad]: elevation up from the horizontal, azimuth from north
   (:class:`CableAngleAid`). A fused angle also feeds the bearing window (the azimuth's noise
@@ -82,6 +83,7 @@ class GroundStationInputs:
         confirmed_pull_per_wind_n_s_per_m: float,
     ) -> None:
         self.load_cell = LoadCellAid(dynamic.load_cell_noise_std_n)
+        self.winch_tension = LoadCellAid(dynamic.load_cell_noise_std_n, at_anchor=True)
         self.winch = WinchAid(
             dynamic.winch_length_noise_std_m, dynamic.slack_tension_n, dynamic.winch_latency_s
         )
@@ -156,6 +158,16 @@ class GroundStationInputs:
         """Fuse a load-cell tension at the drone [N] at filter time ``time_s`` [s]."""
         if self.load_cell.fuse(bank, constants, tension_n, time_s):
             self._health.load_cell_fused += 1
+
+    def fuse_winch_tension(
+        self, bank: FilterBank, constants: ModelConstants, tension_n: float, time_s: float
+    ) -> bool:
+        """Fuse the winch's load cell, the tension where the cable leaves the winch [N], at
+        filter time ``time_s`` [s] (counted in ``load_cell_fused``); whether it was fused."""
+        fused = self.winch_tension.fuse(bank, constants, tension_n, time_s)
+        if fused:
+            self._health.load_cell_fused += 1
+        return fused
 
     def fuse_length(
         self,

@@ -114,6 +114,12 @@ class MemberFilter(ExtendedKalmanFilter):
         mean and their own covariance block as they were (:func:`hold_consider`); set by the
         bank (:attr:`~tether_companion.estimation.dynamic.bank.FilterBank.consider`)."""
 
+    def set_process_noise(self, q_diagonal: FloatArray) -> None:
+        """Predict with the process noise spectral density ``q_diagonal`` (n,) from now on
+        (the estimator's tension walk: a winch's tension fused or not)."""
+        self._q = np.diag(q_diagonal)
+        self._q_density = self._q.copy()
+
     def predict(self, dt_s: float, u: Sequence[float] | None = None) -> bool:  # type: ignore[override]
         """One Euler step of the state and the covariance over ``dt_s`` [s] with the inputs
         ``u`` (floats). ``False`` (and ``rejected_predictions``) when ``dt_s`` or ``u`` is not

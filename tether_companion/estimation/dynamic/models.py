@@ -29,6 +29,7 @@ class CableModels:
     force_balance: Generated
     accel: Generated
     tension: Generated
+    anchor_tension: Generated
     cable_angle: Generated
     winch_length: Generated
 
@@ -37,6 +38,7 @@ STRAIGHT = CableModels(
     generated.force_balance_straight,
     generated.accel_straight,
     generated.tension_straight,
+    generated.anchor_tension_straight,
     generated.cable_angle_straight,
     generated.winch_length_straight,
 )
@@ -101,6 +103,7 @@ CATENARY = CableModels(
     _free_or_grounded(generated.force_balance_catenary, generated.force_balance_grounded),
     _free_or_grounded(generated.accel_catenary, generated.accel_grounded),
     _free_or_grounded(generated.tension_catenary, generated.tension_grounded),
+    _free_or_grounded(generated.anchor_tension_catenary, generated.anchor_tension_grounded),
     _free_or_grounded(generated.cable_angle_catenary, generated.cable_angle_grounded),
     _free_or_grounded(generated.winch_length_catenary, generated.winch_length_grounded),
 )

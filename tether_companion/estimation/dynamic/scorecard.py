@@ -22,7 +22,6 @@ the paper's random-walk bound.
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -51,7 +50,6 @@ from tether_companion.estimation.dynamic.crlb_noise import (
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.models import ModelConstants
 from tether_companion.physics.cable import cable_weight_n_per_m
-from tether_companion.physics.cable_winch import tension_at_drone_n
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.cable_angle import CableAngleConfig
 
@@ -141,9 +139,9 @@ class DynamicKind:
     use_angle
         Whether the ground station's cable angle is given to the filter.
     use_tension
-        Whether the winch's load cell is given to the filter as the service's ``tension.source:
-        winch`` does (:class:`~tether_companion.service.winch.WinchFeed`): carried to the drone
-        with the latest estimate's height, fused as a load cell whose noise is the scenario's
+        Whether the winch's load cell is given to the filter
+        (:meth:`~.estimator.DynamicTetherEstimator.set_winch_tension_n`: the tension where the
+        cable leaves the winch), its noise the scenario's
         ``ground_station.winch_tension_noise_std_n`` (what the winch's data sheet would say).
     """
 
@@ -165,9 +163,6 @@ class DynamicKind:
         self._use_winch = use_winch
         self._use_angle = use_angle
         self._use_tension = use_tension
-        self._weight_n_per_m = dynamic.cable_weight_n_per_m
-        self._height_m = math.nan
-        """The latest estimate's height above the anchor [m] (nan before the first)."""
 
     def on_attitude(self, sample: AttitudeSample) -> None:
         self._estimator.on_attitude(sample)
@@ -182,11 +177,7 @@ class DynamicKind:
         if self._use_winch and station.paid_out_m is not None:
             self._estimator.set_paid_out_length_m(station.paid_out_m, station.time_s)
         if self._use_tension and station.winch_tension_n is not None:
-            at_drone = tension_at_drone_n(
-                station.winch_tension_n, self._weight_n_per_m, self._height_m
-            )
-            if math.isfinite(at_drone):
-                self._estimator.set_known_tension_n(at_drone, station.time_s)
+            self._estimator.set_winch_tension_n(station.winch_tension_n, station.time_s)
         angle = station.cable_angle_rad
         if self._use_angle and angle is not None:
             azimuth, elevation = angle
@@ -202,7 +193,6 @@ class DynamicKind:
         estimate = self._estimator.on_imu(sample)
         if estimate is None or not self._estimator.initialised:
             return None
-        self._height_m = -float(estimate.position_ned_m[2])
         return TickOutput(
             position_ned_m=estimate.position_ned_m,
             position_covariance_m2=estimate.position_covariance_m2,
@@ -251,8 +241,8 @@ register(
         crlb_model=UNKNOWN_TENSION,
         has_velocity=True,
         has_tension=True,
-        description="the dynamic+winch+angle kind also given the winch's load cell (its "
-        "tension carried to the drone with the estimate's height, as tension.source: winch)",
+        description="the dynamic+winch+angle kind also given the winch's load cell (the "
+        "tension where the cable leaves the winch)",
     )
 )
 for _name, _label, _winch in (

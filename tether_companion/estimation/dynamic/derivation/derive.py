@@ -38,6 +38,11 @@ The model (SI units, NED world, FRD body, ``R = R_v^b`` maps NED to body; state 
   the force balance ``f_meas = f + b`` as the measurement (same function as (a)'s).
 * Rangefinder: height above the ground ``-p_d + h_anchor``.
 * Load cell at the drone: ``|F_c|``.
+* The winch's load cell at the anchor: ``|F_c| - w b``. A catenary's tension is ``w`` times
+  the height above its directrix, so it grows by ``w b`` from the anchor to the drone, and on
+  the grounded cable ``|F_c| = H + w b`` exactly (``H^2 + w^2 (b^2 + 2 b c) = (H + w b)^2``)
+  with ``H`` what the cable on the ground carries to the winch. (A drone below the anchor's
+  level, ``b < 0``, takes the same expression: the models there are the straight chord's.)
 * Winch paid-out length: the encoder reads ``offset + (1 + scale) L`` with ``L`` the
   catenary's arc length ``sqrt(b^2 + a^2 (sinh z / z)^2)`` (``|p|`` for the straight line) and
   the calibration states ``winch_offset``, ``winch_scale``.
@@ -197,6 +202,18 @@ def models() -> list[tuple[str, str, list[sp.Symbol], list[sp.Expr], sp.Matrix |
                 [],
                 [tension],
                 sp.Matrix([tension]),
+                "measurement",
+            )
+        )
+        at_anchor = tension - WPL * HEIGHT
+        out.append(
+            (
+                f"anchor_tension_{suffix}",
+                "Winch's load cell at the anchor: ``|F_c| - w b`` [N]; returns"
+                f" ``(h (1,), H (1x{N}))``.",
+                [],
+                [at_anchor],
+                sp.Matrix([at_anchor]),
                 "measurement",
             )
         )

@@ -222,7 +222,11 @@ class DynamicTetherEstimator(InputFeed):
         winch holds the anchor's tension, and the chord tension then moves only as far as
         the winch's control lets it and the geometry turns a held anchor tension into a
         chord tension (docs/estimation.md, sag13)."""
-        if self.ground_station.tension_ok(tension_n, time_s) and self._stepped_to(time_s):
+        if not self.ground_station.tension_ok(tension_n, time_s):
+            return
+        if self.bank is None:  # with a cable angle it places a heavy cable's start
+            self._startup.add_winch_tension(time_s - self.dynamic.winch_latency_s, tension_n)
+        elif self._stepped_to(time_s):
             assert self.bank is not None
             if self.ground_station.fuse_winch_tension(
                 self.bank, self.constants, tension_n, self._time_s

@@ -63,11 +63,11 @@ from tether_companion.estimation.dynamic.start_placement import place
 
 FloatArray = NDArray[np.float64]
 
-_THETA = 13
+_THETA = 14
 """Parameters of the construction: A (3), s, b (3), w (2), h, L, the cable angle's elevation
-and azimuth (``nan`` without one)."""
+and azimuth, the winch's tension (``nan`` without one)."""
 _A, _S, _B, _W, _H, _L = slice(0, 3), 3, slice(4, 7), slice(7, 9), 9, 10
-_EL, _AZ = 11, 12
+_EL, _AZ, _TA = 11, 12, 13
 _REL_STEP = 1e-6
 PLACEMENT_FAILED = (
     "the cable does not rise to the drone, or rests on the ground with no winch length:"
@@ -146,6 +146,7 @@ class Initialiser:
         self._latest_height = math.nan
         self._snapshots: list[tuple[float, FloatArray, FloatArray, float]] = []
         self._angles = AngleReadings()
+        self._winch_tensions: list[float] = []
 
     def add_tick(
         self,
@@ -207,6 +208,14 @@ class Initialiser:
             self._latest_height,
             length_m,
         )
+
+    def add_winch_tension(self, time_s: float, tension_n: float) -> None:
+        """The winch's tension [N] where the cable leaves it, taken at ``time_s`` [s]: with a
+        cable angle it places a heavy cable that leaves the anchor flat
+        (:func:`~.start_placement.place_heavy_by_angle`). Readings taken before the window
+        started are not kept."""
+        if not (math.isnan(self._start_s) or time_s < self._start_s):
+            self._winch_tensions.append(tension_n)
 
     def try_start(
         self,
@@ -274,9 +283,11 @@ class Initialiser:
         theta[_W] = wind_ne_mps
         theta[_H] = height
         theta[_L] = length_m
-        theta[_EL] = theta[_AZ] = math.nan
+        theta[_EL] = theta[_AZ] = theta[_TA] = math.nan
         if self._pull_weak(theta):  # the force would not tell the bearing
             theta[_EL], theta[_AZ] = self._angles.mean()
+            if self._winch_tensions:
+                theta[_TA] = sum(self._winch_tensions) / len(self._winch_tensions)
         y = self._solve(theta)
         if y is None or not np.all(np.isfinite(y)):
             return Initialisation(None, None, PLACEMENT_FAILED)
@@ -298,7 +309,9 @@ class Initialiser:
                 )
         if motion is None:
             by_azimuth = math.isfinite(theta[_AZ]) and not weightless
-            motion = self._fitted_motion(time_s, scale, length_m, theta[_W], by_azimuth)
+            motion = self._fitted_motion(
+                time_s, scale, length_m, theta[_W], by_azimuth, float(theta[_TA])
+            )
         if motion is not None:  # the window's motion: position now and velocity
             position, velocity, velocity_se, _ = motion
             x[state.POSITION] = position
@@ -369,6 +382,7 @@ class Initialiser:
             self.config.cable_weight_n_per_m,
             theta[_EL],
             theta[_AZ],
+            theta[_TA],
         )
 
     def _window_force_n(self, theta: FloatArray) -> FloatArray:
@@ -405,11 +419,13 @@ class Initialiser:
         length_m: float,
         wind_ne_mps: FloatArray,
         by_azimuth: bool = False,
+        winch_tension: float = math.nan,
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None:
         """Position [m] and velocity [m/s] at ``time_s`` from a quadratic fit of the
         window's per-tick positions (thrust scale ``scale``, the wind ``wind_ne_mps``'s drag
-        at the window's mean attitude; ``by_azimuth``: each tick placed with the cable angle read
-        nearest in time, a heavy cable whose pull the wind could turn), and
+        at the window's mean attitude; ``by_azimuth``: each tick placed with the cable angle
+        read nearest in time and the winch's tension ``winch_tension`` [N] (``nan``: none),
+        a heavy cable whose pull the wind could turn), and
         the velocity's and the position's standard errors per axis [m/s, m] (the position's
         not used: measured and not taken, start10)."""
         times, positions = [], []
@@ -420,7 +436,7 @@ class Initialiser:
             if wind_ne_mps.any():
                 force = force + drag
             elevation, azimuth = self._angles.angle_at(t) if by_azimuth else (math.nan, math.nan)
-            placed = place(force, height, length_m, weight, elevation, azimuth)
+            placed = place(force, height, length_m, weight, elevation, azimuth, winch_tension)
             if placed is not None:
                 times.append(t)
                 positions.append(placed[:3])
@@ -441,6 +457,7 @@ class Initialiser:
         sigma[_W] = init.wind_std_mps
         sigma[_H] = self.range_std_m / math.sqrt(max(self._n_height, 1))
         sigma[_L] = cfg.winch_length_noise_std_m
+        sigma[_TA] = cfg.load_cell_noise_std_n / math.sqrt(max(len(self._winch_tensions), 1))
         # the ground station's calibration errors: parameters of the construction beside
         # theta (the reading's error is the noise's plus theirs) and states of their own
         # (state.CALIBRATION, whose estimate 0 is off by minus them): one spread, correlated

@@ -26,6 +26,7 @@ def place(
     weight: float,
     elevation: float = math.nan,
     azimuth: float = math.nan,
+    winch_tension: float = math.nan,
 ) -> FloatArray | None:
     """``(p_n, p_e, p_d, T_ch)`` of a cable force on the drone ``force`` (NED [N]) with
     the drone ``height`` [m] above the anchor and/or a cable ``length`` [m] (``nan``:
@@ -48,10 +49,13 @@ def place(
     With a cable angle at the anchor (``elevation``, ``azimuth`` [rad]; ``nan``: none;
     given where the wind could turn the pull, :meth:`.initialise.Initialiser._pull_weak`)
     the angle places the drone: a weightless cable along it (:func:`place_by_angle`), a
-    heavy one by :func:`place_heavy_by_angle`."""
+    heavy one by :func:`place_heavy_by_angle` (with the winch's ``winch_tension`` [N] where
+    it is known, ``nan`` otherwise)."""
     if math.isfinite(azimuth):  # a pull the wind could turn
         if weight > 0.0:
-            return place_heavy_by_angle(force, height, length, weight, elevation, azimuth)
+            return place_heavy_by_angle(
+                force, height, length, weight, elevation, azimuth, winch_tension
+            )
         return place_by_angle(force, height, length, elevation, azimuth)
     if math.isnan(height):
         chord = force - np.array((0.0, 0.0, 0.5 * weight * length))
@@ -89,6 +93,7 @@ def place_heavy_by_angle(
     weight: float,
     elevation: float,
     azimuth: float,
+    winch_tension: float = math.nan,
 ) -> FloatArray | None:
     """``(p_n, p_e, p_d, T_ch)`` of a drone ``height`` [m] above the anchor on a cable of
     ``weight`` per length [N/m] leaving the anchor at ``elevation`` and ``azimuth`` [rad]:
@@ -97,14 +102,24 @@ def place_heavy_by_angle(
     :data:`MIN_RISE`) the ground station places it alone (:func:`heavy_by_elevation`: a
     weak pull's force, turned and shortened by the wind's drag, is not needed); else (a
     cable leaving the anchor flat may rest on the ground over any stretch) the span is the
-    force's pull along that bearing on the filter's curve (:func:`along_bearing`,
-    :func:`place`). None when neither places it."""
+    horizontal tension's on the filter's curve (:func:`place`): the force's pull along the
+    bearing (:func:`along_bearing`), or where that force points away from the anchor the
+    winch's tension ``winch_tension`` [N] times ``cos(el)`` when it is known (a catenary's
+    horizontal tension is the same all along it, and a cable resting on the ground carries
+    the winch's tension to its touchdown: the heavy 1 N circle's start waited 8 s there).
+    Not in place of the force's pull: the free curve's span also takes the force's down
+    part, and with the winch's horizontal tension beside it the light 1 N figure-8's start
+    (tuning seed 2) came 2.8 s later and 0.13 m worse. None when neither places it."""
     if math.isfinite(length) and height > 0.0 and math.sin(elevation) >= MIN_RISE:
         placed = heavy_by_elevation(height, length, weight, elevation)
         if placed is not None:
             span, tension = placed
             return np.array((span * math.cos(azimuth), span * math.sin(azimuth), -height, tension))
     turned = along_bearing(force, azimuth)
+    if turned is None and math.isfinite(winch_tension):
+        horizontal = winch_tension * math.cos(elevation)
+        bearing = (math.cos(azimuth), math.sin(azimuth))
+        turned = np.array((-horizontal * bearing[0], -horizontal * bearing[1], float(force[2])))
     return None if turned is None else place(turned, height, length, weight)
 
 

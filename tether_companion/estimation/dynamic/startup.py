@@ -98,6 +98,11 @@ class FilterStartup:
             self._constants.length_m,
         )
 
+    def add_winch_tension(self, time_s: float, tension_n: float) -> None:
+        """The winch's tension where the cable leaves it [N], taken at ``time_s`` [s]
+        (:meth:`~tether_companion.estimation.dynamic.initialise.Initialiser.add_winch_tension`)."""
+        self._initialiser.add_winch_tension(time_s, tension_n)
+
     def add_tick(self, aligned: AlignedInputs) -> FilterBank | None:
         """One IMU tick with its aligned attitude and thrust; the bank of one member per
         hypothesis once the data give hypotheses, else ``None``."""

@@ -16,6 +16,7 @@ tick of the batch where they are clear by more than the bound. Pure.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,22 +51,34 @@ class ProcessNoise:
         self.hover_largest = max(abs(self.diagonal[i]) for i in HOVER_UNKNOWNS)
 
 
+class MixtureBounds(NamedTuple):
+    """What bounds a mixture's terms, in Python floats (:meth:`MixtureValues.bounds`)."""
+
+    finite: bool
+    """Whether the arrays are finite with a diagonal >= 0 (else: no approximation)."""
+    sd: list[float]
+    """Standard deviations [SI units]: ``|P_ij| <= sd_i sd_j`` bounds the terms."""
+    largest_sd: float
+    """The largest standard deviation [SI units]."""
+    position_sd: float
+    """The largest position standard deviation [m]."""
+    velocity_sd: float
+    """The largest velocity standard deviation [m/s]."""
+    largest_value: float
+    """The largest ``|x_i|`` [SI units]."""
+
+
 class MixtureValues:
     """The mixture's mean and covariance with what every tick between two member steps reads
     of them as Python floats (made once per mixture: the members replace their arrays when
-    they step; the bounds' scalars, :attr:`finite` to :attr:`velocity_sd`, on first use: only
-    a read status needs them)."""
+    they step; the bounds' scalars, :meth:`bounds`, on first use: only a read status needs
+    them)."""
 
     __slots__ = (
-        "_finite",
+        "_bounds",
         "_hover",
-        "_largest_sd",
-        "_largest_value",
         "_position",
-        "_position_sd",
         "_rows",
-        "_sd",
-        "_velocity_sd",
         "p",
         "x",
         "x_values",
@@ -75,62 +88,39 @@ class MixtureValues:
         self.x = x
         self.p = p
         self.x_values: list[float] = x.tolist()
-        self._sd: list[float] | None = None
+        self._bounds: MixtureBounds | None = None
         self._rows: list[list[float]] | None = None
         self._hover: HoverAnchor | None | bool = False
         self._position: tuple[tuple[float, ...], ...] | None = None
 
-    def _bounds(self) -> list[float]:
-        """Make the bounds' scalars (once); the standard deviations."""
-        sd = self._sd
-        if sd is None:
-            diagonal = self.p.diagonal().tolist()
-            self._finite = (
-                math.isfinite(sum(self.x_values))
-                and bool(np.isfinite(self.p).all())
-                and min(diagonal) >= 0.0
+    def bounds(self) -> MixtureBounds:
+        """The bounds' scalars (made on first use)."""
+        bounds = self._bounds
+        if bounds is None:
+            x_values, p = self.x_values, self.p
+            diagonal = p.diagonal().tolist()
+            sd = [math.sqrt(v) if v >= 0.0 else math.nan for v in diagonal]
+            bounds = self._bounds = MixtureBounds(
+                math.isfinite(sum(x_values))
+                and bool(np.isfinite(p).all())
+                and min(diagonal) >= 0.0,
+                sd,
+                max(sd),
+                max(sd[0], sd[1], sd[2]),
+                max(sd[3], sd[4], sd[5]),
+                max(max(x_values), -min(x_values)),
             )
-            sd = self._sd = [math.sqrt(v) if v >= 0.0 else math.nan for v in diagonal]
-            self._largest_sd = max(sd)
-            self._position_sd = max(sd[0], sd[1], sd[2])
-            self._largest_value = max(max(self.x_values), -min(self.x_values))
-            self._velocity_sd = max(sd[3], sd[4], sd[5])
-        return sd
+        return bounds
 
     @property
     def finite(self) -> bool:
         """Whether the arrays are finite with a diagonal >= 0 (else: no approximation)."""
-        self._bounds()
-        return self._finite
+        return self.bounds().finite
 
     @property
     def sd(self) -> list[float]:
         """Standard deviations [SI units]: ``|P_ij| <= sd_i sd_j`` bounds the terms."""
-        return self._bounds()
-
-    @property
-    def largest_sd(self) -> float:
-        """The largest standard deviation [SI units]."""
-        self._bounds()
-        return self._largest_sd
-
-    @property
-    def position_sd(self) -> float:
-        """The largest position standard deviation [m]."""
-        self._bounds()
-        return self._position_sd
-
-    @property
-    def largest_value(self) -> float:
-        """The largest ``|x_i|`` [SI units]."""
-        self._bounds()
-        return self._largest_value
-
-    @property
-    def velocity_sd(self) -> float:
-        """The largest velocity standard deviation [m/s]."""
-        self._bounds()
-        return self._velocity_sd
+        return self.bounds().sd
 
     def position_terms(self) -> tuple[tuple[float, ...], ...]:
         """``P``'s north, north-east, east and down position entries [m^2]; the same entries'

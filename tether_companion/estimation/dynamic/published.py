@@ -396,13 +396,16 @@ class TickSource:
         if approx is not None:
             return approx
         mixture = self.mixture
-        if mixture is None or not mixture.finite:
+        if mixture is None:
+            return None
+        bounds = mixture.bounds()
+        if not bounds.finite:
             return None
         x = mixture.x_values
         step, noise = self.step, self.noise
         block, linear, quadratic = mixture.position_terms()
         north, north_east, east, down = block
-        sd = mixture.sd
+        sd = bounds.sd
         if step is None:
             t = spread = moved = offset = 0.0
             row_sum = 1.0
@@ -427,7 +430,7 @@ class TickSource:
             f2 = a6 * s8 + a7 * s9 + a8 * s10
             spread = max(f0, f1)
             f = max(spread, f2)
-            moved = f * (2.0 * (mixture.position_sd + t * mixture.velocity_sd) + f)
+            moved = f * (2.0 * (bounds.position_sd + t * bounds.velocity_sd) + f)
             row_sum = 1.0 + t + (a0 + a1 + a2 + a3 + a4 + a5 + a6 + a7 + a8)
             row_sum += sum(map(abs, b_v))
             offset = max(map(abs, (*d_p, *d_v)))
@@ -442,8 +445,8 @@ class TickSource:
         # every row of Phi has sum_k |Phi_ik| <= row_sum, so with |P_kl| <= sd_k sd_l
         # (Cauchy-Schwarz) the terms of (Phi P Phi^T)_ij are below (row_sum max sd)^2, and those
         # of the stepped state below row_sum max |x| + |(D_p, D_v)|
-        largest = mixture.largest_sd * row_sum
-        position_scale = mixture.largest_value * row_sum + offset
+        largest = bounds.largest_sd * row_sum
+        position_scale = bounds.largest_value * row_sum + offset
         added_nn, added_ne, _, added_ee, _, added_dd = self._added(x, tension)
         north += added_nn
         north_east += added_ne

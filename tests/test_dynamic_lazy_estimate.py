@@ -67,7 +67,7 @@ def _former_estimate(est: DynamicTetherEstimator, source) -> tuple:  # noqa: ANN
         x, p = bank.mixture()
         batch = est._batch
         if batch is not None and batch.ticks:
-            x, p = batch.step_state(x, est._q_matrix), batch.step_covariance(p, est._q_matrix)
+            x, p = batch.step_state(x, est._walk.matrix), batch.step_covariance(p, est._walk.matrix)
         values = x.tolist()
         tension, tension_var = est.constants.tension_at_drone(values, p)
     published = p[state.POSITION_VELOCITY, state.POSITION_VELOCITY].copy()

@@ -19,9 +19,9 @@ enters with the start where a reading placed it (``initialise.py``, correlated w
 position) or else with the sensor's first reading (:func:`open_calibration`). They are held as
 consider states until the filter has settled (:mod:`.calibration_release`: the readings move
 the position, not them, while the start may be wrong), then learnt where the flight makes
-them observable (a circle: the rangefinder's height against the length and the elevation, the
-INS's acceleration against the bearing); in a hover they stay at their prior and the
-position's covariance keeps their spread.
+them observable (a circle: the rangefinder's height against the length and the elevation); in
+a hover they stay at their prior and the position's covariance keeps their spread. The
+azimuth zero stays a consider state throughout (``state.NEVER_RELEASED``).
 
 Each reading is checked here (a non-finite or impossible value is counted in
 ``health.nonfinite_rejected`` and dropped); when to fuse it (the filter initialised, the reading

@@ -156,11 +156,10 @@ def _estimator(learn: bool = True) -> DynamicTetherEstimator:
     )
 
 
-def test_by_default_the_calibration_is_never_released() -> None:
-    """``learn_calibration`` off (the default: learning cost 2-6x our error on ArduPilot
-    SITL's flight): decided and in band far beyond SETTLE_S, the states stay consider
-    states."""
-    assert not DynamicFilterConfig().learn_calibration
+def test_with_learning_off_the_calibration_is_never_released() -> None:
+    """``learn_calibration`` off (on by default since the azimuth zero stays held):
+    decided and in band far beyond SETTLE_S, the states stay consider states."""
+    assert DynamicFilterConfig().learn_calibration
     bank = _bad_start_bank(1)
     estimator = _estimator(learn=False)
     _fly_angles(bank, 0.0, 10.0 + SETTLE_S, estimator)

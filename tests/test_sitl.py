@@ -89,9 +89,17 @@ TAUT_KINDS = [
         marks=pytest.mark.xfail(strict=True, reason=ANGLE_RANGE),
     ),
     pytest.param("dynamic-winch-angle", id="dynamic-winch-angle"),  # 2 of 3 runs passed
+    pytest.param("dynamic-winch-angle-errors", id="dynamic-winch-angle-errors"),
 ]
 """The taut hold also with the winch (the ground station sends WINCH_STATUS) and with its
-cable-angle sensor (DEBUG_VECT, the direction from the anchor to SITL's truth)."""
+cable-angle sensor (DEBUG_VECT, the direction from the anchor to SITL's truth); ``-errors``:
+the two with the offline simulator's realistic errors (``GroundSensorConfig(enabled=True)``,
+seed 1: the winch reads 0.148 m short and 1.7 % small, the elevation 0.0075 rad low), which the
+filter's calibration states learn."""
+ERRORS_HOLD_RMS_M = 0.1
+"""Our estimate's RMS error in the external-navigation hold with the ground station's errors
+[m]: measured 0.058 m learning the calibration, 0.158 m holding it (the same flight's .tlog
+replayed with ``learn_calibration: false``; docs/estimation.md, sitlcal13)."""
 
 
 @pytest.fixture
@@ -251,7 +259,8 @@ def test_a_binary_that_dies_at_start_fails_with_its_output(tmp_path, monkeypatch
 @pytest.mark.parametrize("kind", TAUT_KINDS)
 def test_gps_to_external_navigation_switch_at_a_taut_hover(sitl_available, tmp_path, kind) -> None:
     """Issue 14's flight: take off on GPS, fly out until SITL's tether is taut, switch EKF3 to
-    our position (source set 2), hold 60 s, fly a 1 m/s circle about the anchor, land.
+    our position (source set 2), hold 60 s, fly a 1 m/s circle about the anchor, land. With the
+    ground station's errors our estimate is also within ERRORS_HOLD_RMS_M in the hold.
 
     Bounds: no failsafe and EKF3 never without a horizontal position; during the hold the truth
     stays within 0.3 m of the target (the issue's bound) and EKF3 accepts our position (test
@@ -260,11 +269,19 @@ def test_gps_to_external_navigation_switch_at_a_taut_hover(sitl_available, tmp_p
     """
     from tether_companion.ardupilot_sitl.flights import FlightOptions, gps_to_external_nav
 
-    winch = kind.startswith("dynamic-winch")
-    angle = kind.endswith("-angle")
+    from tether_companion.sim.ground_sensors import GroundSensorConfig
+
+    errors = kind.endswith("-errors")
+    sensors = kind.removesuffix("-errors")
+    winch = sensors.startswith("dynamic-winch")
+    angle = sensors.endswith("-angle")
     overrides = {"estimator": {"kind": "dynamic" if kind.startswith("dynamic") else kind}}
     options = FlightOptions(
-        workdir=tmp_path, companion_overrides=overrides, winch=winch, cable_angle=angle
+        workdir=tmp_path,
+        companion_overrides=overrides,
+        winch=winch,
+        cable_angle=angle,
+        ground_station=GroundSensorConfig(enabled=errors),
     )
     result = gps_to_external_nav(options, log=print)
     for phase in result.phases:
@@ -279,6 +296,8 @@ def test_gps_to_external_navigation_switch_at_a_taut_hover(sitl_available, tmp_p
         assert phase.position_lost_samples == 0, phase
     circle = result.phase("extnav-circle")
     assert circle.test_ratio_max < 1.0
+    if errors:
+        assert hold.ours_error_rms_m < ERRORS_HOLD_RMS_M
     assert result.companion_exit == 0
 
 

@@ -223,7 +223,7 @@ class FilterBank:
             prior_xs = _stack([filters[i].x for i in index])
             xs = prior_xs + (pht @ w[:, :, None])[:, :, 0]
             ps = p - (pht @ s_inv) @ pht.swapaxes(1, 2)
-            ps += ps.swapaxes(1, 2)
+            ps = ps + ps.swapaxes(1, 2)  # a new array: no copy of the overlapping operand
             ps *= 0.5
             if self.consider is not None:
                 hold_consider(xs, ps, prior_xs, p, self.consider)
@@ -265,7 +265,7 @@ class FilterBank:
             prior_xs = _stack([filters[i].x for i in index])
             xs = prior_xs + gain * np.array([innovations[i] for i in index])[:, None]
             ps = p - gain[:, :, None] * pht[:, None, :]
-            ps += ps.swapaxes(1, 2)
+            ps = ps + ps.swapaxes(1, 2)  # a new array: no copy of the overlapping operand
             ps *= 0.5
             if self.consider is not None:
                 hold_consider(xs, ps, prior_xs, p, self.consider)

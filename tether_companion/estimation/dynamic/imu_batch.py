@@ -122,7 +122,7 @@ class BatchStep:
         13) and the process noise spectral density ``q`` (13, 13)."""
         phi = self.phi
         out = phi @ p @ phi.T
-        out += out.swapaxes(-1, -2)
+        out = out + out.swapaxes(-1, -2)  # a new array: no copy of the overlapping operand
         out *= 0.5
         out += self.noise(q)
         return out

@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 import pytest
+from filter_states import state_at
 
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.config import EstimatorConfig
@@ -35,14 +36,6 @@ CONSTANTS = (1.5, 0.2, WEIGHT_N_PER_M)
 """Mass [kg], drag [1/s], weight per length [N/m]."""
 
 
-def _state(position: tuple[float, float, float], tension_n: float) -> list[float]:
-    x = [0.0] * state.N_STATES
-    x[0:3] = position
-    x[state.TENSION] = tension_n
-    x[state.SCALE] = 1.0
-    return x
-
-
 def test_below_zero_tension_a_heavy_cable_continues_as_the_resting_one() -> None:
     """At ``T_ch`` below zero the tension at the drone is the resting cable's ``w b + H``
     continued (``H = T_ch a / |p|``), its tension derivative ``a / |p|``; the free catenary's
@@ -50,12 +43,12 @@ def test_below_zero_tension_a_heavy_cable_continues_as_the_resting_one() -> None
     position = (4.0, -0.9, -3.1)
     span, distance = math.hypot(4.0, -0.9), math.dist(position, (0.0, 0.0, 0.0))
     for tension in (-0.5, -0.15, -0.01, 0.0):
-        (value,), jac = CATENARY.tension(_state(position, tension), (), CONSTANTS)
+        (value,), jac = CATENARY.tension(state_at(position, tension), (), CONSTANTS)
         expected = WEIGHT_N_PER_M * 3.1 + tension * span / distance
         assert value == pytest.approx(expected, abs=1e-6)
         assert jac[state.TENSION] == pytest.approx(span / distance, rel=1e-3)
-    at_floor = _state(position, SLACK_FLOOR_N)
-    below = _state(position, SLACK_FLOOR_N * (1.0 - 1e-9))
+    at_floor = state_at(position, SLACK_FLOOR_N)
+    below = state_at(position, SLACK_FLOOR_N * (1.0 - 1e-9))
     for name in ("tension", "accel", "winch_length", "cable_angle"):
         model = getattr(CATENARY, name)
         u = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 14.0) if name == "accel" else ()

@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 import pytest
+from filter_states import state_at
 
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.config import EstimatorConfig
@@ -25,14 +26,6 @@ from tether_companion.estimation.dynamic.offline import run_dynamic
 from tether_companion.physics.cable_winch import winch_catenary
 from tether_companion.samples import AttitudeSample, ImuSample
 from tether_companion.sim.scenario import load_scenario
-
-
-def _state(position: tuple[float, float, float], tension_n: float) -> list[float]:
-    x = [0.0] * state.N_STATES
-    x[0:3] = position
-    x[state.TENSION] = tension_n
-    x[state.SCALE] = 1.0
-    return x
 
 
 @pytest.mark.parametrize(
@@ -55,7 +48,7 @@ def test_the_anchor_tension_is_the_winchs_on_its_cable(
     bearing = 0.7
     position = (span_m * math.cos(bearing), span_m * math.sin(bearing), -height_m)
     chord = math.dist(position, (0.0, 0.0, 0.0))
-    x = _state(position, cable.pull_n * chord / span_m)
+    x = state_at(position, cable.pull_n * chord / span_m)
     c = (1.5, 0.2, weight)
     (at_anchor,), jac = CATENARY.anchor_tension(x, (), c)
     assert at_anchor == pytest.approx(anchor_n, rel=1e-8)
@@ -66,7 +59,7 @@ def test_the_anchor_tension_is_the_winchs_on_its_cable(
 
 def test_a_weightless_cable_pulls_the_winchs_tension() -> None:
     """On the straight line the winch's tension is the chord tension, derivative 1."""
-    (value,), jac = STRAIGHT.anchor_tension(_state((3.0, -1.0, -2.0), 4.0), (), (1.5, 0.2, 0.0))
+    (value,), jac = STRAIGHT.anchor_tension(state_at((3.0, -1.0, -2.0), 4.0), (), (1.5, 0.2, 0.0))
     assert value == pytest.approx(4.0)
     assert jac[state.TENSION] == pytest.approx(1.0)
     assert sum(abs(v) for v in jac) == pytest.approx(1.0)

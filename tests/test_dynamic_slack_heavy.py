@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 import pytest
-from filter_states import state_at
+from filter_states import resting_window, state_at
 
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.config import EstimatorConfig
@@ -99,25 +99,10 @@ def _resting_window(*, angles: bool) -> tuple[Initialiser, float]:
     resting on the ground with 1 N of horizontal tension, in :data:`CROSS_WIND`; heights at
     20 Hz, with ``angles`` the anchor's (flat, azimuth north) at 10 Hz; and the winch length
     [m]."""
-    parameter = HORIZONTAL_N / WEIGHT_N_PER_M
-    rise = math.sqrt(HEIGHT_M**2 + 2.0 * HEIGHT_M * parameter)
-    touchdown = SPAN_M - parameter * math.acosh(1.0 + HEIGHT_M / parameter)
-    assert touchdown > 0.0  # the cable rests on the ground
-    length = touchdown + rise
-    pull = np.array((-HORIZONTAL_N, 0.0, WEIGHT_N_PER_M * rise))
-    drag = MASS_KG * DRAG_PER_S * CROSS_WIND
-    thrust = MASS_KG * GRAVITY_MPS2 + pull[2]
-    specific_force = (pull + drag + np.array((0.0, 0.0, -thrust))) / MASS_KG
     config = dataclasses.replace(DynamicFilterConfig(), cable_weight_n_per_m=WEIGHT_N_PER_M)
-    initialiser = Initialiser(config, MASS_KG, DRAG_PER_S, 0.15, 0.3)
-    for i in range(241):
-        t = i * 0.005
-        if i % 10 == 0:
-            initialiser.add_height(HEIGHT_M)
-        initialiser.add_tick(t, specific_force, np.eye(3), thrust)
-        if angles and i % 20 == 0:
-            initialiser.add_angle(t, 0.0, 0.0, 0.01, (0.007, 0.026), length)
-    return initialiser, length
+    return resting_window(
+        config, MASS_KG, DRAG_PER_S, HORIZONTAL_N, HEIGHT_M, SPAN_M, 0.0, CROSS_WIND, angles=angles
+    )
 
 
 def test_a_heavy_cable_start_takes_its_bearing_from_the_cable_angle() -> None:

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 import pytest
-from filter_states import state_at
+from filter_states import resting_window, state_at
 
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.config import EstimatorConfig
@@ -131,36 +131,30 @@ def test_the_winchs_tension_places_a_resting_cable_whose_pull_points_away() -> N
     and its pull along the azimuth's bearing places nothing either. The winch's tension is the
     horizontal tension of a resting cable: with it, the azimuth, the winch length and the
     height the drone starts within 5 cm, the covariance covering it."""
-    from tether_companion.estimation.dynamic.initialise import PLACEMENT_FAILED, Initialiser
+    from tether_companion.estimation.dynamic.initialise import PLACEMENT_FAILED
 
     weight = 0.1 * GRAVITY_MPS2
     mass, drag_per_s, anchor_n, height, span = 1.5, 0.2, 1.0, 3.0, 4.5
-    parameter = anchor_n / weight
-    rise = math.sqrt(height**2 + 2.0 * height * parameter)
-    touchdown = span - parameter * math.acosh(1.0 + height / parameter)
-    assert touchdown > 0.0  # resting on the ground
-    length = touchdown + rise
     azimuth = 0.4
     outward = np.array((math.cos(azimuth), math.sin(azimuth), 0.0))
-    pull = np.array((*(-anchor_n * outward[:2]), weight * rise))
-    drag = mass * drag_per_s * 4.0 * outward  # 1.2 N outward against 1 N of pull
-    thrust = mass * GRAVITY_MPS2 + pull[2]
-    specific_force = (pull + drag + np.array((0.0, 0.0, -thrust))) / mass
     config = dataclasses.replace(
         DynamicFilterConfig(), cable_weight_n_per_m=weight, load_cell_noise_std_n=0.2
     )
     truth = np.array((span * math.cos(azimuth), span * math.sin(azimuth), -height))
+    wind = 4.0 * outward  # 1.2 N of drag outward against 1 N of pull
     for with_tension in (False, True):
-        initialiser = Initialiser(config, mass, drag_per_s, 0.15, 0.3)
-        for i in range(241):
-            t = i * 0.005
-            if i % 10 == 0:
-                initialiser.add_height(height)
-            initialiser.add_tick(t, specific_force, np.eye(3), thrust)
-            if i % 20 == 0:
-                initialiser.add_angle(t, 0.0, azimuth, 0.01, (0.007, 0.026), length)
-                if with_tension:
-                    initialiser.add_winch_tension(t, anchor_n)
+        initialiser, length = resting_window(
+            config,
+            mass,
+            drag_per_s,
+            anchor_n,
+            height,
+            span,
+            azimuth,
+            wind,
+            angles=True,
+            winch_tension=with_tension,
+        )
         start = initialiser.solve(1.2, length)
         if not with_tension:
             assert start.x is None and start.reason == PLACEMENT_FAILED

@@ -135,9 +135,19 @@ class MessageLayout:
         self.unpacker: struct.Struct = message_class.unpacker
         self.size: int = message_class.unpacker.size
         self.padding = bytes(self.size)
+        self.wire_index: dict[str, int] = _wire_index(message_class)
+        """Each field's index among the unpacked struct items (wire order; an array's first)."""
         self.make = _record_builder(message_class, self.record)
         """``make(flat, src_system, src_component, seq, frame) -> record`` from the unpacked
         struct items ``flat`` (wire order)."""
+
+    def flat_of(self, frame: bytes | bytearray, header_len: int, end: int) -> tuple:
+        """The unpacked struct items (wire order) of the payload ``frame[header_len:end]`` of
+        a checked frame of this message; a MAVLink 2 payload whose trailing zeros the sender
+        truncated is zero-padded back to the full length, as pymavlink does."""
+        if end - header_len >= self.size:
+            return self.unpacker.unpack_from(frame, header_len)
+        return self.unpacker.unpack(frame[header_len:end] + self.padding[end - header_len :])
 
     def record_of(
         self,
@@ -150,13 +160,18 @@ class MessageLayout:
     ) -> HotRecord:
         """The record of a checked ``frame`` of this message whose payload is
         ``frame[header_len:end]``; the header items as given."""
-        size = self.size
-        if end - header_len >= size:
-            flat = self.unpacker.unpack_from(frame, header_len)
-        else:  # MAVLink 2 trailing zeros truncated by the sender
-            payload = frame[header_len:end] + self.padding[end - header_len :]
-            flat = self.unpacker.unpack(payload)
+        flat = self.flat_of(frame, header_len, end)
         return self.make(flat, src_system, src_component, seq, frame)
+
+
+def _wire_index(message_class: type[dialect.MAVLink_message]) -> dict[str, int]:
+    """Each field's index among the message's unpacked wire-order struct items (an array's
+    first element's)."""
+    index, flat = {}, 0
+    for name, length in zip(message_class.ordered_fieldnames, message_class.lengths, strict=True):
+        index[name] = flat
+        flat += length
+    return index
 
 
 def _record_builder(message_class: type[dialect.MAVLink_message], record: type[HotRecord]):
@@ -166,14 +181,11 @@ def _record_builder(message_class: type[dialect.MAVLink_message], record: type[H
     (the source is generated here from the dialect's field names and array lengths; nothing is
     written by hand per message).
     """
+    index = _wire_index(message_class)
     where = {}
-    flat_index = 0
     for name, length in zip(message_class.ordered_fieldnames, message_class.lengths, strict=True):
-        if length == 1:
-            where[name] = f"flat[{flat_index}]"
-        else:
-            where[name] = f"list(flat[{flat_index}:{flat_index + length}])"
-        flat_index += length
+        i = index[name]
+        where[name] = f"flat[{i}]" if length == 1 else f"list(flat[{i}:{i + length}])"
     items = [where[name] for name in message_class.fieldnames] + list(_HEADER_ITEMS)
     source = (
         f"def make(flat, {', '.join(_HEADER_ITEMS)}):\n"

@@ -24,6 +24,7 @@ from collections.abc import Callable
 
 from fastcrc.crc16 import mcrf4xx
 
+from tether_companion.mavlink.fastdecode import MessageLayout, layout_of
 from tether_companion.mavlink.framing import FrameParser, dialect
 from tether_companion.mavlink.units import MILLI_G_TO_MPS2, MILLI_RAD_TO_RAD
 from tether_companion.samples import AttitudeSample
@@ -39,13 +40,9 @@ Convert = Callable[[tuple], Sample | None]
 """A message's unpacked wire-order fields to its checked sample (None: dropped, counted)."""
 
 
-def _fields(message_class: type[dialect.MAVLink_message], *names: str) -> list[int]:
+def _fields(layout: MessageLayout, *names: str) -> list[int]:
     """Indices of ``names`` among the message's unpacked wire-order items (scalar fields)."""
-    index, flat = {}, 0
-    for name, length in zip(message_class.ordered_fieldnames, message_class.lengths, strict=True):
-        index[name] = flat
-        flat += length
-    return [index[name] for name in names]
+    return [layout.wire_index[name] for name in names]
 
 
 class FrameIngest:
@@ -75,29 +72,18 @@ class FrameIngest:
         self._parser = parser
         self._sender = (ingest.link.fc_system_id, ingest.link.fc_component_id)
         self._table: dict[int, tuple] = {}
-        """msg id -> (struct, payload size, crc_extra byte, kind, convert)."""
+        """msg id -> (its layout, crc_extra byte, kind, convert)."""
         if ingest.link.autopilot == "ardupilot":
-            self._add(dialect.MAVLink_raw_imu_message, IMU, self._raw_imu)
+            self._add("RAW_IMU", IMU, self._raw_imu)
         else:
-            self._add(dialect.MAVLink_highres_imu_message, IMU, self._highres_imu)
-        self._add(dialect.MAVLink_attitude_message, ATTITUDE, self._attitude)
-        self._add(dialect.MAVLink_servo_output_raw_message, PWM, self._servo_output_raw)
-        self._add(dialect.MAVLink_distance_sensor_message, RANGE, self._distance_sensor)
+            self._add("HIGHRES_IMU", IMU, self._highres_imu)
+        self._add("ATTITUDE", ATTITUDE, self._attitude)
+        self._add("SERVO_OUTPUT_RAW", PWM, self._servo_output_raw)
+        self._add("DISTANCE_SENSOR", RANGE, self._distance_sensor)
 
-    def _add(
-        self,
-        message_class: type[dialect.MAVLink_message],
-        kind: str,
-        make: Callable[[type[dialect.MAVLink_message]], Convert],
-    ) -> None:
-        unpacker = message_class.unpacker
-        self._table[message_class.id] = (
-            unpacker,
-            unpacker.size,
-            bytes((message_class.crc_extra,)),
-            kind,
-            make(message_class),
-        )
+    def _add(self, name: str, kind: str, make: Callable[[MessageLayout], Convert]) -> None:
+        layout = layout_of(name)
+        self._table[layout.msg_id] = (layout, bytes((layout.crc_extra,)), kind, make(layout))
 
     def receive(self, frame: bytes | bytearray, local_s: float | None) -> list[Sample] | None:
         """The samples ``frame`` releases, as ``Ingest.receive`` gives them for the message the
@@ -111,27 +97,24 @@ class FrameIngest:
         entry = self._table.get(frame[7] | (frame[8] << 8) | (frame[9] << 16))
         if entry is None or (frame[5], frame[6]) != self._sender:
             return None
-        unpacker, size, crc_extra, kind, convert = entry
+        layout, crc_extra, kind, convert = entry
         length = frame[1]
         end = n - _CRC_LEN
-        if end != _HEADER_V2 + length or length > size:
+        if end != _HEADER_V2 + length or length > layout.size:
             return None
         if mcrf4xx(crc_extra, mcrf4xx(frame[1:end], 0xFFFF)) != frame[end] | (frame[end + 1] << 8):
             return None
         counters = self._parser.counters
         counters.bytes_in += n
         counters.frames_ok += 1
-        if length == size:
-            values = unpacker.unpack_from(frame, _HEADER_V2)
-        else:  # MAVLink 2 trailing zeros truncated by the sender
-            values = unpacker.unpack(bytes(frame[_HEADER_V2:end]) + bytes(size - length))
+        values = layout.flat_of(frame, _HEADER_V2, end)
         return self._ingest.receive_input(kind, convert(values), local_s)
 
     # ------------------------------------------------------------------ per message
-    def _raw_imu(self, message_class: type[dialect.MAVLink_message]) -> Convert:
+    def _raw_imu(self, layout: MessageLayout) -> Convert:
         """RAW_IMU (milli-g, milli-rad/s, ``time_usec``), as ``units.raw_imu_si``."""
         t, ax, ay, az, gx, gy, gz, imu_id = _fields(
-            message_class, "time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "id"
+            layout, "time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "id"
         )
         check = self._ingest.imu_sample
         g, rad = MILLI_G_TO_MPS2, MILLI_RAD_TO_RAD
@@ -146,11 +129,11 @@ class FrameIngest:
 
         return convert
 
-    def _highres_imu(self, message_class: type[dialect.MAVLink_message]) -> Convert:
+    def _highres_imu(self, layout: MessageLayout) -> Convert:
         """HIGHRES_IMU (m/s^2, rad/s, ``time_usec``; floats on the wire), as
         ``units.highres_imu_si``."""
         t, ax, ay, az, gx, gy, gz, imu_id = _fields(
-            message_class, "time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "id"
+            layout, "time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "id"
         )
         check = self._ingest.imu_sample
 
@@ -159,9 +142,9 @@ class FrameIngest:
 
         return convert
 
-    def _attitude(self, message_class: type[dialect.MAVLink_message]) -> Convert:
+    def _attitude(self, layout: MessageLayout) -> Convert:
         """ATTITUDE, as ``units.attitude_from_attitude``."""
-        t, roll, pitch, yaw = _fields(message_class, "time_boot_ms", "roll", "pitch", "yaw")
+        t, roll, pitch, yaw = _fields(layout, "time_boot_ms", "roll", "pitch", "yaw")
         check = self._ingest.attitude_sample
 
         def convert(f: tuple) -> Sample | None:
@@ -169,13 +152,11 @@ class FrameIngest:
 
         return convert
 
-    def _servo_output_raw(self, message_class: type[dialect.MAVLink_message]) -> Convert:
+    def _servo_output_raw(self, layout: MessageLayout) -> Convert:
         """SERVO_OUTPUT_RAW's port, ``time_usec`` and channels 1..n_motors."""
-        channels = _fields(
-            message_class, *(f"servo{i + 1}_raw" for i in range(self._ingest.n_motors))
-        )
+        channels = _fields(layout, *(f"servo{i + 1}_raw" for i in range(self._ingest.n_motors)))
         outputs = operator.itemgetter(*channels, channels[0])  # a tuple for one motor too
-        port, t = _fields(message_class, "port", "time_usec")
+        port, t = _fields(layout, "port", "time_usec")
         check = self._ingest.pwm_sample
 
         def convert(f: tuple) -> Sample | None:
@@ -183,10 +164,10 @@ class FrameIngest:
 
         return convert
 
-    def _distance_sensor(self, message_class: type[dialect.MAVLink_message]) -> Convert:
+    def _distance_sensor(self, layout: MessageLayout) -> Convert:
         """DISTANCE_SENSOR's orientation, time and distances [cm]."""
         orientation, t, current, low, high = _fields(
-            message_class,
+            layout,
             "orientation",
             "time_boot_ms",
             "current_distance",

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from itertools import chain
 
 import numpy as np
 from numpy.typing import NDArray
@@ -178,7 +179,7 @@ class FilterBank:
         xs = batch.step_state(_stack([kf.x for kf in filters]), q)
         ps = batch.step_covariance(_stack([kf.P for kf in filters]), q)
         # Phi P Phi^T + T Q stays positive definite: only finiteness is in doubt
-        healthy = math.isfinite(float(xs.sum()) + float(ps.sum()))
+        healthy = math.isfinite(_sum(xs) + _sum(ps))
         for kf, x, p in zip(filters, xs, ps, strict=True):
             kf.set_predicted(x, p, healthy=healthy)
 
@@ -196,17 +197,20 @@ class FilterBank:
         (:meth:`~tether_companion.estimation.dynamic.member.MemberFilter.test_force_balance`).
         Returns each member's outcome, Jacobian and prior covariance."""
         filters = self.filters
+        members = len(filters)
         priors = [kf.P for kf in filters]
         innovations = []
         jacobians = []
+        z0, z1, z2 = z
         for kf in filters:
             value, jacobian = measure(kf.x_values())
-            innovations.append((z[0] - value[0], z[1] - value[1], z[2] - value[2]))
+            innovations.append((z0 - value[0], z1 - value[1], z2 - value[2]))
             jacobians.append(jacobian)
         p = _stack(priors)
-        h_jac = np.array(jacobians, dtype=float).reshape(len(filters), 3, _N)
+        h_jac = np.fromiter(chain.from_iterable(jacobians), float, members * 3 * _N)
+        h_jac = h_jac.reshape(members, 3, _N)
         pht = p @ h_jac.swapaxes(1, 2)
-        s_values = (h_jac @ pht).reshape(len(filters), 9).tolist()
+        s_values = (h_jac @ pht).reshape(members, 9).tolist()
         results: list[UpdateResult | None] = []
         chosen = []
         for i, kf in enumerate(filters):
@@ -216,7 +220,7 @@ class FilterBank:
                 chosen.append((i, solved))
         if chosen:
             index = [i for i, _ in chosen]
-            if len(index) < len(filters):
+            if len(index) < members:
                 p, pht = p[index], pht[index]
             s_inv = np.array([solved[1:10] for _, solved in chosen]).reshape(len(index), 3, 3)
             w = np.array([solved[10:] for _, solved in chosen])
@@ -261,9 +265,10 @@ class FilterBank:
         if index:
             if len(index) < len(filters):
                 p, pht = p[index], pht[index]
-            gain = pht / np.array([s_values[i] for i in index])[:, None]
+            s_and_y = np.array([(s_values[i], innovations[i]) for i in index])
+            gain = pht / s_and_y[:, :1]
             prior_xs = _stack([filters[i].x for i in index])
-            xs = prior_xs + gain * np.array([innovations[i] for i in index])[:, None]
+            xs = prior_xs + gain * s_and_y[:, 1:]
             ps = p - gain[:, :, None] * pht[:, None, :]
             ps = ps + ps.swapaxes(1, 2)  # a new array: no copy of the overlapping operand
             ps *= 0.5
@@ -412,6 +417,14 @@ def log_det_innovation(p: FloatArray, h_jac: FloatArray, r: FloatArray) -> float
     return 2.0 * float(np.log(np.diag(chol)).sum())
 
 
+def _sum(array: FloatArray) -> float:
+    """The sum of every entry (``ndarray.sum()``'s reduction without its method wrapper)."""
+    return _ADD_REDUCE(array, None)  # type: ignore[no-any-return]
+
+
+_ADD_REDUCE = np.add.reduce
+
+
 def _stack(arrays: list[FloatArray]) -> FloatArray:
     """The members' arrays stacked along a new first axis (one member: a view, no copy)."""
     return arrays[0][None] if len(arrays) == 1 else np.array(arrays)
@@ -420,6 +433,6 @@ def _stack(arrays: list[FloatArray]) -> FloatArray:
 def _finite_and_definite(xs: FloatArray, ps: FloatArray) -> bool:
     """Whether the states (m, n) and covariances (m, n, n) are all finite and every
     covariance passes the Cholesky test."""
-    if not math.isfinite(float(xs.sum()) + float(ps.sum())):
+    if not math.isfinite(_sum(xs) + _sum(ps)):
         return False
     return all(dpotrf(p, lower=1, clean=0)[1] == 0 for p in ps)

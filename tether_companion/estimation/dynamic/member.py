@@ -155,10 +155,14 @@ class MemberFilter(ExtendedKalmanFilter):
         (:meth:`~tether_companion.estimation.dynamic.bank.FilterBank.predict_batch`); unless
         known ``healthy`` (finite and positive definite) they are checked as after
         :meth:`predict`: reset when not finite, repaired when not positive definite."""
-        self.x = x
-        self.P = p
+        self._keep(x, p)
         if not healthy:
             self._check_health()
+
+    def _keep(self, x: FloatArray, p: FloatArray) -> None:
+        """Keep a state (n,) and covariance (n, n), float arrays the bank made (the ``x`` and
+        ``P`` setters' conversion skipped: they are float arrays already)."""
+        self._xa, self._xl, self._pa, self._pl = x, None, p, None
 
     def test_scalar(self, sensor: str, innovation: float, s_value: float) -> UpdateResult | None:
         """The scalar part of a 1-D update: ``s_value`` is ``H P H^T + R``; tested, the NIS
@@ -232,8 +236,7 @@ class MemberFilter(ExtendedKalmanFilter):
         status = self.sensors[sensor]
         if not checked:
             return self._accept(status, nis, x, p)
-        self.x = x
-        self.P = p
+        self._keep(x, p)
         status.fused += 1
         status.consecutive_rejections = 0
         return UpdateResult(FUSED, nis)

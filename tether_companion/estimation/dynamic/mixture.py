@@ -31,6 +31,9 @@ ROUNDING = 1e-12
 13 terms differ from the exact ones by a few 1e-16 of it)."""
 HOVER_UNKNOWNS = (state.SCALE, state.WIND.start, state.WIND.start + 1)
 """State indices of the thrust scale and the wind (what a steady hover does not observe)."""
+_HOVER_BLOCK_ROWS = np.array((0, 1, 3, 4, *HOVER_UNKNOWNS))[:, None]
+_HOVER_BLOCK_COLUMNS = np.array(HOVER_UNKNOWNS)
+"""The rows and columns of :meth:`MixtureValues.hover_block` (a gather's indices)."""
 _SMALLEST_SHARE = 0.9
 """Share of ``4 det C / tr(C)^2`` taken as the lower bound of ``C``'s smallest eigenvalue
 (it is one; the share leaves room for the rounding of ``det``, which the singularity test
@@ -78,7 +81,6 @@ class MixtureValues:
         "_bounds",
         "_hover",
         "_position",
-        "_rows",
         "p",
         "x",
         "x_values",
@@ -89,7 +91,6 @@ class MixtureValues:
         self.p = p
         self.x_values: list[float] = x.tolist()
         self._bounds: MixtureBounds | None = None
-        self._rows: list[list[float]] | None = None
         self._hover: HoverAnchor | None | bool = False
         self._position: tuple[tuple[float, ...], ...] | None = None
 
@@ -141,13 +142,11 @@ class MixtureValues:
             )
         return terms
 
-    @property
-    def rows(self) -> list[list[float]]:
-        """The covariance's rows as floats (made on first use)."""
-        rows = self._rows
-        if rows is None:
-            rows = self._rows = self.p.tolist()
-        return rows
+    def hover_block(self) -> list[list[float]]:
+        """The covariance's columns of the thrust scale and the wind (:data:`HOVER_UNKNOWNS`)
+        in the rows north, east, velocity north, velocity east and the three unknowns (7x3,
+        floats; what :class:`HoverAnchor` reads of it, one gather instead of every row)."""
+        return self.p[_HOVER_BLOCK_ROWS, _HOVER_BLOCK_COLUMNS].tolist()
 
     def hover(self) -> HoverAnchor | None:
         """The thrust scale and the wind's part of the horizontal covariance (made on first
@@ -193,12 +192,11 @@ class HoverAnchor:
 
     @classmethod
     def of(cls, mixture: MixtureValues) -> HoverAnchor | None:
-        rows = mixture.rows
+        n, e, vn, ve, row0, row1, row2 = mixture.hover_block()
         h0, h1, h2 = HOVER_UNKNOWNS
         # written out (made at every member step): the unknowns' covariance C (upper
         # triangle), their standard deviations, and X0, V (the north and east rows)
-        row0, row1, row2 = rows[h0], rows[h1], rows[h2]
-        c00, c01, c02, c11, c12, c22 = row0[h0], row0[h1], row0[h2], row1[h1], row1[h2], row2[h2]
+        c00, c01, c02, c11, c12, c22 = row0[0], row0[1], row0[2], row1[1], row1[2], row2[2]
         msd = mixture.sd
         s0, s1, s2 = sd = (msd[h0], msd[h1], msd[h2])
         if not min(sd) > 0.0:
@@ -221,15 +219,8 @@ class HoverAnchor:
         factor = _cholesky_3x3(c00, c01, c02, c11, c12, c22)
         if factor is None:
             return None
-        n, e, vn, ve = rows[0], rows[1], rows[3], rows[4]
-        y0 = (
-            *_forward(factor, n[h0], n[h1], n[h2]),
-            *_forward(factor, e[h0], e[h1], e[h2]),
-        )
-        yv = (
-            *_forward(factor, vn[h0], vn[h1], vn[h2]),
-            *_forward(factor, ve[h0], ve[h1], ve[h2]),
-        )
+        y0 = (*_forward(factor, *n), *_forward(factor, *e))
+        yv = (*_forward(factor, *vn), *_forward(factor, *ve))
         return cls(y0, yv, _SMALLEST_SHARE * smallest, sd)
 
     def explains(

@@ -25,6 +25,7 @@ from tether_companion.estimation.dynamic.bank import (
     RowsFunction,
     log_det_innovation,
 )
+from tether_companion.estimation.dynamic.imu_batch import product
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.ekf import (
     FUSED,
@@ -119,7 +120,7 @@ class AidStatus:
         h_jac = h_jac.reshape(m, -1)
         n = h_jac.shape[1]
         prior = np.asarray(self._last_prior, dtype=float).reshape(n, n)
-        return ((h_jac @ prior) * h_jac).sum(axis=1) + np.diag(noise)
+        return (product(h_jac, prior) * h_jac).sum(axis=1) + np.diag(noise)
 
     def skip(self, reason: str) -> None:
         """Count a sample the module did not offer to the filter, with why."""

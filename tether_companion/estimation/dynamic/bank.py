@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from scipy.linalg.lapack import dpotrf
 
 from tether_companion.estimation.dynamic import state
-from tether_companion.estimation.dynamic.imu_batch import ImuBatch
+from tether_companion.estimation.dynamic.imu_batch import ImuBatch, product
 from tether_companion.estimation.dynamic.member import MemberFilter, hold_consider
 from tether_companion.estimation.ekf import MeasurementFunction, UpdateResult
 
@@ -180,7 +180,8 @@ class FilterBank:
         ps = batch.step_covariance(_stack([kf.P for kf in filters]), q)
         # Phi P Phi^T + T Q stays positive definite: only finiteness is in doubt
         healthy = math.isfinite(_sum(xs) + _sum(ps))
-        for kf, x, p in zip(filters, xs, ps, strict=True):
+        one = len(filters) == 1
+        for kf, x, p in zip(filters, _members(xs, one), _members(ps, one), strict=True):
             kf.set_predicted(x, p, healthy=healthy)
 
     def update_force_balance(
@@ -208,9 +209,9 @@ class FilterBank:
             jacobians.append(jacobian)
         p = _stack(priors)
         h_jac = np.fromiter(chain.from_iterable(jacobians), float, members * 3 * _N)
-        h_jac = h_jac.reshape(members, 3, _N)
-        pht = p @ h_jac.swapaxes(1, 2)
-        s_values = (h_jac @ pht).reshape(members, 9).tolist()
+        h_jac = h_jac.reshape(p.shape[:-2] + (3, _N))
+        pht = product(p, h_jac.swapaxes(-1, -2))
+        s_values = product(h_jac, pht).reshape(members, 9).tolist()
         results: list[UpdateResult | None] = []
         chosen = []
         for i, kf in enumerate(filters):
@@ -222,17 +223,20 @@ class FilterBank:
             index = [i for i, _ in chosen]
             if len(index) < members:
                 p, pht = p[index], pht[index]
-            s_inv = np.array([solved[1:10] for _, solved in chosen]).reshape(len(index), 3, 3)
+            one = p.ndim == 2
+            s_inv = np.array([solved[1:10] for _, solved in chosen]).reshape(p.shape[:-2] + (3, 3))
             w = np.array([solved[10:] for _, solved in chosen])
             prior_xs = _stack([filters[i].x for i in index])
-            xs = prior_xs + (pht @ w[:, :, None])[:, :, 0]
-            ps = p - (pht @ s_inv) @ pht.swapaxes(1, 2)
-            ps = ps + ps.swapaxes(1, 2)  # a new array: no copy of the overlapping operand
+            xs = prior_xs + _apply(pht, w[0] if one else w)
+            ps = p - product(product(pht, s_inv), pht.swapaxes(-1, -2))
+            ps = ps + ps.swapaxes(-1, -2)  # a new array: no copy of the overlapping operand
             ps *= 0.5
             if self.consider is not None:
                 hold_consider(xs, ps, prior_xs, p, self.consider)
             checked = _finite_and_definite(xs, ps)
-            for (i, solved), x, p_new in zip(chosen, xs, ps, strict=True):
+            for (i, solved), x, p_new in zip(
+                chosen, _members(xs, one), _members(ps, one), strict=True
+            ):
                 results[i] = filters[i].accept_update(sensor, solved[0], x, p_new, checked=checked)
         return results, jacobians, priors  # type: ignore[return-value]
 
@@ -254,9 +258,9 @@ class FilterBank:
             innovations.append(z - float(value[0]))
             jacobians.append(jacobian)
         p = _stack(priors)
-        rows = np.array(jacobians).reshape(len(filters), _N)
-        pht = (p @ rows[:, :, None])[:, :, 0]
-        s_values = ((pht * rows).sum(axis=1) + r_variance).tolist()
+        rows = np.array(jacobians).reshape(p.shape[:-2] + (_N,))
+        pht = _apply(p, rows)
+        s_values = ((pht * rows).sum(axis=-1) + r_variance).reshape(-1).tolist()
         results: list[UpdateResult | None] = [
             kf.test_scalar(sensor, y, s)
             for kf, y, s in zip(filters, innovations, s_values, strict=True)
@@ -265,17 +269,19 @@ class FilterBank:
         if index:
             if len(index) < len(filters):
                 p, pht = p[index], pht[index]
+            one = p.ndim == 2
             s_and_y = np.array([(s_values[i], innovations[i]) for i in index])
-            gain = pht / s_and_y[:, :1]
+            s_and_y = s_and_y[0] if one else s_and_y
+            gain = pht / s_and_y[..., :1]
             prior_xs = _stack([filters[i].x for i in index])
-            xs = prior_xs + gain * s_and_y[:, 1:]
-            ps = p - gain[:, :, None] * pht[:, None, :]
-            ps = ps + ps.swapaxes(1, 2)  # a new array: no copy of the overlapping operand
+            xs = prior_xs + gain * s_and_y[..., 1:]
+            ps = p - gain[..., :, None] * pht[..., None, :]
+            ps = ps + ps.swapaxes(-1, -2)  # a new array: no copy of the overlapping operand
             ps *= 0.5
             if self.consider is not None:
                 hold_consider(xs, ps, prior_xs, p, self.consider)
             checked = _finite_and_definite(xs, ps)
-            for i, x, p_new in zip(index, xs, ps, strict=True):
+            for i, x, p_new in zip(index, _members(xs, one), _members(ps, one), strict=True):
                 nis = innovations[i] * innovations[i] / s_values[i]
                 results[i] = filters[i].accept_update(sensor, nis, x, p_new, checked=checked)
         return results, jacobians, priors  # type: ignore[return-value]
@@ -341,10 +347,10 @@ class FilterBank:
         w = self.weights()
         xs = np.array([kf.x for kf in self.filters])
         n = xs.shape[1]
-        mean = w @ xs
+        mean = product(w, xs)
         spread = xs - mean
-        cov = (w @ np.array([kf.P.ravel() for kf in self.filters])).reshape(n, n)
-        cov += (spread.T * w) @ spread
+        cov = product(w, np.array([kf.P.ravel() for kf in self.filters])).reshape(n, n)
+        cov += product(spread.T * w, spread)
         cov += cov.T
         cov *= 0.5
         self._mixture_cache = (arrays, list(self.log_weight), (mean, cov))
@@ -426,8 +432,25 @@ _ADD_REDUCE = np.add.reduce
 
 
 def _stack(arrays: list[FloatArray]) -> FloatArray:
-    """The members' arrays stacked along a new first axis (one member: a view, no copy)."""
-    return arrays[0][None] if len(arrays) == 1 else np.array(arrays)
+    """The members' arrays stacked along a new first axis; one member: its own array (no
+    copy, no new axis: its products go through ``np.dot``, :func:`product`)."""
+    return arrays[0] if len(arrays) == 1 else np.array(arrays)
+
+
+def _members(arrays: FloatArray, one: bool) -> tuple[FloatArray] | FloatArray:
+    """Each member's array of what :func:`_stack` made (``one``: of one member, its own)."""
+    return (arrays,) if one else arrays
+
+
+def _apply(p: FloatArray, v: FloatArray) -> FloatArray:
+    """``P v`` for each member: ``p`` (..., n, m) by ``v`` (..., m) (one member: ``np.dot``,
+    :func:`~tether_companion.estimation.dynamic.imu_batch.product`)."""
+    if p.ndim == 2:
+        return _DOT(p, v)  # type: ignore[no-any-return]
+    return (p @ v[:, :, None])[:, :, 0]
+
+
+_DOT = np.dot
 
 
 def _finite_and_definite(xs: FloatArray, ps: FloatArray) -> bool:
@@ -435,4 +458,4 @@ def _finite_and_definite(xs: FloatArray, ps: FloatArray) -> bool:
     covariance passes the Cholesky test."""
     if not math.isfinite(_sum(xs) + _sum(ps)):
         return False
-    return all(dpotrf(p, lower=1, clean=0)[1] == 0 for p in ps)
+    return all(dpotrf(p, lower=1, clean=0)[1] == 0 for p in _members(ps, ps.ndim == 2))

@@ -19,7 +19,9 @@ cheaper operations:
   then gets the same finite check and Cholesky test as before (a repair is counted); a scalar
   measurement (rangefinder, winch, load cell) likewise, ``K = P h / s``;
 * the bank runs the linear algebra of these steps for all its members at once (stacked
-  arrays: :mod:`~tether_companion.estimation.dynamic.bank`), the member its scalar part
+  arrays: :mod:`~tether_companion.estimation.dynamic.bank`; one member left, on its own 2-D
+  arrays through ``np.dot``, the same numbers without ``matmul``'s gufunc machinery), the
+  member its scalar part
   (:meth:`MemberFilter.test_force_balance`: the 3x3 ``S`` and the gate;
   :meth:`MemberFilter.test_scalar`, :meth:`MemberFilter.accept_update`,
   :meth:`MemberFilter.set_predicted`); the
@@ -263,14 +265,14 @@ class MemberFilter(ExtendedKalmanFilter):
 def hold_consider(
     xs: FloatArray, ps: FloatArray, prior_xs: FloatArray, prior_ps: FloatArray, consider: slice
 ) -> None:
-    """Make optimal updates of stacked states (m, n) and covariances (m, n, n) Schmidt
-    updates, in place: the ``consider`` states' means and their own covariance block back to
-    the priors ``prior_xs``, ``prior_ps``.
+    """Make optimal updates of stacked states (m, n) and covariances (m, n, n) (or one
+    member's, (n,) and (n, n)) Schmidt updates, in place: the ``consider`` states' means and
+    their own covariance block back to the priors ``prior_xs``, ``prior_ps``.
 
     With the optimal gain ``K = [K_s; K_c]`` the Schmidt gain is ``[K_s; 0]``: the other
     states and their covariance update exactly as with ``K`` (their gain is the optimal one),
     the cross block ``P_sc`` too (``P_sc - K_s H P_c``, the same in both), and ``P_cc`` keeps
     its prior; the result is the optimal covariance plus ``K_c S K_c^T`` in the consider
     block, so it stays positive definite."""
-    xs[:, consider] = prior_xs[:, consider]
-    ps[:, consider, consider] = prior_ps[:, consider, consider]
+    xs[..., consider] = prior_xs[..., consider]
+    ps[..., consider, consider] = prior_ps[..., consider, consider]

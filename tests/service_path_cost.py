@@ -3,10 +3,13 @@ its VISION_POSITION_ESTIMATE (a measuring tool, not a test).
 
 The bench's default streams (``bench latency``: RAW_IMU, ATTITUDE and SERVO_OUTPUT_RAW at
 200 Hz, DISTANCE_SENSOR at 20 Hz, SYSTEM_TIME at 5 Hz; ``tests/hot_path_cost.py``'s
-generator) go through what the service's read callback runs: the frame parser, then
-:meth:`CompanionService._handle_guarded` per message with the service's ``send_now`` wiring
-(``publish.on_unhealthy: inflate``, as the bench, so the hovering dynamic filter publishes at
-30 Hz), into a link that only counts frames. No sockets, no event loop.
+generator) go through what the service's read callback runs: a listening ``UdpLink`` (no
+socket) takes each datagram as its readiness does, with the service's receiver and its input
+frames' ``take`` (``--generic``: without, every datagram through the frame parser and
+:meth:`CompanionService.handle_message`; a tree without ``take`` is measured so), the trust
+gate, then :meth:`CompanionService._handle_guarded` per message or frame with the service's
+``send_now`` wiring (``publish.on_unhealthy: inflate``, as the bench, so the hovering dynamic
+filter publishes at 30 Hz), into a link that only counts frames. No sockets, no event loop.
 
 Ticks are handed over ``--batch`` at a time with a sleep of ``--sleep-ms`` per tick in the
 batch before each batch (as the live service sleeps between wake-ups; 0: no sleep, warm), and
@@ -21,8 +24,8 @@ other C code's instructions are not in it: callgrind counts those), by function:
 inclusive of what it calls, with its calls per tick.
 
 Run: ``python tests/service_path_cost.py [--seconds 20] [--sleep-ms 0] [--batch 1]
-[--repeat 2] [--bytecodes 1000 [--top 40]]``; with ``PYTHONPATH=TREE`` to measure another
-tree's code (one that has no ``send_now`` is measured without it).
+[--repeat 2] [--generic] [--bytecodes 1000 [--top 40]]``; with ``PYTHONPATH=TREE`` to
+measure another tree's code (one that has no ``send_now`` is measured without it).
 """
 
 from __future__ import annotations
@@ -36,11 +39,15 @@ from types import FrameType
 
 from hot_path_cost import SOURCE, _datagrams  # type: ignore[import-not-found]
 
-from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
+from tether_companion.mavlink.endpoints import parse_endpoint
+from tether_companion.mavlink.framing import FrameEncoder, dialect
+from tether_companion.mavlink.trust import LinkTrust
+from tether_companion.mavlink.udp_link import UdpLink
 from tether_companion.service.app import CompanionService
 from tether_companion.service.config import load_service_config, load_vehicle_for
 
 _VPE = dialect.MAVLINK_MSG_ID_VISION_POSITION_ESTIMATE
+_RAW_IMU = dialect.MAVLINK_MSG_ID_RAW_IMU
 
 
 class _CountingLink:
@@ -50,6 +57,7 @@ class _CountingLink:
         self.encoder = FrameEncoder(1, 191)
         self.frames = 0
         self.estimate_sent_ns = 0
+        self.imu_start_ns = 0
 
     def send_bytes(self, frame: bytes) -> None:
         self.frames += 1
@@ -91,8 +99,35 @@ class _BytecodeCounter:
         return self._opcode
 
 
+def _receiving_link(service: CompanionService, link: _CountingLink, generic: bool) -> UdpLink:
+    """A listening UDP link without a socket, wired to the service as ``_serve`` wires it
+    (its receiver noting each RAW_IMU's start time on ``link``)."""
+    udp = UdpLink(parse_endpoint("udpin:127.0.0.1:0", "listen"), FrameEncoder(1, 191), 64)
+    udp.trust = LinkTrust(fc_ids=(1, 1))
+    udp._parser.gate = udp.trust  # noqa: SLF001 - as UdpLink builds it with a trust
+    handle = service._handle_guarded  # noqa: SLF001 - the read callback's call
+
+    def receive(items: list) -> None:
+        for item in items:
+            if item[7] == _RAW_IMU if type(item) is bytes else item.get_type() == "RAW_IMU":
+                link.imu_start_ns = time.thread_time_ns()
+            handle(link, item)
+
+    frames = getattr(service.session, "frames", None)
+    take = None if generic or frames is None else frames.take
+    if take is None:
+        udp.set_receiver(receive)
+    else:
+        udp.set_receiver(receive, take)
+    return udp
+
+
 def _one_flight(
-    seconds: float, sleep_s: float, batch: int, count: tuple[_BytecodeCounter, int] | None = None
+    seconds: float,
+    sleep_s: float,
+    batch: int,
+    count: tuple[_BytecodeCounter, int] | None = None,
+    generic: bool = False,
 ) -> tuple[list[int], list[float]]:
     """(IMU -> estimate CPU [ns] of each published tick, CPU per tick [ns] of each batch);
     with ``count`` = (counter, ticks) the bytecodes of that many ticks after the skipped
@@ -104,7 +139,7 @@ def _one_flight(
     wire = getattr(service, "_send_now_to", None)
     if wire is not None:
         wire(link)
-    parser = FrameParser()
+    udp = _receiving_link(service, link, generic)
     ticks: dict[float, list[bytes]] = {}
     for t, data in _datagrams(200.0, seconds):
         ticks.setdefault(t, []).append(data)
@@ -121,14 +156,9 @@ def _one_flight(
         start = time.thread_time_ns()
         for datagrams in chunk:
             sent = link.estimate_sent_ns
-            imu_start = 0
-            for data in datagrams:
-                for msg in parser.feed(data, SOURCE):
-                    if msg.get_type() == "RAW_IMU":
-                        imu_start = time.thread_time_ns()
-                    service._handle_guarded(link, msg)  # noqa: SLF001 - the read callback's call
+            udp._deliver([m for data in datagrams for m in udp._datagram(data, SOURCE)])  # noqa: SLF001
             if first >= skip and link.estimate_sent_ns != sent:
-                to_estimate.append(link.estimate_sent_ns - imu_start)
+                to_estimate.append(link.estimate_sent_ns - link.imu_start_ns)
         if first >= skip:
             tick_cpu.append((time.thread_time_ns() - start) / len(chunk))
     return to_estimate, tick_cpu
@@ -140,12 +170,13 @@ def main() -> None:
     parser.add_argument("--sleep-ms", type=float, default=0.0)
     parser.add_argument("--batch", type=int, default=1)
     parser.add_argument("--repeat", type=int, default=2)
+    parser.add_argument("--generic", action="store_true", help="no input frames' take")
     parser.add_argument("--bytecodes", type=int, default=0, help="count over this many ticks")
     parser.add_argument("--top", type=int, default=40)
     args = parser.parse_args()
     if args.bytecodes:
         counter = _BytecodeCounter()
-        _one_flight(args.seconds, 0.0, 1, (counter, args.bytecodes))
+        _one_flight(args.seconds, 0.0, 1, (counter, args.bytecodes), args.generic)
         sys.settrace(None)
         ticks = args.bytecodes
         print(f"{sum(counter.own.values()) / ticks:.0f} bytecodes per tick ({ticks} ticks)")
@@ -155,14 +186,17 @@ def main() -> None:
                 print(f"{n / ticks:8.1f} {counter.calls[name] / ticks:6.2f} {name}")
         return
     for _ in range(args.repeat):
-        to_estimate, tick_cpu = _one_flight(args.seconds, 1e-3 * args.sleep_ms, args.batch)
+        to_estimate, tick_cpu = _one_flight(
+            args.seconds, 1e-3 * args.sleep_ms, args.batch, generic=args.generic
+        )
         deciles = statistics.quantiles(to_estimate, n=10)
         print(
             f"IMU -> estimate CPU p50 {1e-3 * statistics.median(to_estimate):6.1f} us, "
             f"p90 {1e-3 * deciles[-1]:6.1f} us ({len(to_estimate)} published ticks); "
             f"CPU per tick {1e-3 * statistics.fmean(tick_cpu):6.1f} us = "
             f"{2e-5 * statistics.fmean(tick_cpu):5.2f} % of a core at 200 Hz "
-            f"(batch {args.batch}, sleep {args.sleep_ms:g} ms per tick)"
+            f"(batch {args.batch}, sleep {args.sleep_ms:g} ms per tick"
+            f"{', generic' if args.generic else ''})"
         )
 
 

@@ -8,7 +8,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING
 
-from tether_companion.mavlink.framing import FrameEncoder, FramingCounters, MAVLinkMessage
+from tether_companion.mavlink.framing import (
+    FrameEncoder,
+    FramingCounters,
+    MAVLinkMessage,
+    Received,
+)
 from tether_companion.mavlink.trust import LinkTrust
 
 if TYPE_CHECKING:
@@ -47,6 +52,9 @@ class LinkCounters:
 
 
 CLOSED = object()
+Delivered = Received | bytes
+"""An item of a received batch: a decoded message, or the bytes of one intact frame a
+receiver's ``take`` accepted (see :meth:`Link.set_receiver`)."""
 
 
 class Link:
@@ -80,17 +88,30 @@ class Link:
         self.trust = trust
         self._queue: asyncio.Queue[object] = asyncio.Queue(maxsize=rx_queue_size)
         self._closed = False
-        self._receiver: Callable[[list[MAVLinkMessage]], None] | None = None
+        self._receiver: Callable[[list[Delivered]], None] | None = None
+        self._take: Callable[[bytes], bool] | None = None
 
-    def set_receiver(self, receiver: Callable[[list[MAVLinkMessage]], None] | None) -> None:
-        """Hand every received batch to ``receiver(messages)`` at once, inside the transport's
+    def set_receiver(
+        self,
+        receiver: Callable[[list[Delivered]], None] | None,
+        take: Callable[[bytes], bool] | None = None,
+    ) -> None:
+        """Hand every received batch to ``receiver(items)`` at once, inside the transport's
         own callback, instead of queueing it for :meth:`recv` (None: queue again).
 
         No queue and no task switch per batch: the lowest latency and CPU, for a consumer
         that never blocks (the service). Messages queued before stay for :meth:`recv`, which
         still raises :class:`LinkClosed` once the link closes.
+
+        ``take(datagram) -> bool`` (datagram transports; others ignore it) says which
+        datagrams are exactly one intact frame the receiver decodes itself: such a datagram
+        is offered to the trust gate as any frame is (refused: counted ``untrusted``, not
+        delivered), counted as the parser counts a frame, and delivered as its ``bytes`` in
+        the batch, in arrival order among the messages. ``take`` must only check the bytes
+        (the gate has not seen them yet).
         """
         self._receiver = receiver
+        self._take = take if receiver is not None else None
 
     # -- receiving -------------------------------------------------------------------------
 
@@ -128,7 +149,7 @@ class Link:
         except LinkClosed:
             raise StopAsyncIteration from None
 
-    def _deliver(self, messages: list[MAVLinkMessage]) -> None:
+    def _deliver(self, messages: list[Delivered]) -> None:
         if self._closed or not messages:
             return
         if self._receiver is not None:

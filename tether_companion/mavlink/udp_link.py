@@ -9,8 +9,8 @@ import socket
 from collections import OrderedDict
 from typing import TYPE_CHECKING
 
-from tether_companion.mavlink.framing import FrameEncoder, FrameParser, MAVLinkMessage
-from tether_companion.mavlink.link import Link
+from tether_companion.mavlink.framing import FrameEncoder, FrameParser
+from tether_companion.mavlink.link import Delivered, Link
 from tether_companion.mavlink.trust import LinkTrust
 
 if TYPE_CHECKING:
@@ -88,7 +88,7 @@ class UdpLink(Link):
         sock = self._sock
         if sock is None:
             return
-        messages: list[MAVLinkMessage] = []
+        messages: list[Delivered] = []
         for _ in range(MAX_DATAGRAMS_PER_READ):
             try:
                 data, addr = sock.recvfrom(UDP_MAX_DATAGRAM)
@@ -100,12 +100,25 @@ class UdpLink(Link):
             messages += self._datagram(data, addr)
         self._deliver(messages)
 
-    def _datagram(self, data: bytes, addr: tuple[str, int]) -> list[MAVLinkMessage]:
-        """The messages of one datagram (its sender becomes a peer of a listening link)."""
-        parser = self._parser
-        messages = parser.feed(data, addr)
-        if parser.pending_bytes:
-            messages += parser.end_datagram()
+    def _datagram(self, data: bytes, addr: tuple[str, int]) -> list[Delivered]:
+        """The messages of one datagram (its sender becomes a peer of a listening link); a
+        datagram the receiver's ``take`` accepts is gated and counted here as the parser
+        would (:meth:`FrameParser.feed` of one whole frame) and delivered as its bytes."""
+        take = self._take
+        messages: list[Delivered]
+        if take is not None and take(data):  # the parser holds nothing between datagrams
+            framing = self.framing
+            framing.bytes_in += len(data)
+            if self.trust is not None and not self.trust.admit(data, addr):
+                framing.untrusted += 1
+                return []
+            framing.frames_ok += 1
+            messages = [data]
+        else:
+            parser = self._parser
+            messages = parser.feed(data, addr)
+            if parser.pending_bytes:
+                messages += parser.end_datagram()
         if messages and self.endpoint.role == "listen":
             if addr in self._peers:
                 self._peers.move_to_end(addr)

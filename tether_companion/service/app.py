@@ -33,7 +33,7 @@ from collections.abc import Awaitable, Callable
 from tether_companion.config import ConfigError
 from tether_companion.mavlink.endpoints import open_link, parse_endpoint
 from tether_companion.mavlink.framing import MAVLinkMessage, dialect
-from tether_companion.mavlink.link import Link
+from tether_companion.mavlink.link import Delivered, Link
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.service.clock import FcClock
 from tether_companion.service.config import ServiceConfig
@@ -44,7 +44,7 @@ from tether_companion.service.origin import OriginRequests
 from tether_companion.service.publish import Publication
 from tether_companion.service.recording_thread import RecorderThread, open_recorder
 from tether_companion.service.security import LinkSecurity
-from tether_companion.service.session import EstimationSession
+from tether_companion.service.session import EstimationSession, Step
 from tether_companion.service.state import ServiceState
 from tether_companion.service.streams import INPUT_SILENT_S, StreamRequests
 from tether_companion.service.systemd import SystemdNotifier
@@ -194,15 +194,17 @@ class CompanionService:
         housekeeping = asyncio.create_task(self._housekeeping(link), name="housekeeping")
         fatal = asyncio.get_running_loop().create_future()
 
-        def receive(messages: list[MAVLinkMessage]) -> None:
-            for msg in messages:
-                self._handle_guarded(link, msg)
+        def receive(items: list[Delivered]) -> None:
+            for item in items:
+                self._handle_guarded(link, item)
             if self._fatal is not None and not fatal.done():  # vehicle: from_autopilot
                 fatal.set_result(None)
 
         getter: asyncio.Future[MAVLinkMessage] | None = None
         try:
-            link.set_receiver(receive)
+            # the input frames' test reads the configuration only: a session made later (the
+            # vehicle read from the flight controller) takes the same frames
+            link.set_receiver(receive, self.session.frames.take)
             while True:  # what was queued before the receiver was set, then the closing
                 getter = asyncio.ensure_future(link.recv())
                 await asyncio.wait([getter, fatal], return_when=asyncio.FIRST_COMPLETED)
@@ -229,13 +231,17 @@ class CompanionService:
 
         self.session.send_now = send_now
 
-    def _handle_guarded(self, link: Link, msg: MAVLinkMessage) -> None:
-        """One message; an unexpected error is counted and reported, never fatal in flight."""
+    def _handle_guarded(self, link: Link, item: Delivered) -> None:
+        """One message, or one input frame the link delivered as bytes (:meth:`handle_frame`);
+        an unexpected error is counted and reported, never fatal in flight."""
         try:
-            self.handle_message(link, msg, self._monotonic_s())
+            if type(item) is bytes:
+                self.handle_frame(link, item, self._monotonic_s())
+            else:
+                self.handle_message(link, item, self._monotonic_s())  # type: ignore[arg-type]
         except Exception as exc:  # noqa: BLE001 - a bug must not take the position away
             self.state.handler_errors += 1
-            self.state.last_error = f"error handling {msg.get_type()}: {exc!r}"
+            self.state.last_error = f"error handling {_kind_of(item)}: {exc!r}"
             if self.state.handler_errors == 1:
                 traceback.print_exc()
 
@@ -259,11 +265,7 @@ class CompanionService:
         session = self.session
         kind = None
         if session.ingest.from_flight_controller(msg):
-            self._fc_heard_s = now_s
-            if not self.state.link_up:
-                self.state.link_up = True
-                ids = f"{self.config.link.fc_system_id}/{self.config.link.fc_component_id}"
-                self.state.link_text = f"flight controller {ids} on {self._endpoint}"
+            self._fc_heard(now_s)
             kind = msg.get_type()
             if kind in ("HEARTBEAT", "TIMESYNC", "COMMAND_ACK", "GPS_GLOBAL_ORIGIN"):
                 self._handle_control(link, msg, kind, now_s)
@@ -274,7 +276,34 @@ class CompanionService:
                 return
         if self.vehicle_fetch is not None and not self._vehicle_read(link, now_s):
             return
-        step = session.on_message(msg, now_s, kind)
+        self._after_step(link, session, session.on_message(msg, now_s, kind), now_s)
+
+    def handle_frame(self, link: Link, frame: bytes, now_s: float) -> None:
+        """:meth:`handle_message` for one intact, admitted frame of the flight controller's
+        input streams that the session's
+        :meth:`FrameIngest.take <tether_companion.service.ingest_frames.FrameIngest.take>`
+        accepted (the link delivers such a datagram as its bytes): the same recording, counts,
+        samples and replies as for the message decoded from it, without the message."""
+        if self.recorder is not None:
+            self.recorder.write(frame)
+        self.state.received += 1
+        session = self.session
+        self._fc_heard(now_s)  # take() checked the sender ids, the gate the address
+        if self.vehicle_fetch is not None and not self._vehicle_read(link, now_s):
+            return
+        self._after_step(link, session, session.on_frame(frame, now_s), now_s)
+
+    def _fc_heard(self, now_s: float) -> None:
+        """A message from the flight controller at local time ``now_s`` [s]."""
+        self._fc_heard_s = now_s
+        if not self.state.link_up:
+            self.state.link_up = True
+            ids = f"{self.config.link.fc_system_id}/{self.config.link.fc_component_id}"
+            self.state.link_text = f"flight controller {ids} on {self._endpoint}"
+
+    def _after_step(self, link: Link, session: EstimationSession, step: Step, now_s: float) -> None:
+        """What follows one message's step: a reboot it confirmed, the clock model, the
+        messages to send, the publication record."""
         if session.ingest.rebooted:
             self._on_fc_reboot()
         latest = session.ingest.clock.latest_fc_s
@@ -480,3 +509,11 @@ class CompanionService:
             f"{self.state.link_text}; IMU {self.state.rates_hz[IMU]:.0f} Hz; "
             f"published {self.state.rates_hz['published']:.1f} Hz; health {pub.health}"
         )
+
+
+def _kind_of(item: Delivered) -> str:
+    """The message name of a delivered message or input frame (MAVLink 2)."""
+    if type(item) is bytes:
+        msg_id = item[7] | (item[8] << 8) | (item[9] << 16)
+        return dialect.mavlink_map[msg_id].msgname
+    return item.get_type()  # type: ignore[union-attr]

@@ -14,6 +14,11 @@ counts it under its own reasons. ``.tlog`` replay runs on it (a record is one fr
 tests check it gives the generic path's samples bit for bit and the same counts, frame by
 frame, on recorded and fuzzed frames.
 
+The live service's UDP link runs on it too, in two halves: the link asks :meth:`FrameIngest.take`
+whether a datagram is such a frame, puts it through its trust gate (signatures, the flight
+controller's pinned address) and counts it as its parser would, in arrival order; the service
+then turns each admitted frame into samples with :meth:`FrameIngest.samples`.
+
 Pure and synchronous.
 """
 
@@ -54,10 +59,13 @@ class FrameIngest:
         The session's :class:`~tether_companion.service.ingest.Ingest` (its flavour, flight
         controller ids, motor count, checks and counters).
     parser
-        The frame parser the caller feeds every other frame to: an intact frame taken here is
-        counted in its :class:`~tether_companion.mavlink.framing.FramingCounters` as it would
-        count it (``bytes_in``, ``frames_ok``). It must have no gate (signatures and sender
-        addresses are the gate's to check).
+        The frame parser the caller feeds every other frame to, for :meth:`receive`: an intact
+        frame taken there is counted in its
+        :class:`~tether_companion.mavlink.framing.FramingCounters` as it would count it
+        (``bytes_in``, ``frames_ok``). It must have no gate (signatures and sender addresses
+        are the gate's to check). None: only :meth:`take` and :meth:`samples` are used (the
+        caller gates and counts them: a live link, see
+        :meth:`~tether_companion.mavlink.link.Link.set_receiver`).
 
     Raises
     ------
@@ -65,8 +73,8 @@ class FrameIngest:
         For a parser with a gate.
     """
 
-    def __init__(self, ingest: Ingest, parser: FrameParser) -> None:
-        if parser.gate is not None:
+    def __init__(self, ingest: Ingest, parser: FrameParser | None = None) -> None:
+        if parser is not None and parser.gate is not None:
             raise ValueError("FrameIngest bypasses the parser: not for a gated link")
         self._ingest = ingest
         self._parser = parser
@@ -91,23 +99,41 @@ class FrameIngest:
         ``frame`` is exactly one intact unsigned MAVLink 2 frame of an input stream from the
         flight controller; ``None`` (nothing counted or changed) for anything else: feed it
         to the parser then."""
-        n = len(frame)
-        if n <= _HEADER_V2 or frame[0] != _STX_V2 or frame[2] or self._parser.pending_bytes:
+        parser = self._parser
+        if parser is None:
+            raise ValueError("FrameIngest.receive needs the parser it falls back to")
+        if parser.pending_bytes or not self.take(frame):
             return None
+        counters = parser.counters
+        counters.bytes_in += len(frame)
+        counters.frames_ok += 1
+        return self.samples(frame, local_s)
+
+    def take(self, frame: bytes | bytearray) -> bool:
+        """Whether ``frame`` (a whole datagram or record, starting a frame) is exactly one
+        intact unsigned MAVLink 2 frame of an input stream from the flight controller: length
+        and ``crc_extra`` checksum checked, nothing counted or changed. Only the configuration
+        is read (the flavour's messages, the flight controller's ids)."""
+        n = len(frame)
+        if n <= _HEADER_V2 or frame[0] != _STX_V2 or frame[2]:
+            return False
         entry = self._table.get(frame[7] | (frame[8] << 8) | (frame[9] << 16))
         if entry is None or (frame[5], frame[6]) != self._sender:
-            return None
-        layout, crc_extra, kind, convert = entry
+            return False
         length = frame[1]
         end = n - _CRC_LEN
-        if end != _HEADER_V2 + length or length > layout.size:
-            return None
-        if mcrf4xx(crc_extra, mcrf4xx(frame[1:end], 0xFFFF)) != frame[end] | (frame[end + 1] << 8):
-            return None
-        counters = self._parser.counters
-        counters.bytes_in += n
-        counters.frames_ok += 1
-        values = layout.flat_of(frame, _HEADER_V2, end)
+        if end != _HEADER_V2 + length or length > entry[0].size:
+            return False
+        return mcrf4xx(entry[1], mcrf4xx(frame[1:end], 0xFFFF)) == frame[end] | (
+            frame[end + 1] << 8
+        )
+
+    def samples(self, frame: bytes | bytearray, local_s: float | None) -> list[Sample]:
+        """The samples a frame :meth:`take` accepted releases (received at local time
+        ``local_s`` [s], or None), counted by the ingest as ``Ingest.receive`` counts the
+        message the parser would decode from it; the framing counts are the caller's."""
+        layout, _, kind, convert = self._table[frame[7] | (frame[8] << 8) | (frame[9] << 16)]
+        values = layout.flat_of(frame, _HEADER_V2, len(frame) - _CRC_LEN)
         return self._ingest.receive_input(kind, convert(values), local_s)
 
     # ------------------------------------------------------------------ per message

@@ -72,6 +72,7 @@ from tether_companion.service.ingest import (
     Sample,
     TensionReading,
 )
+from tether_companion.service.ingest_frames import FrameIngest
 from tether_companion.service.publish import Publication, Publisher
 from tether_companion.service.security import command_refusal
 from tether_companion.service.winch import WinchFeed, WinchReading
@@ -126,6 +127,9 @@ class EstimationSession:
             config.winch,
             config.cable_angle,
         )
+        self.frames = FrameIngest(self.ingest)
+        """The flight controller's input frames straight to samples (a live UDP link's
+        admitted frames: :meth:`on_frame`)."""
         self.catenary_source = config.position.source == CATENARY
         """The published position is the catenary estimator's (else the EKF's)."""
         self.dynamic = config.estimator.kind == DYNAMIC
@@ -289,6 +293,12 @@ class EstimationSession:
         if kind in BATTERY_MESSAGES and self.ingest.from_flight_controller(msg):
             self.on_battery_voltage_v(battery_voltage_v(msg))
         return self.on_received(self.ingest.receive(msg, local_s, kind))
+
+    def on_frame(self, frame: bytes, local_s: float | None = None) -> Step:
+        """Process one intact, admitted frame of the flight controller's input streams that
+        :meth:`FrameIngest.take <tether_companion.service.ingest_frames.FrameIngest.take>`
+        accepted, as :meth:`on_message` processes the message decoded from it."""
+        return self.on_received(self.frames.samples(frame, local_s))
 
     def on_received(self, samples: list[Sample]) -> Step:
         """Process the samples the ingest just released for one message (its

@@ -1,22 +1,26 @@
 """Optional winch paid-out length: the cable's arc length as the encoder reads it, with its
 zero offset and scale error (states ``winch_offset``, ``winch_scale``; generated
 ``winch_length_*``: the catenary's, ``|p|`` for a weightless cable). While the filter's
-tension is below ``slack_tension_n`` the cable may be slack and its length says only that the
-drone is no farther from the anchor than that: the reading is skipped, unless the filter has
-the drone beyond it, when the distance ``|p|`` itself (as read) is fused to the length (the
-one statement that holds for any cable; the catenary's arc, longer than the chord at a deep
-sag, is not: fused there it published wrong positions on the sagging circle). The reading was
+tension is below ``slack_tension_n``, or a cable with weight is surely longer than its span
+plus height (:func:`surely_slack_by_length`: slack whatever the tension), the cable may be
+slack and its length says only that the drone is no farther from the anchor than that: the
+reading is skipped, unless the filter has the drone beyond it, when the distance ``|p|``
+itself (as read) is fused to the length (the one statement that holds for any cable; the
+catenary's arc, longer than the chord at a deep sag, is not: fused there it published wrong
+positions on the sagging circle). The reading was
 taken ``latency_s`` before its time stamp (and the stamp may be older than the filter): it is
 fused as the length at the drone's position then
 (:func:`~tether_companion.estimation.dynamic.aiding.at_reading_time`)."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
-from tether_companion.estimation.dynamic.aid.slack import SLACK
+from tether_companion.estimation.dynamic.aid.slack import SLACK, SURE_SIGMAS
 from tether_companion.estimation.dynamic.aiding import AidStatus, at_reading_time, fuse
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.models import ModelConstants, evaluate
@@ -28,7 +32,8 @@ NAME = "winch"
 
 class WinchAid:
     """Fuses a paid-out length [m] with noise ``noise_std_m`` [m] while the chord tension is
-    above ``slack_tension_n`` [N], and below it as a bound on the distance the filter's drone
+    above ``slack_tension_n`` [N] and a cable with weight is not surely slack by its length,
+    otherwise as a bound on the distance the filter's drone
     exceeds; each reading taken ``latency_s`` [s] before its time stamp."""
 
     def __init__(self, noise_std_m: float, slack_tension_n: float, latency_s: float = 0.0) -> None:
@@ -50,7 +55,9 @@ class WinchAid:
         best = bank.best
         z = np.array((length_m,))
         latency_s = self._latency_s + age_s
-        if best.x[state.TENSION] < self._slack_n:
+        if best.x[state.TENSION] < self._slack_n or surely_slack_by_length(
+            best.x, best.P, constants.weight_n_per_m, length_m, float(self._r[0, 0])
+        ):
             chord = at_reading_time(_chord, latency_s)
             if not float(chord(best.x)[0][0]) > length_m:
                 self.status.skip(SLACK)
@@ -64,6 +71,42 @@ class WinchAid:
 
         delayed = at_reading_time(measure, latency_s)
         return fuse(bank, NAME, self.status, z, delayed, self._r, time_s)
+
+
+def surely_slack_by_length(
+    x: FloatArray, p: FloatArray, weight_n_per_m: float, length_m: float, noise_m2: float
+) -> bool:
+    """Whether a cable of weight ``weight_n_per_m`` [N/m] > 0 with the paid-out ``length_m``
+    [m] read (noise variance ``noise_m2`` [m^2]) is surely slack at the state ``x`` with
+    covariance ``p``: the reading beyond the drone's span plus height ``a + b`` (as the encoder
+    would read that length: offset and scale) by more than :data:`~.slack.SURE_SIGMAS`
+    standard deviations. False for a weightless cable or a drone right above the anchor.
+
+    A cable with weight from a winch on the anchor's level pulls (``H > 0``) only where it is
+    shorter than ``a + b``: as ``H -> 0`` it lies on the ground to below the drone and hangs
+    straight up from there (length ``a + b``); a longer one lies there with its excess, slack,
+    at any span. The resting cable's model length ``x_t + sqrt(b^2 + 2 b c)`` (``c = H / w``)
+    is below ``a + b`` at every tension and reaches it only through the model's linear
+    continuation to a pushing cable (``T_ch < 0``, models.py), with a slope in the tension
+    that grows without bound near zero (-14 m/N at 0.1 N on the light 7.5 m cable). Fused
+    there (a chord tension the load cell's noise had lifted over ``slack_tension_n``) one
+    length moved the drone of a truly slack cable 1.4 m out to ``a + b = L`` and its chord
+    tension to -0.4 N with a 0.11 N standard deviation (the fixed-length sagging circle,
+    tuning seed 1, 21.9 s; docs/estimation.md, sag14)."""
+    span = math.hypot(float(x[0]), float(x[1]))
+    if weight_n_per_m <= 0.0 or span <= 0.0:
+        return False
+    gain = 1.0 + float(x[state.WINCH_SCALE])
+    hanging = span - float(x[2])
+    jac = np.zeros(state.N_STATES)
+    jac[0] = gain * float(x[0]) / span
+    jac[1] = gain * float(x[1]) / span
+    jac[2] = -gain
+    jac[state.WINCH_OFFSET] = 1.0
+    jac[state.WINCH_SCALE] = hanging
+    variance = float(jac @ p @ jac) + noise_m2
+    excess = length_m - float(x[state.WINCH_OFFSET]) - gain * hanging
+    return excess > SURE_SIGMAS * math.sqrt(max(variance, 0.0))
 
 
 def _chord(xs: FloatArray) -> tuple[FloatArray, FloatArray]:

@@ -1,0 +1,124 @@
+"""A cable with weight that may be slack on the ground (sag14): what its winch length and its
+cable angle can and cannot say.
+
+* A winch on the anchor's level with a cable longer than the drone's span plus height ``a + b``
+  is slack whatever the filter's tension: the resting cable's length reaches ``a + b`` only at
+  zero tension, so the length equality there is no measurement of the state (aid/winch.py
+  ``surely_slack_by_length``).
+* A heavy cable's reading that leaves the anchor flat says only that the cable rests: its
+  elevation (a hinge ``max(0, e(x))`` at the touchdown kink) is not fused, its azimuth is
+  (aid/cable_angle.py ``leaves_flat``).
+
+Both were measured on the fixed-length sagging circle (tuning seed 1): one length fused on a
+slack cable moved the drone 1.4 m, one flat angle linearised on the free side of the kink cut
+the position's standard deviation from 0.46 to 0.03 m with the drone 1.6 m off
+(docs/estimation.md, sag14)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from tether_companion.constants import GRAVITY_MPS2
+from tether_companion.estimation.config import EstimatorConfig
+from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.aid.slack import SLACK
+from tether_companion.estimation.dynamic.aid.winch import surely_slack_by_length
+from tether_companion.estimation.dynamic.config import DynamicFilterConfig
+from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
+from tether_companion.estimation.dynamic.offline import run_dynamic
+from tether_companion.sim.scenario import load_scenario
+
+LIGHT_N_PER_M = 0.0167 * GRAVITY_MPS2
+"""The light sagging cable's weight per length [N/m]."""
+
+
+def _on_a_light_cable(
+    position: tuple[float, float, float], tension_n: float
+) -> tuple[DynamicTetherEstimator, float]:
+    """An estimator after 3 s of the paper circle, told of the light cable, every member at
+    ``position`` [m] with chord tension ``tension_n`` [N] and 0.5 m of horizontal standard
+    deviation (uncorrelated), the ground station's latencies 0; and the time [s]."""
+    scenario = dataclasses.replace(load_scenario("paper-circle"), duration_s=3.0, seed=2)
+    dynamic = dataclasses.replace(
+        DynamicFilterConfig(), winch_latency_s=0.0, cable_angle_latency_s=0.0
+    )
+    run = run_dynamic(scenario, EstimatorConfig(), dynamic)
+    est = run.estimator
+    assert est.initialised
+    est.constants.weight_n_per_m = LIGHT_N_PER_M
+    for member in est.bank.filters:
+        x, p = member.x.copy(), member.P.copy()
+        x[state.POSITION] = position
+        x[state.TENSION] = tension_n
+        p[state.POSITION, :] = 0.0
+        p[:, state.POSITION] = 0.0
+        p[state.TENSION, :] = 0.0
+        p[:, state.TENSION] = 0.0
+        p[0, 0] = p[1, 1] = 0.25
+        p[2, 2] = 0.01
+        p[state.TENSION, state.TENSION] = 0.1**2
+        member.x, member.P = x, p
+    return est, float(run.time_s[-1])
+
+
+def test_a_cable_longer_than_span_plus_height_is_slack_at_any_tension() -> None:
+    """Chord tension 0.4 +- 0.1 N (above the 0.2 N slack threshold), drone 2 m out and 3 m up,
+    7.5 m paid out: 2.5 m more than a resting cable can take taut. The length is skipped as
+    slack (main tested it against the resting model: gated here, 3.8 m off at a 0.1 N spread;
+    on the circle, where the tension's spread made that innovation look small, fused); a
+    length 0.5 m short of ``a + b`` is fused."""
+    position = (2.0, 0.0, -3.0)
+    est, t = _on_a_light_cable(position, 0.4)
+    status = est.ground_station.winch.status
+    est.set_paid_out_length_m(7.5, t + 0.001)
+    assert status.skipped_by_reason.get(SLACK) == 1
+    assert status.fused == 0
+    np.testing.assert_allclose(est.bank.best.x[state.POSITION], position, atol=1e-9)
+    est.set_paid_out_length_m(4.5, t + 0.002)
+    assert status.fused == 1
+
+
+@pytest.mark.parametrize(
+    ("span_m", "length_m", "weight", "slack"),
+    [
+        (2.0, 7.5, LIGHT_N_PER_M, True),  # 2.5 m beyond a + b = 5 m
+        (2.0, 5.05, LIGHT_N_PER_M, False),  # within 3 sigma of a + b (0.05 m noise)
+        (5.0, 7.5, LIGHT_N_PER_M, False),  # a + b = 8 m: may pull
+        (2.0, 7.5, 0.0, False),  # a weightless cable: the tension's rule alone
+        (0.0, 7.5, LIGHT_N_PER_M, False),  # right above the anchor: no span to judge by
+    ],
+)
+def test_surely_slack_by_length(span_m: float, length_m: float, weight: float, slack: bool) -> None:
+    """The drone ``span_m`` out and 3 m up, known to 1 mm, the encoder's offset and scale 0,
+    its noise 0.05 m."""
+    x = np.zeros(state.N_STATES)
+    x[0:3] = (span_m * math.cos(0.4), span_m * math.sin(0.4), -3.0)
+    p = np.eye(state.N_STATES) * 1e-6
+    assert surely_slack_by_length(x, p, weight, length_m, 0.05**2) is slack
+
+
+def test_a_heavy_cables_flat_reading_fuses_its_azimuth_not_its_elevation() -> None:
+    """Drone 3 m out and 3 m up at 1 N: the free catenary leaves the anchor lifted; a reading
+    that leaves it flat (0 rad, within 3 sigma of the 0.01 rad noise) at the drone's azimuth:
+    fused, the position unmoved and its variance kept (main fused the elevation through the
+    free curve's slope: the drone moved 1.8 m out). An azimuth 0.05 rad off still moves it
+    across."""
+    position = (3.0, 0.0, -3.0)
+    est, t = _on_a_light_cable(position, 1.0)
+    (elevation, _), _ = est.ground_station.cable_angle.evaluate(
+        est.constants, est.bank.best.x.copy()
+    )
+    assert elevation > 0.1  # the model's cable leaves lifted
+    before = est.bank.best.P.copy()
+    est.on_cable_angle(0.0, 0.0, t + 0.001, 0.01)
+    status = est.ground_station.cable_angle.status
+    assert status.fused == 1
+    np.testing.assert_allclose(est.bank.best.x[state.POSITION], position, atol=0.002)
+    assert est.bank.best.P[0, 0] == pytest.approx(before[0, 0], rel=1e-3)
+    est.on_cable_angle(0.0, 0.05, t + 0.002, 0.01)
+    assert status.fused == 2
+    assert est.bank.best.x[1] > 0.03  # half of 0.15 m: the first reading set it to 0.03 m

@@ -26,6 +26,16 @@ ground-station cable angle, every Jacobian from the filter's own generated code
 straight, catenary or grounded variant the true state calls for). Units SI, NED from the
 anchor, FRD body. The noise is mapped from the simulated error sources in :mod:`.crlb_noise`.
 
+Nuisance states (:mod:`.crlb_nuisance`): the ground station's calibration errors
+(:class:`CalibrationPrior`), and since crlb14 (:class:`HeadingError`, :class:`TerrainNoise`)
+errors of the simulated flight the filter's model has no state for, whose leaving out made the
+bound claim more than the data can tell: the flight controller's heading error, a
+first-order Gauss-Markov angle added to the yaw the filter is given (the force balance's and
+the INS's horizontal directions turn with it, so it limits what the flight tells of the cable
+angle's azimuth zero); and the ground's undulation under the rangefinder, correlated over
+``correlation_m`` along the drone's path (a first-order Gauss-Markov process in the distance
+flown: constant under a hovering drone, where taken as white it was averaged away).
+
 Timing: the prediction steps every IMU tick; the information of every sample (rangefinder at
 20 Hz, winch every tick and the cable angle at its reports while the true chord tension is
 positive, force balance at the fusion ticks) is added at the
@@ -36,12 +46,25 @@ Jacobian at its own tick's truth.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import generated, state
+from tether_companion.estimation.dynamic.crlb_nuisance import (
+    AZIMUTH_BIAS,
+    ELEVATION_BIAS,
+    OFFSET,
+    SCALE,
+    CalibrationPrior,
+    HeadingError,
+    TerrainNoise,
+    gauss_markov_step,
+    yaw_column_of_model,
+    yaw_column_of_specific_force,
+)
 from tether_companion.estimation.dynamic.models import UNDEFINED, Generated, ModelConstants
 from tether_companion.frames import rotation_ned_to_body_rows
 
@@ -126,49 +149,6 @@ class TrueTrack:
 
 
 @dataclass(frozen=True)
-class CalibrationPrior:
-    """The ground station's per-flight calibration errors, unknown constants the bound
-    estimates beside the state (nuisance parameters with a Gaussian prior; the bound of the
-    state is then the marginal of the augmented bound: a constant error that the data cannot
-    separate from the position stays in it). The winch reports ``offset + (1 + scale) L``, the
-    angle sensor ``(elevation + elevation bias, azimuth + azimuth bias)``.
-
-    Attributes
-    ----------
-    winch_offset_std_m
-        The encoder's zero offset [m].
-    winch_scale_std
-        The encoder's scale error [1].
-    elevation_bias_std_rad, azimuth_bias_std_rad
-        The angle sensor's zero errors [rad].
-
-    A zero standard deviation is an error known to be zero: it is left out of the augmented
-    state.
-    """
-
-    winch_offset_std_m: float
-    winch_scale_std: float
-    elevation_bias_std_rad: float
-    azimuth_bias_std_rad: float
-
-    def std(self) -> FloatArray:
-        """The prior standard deviations, indexed by :data:`OFFSET`, :data:`SCALE`,
-        :data:`ELEVATION_BIAS`, :data:`AZIMUTH_BIAS`."""
-        return np.array(
-            [
-                self.winch_offset_std_m,
-                self.winch_scale_std,
-                self.elevation_bias_std_rad,
-                self.azimuth_bias_std_rad,
-            ]
-        )
-
-
-OFFSET, SCALE, ELEVATION_BIAS, AZIMUTH_BIAS = range(4)
-"""Indices of the calibration errors in :meth:`CalibrationPrior.std`."""
-
-
-@dataclass(frozen=True)
 class BoundNoise:
     """What the bound assumes about the noise (SI units).
 
@@ -181,7 +161,8 @@ class BoundNoise:
     force_balance_var_mps2
         Variance of one fused force-balance sample, body x, y, z [(m/s^2)^2].
     range_var_m2
-        Variance of one tilt-corrected height [m^2].
+        Variance of one tilt-corrected height [m^2] (the sensor's white noise; with
+        ``terrain`` the ground's undulation is that state, else it is counted here as white).
     winch_var_m2
         Variance of one paid-out length [m^2]; ``None``: not measured.
     cable_angle_var_rad2
@@ -190,6 +171,11 @@ class BoundNoise:
     calibration
         The ground station's calibration errors estimated beside the state; ``None``: the
         winch and the angle sensor have none.
+    heading
+        The flight controller's heading error, estimated beside the state; ``None``: none.
+    terrain
+        The ground's undulation under the rangefinder as a state of the height; ``None``:
+        none (or counted as white in ``range_var_m2``).
     """
 
     process_density: FloatArray
@@ -199,6 +185,8 @@ class BoundNoise:
     winch_var_m2: float | None = None
     cable_angle_var_rad2: float | None = None
     calibration: CalibrationPrior | None = None
+    heading: HeadingError | None = None
+    terrain: TerrainNoise | None = None
 
 
 @dataclass(frozen=True)
@@ -255,11 +243,15 @@ class ForceBalanceAtTruth:
         True specific force minus the model's value at the true state, FRD body, shape (M, 3)
         [m/s^2]: what the model leaves out (quadratic body drag, vertical gusts, the cable's
         drag, rotor-drag model error), without the sensor's noise.
+    yaw_columns
+        ``d h / d yaw`` of each sample (:func:`yaw_column_of_model`), shape (M, 3)
+        [m/s^2/rad]: the heading error's column.
     """
 
     ticks: NDArray[np.int64]
     jacobians: FloatArray
     residuals_mps2: FloatArray
+    yaw_columns: FloatArray
 
 
 def force_balance_at_truth(
@@ -270,7 +262,7 @@ def force_balance_at_truth(
     the anchor) and where the model is undefined."""
     model = constants.models.accel
     c = constants.values()
-    ticks, jacobians, residuals = [], [], []
+    ticks, jacobians, residuals, yaw_columns = [], [], [], []
     step = gating.ticks_per_fusion
     for k in range(step - 1, len(track.time_s), step):
         x = track.state_at(k)
@@ -285,12 +277,15 @@ def force_balance_at_truth(
         if not (math.isfinite(sum(jac)) and math.isfinite(sum(value))):
             continue
         ticks.append(k)
-        jacobians.append(jac)
+        jacobian = np.reshape(np.array(jac, dtype=float), (3, state.N_STATES))
+        jacobians.append(jacobian[:, :_N])
+        yaw_columns.append(yaw_column_of_model(jacobian, x))
         residuals.append(track.specific_force_body_mps2[k] - np.array(value))
     return ForceBalanceAtTruth(
         np.array(ticks, dtype=np.int64),
-        np.reshape(np.array(jacobians, dtype=float), (len(ticks), 3, state.N_STATES))[:, :, :_N],
+        np.reshape(np.array(jacobians, dtype=float), (len(ticks), 3, _N)),
         np.reshape(np.array(residuals, dtype=float), (len(ticks), 3)),
+        np.reshape(np.array(yaw_columns, dtype=float), (len(ticks), 3)),
     )
 
 
@@ -300,19 +295,26 @@ def posterior_bound(
     noise: BoundNoise,
     gating: Gating,
     force_balance: ForceBalanceAtTruth | None = None,
+    *,
+    held: Mapping[int, int | None] | None = None,
+    start_tick: int = 0,
 ) -> FloatArray:
     """Diagonal of the bound ``J_k^-1`` at every tick, shape (N, 13), in the state's units
-    squared (position [m^2] first). The prior ``diag(prior_std^2)`` holds before the first
-    tick. ``force_balance``: the samples of :func:`force_balance_at_truth` when already made.
-    With ``noise.calibration`` the recursion runs on the state and the four calibration errors
-    (constants: identity transition, no process noise) and returns the state's part."""
+    squared (position [m^2] first). The prior ``diag(prior_std^2)`` holds before
+    ``start_tick`` (the rows before it are ``nan``). ``force_balance``: the samples of
+    :func:`force_balance_at_truth` when already made. With ``noise.calibration`` the recursion
+    runs on the state and the four calibration errors (constants: identity transition, no
+    process noise), with ``noise.heading`` and ``noise.terrain`` on their Gauss-Markov states
+    too, and returns the state's part.
+
+    ``held``: calibration errors (:data:`OFFSET`...) an estimator holds as consider (Schmidt)
+    states, each to the tick from which it learns them (``None``: never): then this is not a
+    bound but the covariance of the best estimator that does not correct them meanwhile (the
+    optimal gain with their rows zeroed, :func:`consider_step`), what not learning them costs
+    (the dynamic filter holds the azimuth zero for the whole flight, the others until it has
+    settled: ``calibration_release.py``)."""
     if force_balance is None:
         force_balance = force_balance_at_truth(track, constants, gating)
-    accel_weight = 1.0 / np.asarray(noise.force_balance_var_mps2, dtype=float)
-    accel_information = {
-        int(k): jac.T @ (accel_weight[:, None] * jac)
-        for k, jac in zip(force_balance.ticks, force_balance.jacobians, strict=True)
-    }
     calibration = noise.calibration
     prior_std = noise.prior_std
     density = noise.process_density
@@ -324,20 +326,43 @@ def posterior_bound(
         column = {error: _N + j for j, error in enumerate(unknown)}
         prior_std = np.concatenate([prior_std, stds[unknown]])
         density = np.concatenate([density, np.zeros(len(unknown))])
+    heading, terrain = noise.heading, noise.terrain
+    heading_column = terrain_column = None
+    if heading is not None and heading.std_rad > 0.0:
+        heading_column = len(prior_std)
+        prior_std = np.append(prior_std, heading.std_rad)
+        density = np.append(density, 0.0)
+    if terrain is not None and terrain.std_m > 0.0:
+        terrain_column = len(prior_std)
+        prior_std = np.append(prior_std, terrain.std_m)
+        density = np.append(density, 0.0)
+    held_until = [
+        (column[error], until) for error, until in (held or {}).items() if error in column
+    ]
     winch_columns = ((column.get(OFFSET), column.get(SCALE)),)
     angle_columns = ((column.get(ELEVATION_BIAS),), (column.get(AZIMUTH_BIAS),))
+    height_columns = ((terrain_column,),)
     n = len(prior_std)
+    accel_weight = 1.0 / np.asarray(noise.force_balance_var_mps2, dtype=float)
+    accel_rows = {}
+    for k, jac, yaw in zip(
+        force_balance.ticks, force_balance.jacobians, force_balance.yaw_columns, strict=True
+    ):
+        h = np.zeros((3, n))
+        h[:, :_N] = jac
+        if heading_column is not None:
+            h[:, heading_column] = yaw
+        accel_rows[int(k)] = (h, accel_weight)
     n_ticks = len(track.time_s)
-    out = np.empty((n_ticks, _N))
+    out = np.full((n_ticks, _N), np.nan)
     covariance = np.diag(prior_std**2)
     models = constants.models
     c = constants.values()
     transition = np.eye(n)
-    gathered = np.zeros((n, n))
-    samples = 0
-    previous_s = track.time_s[0]
+    gathered: list[tuple[FloatArray, FloatArray]] = []
+    previous_s = track.time_s[start_tick] if n_ticks else 0.0
     zero_force = (0.0, 0.0, 0.0)
-    for k in range(n_ticks):
+    for k in range(start_tick, n_ticks):
         x = track.state_at(k)
         rows = rotation_ned_to_body_rows(*track.euler_rad[k])
         dt = float(track.time_s[k] - previous_s)
@@ -346,43 +371,95 @@ def posterior_bound(
         transition[0:3, 3:6] = dt * np.eye(3)
         transition[3:6, :_N] = dt * np.reshape(dv, (3, state.N_STATES))[:, :_N]
         transition[3:6, 3:6] += np.eye(3)
-        if k in accel_information:
-            gathered[:_N, :_N] += accel_information[k]
-            samples += 1
+        process = density * dt
+        if heading_column is not None:
+            assert heading is not None
+            transition[3:6, heading_column] = dt * yaw_column_of_specific_force(
+                track.euler_rad[k], track.specific_force_body_mps2[k]
+            )
+            gauss_markov_step(
+                transition,
+                process,
+                heading_column,
+                dt / heading.time_constant_s,
+                heading.std_rad,
+            )
+        if terrain_column is not None:
+            assert terrain is not None
+            flown_m = dt * math.hypot(*track.velocity_ned_mps[k][:2])
+            gauss_markov_step(
+                transition,
+                process,
+                terrain_column,
+                flown_m / terrain.correlation_m,
+                terrain.std_m,
+            )
+        if k in accel_rows:
+            gathered.append(accel_rows[k])
         if track.range_seen[k]:
-            samples += _add(
+            _add(
                 gathered,
+                n,
                 generated.height_above_ground,
                 x,
                 _NO_CONSTANTS,
                 1,
                 noise.range_var_m2,
+                height_columns,
                 u=_ANCHOR_LEVEL,
             )
         taut = x[state.TENSION] > 0.0
         winch_seen = track.winch_seen is None or track.winch_seen[k]
         if noise.winch_var_m2 is not None and taut and winch_seen:
-            samples += _add(
-                gathered, models.winch_length, x, c, 1, noise.winch_var_m2, winch_columns
-            )
+            _add(gathered, n, models.winch_length, x, c, 1, noise.winch_var_m2, winch_columns)
         angle_var = noise.cable_angle_var_rad2
         if angle_var is not None and taut and track.angle_seen is not None and track.angle_seen[k]:
-            samples += _add(
-                gathered, models.cable_angle, x, c, 2, angle_var, angle_columns, per_cos=True
+            _add(gathered, n, models.cable_angle, x, c, 2, angle_var, angle_columns, per_cos=True)
+        apply = (k + 1) % gating.ticks_per_fusion == 0 and len(gathered) > 0
+        held_columns = [col for col, until in held_until if until is None or k < until]
+        if not apply:
+            covariance = information_step(covariance, transition, np.diag(process), None)
+        elif held_columns:
+            covariance = consider_step(
+                covariance, transition, np.diag(process), gathered, held_columns
             )
-        apply = (k + 1) % gating.ticks_per_fusion == 0 and samples > 0
-        covariance = information_step(
-            covariance, transition, np.diag(density * dt), gathered if apply else None
-        )
+        else:
+            information = np.zeros((n, n))
+            for h, weight in gathered:
+                information += h.T @ (weight[:, None] * h)
+            covariance = information_step(covariance, transition, np.diag(process), information)
         if apply:
-            gathered[:] = 0.0
-            samples = 0
+            gathered = []
         out[k] = np.diag(covariance)[:_N]
     return out
 
 
+def consider_step(
+    covariance: FloatArray,
+    transition: FloatArray,
+    process_noise: FloatArray,
+    samples: list[tuple[FloatArray, FloatArray]],
+    held_columns: list[int],
+) -> FloatArray:
+    """One step of a Schmidt (consider) Kalman filter's covariance: the prediction, then the
+    ``samples`` (``H`` (m, n), weights ``1 / variance`` (m,)) fused at once with the optimal
+    gain whose ``held_columns`` rows are zeroed (those states are not corrected), in Joseph
+    form ``(I - K H) P (I - K H)^T + K R K^T``. With nothing held it equals
+    :func:`information_step`."""
+    predicted = transition @ covariance @ transition.T + process_noise
+    h = np.vstack([rows for rows, _ in samples])
+    r = np.concatenate([1.0 / weight for _, weight in samples])
+    innovation = h @ predicted @ h.T + np.diag(r)
+    gain = np.linalg.solve(innovation, h @ predicted).T
+    gain[held_columns, :] = 0.0
+    joseph = np.eye(len(predicted)) - gain @ h
+    updated = joseph @ predicted @ joseph.T + (gain * r) @ gain.T
+    return 0.5 * (updated + updated.T)
+
+
 def _add(
-    gathered: FloatArray,
+    gathered: list[tuple[FloatArray, FloatArray]],
+    width: int,
     model: Generated,
     x: list[float],
     c: tuple[float, float, float],
@@ -392,22 +469,22 @@ def _add(
     u: tuple[float, ...] = (),
     *,
     per_cos: bool = False,
-) -> int:
-    """``gathered += H^T R^-1 H`` for the generated ``model`` at ``x`` with ``R = variance I``
-    (``per_cos``, the cable angle: the second row's, the azimuth's, over the cosine squared of
-    the first, the elevation); 0 where the model is undefined there (at the anchor, zero
-    tension), else 1. ``calibration_columns``: per row, the augmented state's columns of the
-    calibration errors in the reading, ``None`` where it has none: an additive zero error
-    (coefficient 1), then a scale error (coefficient the model's value); ``H`` takes
-    ``gathered``'s width."""
+) -> None:
+    """Append ``(H, 1 / variance per row)`` of the generated ``model`` at ``x`` to
+    ``gathered`` (``per_cos``, the cable angle: the second row's, the azimuth's, variance over
+    the cosine squared of the first, the elevation); nothing where the model is undefined there
+    (at the anchor, zero tension). ``calibration_columns``: per row, the augmented state's
+    columns of the nuisance parameters in the reading, ``None`` where it has none: an additive
+    error (coefficient 1), then a scale error (coefficient the model's value); ``H`` is
+    ``width`` wide."""
     try:
         value, jac = model(x, u, c)
     except UNDEFINED:
-        return 0
-    jacobian = np.zeros((rows, len(gathered)))
+        return
+    jacobian = np.zeros((rows, width))
     jacobian[:, :_N] = np.reshape(jac, (rows, state.N_STATES))[:, :_N]
     if not np.isfinite(jacobian).all():
-        return 0
+        return
     for row, columns in enumerate(calibration_columns):
         for column, coefficient in zip(columns, (1.0, value[row]), strict=False):
             if column is not None:
@@ -415,5 +492,4 @@ def _add(
     weight = np.full(rows, 1.0 / variance)
     if per_cos:
         weight[1] *= math.cos(value[0]) ** 2
-    gathered += jacobian.T @ (weight[:, None] * jacobian)
-    return 1
+    gathered.append((jacobian, weight))

@@ -27,11 +27,16 @@ wind random walk                Dryden's horizontal gusts at the scenario's inte
 position, tension, thrust       the filter's (random walks the simulator does not have: its
 scale random walks              tension is a winch's control, its thrust scale a battery's
                                 sag, both smooth)
-rangefinder                     the true noise (its tilt correction, 1-3 %, left out) plus
-                                the terrain's undulation
-                                taken as white (it is correlated over metres, so this
-                                over-counts its averaging: the bound is lower than with it
-                                modelled)
+rangefinder                     the true noise (its tilt correction, 1-3 %, left out); the
+                                terrain's undulation a state of the height
+                                (:class:`~.crlb_nuisance.TerrainNoise`: its standard deviation,
+                                correlated over ``wavelength / 2 pi`` along the path; was
+                                white until crlb14, which averaged a hovering drone's ground
+                                away)
+heading error                   the simulated flight controller's attitude error's yaw part
+                                (:class:`~.crlb_nuisance.HeadingError`: ``attitude_error_std_rad``
+                                over ``attitude_error_time_constant_s``; its roll and pitch
+                                parts are the bias walk above)
 winch length                    with the scenario's ``ground_station`` errors: at the
                                 encoder's reports, the white variance of its step
                                 (``resolution^2 / 12``, at least 1 mm squared), its zero
@@ -64,7 +69,12 @@ from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig
-from tether_companion.estimation.dynamic.crlb import BoundNoise, CalibrationPrior, Gating
+from tether_companion.estimation.dynamic.crlb import BoundNoise, Gating
+from tether_companion.estimation.dynamic.crlb_nuisance import (
+    CalibrationPrior,
+    HeadingError,
+    TerrainNoise,
+)
 from tether_companion.estimation.dynamic.noise import process_noise_density
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.sim.scenario import Scenario
@@ -76,6 +86,10 @@ MIN_WINCH_STD_M = 1e-3
 """Smallest white noise [m] the bound gives an encoder with no step (a finite information)."""
 UNINFORMED_POSITION_STD_M = 100.0
 UNINFORMED_TENSION_STD_N = 100.0
+TERRAIN_WAVELENGTH_PER_CORRELATION = 2.0 * math.pi
+"""The simulator's terrain (undulations of wavelength ``lambda`` in random directions,
+``sim/ground.py``) is correlated as ``J0(2 pi r / lambda)`` along a line, whose integral is
+``lambda / 2 pi``: the bound's Gauss-Markov terrain has that correlation length."""
 MIN_RESIDUAL_SAMPLES = 50
 """Fewest force-balance samples (1 s at the fusion rate) to measure the residual's density."""
 
@@ -184,10 +198,17 @@ def bound_noise(
             accel_var + residual_density[1] / interval_s,
             accel_var + residual_density[2] / interval_s,
         ),
-        range_var_m2=scenario.sensors.range_noise_std_m**2 + ground.terrain_std_m**2,
+        range_var_m2=scenario.sensors.range_noise_std_m**2,
         winch_var_m2=winch_var if winch else None,
         cable_angle_var_rad2=angle_var if angle else None,
         calibration=calibration,
+        heading=HeadingError(
+            scenario.sensors.attitude_error_std_rad,
+            scenario.sensors.attitude_error_time_constant_s,
+        ),
+        terrain=TerrainNoise(
+            ground.terrain_std_m, ground.terrain_wavelength_m / TERRAIN_WAVELENGTH_PER_CORRELATION
+        ),
     )
 
 

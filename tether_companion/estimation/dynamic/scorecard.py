@@ -22,6 +22,7 @@ the paper's random-walk bound.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -91,14 +92,22 @@ def filter_config(context: FlightContext) -> DynamicFilterConfig:
 
 
 def own_model_bound(
-    context: FlightContext, record: FlightRecord, *, winch: bool, angle: bool
+    context: FlightContext,
+    record: FlightRecord,
+    *,
+    winch: bool,
+    angle: bool,
+    held: Mapping[int, int | None] | None = None,
+    start_tick: int = 0,
 ) -> FloatArray:
     """The posterior CRLB of the filter's 13-state model along ``record``'s truth with the
     kind's measurements (:mod:`~tether_companion.estimation.dynamic.crlb`: force balance and
     rangefinder; ``winch``: the paid-out length at the encoder's reports; ``angle``: the cable
     angle at the sensor's reports; each with the scenario's ``ground_station`` errors, its
     calibration errors estimated beside the state: :func:`~.crlb_noise.bound_noise`),
-    diagonal (N, 13)."""
+    diagonal (N, 13). ``held``, ``start_tick``: as
+    :func:`~tether_companion.estimation.dynamic.crlb.posterior_bound` (calibration errors held
+    as consider states; the recursion's first tick)."""
     dynamic = filter_config(context)
     vehicle = context.vehicle
     constants = ModelConstants(
@@ -124,7 +133,9 @@ def own_model_bound(
         force_balance.residuals_mps2, interval_s, dynamic.noise.force_residual_m2ps3
     )
     noise = bound_noise(context.scenario, dynamic, residual, winch=winch, angle=angle)
-    return posterior_bound(track, constants, noise, gating, force_balance)
+    return posterior_bound(
+        track, constants, noise, gating, force_balance, held=held, start_tick=start_tick
+    )
 
 
 class DynamicKind:
@@ -163,6 +174,17 @@ class DynamicKind:
         self._use_winch = use_winch
         self._use_angle = use_angle
         self._use_tension = use_tension
+
+    @property
+    def estimator(self) -> DynamicTetherEstimator:
+        """The filter (read after a flight: its calibration's release, its counters)."""
+        return self._estimator
+
+    @property
+    def measurements(self) -> tuple[bool, bool]:
+        """Whether it is given the winch's length and the cable angle: the own bound's
+        measurement set (:func:`own_model_bound`'s ``winch``, ``angle``)."""
+        return self._use_winch, self._use_angle
 
     def on_attitude(self, sample: AttitudeSample) -> None:
         self._estimator.on_attitude(sample)

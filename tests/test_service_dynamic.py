@@ -346,9 +346,8 @@ IMU_ONLY_XFAIL = pytest.mark.xfail(
     strict=True,
     reason="issue 10 target not met IMU-only (docs/estimation.md, 'In the service'): a steady "
     "hover does not observe the range (thrust scale and wind); default dynamic_filter on "
-    "main dc72492, seeds 1-5: 1, 3, 4, 5 never publish in 40 s, 2 publishes 53 estimates, "
-    "withholds, and the autopilot lands in its failsafe 2.75 m off; seeds 6-10: 6, 7, 9, 10 "
-    "never publish, 8 publishes 34 and lands 2.52 m off",
+    "main e4eaf76, seeds 1-5: 1, 3, 4 never publish in 40 s, 2 and 5 publish from 3.0 and "
+    "8.5 s, withhold, and the autopilot lands in its failsafe 2.88 and 2.83 m off",
 )
 
 

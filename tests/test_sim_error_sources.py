@@ -185,6 +185,45 @@ def test_flight_controller_attitude_error_is_a_slow_gauss_markov_process() -> No
     assert rho == pytest.approx(math.exp(-1.0), abs=0.12)
 
 
+def test_the_heading_error_has_its_own_sigma_and_time_constant() -> None:
+    """A compass-aided heading is worse than roll and pitch: its own Gauss-Markov process."""
+    config = SensorConfig(
+        attitude_noise_std_rad=0.0,
+        attitude_error_std_rad=0.005,
+        attitude_error_time_constant_s=10.0,
+        heading_error_std_rad=0.02,
+        heading_error_time_constant_s=40.0,
+    )
+    suite = SensorSuite(config, np.random.default_rng(4))
+    readings = [suite.attitude(k * 0.1, 0.0, 0.0, 0.0) for k in range(120_000)]
+    rolls = np.array([a.roll_rad for a in readings])
+    yaws = np.array([a.yaw_rad for a in readings])
+    assert np.std(rolls) == pytest.approx(0.005, rel=0.25)
+    assert np.std(yaws) == pytest.approx(0.02, rel=0.25)
+    lag = 400  # the heading's time constant
+    rho = np.corrcoef(yaws[:-lag], yaws[lag:])[0, 1]
+    assert rho == pytest.approx(math.exp(-1.0), abs=0.15)
+    assert np.corrcoef(rolls[:-lag], rolls[lag:])[0, 1] < 0.1  # the tilt's own 10 s
+
+
+def test_an_unset_heading_error_is_the_attitude_error() -> None:
+    """Without the heading keys every axis draws the same numbers as before they existed."""
+    tilt = SensorConfig(attitude_error_std_rad=0.005, attitude_error_time_constant_s=10.0)
+    same = replace(tilt, heading_error_std_rad=0.005, heading_error_time_constant_s=10.0)
+    a = SensorSuite(tilt, np.random.default_rng(5))
+    b = SensorSuite(same, np.random.default_rng(5))
+    for k in range(200):
+        assert a.attitude(k * 0.1, 0.0, 0.0, 0.0) == b.attitude(k * 0.1, 0.0, 0.0, 0.0)
+
+
+def test_a_heading_error_alone_moves_only_the_heading() -> None:
+    config = SensorConfig(attitude_noise_std_rad=0.0, heading_error_std_rad=0.02)
+    suite = SensorSuite(config, np.random.default_rng(6))
+    readings = [suite.attitude(k * 0.1, 0.1, -0.1, 1.0) for k in range(100)]
+    assert all(a.roll_rad == 0.1 and a.pitch_rad == -0.1 for a in readings)
+    assert max(abs(a.yaw_rad - 1.0) for a in readings) > 0.001
+
+
 def test_battery_sag_lowers_the_thrust_for_the_same_command() -> None:
     battery = BatteryConfig(
         cells=4, full_cell_voltage_v=4.2, reference_cell_voltage_v=4.0, sag_v_per_cell_per_min=0.1
@@ -279,6 +318,12 @@ def test_the_paper_scenario_stays_clean() -> None:
         ("ground: {terrain_std_m: .nan}\n", "ground.terrain_std_m", "finite"),
         ("wind: {turbulence_w20_mps: -2}\n", "wind.turbulence_w20_mps", ">= 0"),
         ("sensors: {attitude_error_std_rad: 1}\n", "sensors.attitude_error_std_rad", "<= 0.2"),
+        ("sensors: {heading_error_std_rad: -0.1}\n", "sensors.heading_error_std_rad", ">= 0"),
+        (
+            "sensors: {heading_error_time_constant_s: 0}\n",
+            "sensors.heading_error_time_constant_s",
+            "> 0",
+        ),
         ("sensors: {range_offset_frd_m: [0, 0]}\n", "sensors.range_offset_frd_m", "3 items"),
         ("trajectory: {kind: figure8}\n", "trajectory.waypoints_ned_m", "at least one"),
         ("trajectory: {kind: hover, yaw_rate_deg_s: 500}\n", "trajectory.yaw_rate_deg_s", "<= 90"),

@@ -89,6 +89,18 @@ class SensorConfig:
     attitude_error_time_constant_s: float = spec(
         30.0, exclusive_minimum=0.0, doc="correlation time of the attitude-estimate error [s]"
     )
+    heading_error_std_rad: float | None = spec(
+        None,
+        minimum=0.0,
+        maximum=0.5,
+        doc="the heading's own stationary sigma of that error (a compass-aided yaw is worse "
+        "than roll and pitch) [rad]; unset: attitude_error_std_rad",
+    )
+    heading_error_time_constant_s: float | None = spec(
+        None,
+        exclusive_minimum=0.0,
+        doc="correlation time of the heading error [s]; unset: attitude_error_time_constant_s",
+    )
     attitude_noise_std_rad: float = spec(
         _PAPER_ANGLE_STD_RAD, minimum=0.0, doc="attitude (roll, pitch, yaw) noise sigma [rad]"
     )
@@ -108,6 +120,18 @@ class SensorConfig:
         doc="rangefinder mounting point from the centre of mass, body FRD [m]",
     )
 
+    def attitude_error_std_per_axis_rad(self) -> tuple[float, float, float]:
+        """Stationary sigma of the flight controller's roll, pitch and heading errors [rad]."""
+        tilt = self.attitude_error_std_rad
+        heading = tilt if self.heading_error_std_rad is None else self.heading_error_std_rad
+        return (tilt, tilt, heading)
+
+    def attitude_error_time_constant_per_axis_s(self) -> tuple[float, float, float]:
+        """Correlation times of the roll, pitch and heading errors [s]."""
+        tilt = self.attitude_error_time_constant_s
+        heading = self.heading_error_time_constant_s
+        return (tilt, tilt, tilt if heading is None else heading)
+
     def validate(self) -> None:
         """The rangefinder's range must not be empty."""
         if self.range_max_m <= self.range_min_m:
@@ -116,9 +140,11 @@ class SensorConfig:
             )
 
 
-def _turn_on(rng: np.random.Generator, std: float) -> list[float]:
-    """Three values drawn with sigma ``std`` (no draw, zeros, when ``std`` is 0)."""
-    return [float(v) for v in rng.normal(0.0, std, 3)] if std > 0.0 else [0.0, 0.0, 0.0]
+def _turn_on(rng: np.random.Generator, std: float | tuple[float, float, float]) -> list[float]:
+    """Three values drawn with sigma ``std`` (one for all three or one per axis; no draw,
+    zeros, when every sigma is 0)."""
+    sigma = np.broadcast_to(np.asarray(std, dtype=float), (3,))
+    return [float(v) for v in rng.normal(0.0, sigma)] if np.any(sigma > 0.0) else [0.0, 0.0, 0.0]
 
 
 def _random_walk(values: list[float], rate: float, dt_s: float, take: Callable[[], float]) -> None:
@@ -168,7 +194,7 @@ class SensorSuite:
         """Bias on top of ``accel_bias_mps2``: turn-on draw plus random walk, FRD [m/s^2]."""
         self.gyro_bias_drift_rad_s = _turn_on(rng, config.gyro_turn_on_bias_std_rad_s)
         """Gyro bias on top of ``gyro_bias_rad_s``: turn-on draw plus random walk [rad/s]."""
-        self.attitude_error_rad = _turn_on(rng, config.attitude_error_std_rad)
+        self.attitude_error_rad = _turn_on(rng, config.attitude_error_std_per_axis_rad())
         """The flight controller's attitude-estimate error (roll, pitch, yaw) now [rad]."""
         self._last_imu_s: float | None = None
         self._last_attitude_s: float | None = None
@@ -182,6 +208,14 @@ class SensorSuite:
     def config(self, config: SensorConfig) -> None:
         self._config = config
         self._vibration_omega_rad_s = 2.0 * math.pi * config.accel_vibration_frequency_hz
+        self._attitude_error_axes = tuple(
+            zip(
+                config.attitude_error_std_per_axis_rad(),
+                config.attitude_error_time_constant_per_axis_s(),
+                strict=True,
+            )
+        )
+        self._attitude_error_on = any(std > 0.0 for std, _ in self._attitude_error_axes)
 
     def imu(
         self,
@@ -228,12 +262,11 @@ class SensorSuite:
         s = c.attitude_noise_std_rad
         take = self._noise.take
         err = self.attitude_error_rad
-        if c.attitude_error_std_rad > 0.0:
+        if self._attitude_error_on:
             dt = 0.0 if self._last_attitude_s is None else max(time_s - self._last_attitude_s, 0.0)
-            a = math.exp(-dt / c.attitude_error_time_constant_s)
-            kick = c.attitude_error_std_rad * math.sqrt(max(1.0 - a * a, 0.0))
-            for i in range(3):
-                err[i] = a * err[i] + kick * take()
+            for i, (std, tau) in enumerate(self._attitude_error_axes):
+                a = math.exp(-dt / tau)
+                err[i] = a * err[i] + std * math.sqrt(max(1.0 - a * a, 0.0)) * take()
         self._last_attitude_s = time_s
         yaw = yaw_rad + err[2] + s * take()
         yaw = (yaw + math.pi) % (2.0 * math.pi) - math.pi

@@ -61,8 +61,8 @@ def test_the_prior_enters_with_the_first_reading_and_only_where_none_was_given()
 
 def _fly(name: str, seed: int, duration_s: float):
     """Fly the realistic scenario ``name`` with the winch and the cable angle (the bench's
-    ``dynamic-winch-angle`` kind) learning the calibration; returns the estimator at the end and the flight's drawn
-    calibration (sim/ground_sensors.py)."""
+    ``dynamic-winch-angle`` kind) learning the calibration; returns the estimator at the end
+    and the flight's drawn calibration (sim/ground_sensors.py)."""
     from tether_companion.bench.estimators.flight import fly
     from tether_companion.bench.estimators.registry import UNKNOWN_TENSION, EstimatorKind
     from tether_companion.estimation.dynamic.scorecard import DynamicKind

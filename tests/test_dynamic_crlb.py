@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from tether_companion.estimation.dynamic import generated, state
+from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.crlb import (
     BoundNoise,
     Gating,
@@ -25,7 +26,7 @@ from tether_companion.estimation.dynamic.crlb import (
     information_step,
     posterior_bound,
 )
-from tether_companion.estimation.dynamic.crlb_noise import residual_density_m2ps3
+from tether_companion.estimation.dynamic.crlb_noise import bound_noise, residual_density_m2ps3
 from tether_companion.estimation.dynamic.crlb_nuisance import (
     AZIMUTH_BIAS,
     CalibrationPrior,
@@ -36,6 +37,7 @@ from tether_companion.estimation.dynamic.crlb_nuisance import (
 )
 from tether_companion.estimation.dynamic.models import ModelConstants
 from tether_companion.frames import rotation_ned_to_body_rows
+from tether_companion.sim.scenario import load_scenario
 
 N = state.CALIBRATION.start
 """The bound's state (the filter's without the calibration, which the bound augments)."""
@@ -471,3 +473,18 @@ def test_the_azimuth_zero_held_widens_the_bound_across_the_cable_until_released(
     np.testing.assert_allclose(
         later[100:], posterior_bound(cut, constants, noise, gating), rtol=1e-9
     )
+
+
+def test_the_bound_takes_the_scenarios_heading_error_not_its_tilt_error():
+    """A scenario whose heading error has its own sigma and time constant (a compass-aided
+    yaw) gives the bound's heading state those, not the roll and pitch error's."""
+    base = load_scenario("realistic-circle")
+    sensors = dataclasses.replace(
+        base.sensors, heading_error_std_rad=0.02, heading_error_time_constant_s=60.0
+    )
+    scenario = dataclasses.replace(base, sensors=sensors)
+    noise = bound_noise(scenario, DynamicFilterConfig(), (0.0, 0.0, 0.0), winch=True, angle=True)
+    assert noise.heading.std_rad == 0.02 and noise.heading.time_constant_s == 60.0
+    unset = bound_noise(base, DynamicFilterConfig(), (0.0, 0.0, 0.0), winch=True, angle=True)
+    assert unset.heading.std_rad == base.sensors.attitude_error_std_rad
+    assert unset.heading.time_constant_s == base.sensors.attitude_error_time_constant_s

@@ -268,7 +268,6 @@ def test_gps_to_external_navigation_switch_at_a_taut_hover(sitl_available, tmp_p
     About 4 minutes at speedup 1.
     """
     from tether_companion.ardupilot_sitl.flights import FlightOptions, gps_to_external_nav
-
     from tether_companion.sim.ground_sensors import GroundSensorConfig
 
     errors = kind.endswith("-errors")

@@ -32,9 +32,9 @@ from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, Range
 from tether_companion.service.config import ServiceConfig
 from tether_companion.service.health import OK, health_text
 from tether_companion.service.ingest import ATTITUDE, IMU, PWM, Sample
+from tether_companion.service.ingest_frames import FrameIngest
 from tether_companion.service.publish import Publication
 from tether_companion.service.recording import read_tlog
-from tether_companion.service.ingest_frames import FrameIngest
 from tether_companion.service.session import EstimationSession, Step
 
 DATAFLASH_DOWNWARD = 25

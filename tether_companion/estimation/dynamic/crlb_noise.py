@@ -34,9 +34,10 @@ rangefinder                     the true noise (its tilt correction, 1-3 %, left
                                 white until crlb14, which averaged a hovering drone's ground
                                 away)
 heading error                   the simulated flight controller's attitude error's yaw part
-                                (:class:`~.crlb_nuisance.HeadingError`: ``attitude_error_std_rad``
-                                over ``attitude_error_time_constant_s``; its roll and pitch
-                                parts are the bias walk above)
+                                (:class:`~.crlb_nuisance.HeadingError`: the heading's sigma
+                                and time constant, ``heading_error_*``, else
+                                ``attitude_error_*``); its roll and pitch parts are the bias
+                                walk above)
 winch length                    with the scenario's ``ground_station`` errors: at the
                                 encoder's reports, the white variance of its step
                                 (``resolution^2 / 12``, at least 1 mm squared), its zero
@@ -203,8 +204,8 @@ def bound_noise(
         cable_angle_var_rad2=angle_var if angle else None,
         calibration=calibration,
         heading=HeadingError(
-            scenario.sensors.attitude_error_std_rad,
-            scenario.sensors.attitude_error_time_constant_s,
+            scenario.sensors.attitude_error_std_per_axis_rad()[2],
+            scenario.sensors.attitude_error_time_constant_per_axis_s()[2],
         ),
         terrain=TerrainNoise(
             ground.terrain_std_m, ground.terrain_wavelength_m / TERRAIN_WAVELENGTH_PER_CORRELATION

@@ -75,10 +75,10 @@ OFFSET, SCALE, ELEVATION_BIAS, AZIMUTH_BIAS = range(4)
 @dataclass(frozen=True)
 class HeadingError:
     """The flight controller's heading error: a first-order Gauss-Markov angle [rad] added to
-    the true yaw in the attitude the filter is given (the simulator's ``attitude_error_*``
-    yaw part). Its column in the model is the derivative of the prediction and the force
-    balance with respect to their yaw input (:func:`yaw_column_of_specific_force`,
-    :func:`yaw_column_of_model`).
+    the true yaw in the attitude the filter is given (the simulator's heading error,
+    ``heading_error_*`` or else ``attitude_error_*``). Its column in the model is the
+    derivative of the prediction and the force balance with respect to their yaw input
+    (:func:`yaw_column_of_specific_force`, :func:`yaw_column_of_model`).
 
     Attributes
     ----------

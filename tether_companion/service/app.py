@@ -7,9 +7,12 @@ way out):
   flight-controller link with exponential back-off (missing serial port, refused TCP socket),
   then this class serves it until it closes: the receive loop records every frame,
   hands every message to the session and sends what the session returns; the housekeeping
-  loop sends our HEARTBEAT, TIMESYNC requests, stream requests (MAV_CMD_SET_MESSAGE_INTERVAL,
-  then REQUEST_DATA_STREAM when that does not work), the EKF origin after every
-  flight-controller boot, and notices link loss and silent inputs;
+  (every :data:`HOUSEKEEPING_PERIOD_S`) sends our HEARTBEAT, TIMESYNC requests, stream requests
+  (MAV_CMD_SET_MESSAGE_INTERVAL, then REQUEST_DATA_STREAM when that does not work), the EKF
+  origin after every flight-controller boot, and notices link loss and silent inputs; it runs
+  in the read callback after the batch that finds it due (the flight controller's datagrams
+  wake the process 200 times a second: no wake-up of its own, which costs more than the duties
+  after a sleep), or from a timer when no datagram came for a period and a grace;
 * ``watchdog``: ``WATCHDOG=1`` and ``STATUS=`` to systemd (only if systemd asked).
 
 The recording is written by its own thread (:class:`RecorderThread`: write, rotate, fsync),
@@ -23,7 +26,6 @@ IMU-to-estimate latency and the CPU per datagram low.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import gc
 import math
 import time
@@ -37,7 +39,7 @@ from tether_companion.mavlink.link import Delivered, Link
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.service.clock import FcClock
 from tether_companion.service.config import ServiceConfig
-from tether_companion.service.health import NO_IMU, STALE
+from tether_companion.service.housekeeping import Housekeeping
 from tether_companion.service.ingest import IMU
 from tether_companion.service.link_supervisor import LinkSupervisor, log, wait_or_stop
 from tether_companion.service.origin import OriginRequests
@@ -46,15 +48,17 @@ from tether_companion.service.recording_thread import RecorderThread, open_recor
 from tether_companion.service.security import LinkSecurity
 from tether_companion.service.session import EstimationSession, Step
 from tether_companion.service.state import ServiceState
-from tether_companion.service.streams import INPUT_SILENT_S, StreamRequests
+from tether_companion.service.streams import StreamRequests
 from tether_companion.service.systemd import SystemdNotifier
 from tether_companion.service.vehicle_fetch import FROM_AUTOPILOT, VehicleFetch
 from tether_companion.vehicle_params.profile import profile_from_parameters
 
 HOUSEKEEPING_PERIOD_S = 0.05
+HOUSEKEEPING_GRACE_S = 0.01
+"""The timer does the housekeeping when no datagram came this long [s] after it was due."""
 
 
-class CompanionService:
+class CompanionService(Housekeeping):
     """The live service: link management around an :class:`EstimationSession`.
 
     Parameters
@@ -191,17 +195,33 @@ class CompanionService:
         """
         self._reset_link_state()
         self._send_now_to(link)
-        housekeeping = asyncio.create_task(self._housekeeping(link), name="housekeeping")
-        fatal = asyncio.get_running_loop().create_future()
+        loop = asyncio.get_running_loop()
+        fatal = loop.create_future()
+        timer: asyncio.TimerHandle | None = None
+        next_due_s = -math.inf
+
+        def housekeeping(fallback_s: float) -> None:
+            """Housekeeping if due; the timer re-armed ``fallback_s`` [s] ahead."""
+            nonlocal timer, next_due_s
+            now = self._monotonic_s()
+            if now < next_due_s:
+                return
+            next_due_s = now + HOUSEKEEPING_PERIOD_S
+            if timer is not None:
+                timer.cancel()
+            timer = loop.call_later(fallback_s, housekeeping, HOUSEKEEPING_PERIOD_S)
+            self.housekeep(link, now)
 
         def receive(items: list[Delivered]) -> None:
             for item in items:
                 self._handle_guarded(link, item)
+            housekeeping(HOUSEKEEPING_PERIOD_S + HOUSEKEEPING_GRACE_S)
             if self._fatal is not None and not fatal.done():  # vehicle: from_autopilot
                 fatal.set_result(None)
 
         getter: asyncio.Future[MAVLinkMessage] | None = None
         try:
+            housekeeping(HOUSEKEEPING_PERIOD_S)
             # the input frames' test reads the configuration only: a session made later (the
             # vehicle read from the flight controller) takes the same frames
             link.set_receiver(receive, self.session.frames.take)
@@ -216,9 +236,8 @@ class CompanionService:
             self.session.send_now = None
             if getter is not None:
                 getter.cancel()
-            housekeeping.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await housekeeping
+            if timer is not None:
+                timer.cancel()
 
     def _send_now_to(self, link: Link) -> None:
         """The session hands its messages to ``link`` the moment they exist: an estimate goes
@@ -394,99 +413,6 @@ class CompanionService:
             self.recorder.write(frame)
         kind = msg.get_type()
         self.state.sent_by_type[kind] = self.state.sent_by_type.get(kind, 0) + 1
-
-    # ------------------------------------------------------------------ housekeeping
-    async def _housekeeping(self, link: Link) -> None:
-        while True:
-            now = self._monotonic_s()
-            self.housekeep(link, now)
-            await asyncio.sleep(HOUSEKEEPING_PERIOD_S)
-
-    def housekeep(self, link: Link, now_s: float) -> None:
-        """Periodic duties at local time ``now_s`` [s]: heartbeat, TIMESYNC, rates, stream
-        requests, origin, link-loss and silent-input detection (public for lock-step use).
-        """
-        cfg = self.config.link
-        fetch = self.vehicle_fetch
-        if fetch is not None and not self._vehicle_ready and self.state.link_up:
-            for request in fetch.requests(now_s):
-                self._send(link, request)
-        if now_s >= self._next_heartbeat_s:
-            self._next_heartbeat_s = now_s + 1.0 / cfg.heartbeat_hz
-            status = (
-                dialect.MAV_STATE_ACTIVE
-                if self.session.publisher.health == "ok"
-                else dialect.MAV_STATE_STANDBY
-            )
-            self._send(
-                link,
-                dialect.MAVLink_heartbeat_message(
-                    dialect.MAV_TYPE_ONBOARD_CONTROLLER,
-                    dialect.MAV_AUTOPILOT_INVALID,
-                    0,
-                    0,
-                    status,
-                    3,
-                ),
-            )
-        if cfg.timesync_hz > 0 and now_s >= self._next_timesync_s:
-            self._next_timesync_s = now_s + 1.0 / cfg.timesync_hz
-            stamp_ns = int(now_s * 1e9)
-            self._timesync_pending = {
-                k: v for k, v in self._timesync_pending.items() if now_s - v < 5.0
-            }
-            self._timesync_pending[stamp_ns] = now_s
-            self._send(link, dialect.MAVLink_timesync_message(0, stamp_ns))
-        self._update_rates(now_s)
-        self._report_trust_events(link)
-        fc_present = now_s - self._fc_heard_s < cfg.link_timeout_s
-        if not fc_present:
-            if self.state.link_up:
-                self.state.link_up = False
-                self.state.link_losses += 1
-                self.state.link_text = (
-                    f"link lost: nothing from the flight controller for {cfg.link_timeout_s:g} s"
-                )
-                for msg in self.session.publisher.set_health(STALE):
-                    self._send(link, msg)
-            return
-        if self.config.security.install_key and not self._key_installed:
-            self._key_installed = True
-            self._send(link, self.security.setup_signing_message())
-        self._send_origin(link, now_s)
-        if fetch is not None and not self._vehicle_ready:
-            return  # inputs are held, not silent: no re-requests, no no_imu until the profile
-        for request in self.streams.due(now_s, self.session.ingest.counters.accepted):
-            self._send(link, request)
-        if self.streams.silent_s(IMU, now_s) > INPUT_SILENT_S:
-            for msg in self.session.publisher.set_health(NO_IMU):
-                self._send(link, msg)
-
-    def _report_trust_events(self, link: Link) -> None:
-        """Log the trust gate's address changes once each (stderr: the journal)."""
-        trust = getattr(link, "trust", None)  # lock-step harnesses bring their own link
-        if trust is None or not trust.events:
-            return
-        for event in trust.events:
-            log(f"{link.endpoint}: {event}")
-        self.state.last_error = trust.events[-1]
-        trust.events.clear()
-
-    def _send_origin(self, link: Link, now_s: float) -> None:
-        """SET_GPS_GLOBAL_ORIGIN after each FC boot until GPS_GLOBAL_ORIGIN answers (bounded)."""
-        msg = self.origin.due(now_s, self.state.origin_confirmed, self.clock.fc_now_s(now_s))
-        if msg is not None:
-            self.state.origin_sent += 1
-            self._send(link, msg)
-
-    def _update_rates(self, now_s: float) -> None:
-        counts = {
-            **self.session.ingest.counters.accepted,
-            "published": self.session.publisher.counters.published,
-        }
-        if self.state.update_rates(now_s, counts):
-            for kind in self.streams.table:
-                self.state.ages_s[kind] = self.streams.silent_s(kind, now_s)
 
     # ------------------------------------------------------------------ systemd, recording
     async def _watchdog(self, stop: asyncio.Event) -> None:

@@ -8,8 +8,7 @@ a steep cable turns its azimuth by more).
 
 Skipped as slack only when the filter is sure the cable is slack (:func:`.slack.surely_slack`):
 a tension estimate that merely dips below ``slack_tension_n`` must not lock out the angle
-that would correct it. A heavy cable's reading that leaves the anchor flat (:func:`leaves_flat`)
-fuses its azimuth only: a cable resting on the ground leaves flat wherever the drone is.
+that would correct it.
 
 At a low tension the generated tangent is not evaluated as it stands: its horizontal part is
 ``T_ch p_ne/|p|``, so a member whose chord tension went negative predicts a cable leaving
@@ -17,8 +16,15 @@ the anchor away from the drone (elevation ``-el``, azimuth ``+ pi``); those inno
 gated and then, after ``max_consecutive_rejections``, fused regardless, and a linearised
 update of a half-turn innovation threw the position away (slack-gate-wip's angle-alone
 runaway). A slack cable does not point back at the anchor: below :data:`MIN_MODEL_TENSION_N`
-(or the slack threshold, the larger) the model is evaluated at that tension, its Jacobian's
-tension column 0 (for a weightless cable the angles do not depend on the tension at all).
+the model is evaluated at that tension, its Jacobian's tension column 0 (for a weightless cable
+the angles do not depend on the tension at all). Not at the slack threshold: a heavy cable's
+model there can be a different curve from the state's. A resting cable leaves the anchor flat
+wherever the drone is, and its elevation is a hinge at the touchdown kink, where the free
+curve's rises ~1 rad per metre of position; a state at 0.15 N resting on the ground, evaluated
+at 0.2 N, was put on the free side (0.28 rad against a flat reading) and one update cut its
+horizontal standard deviation 0.46 -> 0.03 m with the drone 1.6 m off (the fixed-length
+sagging circle, tuning seed 1, 5.7 s, with the load cell's negative readings taken;
+docs/estimation.md, sag14).
 
 A bearing that far off is beyond the linearisation anyway: when a sample is going to be fused
 regardless of the gate (the member's angle was gated ``max_consecutive_rejections`` times in a
@@ -42,7 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
-from tether_companion.estimation.dynamic.aid.slack import SLACK, SURE_SIGMAS, surely_slack
+from tether_companion.estimation.dynamic.aid.slack import SLACK, surely_slack
 from tether_companion.estimation.dynamic.aiding import AidStatus, at_reading_time, fuse
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.member import MemberFilter
@@ -80,29 +86,6 @@ def turn_about_anchor(member: MemberFilter, angle_rad: float) -> None:
     member.P = turn @ member.P @ turn.T
 
 
-def leaves_flat(
-    member: MemberFilter, constants: ModelConstants, elevation_rad: float, noise_std_rad: float
-) -> bool:
-    """Whether a heavy cable's reading (elevation [rad], direction noise ``noise_std_rad``
-    [rad]) says it leaves the anchor flat: less its zero's estimate, within
-    :data:`~.slack.SURE_SIGMAS` standard deviations (the noise and ``member``'s zero's) of
-    level. False for a weightless cable.
-
-    A cable that rests on the anchor's level leaves it flat whatever the drone's position:
-    the elevation is ``max(0, e(x))`` with ``e`` the free catenary's, a hinge at the touchdown
-    kink where ``e`` rises at ~1 rad per metre of position. A flat reading says only that the
-    state lies on the resting side, an inequality; fused as an equality through a free-side
-    linearisation next to the kink it set the position to the angle's noise over that slope
-    (0.46 -> 0.03 m of standard deviation in one update, the drone 1.6 m off: the fixed-length
-    sagging circle, tuning seed 1, 5.7 s; docs/estimation.md, sag14). Its azimuth is fused."""
-    if constants.weight_n_per_m <= 0.0:
-        return False
-    zero = float(member.x[state.ELEVATION_ZERO])
-    zero_variance = float(member.P[state.ELEVATION_ZERO, state.ELEVATION_ZERO])
-    variance = noise_std_rad**2 + max(zero_variance, 0.0)
-    return elevation_rad - zero <= SURE_SIGMAS * math.sqrt(variance)
-
-
 class CableAngleAid:
     """Fuses (elevation, azimuth) [rad], each taken ``latency_s`` [s] before its stamp, unless
     the chord tension is surely below ``slack_tension_n`` [N].
@@ -124,7 +107,6 @@ class CableAngleAid:
         self.turns = 0
         self._latency_s = latency_s
         self._slack_n = slack_tension_n
-        self._floor_n = max(slack_tension_n, MIN_MODEL_TENSION_N)
 
     def fuse(
         self,
@@ -145,15 +127,10 @@ class CableAngleAid:
         for member in bank.filters:
             self._turn_if_far(member, azimuth_rad)
 
-        flat = leaves_flat(bank.best, constants, elevation_rad, noise_std_rad)
-
         def measure(xs: FloatArray) -> tuple[FloatArray, FloatArray]:
             h, jac = self.evaluate(constants, xs)
             # predicted azimuth moved by whole turns next to the measured one
             h[1] = azimuth_rad - wrap_pi(azimuth_rad - h[1])
-            if flat:  # the elevation tells only that the cable rests: not fused
-                h[0] = elevation_rad
-                jac[0] = 0.0
             return h, jac
 
         z = np.array((elevation_rad, azimuth_rad))
@@ -173,10 +150,10 @@ class CableAngleAid:
         """The angles (elevation, azimuth) [rad] (2,) and their Jacobian (2, n) as fused at the
         state ``x``: the chord tension floored (module docstring), ``nan`` where the model is
         undefined."""
-        low = x[state.TENSION] < self._floor_n
+        low = x[state.TENSION] < MIN_MODEL_TENSION_N
         if low:
             x = x.copy()
-            x[state.TENSION] = self._floor_n
+            x[state.TENSION] = MIN_MODEL_TENSION_N
         try:
             values, jac_flat = constants.models.cable_angle(x.tolist(), (), constants.values())
         except UNDEFINED:

@@ -477,14 +477,22 @@ def test_the_azimuth_zero_held_widens_the_bound_across_the_cable_until_released(
 
 def test_the_bound_takes_the_scenarios_heading_error_not_its_tilt_error():
     """A scenario whose heading error has its own sigma and time constant (a compass-aided
-    yaw) gives the bound's heading state those, not the roll and pitch error's."""
+    yaw) gives the bound's heading state those, not the roll and pitch error's; unset, the
+    attitude error's."""
     base = load_scenario("realistic-circle")
-    sensors = dataclasses.replace(
-        base.sensors, heading_error_std_rad=0.02, heading_error_time_constant_s=60.0
-    )
-    scenario = dataclasses.replace(base, sensors=sensors)
-    noise = bound_noise(scenario, DynamicFilterConfig(), (0.0, 0.0, 0.0), winch=True, angle=True)
-    assert noise.heading.std_rad == 0.02 and noise.heading.time_constant_s == 60.0
-    unset = bound_noise(base, DynamicFilterConfig(), (0.0, 0.0, 0.0), winch=True, angle=True)
-    assert unset.heading.std_rad == base.sensors.attitude_error_std_rad
-    assert unset.heading.time_constant_s == base.sensors.attitude_error_time_constant_s
+
+    def heading_of(std_rad, time_constant_s):
+        sensors = dataclasses.replace(
+            base.sensors,
+            heading_error_std_rad=std_rad,
+            heading_error_time_constant_s=time_constant_s,
+        )
+        scenario = dataclasses.replace(base, sensors=sensors)
+        config = DynamicFilterConfig()
+        return bound_noise(scenario, config, (0.0, 0.0, 0.0), winch=True, angle=True).heading
+
+    own = heading_of(0.03, 90.0)
+    assert (own.std_rad, own.time_constant_s) == (0.03, 90.0)
+    unset = heading_of(None, None)
+    assert unset.std_rad == base.sensors.attitude_error_std_rad
+    assert unset.time_constant_s == base.sensors.attitude_error_time_constant_s

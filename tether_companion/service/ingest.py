@@ -327,9 +327,7 @@ class Ingest:
             return None
         return sample
 
-    def pwm_sample(
-        self, port: int, time_usec: int, outputs: tuple[int, ...]
-    ) -> PwmSample | None:
+    def pwm_sample(self, port: int, time_usec: int, outputs: tuple[int, ...]) -> PwmSample | None:
         """The checked sample of a SERVO_OUTPUT_RAW: its ``port``, uint32 ``time_usec`` and
         channels 1..n_motors ``outputs`` as sent."""
         if port != 0:  # channels 9-16 come as port 1; motors are on 1..n of port 0

@@ -117,6 +117,9 @@ class Ingest:
         self._fc_system_id = link.fc_system_id
         self._fc_component_id = link.fc_component_id
         self.limits = limits
+        self._max_force_sq = limits.max_specific_force_mps2**2
+        """The IMU check's bound on the squared specific force [m^2/s^4] (limits are frozen)."""
+        self._max_rate = limits.max_angular_rate_rad_s
         self._output_range = (
             (limits.pwm_min_us, limits.pwm_max_us)
             if command_unit == "pwm_us"
@@ -300,10 +303,9 @@ class Ingest:
         if not math.isfinite(fx + fy + fz + p + q + r):  # NaN/inf in any
             self.counters.nonfinite += 1
             return None
-        limit = self.limits.max_angular_rate_rad_s
         if (
-            fx * fx + fy * fy + fz * fz > self.limits.max_specific_force_mps2**2
-            or max(abs(p), abs(q), abs(r)) > limit
+            fx * fx + fy * fy + fz * fz > self._max_force_sq
+            or max(abs(p), abs(q), abs(r)) > self._max_rate
         ):
             self.counters.absurd += 1
             return None
@@ -456,8 +458,9 @@ class Ingest:
 
     def _unwrap_uint32_us(self, time_usec: int) -> float:
         """SERVO_OUTPUT_RAW's uint32 microseconds to seconds near the latest stamp [s]."""
-        if not math.isfinite(self.latest_fc_s):
+        latest_s = self.clock.latest_fc_s  # read once, without the property
+        if not math.isfinite(latest_s):
             return time_usec * 1e-6
-        latest_us = self.latest_fc_s * 1e6
+        latest_us = latest_s * 1e6
         wraps = round((latest_us - time_usec) / _UINT32_US)
         return (time_usec + max(0, wraps) * _UINT32_US) * 1e-6

@@ -25,6 +25,8 @@ from typing import BinaryIO
 from tether_companion.errors import InputError
 
 _STAMP = struct.Struct(">Q")
+_RECORD = struct.Struct(">QBBB")
+"""A .tlog record's stamp and its frame's first three bytes (magic, payload length, flags)."""
 MAVLINK1_MAGIC = 0xFE
 MAVLINK2_MAGIC = 0xFD
 _MAVLINK2_SIGNED = 0x01
@@ -219,16 +221,24 @@ def read_tlog(path: str | Path, *, allow_truncated: bool = False) -> Iterator[tu
     count = 0
     size = len(data)
     stamp_of = _STAMP.unpack_from
+    record_of = _RECORD.unpack_from
     while offset < size:
         start = offset + _STAMP.size
-        if start > size:
-            if allow_truncated:
-                return
-            raise InputError(
-                f"{path}: truncated at byte {offset} of {size} (cut inside a record header)"
-            )
-        (stamp_us,) = stamp_of(data, offset)
-        length = frame_length(data, start)
+        if start + 3 <= size:  # the stamp and the frame's first three bytes in one read
+            stamp_us, magic, payload_len, flags = record_of(data, offset)
+            if magic == MAVLINK2_MAGIC and not flags & _MAVLINK2_SIGNED:
+                length: int | None = 12 + payload_len  # frame_length's unsigned MAVLink 2 case
+            else:
+                length = frame_length(data, start)
+        else:
+            if start > size:
+                if allow_truncated:
+                    return
+                raise InputError(
+                    f"{path}: truncated at byte {offset} of {size} (cut inside a record header)"
+                )
+            (stamp_us,) = stamp_of(data, offset)
+            length = frame_length(data, start)
         if length is None:
             if start >= size - 1 and allow_truncated:
                 return

@@ -100,7 +100,9 @@ class FcTimeGate:
     def _implausible(self, fc_s: float, local_s: float | None) -> bool:
         if local_s is None or self._latest_local_s is None:
             return False
-        elapsed = max(0.0, local_s - self._latest_local_s)
+        elapsed = local_s - self._latest_local_s
+        if not elapsed > 0.0:  # max(0.0, elapsed) without the builtin's call (nan too: 0.0)
+            elapsed = 0.0
         return fc_s > self.latest_fc_s + self.max_rate * elapsed + self.future_tolerance_s
 
     def on_system_time(self, fc_s: float, local_s: float | None) -> str:

@@ -305,7 +305,9 @@ class Ingest:
             return None
         if (
             fx * fx + fy * fy + fz * fz > self._max_force_sq
-            or max(abs(p), abs(q), abs(r)) > self._max_rate
+            or abs(p) > self._max_rate  # finite: as the largest of the three against it
+            or abs(q) > self._max_rate
+            or abs(r) > self._max_rate
         ):
             self.counters.absurd += 1
             return None
@@ -463,4 +465,4 @@ class Ingest:
             return time_usec * 1e-6
         latest_us = latest_s * 1e6
         wraps = round((latest_us - time_usec) / _UINT32_US)
-        return (time_usec + max(0, wraps) * _UINT32_US) * 1e-6
+        return (time_usec + (wraps if wraps > 0 else 0) * _UINT32_US) * 1e-6

@@ -43,8 +43,9 @@ _HEADER_V2 = dialect.HEADER_LEN_V2
 _CRC_LEN = 2
 _FRONT = struct.Struct("<BBB2xBBI")
 """A MAVLink 2 frame's first 11 bytes in one read, not one index per byte (CPython 3.11 does
-not specialise indexing bytes): STX, payload length, incompatibility flags, (compatibility flags, sequence),
-system, component, and the 24-bit message id with the payload's first byte above it."""
+not specialise indexing bytes): STX, payload length, incompatibility flags, (compatibility
+flags, sequence), system, component, and the 24-bit message id with the payload's first byte
+above it."""
 _CHECKSUM = struct.Struct("<H")
 
 Convert = Callable[[tuple], Sample | None]

@@ -65,3 +65,40 @@ def resting_window(
             if winch_tension:
                 initialiser.add_winch_tension(t, horizontal_n)
     return initialiser, length
+
+
+def random_start(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A drawn state near (3, 1.5, -2.5) m at 4 N with wind, a random positive definite
+    covariance and a process-noise density per state: a start for comparing two ways of
+    stepping and fusing the same member."""
+    x = np.zeros(state.N_STATES)
+    x[state.POSITION] = (3.0, 1.5, -2.5)
+    x[state.VELOCITY] = rng.normal(scale=0.3, size=3)
+    x[state.TENSION] = 4.0
+    x[state.SCALE] = 1.02
+    x[state.BIAS] = rng.normal(scale=0.05, size=3)
+    x[state.WIND] = (1.0, -0.5)
+    a = rng.normal(size=(state.N_STATES, state.N_STATES)) * 0.05
+    p0 = a @ a.T + np.diag(
+        [
+            0.3,
+            0.3,
+            0.05,
+            0.2,
+            0.2,
+            0.2,
+            1.0,
+            0.01,
+            0.01,
+            0.01,
+            0.01,
+            1.0,
+            1.0,
+            0.01,
+            1e-4,
+            1e-4,
+            1e-3,
+        ]
+    )
+    q = np.array([1e-6] * 3 + [1e-4] * 3 + [2.0, 1e-5] + [1e-4] * 3 + [0.05] * 2 + [0.0] * 4)
+    return x, p0, q

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from filter_states import random_start
 
 from tether_companion.estimation.dynamic import generated, state
 from tether_companion.estimation.dynamic.bank import FilterBank, _apply
@@ -19,19 +20,6 @@ from tether_companion.estimation.dynamic.models import ModelConstants
 from tether_companion.frames import rotation_ned_to_body
 
 N = state.N_STATES
-
-
-def _start(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    x = np.zeros(N)
-    x[state.POSITION] = (3.0, 1.5, -2.5)
-    x[state.VELOCITY] = rng.normal(scale=0.3, size=3)
-    x[state.TENSION] = 4.0
-    x[state.SCALE] = 1.02
-    x[state.BIAS] = rng.normal(scale=0.05, size=3)
-    a = rng.normal(size=(N, N)) * 0.05
-    p0 = a @ a.T + np.diag(rng.uniform(0.01, 1.0, size=N))
-    q = np.array([1e-6] * 3 + [1e-4] * 3 + [2.0, 1e-5] + [1e-4] * 3 + [0.05] * 2 + [0.0] * 4)
-    return x, p0, q
 
 
 def _height(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -46,7 +34,7 @@ def test_one_member_steps_and_fuses_as_a_stacked_member(consider: slice | None) 
     balances (outliers gated) and heights: the same outcomes, every member's state and
     covariance the single member's to rounding after every step."""
     rng = np.random.default_rng(3)
-    x0, p0, q = _start(rng)
+    x0, p0, q = random_start(rng)
     constants = ModelConstants(1.5, 0.2, 0.0)
 
     def member() -> MemberFilter:

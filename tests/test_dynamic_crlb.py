@@ -227,15 +227,31 @@ def _reference(track, constants, noise, *, repeat_range: int = 1) -> np.ndarray:
     return out
 
 
+PRIOR_STD = np.array([5.0, 5, 5, 0.5, 0.5, 0.5, 3.0, 0.1, 0.2, 0.2, 0.2, 2.0, 2.0])
+"""The state's prior standard deviations in the bound's tests (its units per state)."""
+DENSITY = np.array([1e-6, 1e-6, 1e-6, 1e-4, 1e-4, 1e-4, 2.0, 1e-5, 1e-4, 1e-4, 1e-4, 0.04, 0.04])
+"""The state's process-noise densities in the bound's tests (its units per state per s)."""
+
+
+def _ground_station_noise(**nuisance) -> BoundNoise:
+    """The bound's noise with the winch (3 mm) and the cable angle (0.01 rad) and the given
+    nuisance (``calibration``, ``heading``, ``terrain``)."""
+    return BoundNoise(
+        DENSITY,
+        PRIOR_STD,
+        ACCEL_VAR,
+        0.05**2,
+        winch_var_m2=0.003**2,
+        cable_angle_var_rad2=0.01**2,
+        **nuisance,
+    )
+
+
 @pytest.mark.parametrize("weight", [0.0, 0.164])
 def test_the_bound_is_the_kalman_covariance_at_the_truth(weight):
     track, constants = _track(weight)
-    prior = np.array([5.0, 5, 5, 0.5, 0.5, 0.5, 3.0, 0.1, 0.2, 0.2, 0.2, 2.0, 2.0])
-    density = np.array(
-        [1e-6, 1e-6, 1e-6, 1e-4, 1e-4, 1e-4, 2.0, 1e-5, 1e-4, 1e-4, 1e-4, 0.04, 0.04]
-    )
     noise = BoundNoise(
-        density, prior, ACCEL_VAR, 0.05**2, winch_var_m2=0.05**2, cable_angle_var_rad2=0.01**2
+        DENSITY, PRIOR_STD, ACCEL_VAR, 0.05**2, winch_var_m2=0.05**2, cable_angle_var_rad2=0.01**2
     )
     gating = Gating(ticks_per_fusion=1, min_distance_m=0.3, min_thrust_n=5.0)
     bound = posterior_bound(track, constants, noise, gating)
@@ -244,7 +260,7 @@ def test_the_bound_is_the_kalman_covariance_at_the_truth(weight):
     doubled = _reference(track, constants, noise, repeat_range=2)
     assert np.max(np.abs(doubled[:, 2] / reference[:, 2] - 1.0)) > 0.05
     only_sensors = posterior_bound(
-        track, constants, BoundNoise(density, prior, ACCEL_VAR, 0.05**2), gating
+        track, constants, BoundNoise(DENSITY, PRIOR_STD, ACCEL_VAR, 0.05**2), gating
     )
     assert np.max(np.abs(only_sensors[:, 0] / bound[:, 0] - 1.0)) > 0.05
 
@@ -256,22 +272,10 @@ def test_calibration_errors_are_estimated_beside_the_state_and_widen_the_bound()
     go to zero."""
     track, constants = _track(0.0)
     track = dataclasses.replace(track, winch_seen=np.arange(len(track.time_s)) % 20 == 3)
-    prior = np.array([5.0, 5, 5, 0.5, 0.5, 0.5, 3.0, 0.1, 0.2, 0.2, 0.2, 2.0, 2.0])
-    density = np.array(
-        [1e-6, 1e-6, 1e-6, 1e-4, 1e-4, 1e-4, 2.0, 1e-5, 1e-4, 1e-4, 1e-4, 0.04, 0.04]
-    )
     gating = Gating(ticks_per_fusion=1, min_distance_m=0.3, min_thrust_n=5.0)
 
     def noise(calibration):
-        return BoundNoise(
-            density,
-            prior,
-            ACCEL_VAR,
-            0.05**2,
-            winch_var_m2=0.003**2,
-            cable_angle_var_rad2=0.01**2,
-            calibration=calibration,
-        )
+        return _ground_station_noise(calibration=calibration)
 
     calibrated = noise(CalibrationPrior(0.1, 0.01, 0.007, 0.026))
     bound = posterior_bound(track, constants, calibrated, gating)
@@ -334,23 +338,11 @@ def test_heading_error_and_terrain_are_gauss_markov_states_of_the_bound():
     the truth (their columns by differences in the yaw input, the height's 1); both widen it,
     and it equals the bound without them as their standard deviations go to zero."""
     track, constants = _track(0.0)
-    prior = np.array([5.0, 5, 5, 0.5, 0.5, 0.5, 3.0, 0.1, 0.2, 0.2, 0.2, 2.0, 2.0])
-    density = np.array(
-        [1e-6, 1e-6, 1e-6, 1e-4, 1e-4, 1e-4, 2.0, 1e-5, 1e-4, 1e-4, 1e-4, 0.04, 0.04]
-    )
     gating = Gating(ticks_per_fusion=1, min_distance_m=0.3, min_thrust_n=5.0)
 
     def noise(heading, terrain):
-        return BoundNoise(
-            density,
-            prior,
-            ACCEL_VAR,
-            0.05**2,
-            winch_var_m2=0.003**2,
-            cable_angle_var_rad2=0.01**2,
-            calibration=CalibrationPrior(0.1, 0.01, 0.007, 0.026),
-            heading=heading,
-            terrain=terrain,
+        return _ground_station_noise(
+            calibration=CalibrationPrior(0.1, 0.01, 0.007, 0.026), heading=heading, terrain=terrain
         )
 
     full = noise(HeadingError(0.02, 20.0), TerrainNoise(0.05, 0.6))
@@ -429,19 +421,7 @@ def test_the_azimuth_zero_held_widens_the_bound_across_the_cable_until_released(
     circle's first second tells of it), released at the first tick it is
     the bound; started at a later tick the bound is that of the flight cut there."""
     track, constants = _track(0.0)
-    prior = np.array([5.0, 5, 5, 0.5, 0.5, 0.5, 3.0, 0.1, 0.2, 0.2, 0.2, 2.0, 2.0])
-    density = np.array(
-        [1e-6, 1e-6, 1e-6, 1e-4, 1e-4, 1e-4, 2.0, 1e-5, 1e-4, 1e-4, 1e-4, 0.04, 0.04]
-    )
-    noise = BoundNoise(
-        density,
-        prior,
-        ACCEL_VAR,
-        0.05**2,
-        winch_var_m2=0.003**2,
-        cable_angle_var_rad2=0.01**2,
-        calibration=CalibrationPrior(0.1, 0.01, 0.007, 0.026),
-    )
+    noise = _ground_station_noise(calibration=CalibrationPrior(0.1, 0.01, 0.007, 0.026))
     gating = Gating(ticks_per_fusion=4, min_distance_m=0.3, min_thrust_n=5.0)
     learnt = posterior_bound(track, constants, noise, gating)
     held = posterior_bound(track, constants, noise, gating, held={AZIMUTH_BIAS: None})

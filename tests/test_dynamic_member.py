@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from filter_states import random_start
 
 from tether_companion.estimation.dynamic import generated, state
 from tether_companion.estimation.dynamic.bank import FilterBank
@@ -43,40 +44,6 @@ class ReferenceProcess:
         return self._xdot  # jacobian() ran first at this x (the EKF calls it first)
 
 
-def _start(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    x = np.zeros(N)
-    x[state.POSITION] = (3.0, 1.5, -2.5)
-    x[state.VELOCITY] = rng.normal(scale=0.3, size=3)
-    x[state.TENSION] = 4.0
-    x[state.SCALE] = 1.02
-    x[state.BIAS] = rng.normal(scale=0.05, size=3)
-    x[state.WIND] = (1.0, -0.5)
-    a = rng.normal(size=(N, N)) * 0.05
-    p0 = a @ a.T + np.diag(
-        [
-            0.3,
-            0.3,
-            0.05,
-            0.2,
-            0.2,
-            0.2,
-            1.0,
-            0.01,
-            0.01,
-            0.01,
-            0.01,
-            1.0,
-            1.0,
-            0.01,
-            1e-4,
-            1e-4,
-            1e-3,
-        ]
-    )
-    q = np.array([1e-6] * 3 + [1e-4] * 3 + [2.0, 1e-5] + [1e-4] * 3 + [0.05] * 2 + [0.0] * 4)
-    return x, p0, q
-
-
 @pytest.mark.parametrize(
     ("cable", "weight"), [("straight", 0.0), ("catenary", 0.3), ("force_balance", 0.3)]
 )
@@ -87,7 +54,7 @@ def test_lean_members_equal_the_generic_ekf(cable: str, weight: float) -> None:
     constants = ModelConstants(1.5, 0.2, weight)
     models = CATENARY if weight > 0.0 else STRAIGHT
     process = models.force_balance if cable == "force_balance" else generated.inertial
-    x0, p0, q = _start(rng)
+    x0, p0, q = random_start(rng)
     starts = [x0 + offset for offset in (0.0, 0.05, -0.05)]
     lean = [
         MemberFilter(
@@ -159,7 +126,7 @@ def _height(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_not_finite_or_not_definite_innovation_covariance_is_counted() -> None:
-    x0, p0, q = _start(np.random.default_rng(1))
+    x0, p0, q = random_start(np.random.default_rng(1))
     member = MemberFilter(x0, p0, q, ModelConstants(1.5, 0.2, 0.0), generated.inertial)
     bank = FilterBank([member], 0.0, 30.0)
     before = member.x.copy()
@@ -229,7 +196,7 @@ def test_a_batch_steps_the_state_as_tick_by_tick_euler(ticks: int) -> None:
     """One step over the summed ticks gives the state of one Euler step per tick (1e-9), and
     the covariance of the ticks' transitions composed, ``Phi P Phi^T + T Q``."""
     rng = np.random.default_rng(ticks)
-    x0, p0, q = _start(rng)
+    x0, p0, q = random_start(rng)
     constants = ModelConstants(1.5, 0.2, 0.0)
     per_tick = MemberFilter(x0, p0, q, constants, generated.inertial)
     batched = MemberFilter(x0, p0, q, constants, generated.inertial)

@@ -152,7 +152,7 @@ class FrameIngest:
         """The samples a frame :meth:`take` accepted releases (received at local time
         ``local_s`` [s], or None), counted by the ingest as ``Ingest.receive`` counts the
         message the parser would decode from it; the framing counts are the caller's."""
-        layout, _, kind, convert = self._table[frame[7] | (frame[8] << 8) | (frame[9] << 16)]
+        layout, _, kind, convert = self._table[_FRONT.unpack_from(frame)[5] & 0xFFFFFF]
         values = layout.flat_of(frame, _HEADER_V2, len(frame) - _CRC_LEN)
         return self._ingest.receive_input(kind, convert(values), local_s)
 

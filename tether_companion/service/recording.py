@@ -31,6 +31,8 @@ MAVLINK1_MAGIC = 0xFE
 MAVLINK2_MAGIC = 0xFD
 _MAVLINK2_SIGNED = 0x01
 _MAVLINK2_SIGNATURE_LEN = 13
+_MAVLINK2_OVERHEAD = 12
+"""An unsigned MAVLink 2 frame's bytes besides its payload (10 header, 2 checksum)."""
 
 
 def frame_length(buffer: bytes | memoryview, start: int = 0) -> int | None:
@@ -44,7 +46,7 @@ def frame_length(buffer: bytes | memoryview, start: int = 0) -> int | None:
     if magic == MAVLINK2_MAGIC:
         if start + 3 > len(buffer):
             return None
-        length = 12 + buffer[start + 1]
+        length = _MAVLINK2_OVERHEAD + buffer[start + 1]
         if buffer[start + 2] & _MAVLINK2_SIGNED:
             length += _MAVLINK2_SIGNATURE_LEN
         return length
@@ -227,7 +229,7 @@ def read_tlog(path: str | Path, *, allow_truncated: bool = False) -> Iterator[tu
         if start + 3 <= size:  # the stamp and the frame's first three bytes in one read
             stamp_us, magic, payload_len, flags = record_of(data, offset)
             if magic == MAVLINK2_MAGIC and not flags & _MAVLINK2_SIGNED:
-                length: int | None = 12 + payload_len  # frame_length's unsigned MAVLink 2 case
+                length: int | None = _MAVLINK2_OVERHEAD + payload_len  # as frame_length
             else:
                 length = frame_length(data, start)
         else:

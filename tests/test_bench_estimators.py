@@ -230,9 +230,16 @@ def test_unreachable_scheduler_exits_2(capsys, monkeypatch):
     assert err.count("\n") == 1
 
 
-def _wait_for(path: Path, process: subprocess.Popen, timeout_s: float = 60.0) -> None:
+def _scheduler_address(path: Path, process: subprocess.Popen, timeout_s: float = 60.0) -> str:
+    """The address in the scheduler file ``path`` once ``process`` has written it whole (the
+    file exists, empty, for a moment before its JSON is in it: read then, on a busy machine,
+    it failed to parse)."""
     deadline = time.monotonic() + timeout_s
-    while not path.exists():
+    while True:
+        try:
+            return json.loads(path.read_text())["address"]
+        except (FileNotFoundError, json.JSONDecodeError, KeyError):
+            pass
         if process.poll() is not None or time.monotonic() > deadline:
             raise RuntimeError(f"{process.args} did not start (exit {process.poll()})")
         time.sleep(0.1)
@@ -262,8 +269,7 @@ def test_scheduler_gives_the_local_numbers(local_card, tmp_path, capsys):
     )
     worker = None
     try:
-        _wait_for(scheduler_file, scheduler)
-        address = json.loads(scheduler_file.read_text())["address"]
+        address = _scheduler_address(scheduler_file, scheduler)
         assert address.startswith("tcp://127.0.0.1:")
         worker = subprocess.Popen(
             [

@@ -14,10 +14,12 @@ and the chord tension ``T_ch``; a cable resting on the ground pulls the same at 
 beyond its touchdown, so there only the winch length places the drone. The prior of
 everything the window cannot measure (``s``, ``b``, ``w`` from the config; the
 accelerometer's and the rangefinder's noise averaged over the window) is mapped through this
-construction by central differences, so the initial covariance carries the correlations
-(position with thrust scale, bias and wind) that let later data correct the position when
-those become known. In a steady hover they do not: the thrust scale trades against the
-cable's vertical pull and the wind against its horizontal pull, and the covariance says so.
+construction by central differences
+(:mod:`~tether_companion.estimation.dynamic.start_covariance`), so the initial covariance
+carries the correlations (position with thrust scale, bias and wind) that let later data
+correct the position when those become known. In a steady hover they do not: the thrust
+scale trades against the cable's vertical pull and the wind against its horizontal pull, and
+the covariance says so.
 
 With a ground-station cable angle read within the window (:meth:`Initialiser.add_angle`) the
 anchor measures the drone's bearing itself: its azimuth is the bearing (a cable hangs in the
@@ -59,16 +61,23 @@ from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig, DynamicInitial
 from tether_companion.estimation.dynamic.start_angle import AngleReadings, quadratic_fit
+from tether_companion.estimation.dynamic.start_covariance import (
+    T_ACCEL,
+    T_AZIMUTH,
+    T_BIAS,
+    T_ELEVATION,
+    T_HEIGHT,
+    T_LENGTH,
+    T_SCALE,
+    T_WINCH_TENSION,
+    T_WIND,
+    THETA_SIZE,
+    start_state,
+)
 from tether_companion.estimation.dynamic.start_placement import place
 
 FloatArray = NDArray[np.float64]
 
-_THETA = 14
-"""Parameters of the construction: A (3), s, b (3), w (2), h, L, the cable angle's elevation
-and azimuth, the winch's tension (``nan`` without one)."""
-_A, _S, _B, _W, _H, _L = slice(0, 3), 3, slice(4, 7), slice(7, 9), 9, 10
-_EL, _AZ, _TA = 11, 12, 13
-_REL_STEP = 1e-6
 PLACEMENT_FAILED = (
     "the cable does not rise to the drone, or rests on the ground with no winch length:"
     " no position fix"
@@ -277,17 +286,17 @@ class Initialiser:
             )
         if math.isnan(height) and math.isnan(length_m):
             return Initialisation(None, None, "no rangefinder height and no winch length yet")
-        theta = np.zeros(_THETA)
-        theta[_A] = self._sum_a / n
-        theta[_S] = scale
-        theta[_W] = wind_ne_mps
-        theta[_H] = height
-        theta[_L] = length_m
-        theta[_EL] = theta[_AZ] = theta[_TA] = math.nan
+        theta = np.zeros(THETA_SIZE)
+        theta[T_ACCEL] = self._sum_a / n
+        theta[T_SCALE] = scale
+        theta[T_WIND] = wind_ne_mps
+        theta[T_HEIGHT] = height
+        theta[T_LENGTH] = length_m
+        theta[T_ELEVATION] = theta[T_AZIMUTH] = theta[T_WINCH_TENSION] = math.nan
         if self._pull_weak(theta):  # the force would not tell the bearing
-            theta[_EL], theta[_AZ] = self._angles.mean()
+            theta[T_ELEVATION], theta[T_AZIMUTH] = self._angles.mean()
             if self._winch_tensions:
-                theta[_TA] = sum(self._winch_tensions) / len(self._winch_tensions)
+                theta[T_WINCH_TENSION] = sum(self._winch_tensions) / len(self._winch_tensions)
         y = self._solve(theta)
         if y is None or not np.all(np.isfinite(y)):
             return Initialisation(None, None, PLACEMENT_FAILED)
@@ -295,12 +304,15 @@ class Initialiser:
             return Initialisation(
                 None, None, f"cable slack (chord tension {y[3]:.2f} N < {cfg.slack_tension_n} N)"
             )
-        x, p = self._state_and_covariance(theta, y, n, scale_std)
+        sigma, calibration_std = self._parameter_std(theta, n, scale_std)
+        x, p = start_state(theta, y, sigma, calibration_std, self._solve, cfg.initial)
         if x is None or p is None:
             return Initialisation(None, None, NO_COVARIANCE)
         motion = None
         weightless = cfg.cable_weight_n_per_m == 0.0
-        if math.isfinite(theta[_EL]) and weightless:  # a weightless cable placed by the readings
+        if (
+            math.isfinite(theta[T_ELEVATION]) and weightless
+        ):  # a weightless cable placed by the readings
             motion = self._angles.motion(time_s, self.range_std_m, cfg.winch_length_noise_std_m)
             if motion is not None:  # the end point as uncertain as the fit says, at least
                 position_var = np.diag(p)[state.POSITION]
@@ -308,9 +320,9 @@ class Initialiser:
                     np.maximum(motion[3] ** 2 - position_var, 0.0)
                 )
         if motion is None:
-            by_azimuth = math.isfinite(theta[_AZ]) and not weightless
+            by_azimuth = math.isfinite(theta[T_AZIMUTH]) and not weightless
             motion = self._fitted_motion(
-                time_s, scale, length_m, theta[_W], by_azimuth, float(theta[_TA])
+                time_s, scale, length_m, theta[T_WIND], by_azimuth, float(theta[T_WINCH_TENSION])
             )
         if motion is not None:  # the window's motion: position now and velocity
             position, velocity, velocity_se, _ = motion
@@ -377,12 +389,12 @@ class Initialiser:
         """``(p_n, p_e, p_d, T_ch)`` from the parameters, or None (no rising cable)."""
         return place(
             self._window_force_n(theta),
-            theta[_H],
-            theta[_L],
+            theta[T_HEIGHT],
+            theta[T_LENGTH],
             self.config.cable_weight_n_per_m,
-            theta[_EL],
-            theta[_AZ],
-            theta[_TA],
+            theta[T_ELEVATION],
+            theta[T_AZIMUTH],
+            theta[T_WINCH_TENSION],
         )
 
     def _window_force_n(self, theta: FloatArray) -> FloatArray:
@@ -390,10 +402,10 @@ class Initialiser:
         ``theta``: the module docstring's ``c`` times the mass."""
         n = self._n
         c = (
-            theta[_A]
-            - (self._sum_r / n) @ theta[_B]
-            + theta[_S] * (self._sum_e / n)
-            - self.drag_per_s * ((self._sum_d / n)[:, :2] @ theta[_W])
+            theta[T_ACCEL]
+            - (self._sum_r / n) @ theta[T_BIAS]
+            + theta[T_SCALE] * (self._sum_e / n)
+            - self.drag_per_s * ((self._sum_d / n)[:, :2] @ theta[T_WIND])
         )
         return self.mass_kg * c
 
@@ -444,70 +456,31 @@ class Initialiser:
             return None
         return quadratic_fit(np.asarray(times) - time_s, np.asarray(positions))
 
-    def _state_and_covariance(
-        self, theta: FloatArray, y: FloatArray, n: int, scale_std: float
-    ) -> tuple[FloatArray | None, FloatArray | None]:
-        theta_scale = float(theta[_S])
+    def _parameter_std(
+        self, theta: FloatArray, n: int, scale_std: float
+    ) -> tuple[FloatArray, FloatArray]:
+        """Standard deviations of the construction's parameters ``theta`` (the window's
+        noise averaged over its ``n`` ticks, the priors) and of the ground station's
+        calibration errors (winch offset [m] and scale, the angle's elevation and azimuth
+        zeros [rad]; 0 where the window does not use that sensor)."""
         cfg = self.config
         init = cfg.initial
-        sigma = np.zeros(_THETA)
-        sigma[_A] = self.accel_std_mps2 / math.sqrt(n)
-        sigma[_S] = scale_std
-        sigma[_B] = init.accel_bias_std_mps2
-        sigma[_W] = init.wind_std_mps
-        sigma[_H] = self.range_std_m / math.sqrt(max(self._n_height, 1))
-        sigma[_L] = cfg.winch_length_noise_std_m
-        sigma[_TA] = cfg.load_cell_noise_std_n / math.sqrt(max(len(self._winch_tensions), 1))
-        # the ground station's calibration errors: parameters of the construction beside
-        # theta (the reading's error is the noise's plus theirs) and states of their own
-        # (state.CALIBRATION, whose estimate 0 is off by minus them): one spread, correlated
-        calibration_std = np.zeros(4)
-        if math.isfinite(theta[_L]):  # the length places the drone: its calibration too
-            calibration_std[0:2] = cfg.winch_length_offset_std_m, cfg.winch_length_scale_std
-        if math.isfinite(theta[_EL]):
-            sigma[_EL], sigma[_AZ] = self._angles.mean_noise_std(float(theta[_EL]))
-            calibration_std[2:4] = self._angles.calibration_std()
-        active = [i for i in range(_THETA) if math.isfinite(theta[i]) and sigma[i] > 0.0]
-        jac = np.zeros((4, _THETA))
-        for i in active:
-            step = _REL_STEP * max(1.0, abs(theta[i]))
-            plus, minus = theta.copy(), theta.copy()
-            plus[i] += step
-            minus[i] -= step
-            y_plus, y_minus = self._solve(plus), self._solve(minus)
-            if y_plus is None or y_minus is None:
-                return None, None
-            jac[:, i] = (y_plus - y_minus) / (2.0 * step)
-        length_m = float(theta[_L]) if math.isfinite(theta[_L]) else 0.0
-        # offset + scale L and the angles' zeros move the drone as their readings do
-        calibration_columns = np.stack(
-            (jac[:, _L], jac[:, _L] * length_m, jac[:, _EL], jac[:, _AZ]), axis=1
+        sigma = np.zeros(THETA_SIZE)
+        sigma[T_ACCEL] = self.accel_std_mps2 / math.sqrt(n)
+        sigma[T_SCALE] = scale_std
+        sigma[T_BIAS] = init.accel_bias_std_mps2
+        sigma[T_WIND] = init.wind_std_mps
+        sigma[T_HEIGHT] = self.range_std_m / math.sqrt(max(self._n_height, 1))
+        sigma[T_LENGTH] = cfg.winch_length_noise_std_m
+        sigma[T_WINCH_TENSION] = cfg.load_cell_noise_std_n / math.sqrt(
+            max(len(self._winch_tensions), 1)
         )
-        # rows: p (3), T_ch, s, b (3), w (2), calibration (4) as functions of theta and the
-        # calibration errors
-        rows = np.zeros((14, _THETA + 4))
-        rows[0:4, :_THETA] = jac
-        rows[0:4, _THETA:] = calibration_columns
-        rows[4, _S] = 1.0
-        rows[5:8, _B] = np.eye(3)
-        rows[8:10, _W] = np.eye(2)
-        rows[10:14, _THETA:] = -np.eye(4)
-        parameter_std = np.concatenate((np.where(np.isfinite(sigma), sigma, 0.0), calibration_std))
-        joint = (rows * parameter_std**2) @ rows.T
-        calibration = range(state.CALIBRATION.start, state.CALIBRATION.stop)
-        order = [0, 1, 2, state.TENSION, state.SCALE, 8, 9, 10, 11, 12, *calibration]
-        p = np.zeros((state.N_STATES, state.N_STATES))
-        p[np.ix_(order, order)] = joint
-        p[state.VELOCITY, state.VELOCITY] = np.eye(3) * init.velocity_std_mps**2
-        # keep it positive definite when a prior is exact (a calibration not given here
-        # enters with its sensor's first reading: ground_station.open_calibration)
-        p += np.eye(state.N_STATES) * state.UNSET_CALIBRATION_VARIANCE
-        p = 0.5 * (p + p.T)
-        if not np.all(np.isfinite(p)):
-            return None, None
-        x = np.zeros(state.N_STATES)
-        x[state.POSITION] = y[:3]
-        x[state.TENSION] = y[3]
-        x[state.SCALE] = theta_scale
-        x[state.WIND] = theta[_W]
-        return x, p
+        calibration_std = np.zeros(4)
+        if math.isfinite(theta[T_LENGTH]):  # the length places the drone: its calibration too
+            calibration_std[0:2] = cfg.winch_length_offset_std_m, cfg.winch_length_scale_std
+        if math.isfinite(theta[T_ELEVATION]):
+            sigma[T_ELEVATION], sigma[T_AZIMUTH] = self._angles.mean_noise_std(
+                float(theta[T_ELEVATION])
+            )
+            calibration_std[2:4] = self._angles.calibration_std()
+        return sigma, calibration_std

@@ -170,7 +170,7 @@ class HoverAnchor:
     (``C' = D^-1 C D^-1``, a correlation matrix; ``X C^-1 X^T = X' C'^-1 X'^T``, ``X' = X
     D^-1``)."""
 
-    __slots__ = ("noise_scale", "sd", "smallest", "y0", "yv")
+    __slots__ = ("largest_sd", "noise_scale", "sd", "smallest", "smallest_sd", "y0", "yv")
 
     def __init__(
         self,
@@ -189,6 +189,8 @@ class HoverAnchor:
         """The standard deviations of the thrust scale and the wind (``D``)."""
         self.noise_scale = (1.0 / (sd[0] * sd[0]), 1.0 / (sd[1] * sd[1]), 1.0 / (sd[2] * sd[2]))
         """``1 / sd_h^2``: ``T q_h`` scaled into ``C'``."""
+        self.smallest_sd, self.largest_sd = min(sd), max(sd)
+        """The smallest and the largest of :attr:`sd` (read at every tick)."""
 
     @classmethod
     def of(cls, mixture: MixtureValues) -> HoverAnchor | None:
@@ -274,13 +276,15 @@ class HoverAnchor:
         x_ne = n0 * e0 + n1 * e1 + n2 * e2
         x_ee = e0 * e0 + e1 * e1 + e2 * e2
         y_sq = x_nn + x_ee
-        smallest_sd, largest_sd = min(self.sd), max(self.sd)
+        smallest_sd, largest_sd = self.smallest_sd, self.largest_sd
         # the exact entries' rounding (absolute), scaled by the smallest sd_h sd_h'
         rounding = ROUNDING * (largest_sd * largest_sd + t * noise.largest)
         q = noise.diagonal
         w0, w1, w2 = self.noise_scale
         s, n, e = HOVER_UNKNOWNS
-        delta = t * max(q[s] * w0, q[n] * w1, q[e] * w2)
+        d0, d1, d2 = q[s] * w0, q[n] * w1, q[e] * w2
+        d1 = d1 if d1 > d0 else d0  # max(d0, d1, d2) without the builtin's call
+        delta = t * (d2 if d2 > d1 else d1)
         delta += 3.0 * rounding / (smallest_sd * smallest_sd)
         dx = math.sqrt(6.0) * (spread + ROUNDING * row_scale * largest_sd / smallest_sd)
         smallest = self.smallest

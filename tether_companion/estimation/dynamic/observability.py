@@ -204,7 +204,7 @@ def unmodelled_position_rows(
     # the columns of I - u u^T a horizontal force acts through (north, east)
     an0, an1, an2 = 1.0 - u0 * u0, -u1 * u0, -u2 * u0
     ae0, ae1, ae2 = -u0 * u1, 1.0 - u1 * u1, -u2 * u1
-    gain = distance * force_std_n / max(tension_n, MIN_TENSION_N)
+    gain = distance * force_std_n / (MIN_TENSION_N if MIN_TENSION_N > tension_n else tension_n)
     g, w = gain * gain, length_std_m * length_std_m
     # entry (i, j): g (an_i an_j + ae_i ae_j) + w u_i u_j, written out (runs every IMU tick)
     return [
@@ -245,7 +245,8 @@ def min_horizontal_pull_n(
     invents (realistic sagging circle, winch length given: 6-8 m/s of wind against 1.8 m/s
     blown, estimated pull 4.5 N against 1.3 N): the bearing it claims is then no better than
     that wind's drag."""
-    return pull_per_wind_n_s_per_m * max(wind_std_mps, math.hypot(wind_n_mps, wind_e_mps))
+    speed = math.hypot(wind_n_mps, wind_e_mps)  # max(wind_std_mps, speed), the builtin's order
+    return pull_per_wind_n_s_per_m * (speed if speed > wind_std_mps else wind_std_mps)
 
 
 def assess(
@@ -439,7 +440,7 @@ def _less(a: float, b: float, margin: float) -> bool | None:
 def _largest_std_values(a: float, b: float, c: float) -> float:
     """Square root of the larger eigenvalue of the symmetric 2x2 ``[[a, b], [b, c]]``."""
     largest = 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
-    return math.sqrt(max(largest, 0.0))
+    return math.sqrt(0.0 if 0.0 > largest else largest)  # max(largest, 0.0), nan kept
 
 
 def _explained_2x2(

@@ -72,3 +72,46 @@ def test_motor_lag_matches_exponential_and_refuses_bad_tau() -> None:
     assert lag.decay(0.0) == 1.0
     with pytest.raises(ValueError, match="> 0"):
         MotorLag(0.0)
+
+
+def _mix_with_builtins(collective_share, torque_rows, collective_n, torque, f_min, f_max):
+    """The mixing rule with the min/max builtins (the generated code's former form)."""
+    tl, tm, tn = torque
+    bases = [min(max(c * collective_n, f_min), f_max) for c in collective_share]
+    shares = [a * tl + b * tm + e * tn for a, b, e in torque_rows]
+    scale = 1.0
+    for base, share in zip(bases, shares, strict=True):
+        if share > 0.0 and base + share > f_max:
+            scale = min(scale, (f_max - base) / share)
+        elif share < 0.0 and base + share < f_min:
+            scale = min(scale, (f_min - base) / share)
+    scale = max(scale, 0.0)
+    return [base + scale * share for base, share in zip(bases, shares, strict=True)]
+
+
+def test_generated_mixing_is_the_builtins_rule_bit_for_bit() -> None:
+    """The generated code's comparisons (perf15: no min/max calls) give the builtins' floats,
+    saturated, negative, nan and infinite requests included."""
+    import itertools
+    import struct
+
+    from tether_companion.physics.motors import _mixing_function
+
+    share = (0.25, 0.25, 0.25, 0.25)
+    rows = ((-1.3, 1.1, 0.4), (1.3, -1.1, 0.4), (1.3, 1.1, -0.4), (-1.3, -1.1, -0.4))
+    mix = _mixing_function(share, rows)
+    rng = np.random.default_rng(5)
+    specials = (0.0, -0.0, 3.0, 40.0, -5.0, math.inf, -math.inf, math.nan)
+    cases = [
+        (float(rng.uniform(-10, 60)), tuple(float(v) for v in rng.normal(0, 2, 3)))
+        for _ in range(300)
+    ]
+    cases += [(c, (t, -t, 0.5 * t)) for c, t in itertools.product(specials, repeat=2)]
+
+    def bits(values):
+        return [struct.pack("<d", v) if not math.isnan(v) else b"nan" for v in values]
+
+    for collective, torque in cases:
+        got = mix(collective, torque, 0.4, 9.0)
+        expected = _mix_with_builtins(share, rows, collective, torque, 0.4, 9.0)
+        assert bits(got) == bits(expected), (collective, torque)

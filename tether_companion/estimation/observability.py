@@ -112,7 +112,8 @@ class RangeWatch:
         if math.isnan(self._start_s):
             self._start_s = time_s
         since = self._start_s if math.isnan(self._last_fused_s) else self._last_fused_s
-        return max(time_s - since, 0.0)
+        elapsed = time_s - since
+        return 0.0 if 0.0 > elapsed else elapsed  # max(elapsed, 0.0), nan kept
 
     def lost(self, time_s: float) -> bool:
         """True when no height was fused for longer than ``range_lost_after_s``."""

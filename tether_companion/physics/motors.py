@@ -147,15 +147,26 @@ def _mixing_function(
         raise ValueError("the allocation's pseudo-inverse is not finite")
     lines = ["tl, tm, tn = torque", "scale = 1.0"]
     for i, (c, (a, b, e)) in enumerate(zip(collective_share, torque_rows, strict=True)):
+        # min()/max() as comparisons in the builtins' order (a later value replaces the
+        # first only when it compares smaller/greater: the same floats, nan included),
+        # without their calls
         lines += [
-            f"b{i} = min(max({c!r} * collective_n, f_min), f_max)",
+            f"b{i} = {c!r} * collective_n",
+            f"if f_min > b{i}:",
+            f"    b{i} = f_min",
+            f"if f_max < b{i}:",
+            f"    b{i} = f_max",
             f"d{i} = {a!r} * tl + {b!r} * tm + {e!r} * tn",
             f"if d{i} > 0.0 and b{i} + d{i} > f_max:",
-            f"    scale = min(scale, (f_max - b{i}) / d{i})",
+            f"    limit = (f_max - b{i}) / d{i}",
+            "    if limit < scale:",
+            "        scale = limit",
             f"elif d{i} < 0.0 and b{i} + d{i} < f_min:",
-            f"    scale = min(scale, (f_min - b{i}) / d{i})",
+            f"    limit = (f_min - b{i}) / d{i}",
+            "    if limit < scale:",
+            "        scale = limit",
         ]
-    lines.append("scale = max(scale, 0.0)")
+    lines += ["if 0.0 > scale:", "    scale = 0.0"]
     lines.append(
         "return [" + ", ".join(f"b{i} + scale * d{i}" for i in range(len(torque_rows))) + "]"
     )

@@ -230,7 +230,8 @@ class CascadedController:
         g = self.gravity_mps2
         m = self.mass_kg
         fn, fe = m * an_cmd, m * ae_cmd
-        fd = min(m * (ad_cmd - g), -0.1 * m * g)
+        fd, floor = m * (ad_cmd - g), -0.1 * m * g
+        fd = floor if floor < fd else fd  # min(fd, floor) without the builtin's call
         horizontal = math.hypot(fn, fe)
         limit = self._tan_max_tilt * -fd
         if horizontal > limit:
@@ -246,7 +247,8 @@ class CascadedController:
         cp, sp_ = math.cos(pitch), math.sin(pitch)
         # body z axis in NED: third row of R_v^b
         zb0, zb1, zb2 = cr * sp_ * cy + sr * sy, cr * sp_ * sy - sr * cy, cr * cp
-        collective = max(-(fn * zb0 + fe * zb1 + fd * zb2), 0.0)
+        collective = -(fn * zb0 + fe * zb1 + fd * zb2)
+        collective = 0.0 if 0.0 > collective else collective  # max(collective, 0.0)
 
         # attitude -> body rates (eq. 5 inverted) -> torques
         max_rate, max_yaw_rate = c.max_rate_rad_s, c.max_yaw_rate_rad_s

@@ -226,7 +226,8 @@ class SensorSuite:
         """Accelerometer (truth + bias + vibration + noise) and gyro (truth + bias + noise)."""
         c = self._config
         take = self._noise.take
-        dt = 0.0 if self._last_imu_s is None else max(time_s - self._last_imu_s, 0.0)
+        dt = 0.0 if self._last_imu_s is None else time_s - self._last_imu_s
+        dt = 0.0 if 0.0 > dt else dt  # max(dt, 0.0) without the builtin's call
         self._last_imu_s = time_s
         _random_walk(self.accel_bias_drift_mps2, c.accel_bias_random_walk_mps2_per_sqrt_s, dt, take)
         _random_walk(self.gyro_bias_drift_rad_s, c.gyro_bias_random_walk_rad_s_per_sqrt_s, dt, take)
@@ -298,4 +299,6 @@ class SensorSuite:
         if not c.range_min_m <= distance <= c.range_max_m:
             return None
         noisy = distance + c.range_noise_std_m * self._noise.take()
-        return RangeSample(time_s, min(max(noisy, c.range_min_m), c.range_max_m))
+        low, high = c.range_min_m, c.range_max_m  # min(max(noisy, low), high), written out
+        noisy = low if low > noisy else noisy
+        return RangeSample(time_s, high if high < noisy else noisy)

@@ -118,10 +118,29 @@ def test_the_winchs_tension_is_fused_at_the_anchor_and_slows_the_tension_walk() 
 def test_a_bad_winch_tension_is_counted_and_dropped() -> None:
     est, t = _filter_on_the_light_cable()
     before = est.health.nonfinite_rejected
-    for bad in (math.nan, -1.0, math.inf):
+    for bad in (math.nan, -10.0 * est.dynamic.load_cell_noise_std_n, math.inf):
         est.set_winch_tension_n(bad, t)
     assert est.health.nonfinite_rejected == before + 3
     assert est.ground_station.winch_tension.status.fused == 0
+
+
+def test_a_reading_just_below_zero_is_the_load_cells_noise_and_is_fused() -> None:
+    """Near zero a load cell's noise scatters its readings below zero: dropping them fused
+    only the upper half (a slack cable's 0.07 N anchor tension read with 0.2 N of noise
+    averaged 0.19 N over the readings kept). One noise standard deviation below zero is a
+    measurement (the aid's innovation test decides: this filter pulls 4 N, so it is gated);
+    ten is a fault, counted and dropped."""
+    est, t = _filter_on_the_light_cable()
+    sigma = est.dynamic.load_cell_noise_std_n
+    status = est.ground_station.winch_tension.status
+    rejected = est.health.nonfinite_rejected
+    est.set_winch_tension_n(-sigma, t)
+    assert status.fused + status.gated == 1
+    assert status.last_innovation[0] == pytest.approx(-sigma - 4.0, abs=0.5)
+    assert est.health.nonfinite_rejected == rejected
+    est.set_winch_tension_n(-10.0 * sigma, t + 0.001)
+    assert status.fused + status.gated == 1
+    assert est.health.nonfinite_rejected == rejected + 1
 
 
 def test_the_winchs_tension_places_a_resting_cable_whose_pull_points_away() -> None:

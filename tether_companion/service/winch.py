@@ -60,7 +60,9 @@ CLUTCH_ENGAGED = dialect.MAV_WINCH_STATUS_CLUTCH_ENGAGED
 WINCH_COMPONENT_ID = dialect.MAV_COMP_ID_WINCH
 """MAV_COMP_ID_WINCH (169)."""
 MAX_TENSION_KG = 1000.0
-"""A tension above this [kgf] is not a tether's: the reading's tension is dropped."""
+"""A tension beyond this [kgf] either way is not a tether's: the reading's tension is dropped.
+A load cell near zero reads slightly below it (its noise): the estimator takes such readings as
+measurements down to what its noise explains (dynamic filter: ``ground_station.tension_ok``)."""
 
 
 @dataclass(frozen=True)
@@ -232,7 +234,7 @@ class WinchGate(GroundGate):
         tension_kg = float(msg.tension)
         if math.isnan(tension_kg):
             return math.nan
-        if math.isinf(tension_kg) or not 0.0 <= tension_kg <= MAX_TENSION_KG:
+        if math.isinf(tension_kg) or not -MAX_TENSION_KG <= tension_kg <= MAX_TENSION_KG:
             self.counters.bad_tension += 1
             return math.nan
         return tension_kg * STANDARD_GRAVITY_MPS2

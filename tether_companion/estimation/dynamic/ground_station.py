@@ -57,6 +57,14 @@ ANGLE_FRESH_S = 1.0
 withholds a pull too weak against the wind's drag (observability.py) is waived meanwhile."""
 
 
+LOAD_CELL_BELOW_ZERO_STDS = 5.0
+"""A load cell reads a tension near zero as that tension plus its noise, below zero about half
+the time at zero: a reading down to this many of its noise standard deviations below zero is
+a measurement, lower a fault (dropped, counted). Dropping every negative reading fused only the
+upper part of the noise: on the fixed-length sagging circle (anchor tension ~0.07 N, the
+winch's 0.2 N of noise) the readings fused averaged ~0.19 N."""
+
+
 class GroundStationInputs:
     """Checks and fuses the load cell's tension, the winch's length and the cable angle.
 
@@ -83,6 +91,8 @@ class GroundStationInputs:
         confirmed_pull_per_wind_n_s_per_m: float,
     ) -> None:
         self.load_cell = LoadCellAid(dynamic.load_cell_noise_std_n)
+        self._least_tension_n = -LOAD_CELL_BELOW_ZERO_STDS * dynamic.load_cell_noise_std_n
+        """The lowest load-cell reading [N] taken as a measurement."""
         self.winch_tension = LoadCellAid(dynamic.load_cell_noise_std_n, at_anchor=True)
         self.winch = WinchAid(
             dynamic.winch_length_noise_std_m, dynamic.slack_tension_n, dynamic.winch_latency_s
@@ -114,9 +124,12 @@ class GroundStationInputs:
 
     # ------------------------------------------------------------------ checks
     def tension_ok(self, tension_n: float, time_s: float) -> bool:
-        """Whether a load-cell reading (tension [N] at ``time_s`` [s]) is usable (counted
-        in ``nonfinite_rejected`` when not)."""
-        if not (math.isfinite(tension_n) and math.isfinite(time_s)) or tension_n < 0.0:
+        """Whether a load-cell reading (tension [N] at ``time_s`` [s]) is usable: finite and
+        not below zero by more than its noise explains (counted in ``nonfinite_rejected`` when
+        not)."""
+        if not (math.isfinite(tension_n) and math.isfinite(time_s)) or (
+            tension_n < self._least_tension_n
+        ):
             self._health.nonfinite_rejected += 1
             return False
         return True

@@ -296,7 +296,11 @@ class Initialiser:
         if self._pull_weak(theta):  # the force would not tell the bearing
             theta[T_ELEVATION], theta[T_AZIMUTH] = self._angles.mean()
             if self._winch_tensions:
-                theta[T_WINCH_TENSION] = sum(self._winch_tensions) / len(self._winch_tensions)
+                # readings near zero scatter below it (ground_station.tension_ok); a tension
+                # does not
+                theta[T_WINCH_TENSION] = max(
+                    0.0, sum(self._winch_tensions) / len(self._winch_tensions)
+                )
         y = self._solve(theta)
         if y is None or not np.all(np.isfinite(y)):
             return Initialisation(None, None, PLACEMENT_FAILED)

@@ -86,9 +86,45 @@ def turn_about_anchor(member: MemberFilter, angle_rad: float) -> None:
     member.P = turn @ member.P @ turn.T
 
 
+UNIFORM_BEARING_VARIANCE_RAD2 = math.pi**2 / 3.0
+"""The variance [rad^2] of a bearing that could be anywhere on the circle."""
+
+
+def bearing_curvature_variance(x: FloatArray, p: FloatArray) -> float:
+    """The variance [rad^2] the azimuth linearised at the state ``x`` leaves out over the
+    horizontal position's spread (covariance ``p``): a Gaussian filter's second-order term
+    ``0.5 tr(H P H P)`` with ``H`` the bearing ``atan2(e, n)``'s Hessian in (n, e), of size
+    ``1/a^2`` at the span ``a``; at most a bearing uniform on the circle's ``pi^2/3`` (its
+    value right above the anchor).
+
+    It is ``(sd / a)^4`` for a round spread ``sd``: nothing where the bearing is sure (1e-7
+    rad^2 at 0.1 m and 5 m, against the sensor's 1e-4) and the bearing's whole spread where
+    the drone may be on either side of the anchor. Without it a member a slack cable had
+    brought to 0.43 m from the anchor with 0.33 m of spread took the measured bearing through
+    a Jacobian of ``1/a``: its deviation fell 0.33 -> 0.11 m within 0.1 s (one angle and one
+    load-cell reading), 2.5 m off (the fixed-length sagging circle, tuning seed 6, 5.7-5.8 s,
+    with the load cell's readings below zero taken; sag14 saw the same on seed 1). Added only
+    once a load cell's tension has been fused (:class:`CableAngleAid`)."""
+    n, e = float(x[0]), float(x[1])
+    span2 = n * n + e * e
+    if span2 <= 0.0:
+        return UNIFORM_BEARING_VARIANCE_RAD2
+    cross, diagonal = e * e - n * n, 2.0 * n * e
+    hessian = np.array(((diagonal, cross), (cross, -diagonal))) / (span2 * span2)
+    hp = hessian @ np.asarray(p)[0:2, 0:2]
+    return min(0.5 * float(np.trace(hp @ hp)), UNIFORM_BEARING_VARIANCE_RAD2)
+
+
 class CableAngleAid:
     """Fuses (elevation, azimuth) [rad], each taken ``latency_s`` [s] before its stamp, unless
     the chord tension is surely below ``slack_tension_n`` [N].
+
+    Once a load cell's tension has been fused (``constants.tension_measured``) the azimuth's
+    variance also holds :func:`bearing_curvature_variance`. Not without one: the term is
+    ``sd_radial^2 sd_across^2 / a^4``, which an angle-only filter's metres of radial spread
+    make large, and it took that filter's fixed-length sagging circle, tuning seed 2, from
+    NEES 0.71 to 19.3 (sag14's candidate), so the filters without a load cell keep the plain
+    linearisation (docs/estimation.md, sag15).
 
     Attributes
     ----------
@@ -135,6 +171,8 @@ class CableAngleAid:
 
         z = np.array((elevation_rad, azimuth_rad))
         r = np.diag([sd**2 for sd in self.noise_std_rad(elevation_rad, noise_std_rad)])
+        if constants.tension_measured:  # the load cell's filter only (class docstring)
+            r[1, 1] += bearing_curvature_variance(bank.best.x, bank.best.P)
         delayed = at_reading_time(measure, self._latency_s + age_s)
         return fuse(bank, NAME, self.status, z, delayed, r, time_s)
 

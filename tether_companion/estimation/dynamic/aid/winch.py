@@ -1,15 +1,18 @@
 """Optional winch paid-out length: the cable's arc length as the encoder reads it, with its
 zero offset and scale error (states ``winch_offset``, ``winch_scale``; generated
 ``winch_length_*``: the catenary's, ``|p|`` for a weightless cable). While the filter's
-tension is below ``slack_tension_n``, or a cable with weight is surely longer than its span
-plus height (:func:`surely_slack_by_length`: slack whatever the tension), the cable may be
-slack and its length says only that the drone is no farther from the anchor than that: the
-reading is skipped, unless the filter has the drone beyond it, when the distance ``|p|``
-itself (as read) is fused to the length (the one statement that holds for any cable; the
-catenary's arc, longer than the chord at a deep sag, is not: fused there it published wrong
-positions on the sagging circle). The reading was
-taken ``latency_s`` before its time stamp (and the stamp may be older than the filter): it is
-fused as the length at the drone's position then
+tension is below ``slack_tension_n`` (once a load cell's tension has been fused on a cable
+with weight: surely below it, ``WinchAid._maybe_slack``), or a cable with weight is surely
+longer than its span plus height (:func:`surely_slack_by_length`: slack whatever the
+tension), the cable may be slack and its length says only that the drone is no farther from
+the anchor than that: the reading is skipped, unless the filter has the drone beyond it,
+when the distance ``|p|`` itself (as read) is fused to the length (the one statement that
+holds for any cable; the catenary's arc, longer than the chord at a deep sag, is not: fused
+there it published wrong positions on the sagging circle). Fused as the catenary's length
+after a load cell's tension on a cable with weight, the reading's variance also holds the
+length's second-order term in the tension (:func:`tension_curvature_variance`). The reading
+was taken ``latency_s`` before its time stamp (and the stamp may be older than the filter):
+it is fused as the length at the drone's position then
 (:func:`~tether_companion.estimation.dynamic.aiding.at_reading_time`)."""
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from tether_companion.estimation.dynamic.aid.slack import SLACK, SURE_SIGMAS
 from tether_companion.estimation.dynamic.aiding import AidStatus, at_reading_time, fuse
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.models import ModelConstants, evaluate
+from tether_companion.estimation.ekf import MeasurementFunction
 
 FloatArray = NDArray[np.float64]
 
@@ -55,9 +59,7 @@ class WinchAid:
         best = bank.best
         z = np.array((length_m,))
         latency_s = self._latency_s + age_s
-        if best.x[state.TENSION] < self._slack_n or surely_slack_by_length(
-            best.x, best.P, constants.weight_n_per_m, length_m, float(self._r[0, 0])
-        ):
+        if self._maybe_slack(best.x, best.P, constants, length_m):
             chord = at_reading_time(_chord, latency_s)
             if not float(chord(best.x)[0][0]) > length_m:
                 self.status.skip(SLACK)
@@ -70,7 +72,34 @@ class WinchAid:
             return evaluate(model, xs, (), c, 1)
 
         delayed = at_reading_time(measure, latency_s)
-        return fuse(bank, NAME, self.status, z, delayed, self._r, time_s)
+        r = self._r
+        if constants.weight_n_per_m > 0.0 and constants.tension_measured:
+            r = r + tension_curvature_variance(delayed, best.x, best.P)
+        return fuse(bank, NAME, self.status, z, delayed, r, time_s)
+
+    def _maybe_slack(
+        self, x: FloatArray, p: FloatArray, constants: ModelConstants, length_m: float
+    ) -> bool:
+        """Whether the reading ``length_m`` [m] may be of a slack cable at the state ``x``
+        (covariance ``p``): a cable with weight surely slack by its length
+        (:func:`surely_slack_by_length`), or its chord tension below ``slack_tension_n``;
+        once a load cell's tension has been fused on a cable with weight
+        (``constants.tension_measured``), surely below it (by :data:`~.slack.SURE_SIGMAS`
+        standard deviations). Such a cable can pull below that tension (the sagging hover's
+        7 m cable 5 m out and 3 m up: 0.12 N, taut), and there its length is the one reading
+        of the range: with the load cell's readings below zero taken, the length came only
+        when the load cell's noise lifted the tension over 0.2 N, and each moved the drone
+        metres (tuning seed 1: its estimate swung through the anchor, 76 ticks published
+        beyond 3 sigma). Without a load cell the tension is not measured and the rule stays
+        the estimate's (sag14's candidate took the winch + angle filter's sagging circle seed
+        1 from NEES 0.13 to 165)."""
+        weight_n_per_m = constants.weight_n_per_m
+        tension = float(x[state.TENSION])
+        if weight_n_per_m > 0.0 and constants.tension_measured:
+            tension += SURE_SIGMAS * math.sqrt(max(float(p[state.TENSION, state.TENSION]), 0.0))
+        return tension < self._slack_n or surely_slack_by_length(
+            x, p, weight_n_per_m, length_m, float(self._r[0, 0])
+        )
 
 
 def surely_slack_by_length(
@@ -107,6 +136,31 @@ def surely_slack_by_length(
     variance = float(jac @ p @ jac) + noise_m2
     excess = length_m - float(x[state.WINCH_OFFSET]) - gain * hanging
     return excess > SURE_SIGMAS * math.sqrt(max(variance, 0.0))
+
+
+def tension_curvature_variance(measure: MeasurementFunction, x: FloatArray, p: FloatArray) -> float:
+    """The variance [m^2] a length ``measure(x)`` linearised at ``x`` leaves out over the
+    chord tension's spread (covariance ``p``): the second-order term of a Gaussian filter in
+    the tension alone, ``0.5 (h'' sd^2)^2`` with ``h'' sd^2 = h(T + sd) - 2 h(T) + h(T - sd)``
+    (central differences over the spread itself, so a kink within it counts; 0 where the
+    model is undefined).
+
+    A cable with weight's length falls from ``a + b`` as ``c ln(2 b / c)`` near zero tension
+    (``c = H / w``): its slope in the tension grows without bound there and changes by more
+    than itself within a spread of 0.1-0.2 N. Linearised at the estimate, a length fused at
+    0.2 +- 0.13 N took the tension to 0.64 +- 0.03 N in one update (the sagging hover, tuning
+    seed 1); fused near zero tension it pinned the tension at 0 +- 0.015 N while the true one
+    rose to 0.3 N (the fixed-length circle, seed 1). At 1 +- 0.1 N on the light cable 5 m out
+    it is 2 % of the encoder's noise variance (tests/test_dynamic_resting_slack.py). Added
+    only once a load cell's tension has been fused (:class:`WinchAid`)."""
+    sd = math.sqrt(max(float(p[state.TENSION, state.TENSION]), 0.0))
+    values = []
+    for step in (-sd, 0.0, sd):
+        xs = x.copy()
+        xs[state.TENSION] += step
+        values.append(float(measure(xs)[0][0]))
+    second = values[0] - 2.0 * values[1] + values[2]
+    return 0.5 * second * second if math.isfinite(second) else 0.0
 
 
 def _chord(xs: FloatArray) -> tuple[FloatArray, FloatArray]:

@@ -18,7 +18,19 @@ elevation zero are released to learning once the filter has settled:
   samples included) average at most :data:`MAX_MEAN_NIS` over the last :data:`SETTLE_S`;
 * and a cable angle has been fused (``ground_station.py`` gives the samples only then: the
   winch's calibration without an angle is told only through the force balance's cable
-  direction, and stays a consider state).
+  direction, and stays a consider state);
+* and the innovations of the readings that teach the released states (the winch's length, the
+  angle's elevation) are steady (sitl15): for each, the mean over the last
+  :data:`STEADY_WINDOW_S` is either at 0 (the held calibration agrees with the readings:
+  nothing to learn) or within the tolerance of the mean over the :data:`STEADY_WINDOW_S`
+  before it (a constant to learn). The tolerance is :data:`STEADY_FRACTION` of the state's
+  prior standard deviation plus :data:`STEADY_STANDARD_ERRORS` standard errors of the
+  reading's noise. The NIS rule cannot see a transient smaller than the calibration's spread
+  (that spread is in the innovations' variance), and a state released while the position's
+  error still moves takes the transient as a constant and keeps it (no process noise): on
+  ArduPilot SITL, released at the end of the fly-out or in a recovering bad start's +0.07 m
+  plateau of the winch's innovation, the external-navigation hold's RMS was 0.165 and
+  0.107 m; released by this test 0.073 and 0.078 m (docs/estimation.md, sitl15).
 
 The azimuth zero is never released (``state.NEVER_RELEASED``): the angle sensor is the
 companion's only absolute bearing, and the flight cannot tell its zero from the autopilot's
@@ -39,9 +51,7 @@ the SITL harness's rangefinder mount (the companion had it at the centre of mass
 0.09 m below: the height's disagreement went into the winch's offset and the elevation zero).
 Since, on SITL's flight with the simulator's realistic ground-station errors, learning cut our
 RMS from 0.145 / 0.158 / 0.155 / 0.221 m held to 0.032 / 0.058 / 0.077 / 0.038 m (GPS hold,
-external-navigation hold, circle, landing); with SITL's exact sensors it costs up to 0.03 m in
-the hold after the fly-out (the 3 s release takes the fly-out's transient as a constant:
-docs/estimation.md, "State and model"). Pure.
+external-navigation hold, circle, landing). Pure.
 """
 
 from __future__ import annotations
@@ -58,11 +68,30 @@ decided, before the calibration states learn."""
 MAX_MEAN_NIS = 2.0
 """The band: the mean NIS per degree of freedom over the last :data:`SETTLE_S` (1 for a
 consistent filter; a bad start's bearing shows tens)."""
+STEADY_WINDOW_S = 4.0
+"""The steadiness test's window [s]: the last one's mean innovation is compared with 0 and with
+the one before's (3 s let a recovering bad start's 4 s plateau on ArduPilot SITL through)."""
+STEADY_FRACTION = 0.25
+"""The steadiness test's tolerance, a fraction of the state's prior standard deviation (the
+winch's zero offset [m], the elevation zero [rad]). A calibration error is a constant the
+innovations agree on; a transient (the fly-out's, a recovering bad start's) moved the winch's
+innovation's mean by 0.04-0.15 m a window on ArduPilot SITL."""
+STEADY_STANDARD_ERRORS = 2.0
+"""The steadiness test's allowance for the readings' noise: this many standard errors of a
+window's mean (or of the difference of two), from the reading's white noise's standard
+deviation."""
+WINCH, ELEVATION = 0, 1
+"""The innovations the steadiness test watches: the winch length's [m], the elevation's [rad]."""
 
 
 class CalibrationRelease:
     """Watches the ground station's innovations and releases the bank's consider states
     by the module's rule.
+
+    Parameters
+    ----------
+    enabled
+        Whether the states are ever released (``dynamic_filter.learn_calibration``).
 
     Attributes
     ----------
@@ -73,21 +102,47 @@ class CalibrationRelease:
     def __init__(self, enabled: bool = True) -> None:
         self.enabled = enabled
         """Whether the states are ever released (``dynamic_filter.learn_calibration``)."""
+        self._tolerance = [0.0, 0.0]
+        """The steadiness test's tolerance per watched innovation (winch [m], elevation [rad])."""
+        self._noise_std = [0.0, 0.0]
+        """The watched readings' noise standard deviations (winch [m], elevation [rad])."""
         self._samples: deque[tuple[float, float]] = deque()
         """(filter time [s], NIS per degree of freedom) since the bank decided, the last
         :data:`SETTLE_S`."""
+        self._innovations: tuple[deque[tuple[float, float]], ...] = (deque(), deque())
+        """(filter time [s], innovation) of the winch length [m] and the elevation [rad], the
+        last 2 :data:`STEADY_WINDOW_S` (decided or not)."""
         self._decided_s = math.nan
         """The filter time of the first sample after the bank decided [s]."""
         self.released_time_s = math.nan
 
-    def add(self, bank: FilterBank, time_s: float, nis: float, dof: int) -> None:
+    def add(
+        self,
+        bank: FilterBank,
+        time_s: float,
+        nis: float,
+        dof: int,
+        watched: tuple[int, float, float, float] | None = None,
+    ) -> None:
         """A ground-station sample's NIS (``dof`` degrees of freedom) at filter time
-        ``time_s`` [s], tested against ``bank``'s best member; the bank's consider states
-        are released when the rule holds."""
+        ``time_s`` [s], tested against ``bank``'s best member, and the innovation the
+        steadiness test watches (``watched``: :data:`WINCH` or :data:`ELEVATION`, the value,
+        the prior standard deviation of the calibration state it would teach, the winch's
+        zero offset [m] or the elevation zero [rad], and the reading's noise standard
+        deviation in the same unit); the bank's consider states are released when the rule
+        holds."""
         if not self.enabled or bank.consider != state.CALIBRATION or not math.isfinite(nis):
             return
+        if watched is not None and math.isfinite(watched[1]):
+            self._tolerance[watched[0]] = STEADY_FRACTION * watched[2]
+            self._noise_std[watched[0]] = watched[3]
+            window = self._innovations[watched[0]]
+            window.append((time_s, watched[1]))
+            while window[0][0] < time_s - 2.0 * STEADY_WINDOW_S:
+                window.popleft()
         if not bank.decided:
-            self.clear()
+            self._samples.clear()
+            self._decided_s = math.nan
             return
         if math.isnan(self._decided_s):
             self._decided_s = time_s
@@ -97,12 +152,45 @@ class CalibrationRelease:
             samples.popleft()
         if time_s - self._decided_s < SETTLE_S:
             return
-        if sum(v for _, v in samples) <= MAX_MEAN_NIS * len(samples):
+        if sum(v for _, v in samples) > MAX_MEAN_NIS * len(samples):
+            return
+        if all(
+            _steady(window, time_s, tolerance, noise)
+            for window, tolerance, noise in zip(
+                self._innovations, self._tolerance, self._noise_std, strict=True
+            )
+        ):
             bank.release(state.NEVER_RELEASED)
             self.released_time_s = time_s
 
     def clear(self) -> None:
-        """Forget the samples (the bank is undecided, or the filter restarts)."""
+        """Forget the samples (the filter restarts)."""
         self._samples.clear()
+        for window in self._innovations:
+            window.clear()
         self._decided_s = math.nan
         self.released_time_s = math.nan
+
+
+def _steady(
+    window: deque[tuple[float, float]], time_s: float, tolerance: float, noise_std: float
+) -> bool:
+    """Whether the innovations in ``window`` have a steady mean at ``time_s`` [s]: the last
+    :data:`STEADY_WINDOW_S`'s mean within ``tolerance`` plus :data:`STEADY_STANDARD_ERRORS`
+    standard errors (readings of noise ``noise_std``) of 0 or of the :data:`STEADY_WINDOW_S`
+    before it (a sensor that has not reported is steady)."""
+    if not window:
+        return True
+    recent = [v for t, v in window if t > time_s - STEADY_WINDOW_S]
+    before = [v for t, v in window if t <= time_s - STEADY_WINDOW_S]
+    if len(recent) < 2:
+        return False
+    allowance = STEADY_STANDARD_ERRORS * noise_std
+    mean_recent = sum(recent) / len(recent)
+    if abs(mean_recent) <= tolerance + allowance / math.sqrt(len(recent)):
+        return True  # nothing to learn: the held calibration agrees with the readings
+    if len(before) < 2:
+        return False
+    difference = mean_recent - sum(before) / len(before)
+    error = math.sqrt(1.0 / len(recent) + 1.0 / len(before))
+    return abs(difference) <= tolerance + allowance * error

@@ -43,7 +43,11 @@ from tether_companion.estimation.dynamic.aid.load_cell import LoadCellAid
 from tether_companion.estimation.dynamic.aid.winch import NAME as WINCH_NAME
 from tether_companion.estimation.dynamic.aid.winch import WinchAid
 from tether_companion.estimation.dynamic.bank import FilterBank
-from tether_companion.estimation.dynamic.calibration_release import CalibrationRelease
+from tether_companion.estimation.dynamic.calibration_release import (
+    ELEVATION,
+    WINCH,
+    CalibrationRelease,
+)
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.consistency import BearingWindow
 from tether_companion.estimation.dynamic.models import ModelConstants
@@ -110,6 +114,11 @@ class GroundStationInputs:
         )
         """The winch length's zero error [m] and scale error [1] (standard deviations): the
         prior of the calibration states."""
+        self._elevation_calibration_std_rad = 0.0
+        """The angle sensor's elevation zero's prior standard deviation [rad] (the last
+        angle's)."""
+        self._elevation_noise_std_rad = 0.0
+        """The last angle's elevation noise standard deviation [rad]."""
         self._bearing = bearing
         self._health = health
         self._status_settings = status_settings
@@ -217,6 +226,8 @@ class GroundStationInputs:
         stamped ``age_s`` [s] before it; its innovation, and once fused its information,
         calibration and bearing, are recorded."""
         open_calibration(bank, (state.ELEVATION_ZERO, state.AZIMUTH_ZERO), calibration_std_rad)
+        self._elevation_calibration_std_rad = calibration_std_rad[0]
+        self._elevation_noise_std_rad = CableAngleAid.noise_std_rad(elevation_rad, noise_std_rad)[0]
         status = self.cable_angle.status
         gated_before = status.gated
         fused = self.cable_angle.fuse(
@@ -262,12 +273,29 @@ class GroundStationInputs:
         force balance's cable direction, whose errors (wind, unmodelled forces) it then takes
         (the realistic 4 N circle, winch alone, tuning seed 9: 4.5 % of the published ticks
         beyond 3 sigma released, none held); it stays a consider state, its spread in the
-        position's covariance."""
+        position's covariance. The sample's innovation (the winch's length [m], the angle's
+        elevation [rad]) goes to the rule's steadiness test with the prior and the noise of
+        what it would teach."""
         if not self._health.cable_angle_fused:
             return
         status = bank.best.sensors.get(sensor)
         if status is not None:
-            self.calibration_release.add(bank, time_s, status.last_nis, dof)
+            innovation = status.innovation[0] if len(status.innovation) else math.nan
+            if sensor == WINCH_NAME:
+                watched = (
+                    WINCH,
+                    innovation,
+                    self._winch_calibration_m[0],
+                    self._winch_length_noise_std_m,
+                )
+            else:
+                watched = (
+                    ELEVATION,
+                    innovation,
+                    self._elevation_calibration_std_rad,
+                    self._elevation_noise_std_rad,
+                )
+            self.calibration_release.add(bank, time_s, status.last_nis, dof, watched)
 
     def _add_angle_information(
         self,

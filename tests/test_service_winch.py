@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import io
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -18,7 +19,9 @@ from test_service_emulator import _fly
 
 from tether_companion.config import ConfigError
 from tether_companion.emulator.lockstep import build_controller
+from tether_companion.emulator.winch import EmulatedWinch, EmulatedWinchConfig
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
+from tether_companion.physics.cable import cable_weight_n_per_m
 from tether_companion.service.config import load_service_config, load_vehicle_for
 from tether_companion.service.emulator_process import EmulatorProcess
 from tether_companion.service.ingest import WINCH, Ingest
@@ -31,6 +34,7 @@ from tether_companion.service.winch import (
     WinchFeed,
     WinchReading,
 )
+from tether_companion.sim.scenario import load_scenario
 
 WINCH_IDS = (255, 169)
 FC_IDS = (1, 1)
@@ -354,3 +358,28 @@ def test_three_state_takes_the_winch_tension_as_its_known_tension() -> None:
     session.on_sample(WinchReading(3.0, 5.0, 4.5, 0.0, HEALTHY))
     assert session.estimator._known_tension_n == 4.5
     assert session.estimator._tension_time_s == 3.0
+
+
+def test_the_emulated_load_cell_reads_below_zero_about_a_slack_line() -> None:
+    """The emulated winch's load cell on a weightless slack line (0 N): its readings scatter
+    about zero with the configured 0.2 N of noise, below zero about half the time, and their
+    mean is the true zero within its standard error (clamped at zero they average
+    0.2 N / sqrt(2 pi) = +0.08 N, the bias the dynamic filter took as pull; sag15)."""
+    scenario = load_scenario("paper-circle")
+    assert cable_weight_n_per_m(scenario.cable) == 0.0
+    sensors = SimpleNamespace(winch_length_m=lambda time_s: 5.0)
+    winch = EmulatedWinch(EmulatedWinchConfig(enabled=True), scenario, sensors, 1.7e9)
+    sim = SimpleNamespace(
+        time_s=0.0,
+        cable=SimpleNamespace(tension_n=0.0, paid_out_m=5.0),
+        position_ned_m=np.array((3.0, 0.0, 0.0)),
+    )
+    parser = FrameParser(fast=False)
+    tensions = []
+    for i in range(400):
+        sim.time_s = 0.1 * i
+        (msg,) = parser.feed(winch.frame(sim))
+        tensions.append(msg.tension * STANDARD_GRAVITY_MPS2)
+    below = sum(t < 0.0 for t in tensions) / len(tensions)
+    assert 0.4 < below < 0.6
+    assert abs(float(np.mean(tensions))) < 3.0 * 0.2 / math.sqrt(len(tensions))

@@ -9,7 +9,10 @@ scenario's ``ground_station`` errors and rate (off: the exact ``paid_out_m`` at
 ``winch_rate_hz``; on, as the realistic scenarios have it: a per-flight scale error and zero
 offset, the latency, the steps, the cable's stretch the encoder does not see). The tension is
 the one at the drone less the hanging cable's weight ``w h`` (a heavy cable's tension falls by
-that from the drone down to the winch), with the load cell's noise of ``emulator.winch``. Every
+that from the drone down to the winch), with the load cell's noise of ``emulator.winch``: near
+zero it reads below zero at times, as a load cell does (the service passes such readings and
+the dynamic filter takes them down to 5 noise standard deviations below zero; clamped at zero
+they averaged above the true tension, docs/estimation.md sag15). Every
 random draw comes from the sensors' own generators (seeded from the scenario's seed), so
 switching the winch on does not change the simulated flight.
 """
@@ -97,7 +100,7 @@ class EmulatedWinch:
         height = max(0.0, -sim.position_ned_m[2])
         tension_n = cable.tension_n - self._weight_n_per_m * height
         tension_n += cfg.tension_noise_std_n * rng.standard_normal()
-        tension_kg = max(0.0, tension_n) / _KGF_N
+        tension_kg = tension_n / _KGF_N  # near zero the noise reads below it, as a load cell's
         status = dialect.MAV_WINCH_STATUS_HEALTHY
         if cable.paid_out_m <= 0.0:
             status |= dialect.MAV_WINCH_STATUS_FULLY_RETRACTED

@@ -252,6 +252,39 @@ def test_three_state_with_tension_from_a_load_cell_message() -> None:
     assert _run(silent, frames) == [] and silent.estimator.health.stale_tension > 0
 
 
+def test_a_load_cell_message_just_below_zero_reaches_the_estimator() -> None:
+    """A load cell near zero reads below zero about half the time: ingest passes a small
+    negative NAMED_VALUE_FLOAT tension to the estimator, which judges it by its noise (the
+    dynamic filter takes it as a measurement: not counted as rejected); a tension far beyond
+    any tether's either way is ``absurd``."""
+    overrides = {
+        "recording": {"enabled": False},
+        "tension": {"source": "message", "message_name": "TENSION", "sensor_component_id": 1},
+    }
+    config = load_service_config(None, overrides)
+    assert config.estimator.kind == "dynamic"
+    fc = FrameEncoder(1, 1)
+    frames: list[bytes] = []
+    values = [-0.05, -0.2, -5000.0, 5000.0]
+    hover = _hover_frames(config, 2.0)
+    every = len(hover) // (len(values) + 1)
+    for i, frame in enumerate(hover):
+        frames.append(frame)
+        if i % every == every // 2 and values:
+            stamp_ms = 10_000 + i * 2_000 // len(hover)
+            frames.append(
+                fc.encode(
+                    dialect.MAVLink_named_value_float_message(stamp_ms, b"TENSION", values.pop(0))
+                )
+            )
+    assert not values
+    session = _session(config)
+    _run(session, frames)
+    counters = session.ingest.counters
+    assert counters.accepted["tension"] == 2 and counters.absurd == 2
+    assert session.estimator.health.nonfinite_rejected == 0
+
+
 def test_ground_station_command_controls_the_tension_modes(config) -> None:
     session = _session(config)
     gcs = FrameEncoder(255, 190)

@@ -8,7 +8,12 @@ Pure and synchronous (the live service and replay share it). For each message:
 2. type: the flavour's IMU message (ArduPilot RAW_IMU in milli-g, PX4 HIGHRES_IMU in m/s^2),
    ATTITUDE, SERVO_OUTPUT_RAW, downward DISTANCE_SENSOR; anything else is not an input;
 3. values: NaN/inf is ``nonfinite``; outside the plausibility bounds is ``absurd``; a
-   rangefinder reading outside its valid range is ``out_of_range``;
+   rangefinder reading outside its valid range is ``out_of_range``; a load cell's tension
+   (NAMED_VALUE_FLOAT) is absurd only beyond ``10 * tension.known_tension_n + 1000`` N either
+   way: a load cell near zero reads below zero about half the time, and the estimator judges
+   such a reading by its noise (the dynamic filter fuses it down to
+   ``ground_station.LOAD_CELL_BELOW_ZERO_STDS`` standard deviations below zero; the paper
+   filters, whose model takes the tension as a known input, drop a negative one, counted);
 4. clock (:class:`~tether_companion.service.fc_time.FcTimeGate`): a stamp far ahead of the
    flight controller's clock model is ``implausible``; one more than a second behind is
    ``out_of_order``, unless SYSTEM_TIME said the flight controller rebooted and the stamps
@@ -388,7 +393,7 @@ class Ingest:
         if not math.isfinite(value):
             self.counters.nonfinite += 1
             return None
-        if value < 0.0 or value > 10.0 * self.tension.known_tension_n + 1000.0:
+        if abs(value) > 10.0 * self.tension.known_tension_n + 1000.0:
             self.counters.absurd += 1
             return None
         return TensionReading(time_s=msg.time_boot_ms * 1e-3, tension_n=value)

@@ -23,7 +23,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
-from tether_companion.estimation.dynamic.aid.slack import SLACK, SURE_SIGMAS
+from tether_companion.estimation.dynamic.aid.slack import (
+    SLACK,
+    SURE_SIGMAS,
+    tension_std_n,
+    tension_upper_n,
+)
 from tether_companion.estimation.dynamic.aiding import AidStatus, at_reading_time, fuse
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.models import ModelConstants, evaluate
@@ -94,9 +99,10 @@ class WinchAid:
         the estimate's (sag14's candidate took the winch + angle filter's sagging circle seed
         1 from NEES 0.13 to 165)."""
         weight_n_per_m = constants.weight_n_per_m
-        tension = float(x[state.TENSION])
         if weight_n_per_m > 0.0 and constants.tension_measured:
-            tension += SURE_SIGMAS * math.sqrt(max(float(p[state.TENSION, state.TENSION]), 0.0))
+            tension = tension_upper_n(x, p)
+        else:
+            tension = float(x[state.TENSION])
         return tension < self._slack_n or surely_slack_by_length(
             x, p, weight_n_per_m, length_m, float(self._r[0, 0])
         )
@@ -153,7 +159,7 @@ def tension_curvature_variance(measure: MeasurementFunction, x: FloatArray, p: F
     rose to 0.3 N (the fixed-length circle, seed 1). At 1 +- 0.1 N on the light cable 5 m out
     it is 2 % of the encoder's noise variance (tests/test_dynamic_resting_slack.py). Added
     only once a load cell's tension has been fused (:class:`WinchAid`)."""
-    sd = math.sqrt(max(float(p[state.TENSION, state.TENSION]), 0.0))
+    sd = tension_std_n(p)
     values = []
     for step in (-sd, 0.0, sd):
         xs = x.copy()

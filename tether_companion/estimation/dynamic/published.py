@@ -435,8 +435,8 @@ class TickSource:
             f = f2 if f2 > spread else spread
             moved = f * (2.0 * (bounds.position_sd + t * bounds.velocity_sd) + f)
             row_sum = 1.0 + t + (a0 + a1 + a2 + a3 + a4 + a5 + a6 + a7 + a8)
-            a0, a1, a2, a3, a4, a5, a6, a7, a8 = map(abs, b_v)
-            row_sum += a0 + a1 + a2 + a3 + a4 + a5 + a6 + a7 + a8
+            bv0, bv1, bv2, bv3, bv4, bv5, bv6, bv7, bv8 = map(abs, b_v)
+            row_sum += bv0 + bv1 + bv2 + bv3 + bv4 + bv5 + bv6 + bv7 + bv8
             o0, o1, o2, o3, o4, o5 = map(abs, (*d_p, *d_v))
             offset = o1 if o1 > o0 else o0
             offset = o2 if o2 > offset else offset

@@ -21,8 +21,8 @@ from tether_companion.mavlink.framing import FrameEncoder, dialect
 from tether_companion.mavlink.signing import Signer
 from tether_companion.service.app import CompanionService
 from tether_companion.service.config import load_service_config, load_vehicle_for
+from tether_companion.service.mode_command import TENSION_MODE_COMMAND
 from tether_companion.service.security import UNSIGNED_COMMAND
-from tether_companion.service.session import TENSION_MODE_COMMAND
 from tether_companion.service.systemd import SystemdNotifier
 
 pytestmark = pytest.mark.integration

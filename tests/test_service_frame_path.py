@@ -24,7 +24,7 @@ from tether_companion.mavlink.udp_link import UdpLink
 from tether_companion.service.app import CompanionService
 from tether_companion.service.config import load_service_config, load_vehicle_for
 from tether_companion.service.ingest_frames import FrameIngest
-from tether_companion.service.session import TENSION_MODE_COMMAND
+from tether_companion.service.mode_command import TENSION_MODE_COMMAND
 
 STRANGER = ("127.0.0.1", 40001)
 

@@ -22,8 +22,9 @@ from tether_companion.mavlink.signing import SignatureVerifier, Signer
 from tether_companion.mavlink.trust import REQUIRED, LinkTrust
 from tether_companion.service.app import CompanionService
 from tether_companion.service.config import load_service_config, load_vehicle_for
+from tether_companion.service.mode_command import TENSION_MODE_COMMAND
 from tether_companion.service.security import NOT_A_COMMAND_SOURCE, UNSIGNED_COMMAND
-from tether_companion.service.session import TENSION_MODE_COMMAND, EstimationSession
+from tether_companion.service.session import EstimationSession
 from tether_companion.service.synthetic import FakeFlightController, HoverStreams
 from tether_companion.service.systemd import SystemdNotifier
 

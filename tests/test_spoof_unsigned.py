@@ -17,8 +17,8 @@ from tether_companion.mavlink.endpoints import open_link, parse_endpoint
 from tether_companion.mavlink.framing import FrameEncoder, dialect
 from tether_companion.service.app import CompanionService
 from tether_companion.service.config import load_service_config, load_vehicle_for
+from tether_companion.service.mode_command import TENSION_MODE_COMMAND
 from tether_companion.service.security import NOT_A_COMMAND_SOURCE
-from tether_companion.service.session import TENSION_MODE_COMMAND
 from tether_companion.service.synthetic import FakeFlightController, HoverStreams
 from tether_companion.service.systemd import SystemdNotifier
 

@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import output as dynamic_output
 from tether_companion.estimation.dynamic.output import Approximation
+from tether_companion.estimation.estimate import EstimatorHealth
 from tether_companion.estimation.observability import RANGEFINDER
 from tether_companion.service.publish_config import PublishConfig
 
@@ -261,3 +262,21 @@ def _closer_than(estimate: dynamic_output.NavigationEstimate, distance_m: float)
         if abs(distance - distance_m) > tol:
             return distance < distance_m
     return float(np.linalg.norm(estimate.position_ned_m)) < distance_m
+
+
+_STALE_HEALTH = (STALE_ATTITUDE, STALE_PWM, STALE_TENSION)
+
+
+def stale_counts(health: EstimatorHealth) -> tuple[int, int, int]:
+    """The estimator's stale-input counters (attitude, PWM, known tension)."""
+    return health.stale_attitude, health.stale_pwm, health.stale_tension
+
+
+def stale_input_health(before: tuple[int, int, int], after: tuple[int, int, int]) -> str | bool:
+    """The publisher health naming the input that kept this tick from fusing (False: none)."""
+    if after == before:  # the usual tick: one comparison of the tuples
+        return False
+    for name, old, new in zip(_STALE_HEALTH, before, after, strict=True):
+        if new > old:
+            return name
+    return False

@@ -44,7 +44,7 @@ from tether_companion.estimation.catenary_position import (
 )
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.output import NavigationEstimate
-from tether_companion.estimation.estimate import Estimate, EstimatorHealth
+from tether_companion.estimation.estimate import Estimate
 from tether_companion.estimation.pipeline import TetherEstimator, default_thrust_input
 from tether_companion.estimation.tension_kf import TensionEstimate
 from tether_companion.estimation.thrust_input import (
@@ -52,19 +52,14 @@ from tether_companion.estimation.thrust_input import (
     ThrustInput,
 )
 from tether_companion.mavlink.battery import BATTERY_MESSAGES, battery_voltage_v
-from tether_companion.mavlink.framing import MAVLinkMessage, dialect
+from tether_companion.mavlink.framing import MAVLinkMessage
 from tether_companion.modes.session import TensionModeSession
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.cable_angle import CableAngleFeed, CableAngleReading
 from tether_companion.service.catenary_source import CATENARY_UNAVAILABLE, CatenaryEstimate
 from tether_companion.service.config import CATENARY, DYNAMIC, ServiceConfig
-from tether_companion.service.health import (
-    STALE_ATTITUDE,
-    STALE_PWM,
-    STALE_TENSION,
-    dynamic_health,
-)
+from tether_companion.service.health import dynamic_health, stale_counts, stale_input_health
 from tether_companion.service.ingest import (
     FcPosition,
     Ingest,
@@ -73,15 +68,10 @@ from tether_companion.service.ingest import (
     TensionReading,
 )
 from tether_companion.service.ingest_frames import FrameIngest
+from tether_companion.service.mode_command import addressed_to_us, answer_mode_command
 from tether_companion.service.publish import Publication, Publisher
-from tether_companion.service.security import command_refusal
 from tether_companion.service.winch import WinchFeed, WinchReading
 
-TENSION_MODE_COMMAND = dialect.MAV_CMD_USER_2
-"""COMMAND_LONG a ground station sends to this component (our system and component id) to
-control the tension modes at run time: param1 1 enable, 0 disable, -1 unchanged; param2 1
-request a landing, 2 cancel it, 0 nothing. Answered with COMMAND_ACK (DENIED for other
-values, UNSUPPORTED for other commands)."""
 MODE_TICK_S = 0.02
 """Period of the tension modes' logic [s of flight-controller time] (50 Hz)."""
 HEIGHT_STALE_S = 0.5
@@ -235,34 +225,6 @@ class EstimationSession:
             aligner=self.aligner,
         )
 
-    def _for_us(self, msg: MAVLinkMessage) -> bool:
-        link = self.config.link
-        return msg.target_system == link.system_id and msg.target_component == link.component_id
-
-    def _mode_command(self, msg: MAVLinkMessage) -> MAVLinkMessage:
-        """A ground station's command to this component (see ``TENSION_MODE_COMMAND``); from
-        a sender outside ``security.command_sources`` (or unsigned, with signing required)
-        it is DENIED and counted in :attr:`commands_refused`."""
-        result = dialect.MAV_RESULT_UNSUPPORTED
-        refusal = command_refusal(msg, self.config.security)
-        if refusal is not None:
-            self.commands_refused[refusal] = self.commands_refused.get(refusal, 0) + 1
-            result = dialect.MAV_RESULT_DENIED
-        elif msg.command == TENSION_MODE_COMMAND:
-            enable, landing = msg.param1, msg.param2
-            modes = self.modes.modes
-            if enable not in (-1.0, 0.0, 1.0) or landing not in (0.0, 1.0, 2.0):
-                result = dialect.MAV_RESULT_DENIED
-            else:
-                if enable >= 0.0:
-                    modes.set_enabled(enable == 1.0)
-                if landing == 1.0:
-                    modes.request_landing()
-                elif landing == 2.0:
-                    modes.cancel_landing()
-                result = dialect.MAV_RESULT_ACCEPTED
-        return dialect.MAVLink_command_ack_message(msg.command, result)
-
     def on_fc_heartbeat(self, base_mode: int, custom_mode: int) -> None:
         """The flight controller's HEARTBEAT (armed flag and flight mode, for the modes)."""
         self.modes.on_heartbeat(base_mode, custom_mode)
@@ -288,8 +250,11 @@ class EstimationSession:
         ``kind`` is ``msg.get_type()`` when the caller has it."""
         if kind is None:
             kind = msg.get_type()
-        if kind == "COMMAND_LONG" and self._for_us(msg):
-            return Step(messages=[self._mode_command(msg)])
+        if kind == "COMMAND_LONG" and addressed_to_us(msg, self.config.link):
+            reply = answer_mode_command(
+                msg, self.config.security, self.modes.modes, self.commands_refused
+            )
+            return Step(messages=[reply])
         if kind in BATTERY_MESSAGES and self.ingest.from_flight_controller(msg):
             self.on_battery_voltage_v(battery_voltage_v(msg))
         return self.on_received(self.ingest.receive(msg, local_s, kind))
@@ -448,7 +413,7 @@ class EstimationSession:
         estimator = self.estimator
         if self.config.tension.source == "config":
             estimator.set_known_tension_n(self.config.tension.known_tension_n, sample.time_s)
-        stale_before = _stale_counts(estimator.health)
+        stale_before = stale_counts(estimator.health)
         near_anchor_before = estimator.health.near_anchor
         estimate = estimator.on_imu(sample)
         if estimate is not None:
@@ -458,7 +423,7 @@ class EstimationSession:
         messages: list[MAVLinkMessage] = []
         publication = None
         if not self.catenary_source and estimate is not None:
-            stale = _stale_input(stale_before, _stale_counts(estimator.health))
+            stale = stale_input_health(stale_before, stale_counts(estimator.health))
             unavailable = None
             if isinstance(estimate, NavigationEstimate):
                 near_anchor = estimator.health.near_anchor > near_anchor_before
@@ -484,21 +449,3 @@ class EstimationSession:
                 send_now=self.send_now,
             )
         return Step(messages=messages, publication=publication, estimate=estimate)
-
-
-_STALE_HEALTH = (STALE_ATTITUDE, STALE_PWM, STALE_TENSION)
-
-
-def _stale_counts(health: EstimatorHealth) -> tuple[int, int, int]:
-    """The estimator's stale-input counters (attitude, PWM, known tension)."""
-    return health.stale_attitude, health.stale_pwm, health.stale_tension
-
-
-def _stale_input(before: tuple[int, int, int], after: tuple[int, int, int]) -> str | bool:
-    """The publisher health naming the input that kept this tick from fusing (False: none)."""
-    if after == before:  # the usual tick: one comparison of the tuples
-        return False
-    for name, old, new in zip(_STALE_HEALTH, before, after, strict=True):
-        if new > old:
-            return name
-    return False

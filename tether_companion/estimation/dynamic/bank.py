@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from itertools import chain
+from operator import attrgetter, is_
 
 import numpy as np
 from numpy.typing import NDArray
@@ -333,15 +334,16 @@ class FilterBank:
     def mixture(self) -> tuple[FloatArray, FloatArray]:
         """Mean (n,) and covariance (n, n) of the weighted mixture (with one member left,
         that member's own arrays; either way the caller copies what it keeps)."""
-        if self.decided:  # the member's own arrays: read them, do not change them
-            kf = self.filters[0]
+        filters = self.filters
+        if len(filters) == 1:  # decided: the member's own arrays: read them, do not change them
+            kf = filters[0]
             return kf.x, kf.P
-        arrays = [a for kf in self.filters for a in (kf.x, kf.P)]
+        arrays = [a for kf in filters for a in (kf.x, kf.P)]
         cached_arrays, cached_ll, moments = self._mixture_cache
-        if (
+        if (  # the same objects (identity, in C: this runs at every IMU tick)
             cached_ll == self.log_weight
             and len(cached_arrays) == len(arrays)
-            and all(a is b for a, b in zip(arrays, cached_arrays, strict=True))
+            and all(map(is_, arrays, cached_arrays))
         ):
             return moments
         w = self.weights()

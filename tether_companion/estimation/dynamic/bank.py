@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from itertools import chain
-from operator import attrgetter, is_
+from operator import is_
 
 import numpy as np
 from numpy.typing import NDArray

@@ -60,6 +60,8 @@ def test_mode_commands_only_from_the_configured_ground_stations() -> None:
     assert session.commands_refused == {NOT_A_COMMAND_SOURCE: 2}
     (ack,) = session.on_message(_command(FrameEncoder(250, 190), 1.0)).messages
     assert ack.result == dialect.MAV_RESULT_ACCEPTED and session.modes.modes.enabled
+    # addressed to the sender (MAVLink's COMMAND_ACK target): an autopilot routes it there
+    assert (ack.target_system, ack.target_component) == (250, 190)
 
 
 def test_with_signing_required_an_unsigned_command_is_denied(tmp_path) -> None:

@@ -4,7 +4,9 @@ A ground station addresses the companion (its system and component id) with
 :data:`TENSION_MODE_COMMAND` to enable or disable the tension modes and to request or cancel a
 tension-following landing. The answer is a COMMAND_ACK: ACCEPTED, DENIED (a sender outside
 ``security.command_sources``, an unsigned one with signing required, or parameters outside
-the values below) or UNSUPPORTED (any other command). Pure: the session hands it the message,
+the values below) or UNSUPPORTED (any other command), addressed to the command's sender (its
+``target_system``/``target_component``, as MAVLink defines them, so that an autopilot routes
+it back to that ground station only). Pure: the session hands it the message,
 its security configuration and the modes.
 """
 
@@ -57,4 +59,6 @@ def answer_mode_command(
             elif landing == 2.0:
                 modes.cancel_landing()
             result = dialect.MAV_RESULT_ACCEPTED
-    return dialect.MAVLink_command_ack_message(msg.command, result)
+    return dialect.MAVLink_command_ack_message(
+        msg.command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
+    )

@@ -7,7 +7,12 @@ router's address (its frames are relayed, not sent by the flight controller itse
 stream-rate requests and the EKF origin reach the flight controller and are answered, the
 ground station's winch and cable-angle frames relayed with the flight controller's arrive and
 are fused, and the flight controller receives the estimates at the publication rate, stamped
-in its own time base, with honest covariances."""
+in its own time base, with honest covariances.
+
+A ground station (pymavlink's mavutil) on the flight controller's other port commands the
+tension modes: the autopilot routes the command to the link it has seen the companion on
+(the emulator routes as ArduPilot does: tether_companion/emulator/routing.py), MAVProxy
+relays it, and the answer finds its way back; a stranger's command is DENIED the same way."""
 
 from __future__ import annotations
 
@@ -20,12 +25,16 @@ import sys
 from pathlib import Path
 
 import pytest
+from pymavlink import mavutil
 
+from tether_companion.mavlink.framing import dialect
 from tether_companion.mavlink.link import Link
 from tether_companion.service.app import CompanionService
 from tether_companion.service.config import load_service_config, load_vehicle_for
 from tether_companion.service.emulator_process import EmulatorProcess
 from tether_companion.service.ingest import WINCH
+from tether_companion.service.mode_command import TENSION_MODE_COMMAND
+from tether_companion.service.security import NOT_A_COMMAND_SOURCE
 from tether_companion.service.systemd import SystemdNotifier
 
 pytestmark = pytest.mark.integration
@@ -35,6 +44,9 @@ MAVPROXY = pytest.importorskip(
 )
 
 FLIGHT_S = 20.0
+COMMAND_AT_S = 10.0
+"""When the ground stations send their commands [s of wall time after the service starts]."""
+COMPANION = (1, 191)
 
 
 def _free_udp_port() -> int:
@@ -58,11 +70,34 @@ def _mavproxy(master_port: int, out_port: int, state_dir: Path) -> subprocess.Po
     return subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT, cwd=state_dir)
 
 
+def _ask_tension_modes(port: int, system_id: int) -> int | None:
+    """A ground station with ``system_id`` on the flight controller's ``port`` asks the
+    companion to enable its tension modes; returns the companion's COMMAND_ACK result (None:
+    no answer within 5 s)."""
+    gcs = mavutil.mavlink_connection(
+        f"udpout:127.0.0.1:{port}", source_system=system_id, source_component=190
+    )
+    try:
+        gcs.mav.heartbeat_send(dialect.MAV_TYPE_GCS, dialect.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        for _ in range(5):  # once a second until the companion answers
+            gcs.mav.command_long_send(*COMPANION, TENSION_MODE_COMMAND, 0, 1, 0, 0, 0, 0, 0, 0)
+            ack = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=1.0)
+            while ack is not None and (ack.get_srcSystem(), ack.get_srcComponent()) != COMPANION:
+                ack = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=1.0)
+            if ack is not None:
+                return int(ack.result)
+        return None
+    finally:
+        gcs.close()
+
+
 async def _fly_behind_mavproxy(
     emulator: EmulatorProcess, state_dir: Path, overrides: dict
-) -> tuple[CompanionService, list[Link]]:
-    """Emulator -> MAVProxy -> service until the emulator's flight ends; returns the service
-    and the links it served (kept while open: the service drops its link when it stops)."""
+) -> tuple[CompanionService, list[Link], dict[int, int | None]]:
+    """Emulator -> MAVProxy -> service until the emulator's flight ends, with ground stations
+    (system 255, then a stranger 77) on the emulator's second port asking for the tension
+    modes; returns the service, the links it served (kept while open: the service drops its
+    link when it stops) and each ground station's answer."""
     async with emulator:
         assert emulator.port is not None
         out_port = _free_udp_port()
@@ -77,10 +112,17 @@ async def _fly_behind_mavproxy(
             task = asyncio.create_task(service.run(stop), name="service")
             flight = asyncio.create_task(emulator.wait(), name="emulator")
             links: list[Link] = []
+            answers: dict[int, int | None] = {}
+            commands = asyncio.create_task(asyncio.sleep(COMMAND_AT_S))
             async with asyncio.timeout(FLIGHT_S + 60.0):
                 while not flight.done():
                     if service.link is not None and service.link not in links:
                         links.append(service.link)
+                    if commands.done() and not answers:
+                        for system_id in (255, 77):
+                            answers[system_id] = await asyncio.to_thread(
+                                _ask_tension_modes, emulator.ports[1], system_id
+                            )
                     await asyncio.sleep(0.2)
             assert flight.result() == 0
             stop.set()
@@ -92,7 +134,7 @@ async def _fly_behind_mavproxy(
             if router.poll() is None:
                 router.kill()
                 router.wait()
-    return service, links
+    return service, links, answers
 
 
 def test_service_behind_mavproxy_router(tmp_path: Path) -> None:
@@ -102,14 +144,14 @@ def test_service_behind_mavproxy_router(tmp_path: Path) -> None:
         "paper-circle",
         duration_s=FLIGHT_S,
         score_path=tmp_path / "score.json",
-        extra_args=("--winch", "--cable-angle"),
+        extra_args=("--winch", "--cable-angle", "--listen", "udp:127.0.0.1:0"),
     )
     overrides = {
         "winch": {"enabled": True},
         "cable_angle": {"enabled": True},
         "recording": {"enabled": False},
     }
-    service, links = asyncio.run(_fly_behind_mavproxy(emulator, tmp_path, overrides))
+    service, links, answers = asyncio.run(_fly_behind_mavproxy(emulator, tmp_path, overrides))
     router_log = (tmp_path / "mavproxy.out").read_text(errors="replace")
     assert "Detected vehicle 1:1" in router_log, router_log
 
@@ -119,6 +161,11 @@ def test_service_behind_mavproxy_router(tmp_path: Path) -> None:
     assert trust is not None and trust.fc_source is not None
     assert trust.fc_source[1] != emulator.port  # the router's socket, not the emulator's
     assert trust.counters.foreign_source == 0, trust.counters
+
+    # the ground stations' commands routed by the autopilot and relayed by MAVProxy
+    assert answers == {255: dialect.MAV_RESULT_ACCEPTED, 77: dialect.MAV_RESULT_DENIED}
+    assert service.session.modes.modes.enabled
+    assert service.session.commands_refused.keys() == {NOT_A_COMMAND_SOURCE}
 
     # the service's requests answered through the router
     assert service.state.origin_confirmed

@@ -43,6 +43,7 @@ from tether_companion.emulator.params import (
     parameter_definitions,
     vehicle_parameter_definitions,
 )
+from tether_companion.emulator.routing import MavlinkRoutes
 from tether_companion.emulator.scoring import Scorer, ScoreReport, TruthHistory
 from tether_companion.emulator.streams import (
     STREAMS,
@@ -66,7 +67,10 @@ class FlightControllerCounters:
 
     messages_in: int = 0
     other_target: int = 0
-    """Messages addressed to another system or component: ignored."""
+    """Messages addressed to another system or component that no link leads to: ignored."""
+    routed: int = 0
+    """Messages forwarded to other links, one per link
+    (:mod:`~tether_companion.emulator.routing`)."""
     bad_values: int = 0
     """Messages with NaN or out-of-range fields: ignored or refused."""
     ignored: int = 0
@@ -135,6 +139,8 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions, Fligh
         self._stream_defaults = self._default_rates(scenario, config)
         self._schedules: dict[int, StreamSchedule] = {}
         self._next_link_id = 0
+        self.routes = MavlinkRoutes(config.system_id, config.component_id)
+        """What ArduPilot's routing has learnt: who is reachable on which link."""
         self._next_due_s = math.inf
         self._outbox: list[Outgoing] = []
         self._cache_step = -1
@@ -275,6 +281,7 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions, Fligh
     def remove_link(self, link_id: int) -> None:
         """Forget a link."""
         self._schedules.pop(link_id, None)
+        self.routes.forget_link(link_id)
         self._refresh_next_due()
 
     def stream_rate_hz(self, link_id: int, name: str) -> float:
@@ -409,6 +416,18 @@ class FlightController(MessageHandlers, CommandHandlers, ParameterActions, Fligh
         self.counters.messages_in += 1
         target_system = getattr(msg, "target_system", 0)
         target_component = getattr(msg, "target_component", 0)
+        routes = self.routes
+        routes.learn(msg.get_srcSystem(), msg.get_srcComponent(), link_id)
+        routing = routes.route(target_system, target_component, link_id)
+        if routing.forward_to:
+            frame = bytes(msg.get_msgbuf())
+            for other in routing.forward_to:
+                self._send(frame, other)
+            self.counters.routed += len(routing.forward_to)
+        if not routing.process_locally:
+            if not routing.forward_to:  # for a system no link leads to
+                self.counters.other_target += 1
+            return
         if target_system not in (0, self.config.system_id) or target_component not in (
             0,
             self.config.component_id,

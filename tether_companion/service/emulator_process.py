@@ -57,6 +57,9 @@ class EmulatorProcess:
         ]  # fmt: skip
         self.score_path = score_path
         self.port: int | None = None
+        """The first endpoint's port (the ``--listen udp:127.0.0.1:0`` this class adds)."""
+        self.ports: list[int] = []
+        """Every endpoint's port, in the order given (more ``--listen`` in ``extra_args``)."""
         self.output: list[str] = []
         self._process: asyncio.subprocess.Process | None = None
         self._reader: asyncio.Task[None] | None = None
@@ -90,7 +93,9 @@ class EmulatorProcess:
             self.output.append(text)
             match = _BOUND.search(text)
             if match:
-                self.port = int(match.group(2))
+                self.ports.append(int(match.group(2)))
+                self.port = self.ports[0]
+            elif self.ports:  # the line after the endpoints': all of them are bound
                 return
 
     async def _read_rest(self) -> None:

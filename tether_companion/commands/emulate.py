@@ -37,7 +37,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="ENDPOINT",
-        help=f"serve here; repeatable (default {DEFAULT_LISTEN} when no --connect)",
+        help="serve here; repeatable, each endpoint one of the autopilot's ports, routed as"
+        f" ArduPilot routes (default {DEFAULT_LISTEN} when no --connect)",
     )
     parser.add_argument(
         "--connect",

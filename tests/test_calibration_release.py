@@ -28,11 +28,11 @@ WINCH_NOISE_M, ELEVATION_NOISE_RAD = 0.05, 0.01
 
 
 class _Bank:
-    """The part of a FilterBank the release rule reads: decided, its consider states, and
-    ``release``."""
+    """The part of a FilterBank the release rule reads: one bearing left, its consider
+    states, and ``release``."""
 
     def __init__(self) -> None:
-        self.decided = True
+        self.one_bearing = True
         self.consider: slice | None = state.CALIBRATION
 
     def release(self, still_held: slice | None = None) -> None:
@@ -77,8 +77,8 @@ def test_sitls_recovering_bad_start_is_not_learnt_as_the_winchs_calibration() ->
 
 def test_a_steady_calibration_error_is_released_when_the_nis_rule_allows() -> None:
     """The winch 0.09 m off and the elevation 0.004 rad (steady, with the readings' noise):
-    steady before the bank decided, the states are released SETTLE_S after it, as without
-    the steadiness test."""
+    steady while bearing hypotheses ran, the states are released SETTLE_S after one is left,
+    as without the steadiness test."""
     rng = np.random.default_rng(1)
     rows = []
     for k in range(400):
@@ -90,10 +90,10 @@ def test_a_steady_calibration_error_is_released_when_the_nis_rule_allows() -> No
             v = 0.004 + 0.01 * rng.standard_normal()
             rows.append((t, 1, v, 2.0 * 0.6))
     bank = _Bank()
-    bank.decided = False
+    bank.one_bearing = False
     release = CalibrationRelease()
     _feed(release, bank, [r for r in rows if r[0] < 0.0])
-    bank.decided = True
+    bank.one_bearing = True
     _feed(release, bank, [r for r in rows if r[0] >= 0.0])
     assert bank.consider == state.NEVER_RELEASED
     assert SETTLE_S <= release.released_time_s < SETTLE_S + 0.2

@@ -136,6 +136,13 @@ class FilterBank:
         return len(self.filters) == 1
 
     @property
+    def one_bearing(self) -> bool:
+        """Whether the members left hold one bearing hypothesis (the thrust-scale
+        hypotheses may still run side by side)."""
+        bearings = self.bearings
+        return bearings.count(bearings[0]) == len(bearings)
+
+    @property
     def best(self) -> MemberFilter:
         """The member with the largest weight."""
         filters = self.filters

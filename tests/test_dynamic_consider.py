@@ -199,24 +199,15 @@ def test_a_bad_start_moves_the_position_not_the_held_calibration_and_then_releas
     assert status.last_nis / 2 <= MAX_MEAN_NIS
 
 
-def test_thrust_scale_hypotheses_still_running_do_not_hold_the_release() -> None:
-    """Two members of one bearing (the thrust-scale hypotheses, undecided until the bank's
-    ``max_bank_s``): the angles' NIS in band for SETTLE_S releases the states in every
-    member (cal16: the simulator's take-off waited 6 s for the bank's collapse, and the
-    position's error with it), all but the azimuth zero."""
-    bank = _bad_start_bank(2, 0.05)
-    bank.filters[0].x[state.POSITION] = bank.filters[1].x[state.POSITION] = (
-        SPAN_M * math.cos(TRUE_BEARING_RAD),
-        SPAN_M * math.sin(TRUE_BEARING_RAD),
-        -HEIGHT_M,
-    )
-    estimator = _estimator()
-    release = estimator.ground_station.calibration_release
-    _fly_angles(bank, 0.0, SETTLE_S + 0.5, estimator)
-    assert not bank.decided
-    assert bank.consider == state.NEVER_RELEASED
-    assert all(m.consider == state.NEVER_RELEASED for m in bank.filters)
-    assert SETTLE_S <= release.released_time_s < SETTLE_S + 0.5
+def test_one_bearing_means_every_member_holds_the_same_bearing_hypothesis() -> None:
+    """``FilterBank.one_bearing``: two thrust-scale members of one bearing (undecided) are one
+    bearing; a bad start's two bearings are not, until one is dropped."""
+    bank = _bad_start_bank(2)
+    assert bank.one_bearing and not bank.decided
+    bank = _bad_start_bank(2, bearings=[0, 1])
+    assert not bank.one_bearing
+    bank.keep([1])
+    assert bank.one_bearing and bank.decided
 
 
 def test_without_the_consider_phase_the_bad_start_is_taken_as_the_azimuth_zero() -> None:

@@ -12,9 +12,15 @@ spread while the readings correct the position alone. The winch's offset and sca
 elevation zero are released to learning once the filter has settled:
 
 * one bearing hypothesis is left (the others rejected or merged: a bad start's bearing
-  settled; the thrust-scale hypotheses may still run side by side, cal16: waiting for their
-  collapse, 6 s after the filter's start, held the simulator's take-off and circles' states
-  to 13 and 10 s, and the position's error with them), and
+  settled) when a winch length has been fused: the thrust-scale hypotheses may still run
+  side by side (cal16: waiting for their collapse, 6 s after the filter's start, held the
+  simulator's take-off and circles' states to 13 and 10 s, and the position's error with
+  them); they differ in the vertical pull the thrust map explains, and with the length the
+  range the elevation is compared at is measured. Without a length that range comes from
+  the force balance's pull, which the thrust scale splits, so the rule waits for the bank to
+  decide (one member left: thrust-scale and bearing hypotheses chosen, merged or collapsed;
+  released at one bearing, the angle alone's take-off figure-8 published 0.4 % beyond 3
+  sigma against 0.1 %, tuning seeds 1-5), and
 * since then, for :data:`SETTLE_S` at least, the ground station's innovations are in band:
   their normalised squared innovations (NIS per degree of freedom, the best member's, gated
   samples included) average at most :data:`MAX_MEAN_NIS` over the last :data:`SETTLE_S`;
@@ -116,7 +122,8 @@ class CalibrationRelease:
         """(filter time [s], innovation) of the winch length [m] and the elevation [rad], the
         last 2 :data:`STEADY_WINDOW_S` (one bearing left or not)."""
         self._start_s = math.nan
-        """The filter time [s] of the first sample since one bearing hypothesis was left."""
+        """The filter time [s] of the first sample since one bearing hypothesis was left (the
+        bank decided, without a winch length)."""
         self.released_time_s = math.nan
 
     def add(
@@ -126,6 +133,7 @@ class CalibrationRelease:
         nis: float,
         dof: int,
         watched: tuple[int, float, float, float] | None = None,
+        ranged: bool = True,
     ) -> None:
         """A ground-station sample's NIS (``dof`` degrees of freedom) at filter time
         ``time_s`` [s], tested against ``bank``'s best member, and the innovation the
@@ -133,7 +141,8 @@ class CalibrationRelease:
         the prior standard deviation of the calibration state it would teach, the winch's
         zero offset [m] or the elevation zero [rad], and the reading's noise standard
         deviation in the same unit); the bank's consider states are released when the rule
-        holds."""
+        holds. ``ranged``: whether a winch length has been fused; without one the rule's
+        clock waits for the bank to decide (see the module)."""
         if not self.enabled or bank.consider != state.CALIBRATION or not math.isfinite(nis):
             return
         if watched is not None and math.isfinite(watched[1]):
@@ -143,7 +152,7 @@ class CalibrationRelease:
             window.append((time_s, watched[1]))
             while window[0][0] < time_s - 2.0 * STEADY_WINDOW_S:
                 window.popleft()
-        if not bank.one_bearing:
+        if not (bank.one_bearing if ranged else bank.decided):
             self._samples.clear()
             self._start_s = math.nan
             return

@@ -295,7 +295,8 @@ class GroundStationInputs:
                     self._elevation_calibration_std_rad,
                     self._elevation_noise_std_rad,
                 )
-            self.calibration_release.add(bank, time_s, status.last_nis, dof, watched)
+            ranged = bool(self._health.winch_fused)
+            self.calibration_release.add(bank, time_s, status.last_nis, dof, watched, ranged)
 
     def _add_angle_information(
         self,

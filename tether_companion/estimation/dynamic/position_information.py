@@ -7,18 +7,29 @@ horizontal force turns the cable it reads the bearing from, ``C = |p|^2 (I - u u
 accuracy along the cable), because the force balance is fused every IMU tick as if that force
 were white while it stays the same for about ``tau = unmodelled_force_correlation_s``.
 
-That offset ``d`` is a Gauss-Markov process: stationary covariance ``C``, correlation
-``exp(-dt / tau)``. A measurement that sees the position directly, and whose error has nothing
-to do with that force (the cable angle: the direction from the anchor), measures it; so the
-added term is the offset's covariance given the readings, a small Kalman filter of ``d``:
+That offset ``d`` is a stationary process of covariance ``C`` correlated over ``tau``. It is
+a displacement of the estimated position, which the filter moves only through its velocity:
+``d`` is smooth (its change over ``dt`` is the velocity error times ``dt``), so its correlation
+is the second-order Gauss-Markov one, ``rho(dt) = (1 + dt / tau) exp(-dt / tau)`` (Matern 3/2:
+``1 - rho^2 ~ (dt / tau)^2`` for a short ``dt``), not the first-order ``exp(-dt / tau)``, whose
+increments grow as ``sqrt(dt)``: that one let ``d`` jump ``0.43 sqrt(C)`` between two 10 Hz
+readings (0.08 m across the cable on the 4 N circle: a velocity error of 0.8 m/s where the
+filter's is 0.06 m/s) and kept the term at 0.6-1.4 times the error's variance across the
+cable where the filter's own variance already matched it (36 times at 0.5 N; nees15,
+docs/estimation.md). A measurement that sees the
+position directly, and whose error has nothing to do with that force (the cable angle: the
+direction from the anchor), measures it; so the added term is the offset's covariance given
+the readings, a small Kalman filter of ``d`` (the variance recursion of the scalar-Markov
+approximation of that correlation):
 
-* between readings ``P <- a P + (1 - a) C`` with ``a = exp(-2 dt / tau)`` (the old readings'
+* between readings ``P <- a P + (1 - a) C`` with ``a = rho(dt)^2`` (the old readings'
   knowledge fades as the force changes, back to ``C`` within a few ``tau``);
 * at a fused reading, for each of its rows ``h`` (the position columns of the angle's
   Jacobian) with noise ``r``: ``P <- P - P h h^T P / (h^T P h + r)``.
 
 Without any reading the term is ``C`` exactly. ``P`` never exceeds ``C``; with a steady 10 Hz
-angle and ``tau`` = 1 s it settles near the accuracy of a few readings across the cable.
+angle and ``tau`` = 1 s it settles at ``sqrt((1 - a) C r)`` across the cable (a few readings'
+accuracy where ``C`` is small, well below ``C`` where it is large: a weak pull).
 
 That holds while the filter follows the angle. When it does not (its bearing off by more than
 the readings allow: innovations beyond the gate, as in a gusty hover's first seconds), the
@@ -126,12 +137,14 @@ class PositionInformation:
         self._excess = _ZERO6
 
     def _kept(self, time_s: float) -> float:
-        """The weight ``a = exp(-2 dt / tau)`` the last reading's covariance keeps at
-        ``time_s`` [s]."""
+        """The weight ``a = rho(dt)^2``, ``rho = (1 + dt / tau) exp(-dt / tau)``, the last
+        reading's covariance keeps at ``time_s`` [s] (the module docstring)."""
         last = self._last_s
         if math.isnan(last) or not time_s > last:
             return 1.0
-        return math.exp(-2.0 * (time_s - last) / self._tau_s)
+        x = (time_s - last) / self._tau_s
+        rho = (1.0 + x) * math.exp(-x)
+        return rho * rho
 
     def add(
         self,

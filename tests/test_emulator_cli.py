@@ -10,6 +10,7 @@ import threading
 from pathlib import Path
 
 import pytest
+from udp_ports import free_udp_port
 
 from tether_companion.cli import main
 from tether_companion.config import ConfigError
@@ -118,10 +119,7 @@ def test_scenario_file_with_an_emulator_section(tmp_path: Path) -> None:
 def test_estimates_sent_during_a_run_are_scored(tmp_path: Path, capsys) -> None:
     """A companion sends the hover point, 10 cm north of it, stamped with the emulator's clock."""
     out = tmp_path / "score.json"
-    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    probe.bind(("127.0.0.1", 0))
-    port = probe.getsockname()[1]
-    probe.close()
+    port = free_udp_port()
     result: dict[str, int] = {}
     args = ["emulate", "hover", "--listen", f"udp:127.0.0.1:{port}", "--duration", "4", "--quiet"]
     args += ["--score-out", str(out), "--score-start", "0.5"]

@@ -8,6 +8,7 @@ import socket
 
 import pytest
 from pymavlink import mavutil
+from udp_ports import free_udp_port
 
 from tether_companion.config import ConfigError
 from tether_companion.mavlink.endpoints import Endpoint, open_link, parse_endpoint
@@ -123,10 +124,7 @@ def test_udp_listen_learns_peers_and_counts_garbage() -> None:
 
 def test_udp_connect_to_nobody_counts_errors_and_keeps_going() -> None:
     async def main() -> None:
-        probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-        probe.close()  # nobody listens there now
+        port = free_udp_port()  # nobody listens there now
         link = await open_link(
             parse_endpoint(f"udpout:127.0.0.1:{port}", "connect"), system_id=1, component_id=1
         )

@@ -19,13 +19,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
-import socket
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 from pymavlink import mavutil
+from udp_ports import free_udp_port
 
 from tether_companion.mavlink.framing import dialect
 from tether_companion.mavlink.link import Link
@@ -47,12 +47,6 @@ FLIGHT_S = 20.0
 COMMAND_AT_S = 10.0
 """When the ground stations send their commands [s of wall time after the service starts]."""
 COMPANION = (1, 191)
-
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def _mavproxy(master_port: int, out_port: int, state_dir: Path) -> subprocess.Popen[bytes]:
@@ -100,7 +94,7 @@ async def _fly_behind_mavproxy(
     link when it stops) and each ground station's answer."""
     async with emulator:
         assert emulator.port is not None
-        out_port = _free_udp_port()
+        out_port = free_udp_port()
         router = _mavproxy(emulator.port, out_port, state_dir)
         try:
             link = {"connect": f"udpout:127.0.0.1:{out_port}"}

@@ -16,6 +16,7 @@ import os
 import socket
 
 import pytest
+from udp_ports import free_udp_port
 
 from tether_companion.mavlink.framing import FrameEncoder, dialect
 from tether_companion.mavlink.signing import Signer
@@ -30,12 +31,6 @@ KEY = bytes(range(40, 72))
 MAVSDK_SYSTEM_ID = 245
 """MAVSDK's system id as a ground station (its default)."""
 WALL_TIMEOUT_S = 10.0
-
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 async def _system(sdk, system_id: int):
@@ -63,7 +58,7 @@ def test_mavsdk_reads_signed_frames_unchecked_and_its_unsigned_commands_are_deni
     key_file = tmp_path / "signing.key"
     key_file.write_bytes(KEY)
     os.chmod(key_file, 0o600)
-    port = _free_udp_port()
+    port = free_udp_port()
 
     async def scenario():
         sdk_config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)

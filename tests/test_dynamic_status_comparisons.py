@@ -18,7 +18,7 @@ from tether_companion.estimation.dynamic.observability import (
     min_horizontal_pull_n,
     unmodelled_position_rows,
 )
-from tether_companion.estimation.dynamic.published import _tension_and_jacobian
+from tether_companion.estimation.dynamic.published_bound import _tension_and_jacobian
 
 _VALUES = (0.0, -0.0, 1e-300, 0.3, 2.5, -1.5, 1e150, math.inf, -math.inf, math.nan)
 

@@ -59,6 +59,7 @@ from tether_companion.estimation.dynamic.divergence import (
     too_far,
 )
 from tether_companion.estimation.dynamic.ground_station import GroundStationInputs
+from tether_companion.estimation.dynamic.ground_station_feed import GroundStationFeed
 from tether_companion.estimation.dynamic.imu_batch import ImuBatch
 from tether_companion.estimation.dynamic.mixture import MixtureValues
 from tether_companion.estimation.dynamic.models import ModelConstants
@@ -79,7 +80,7 @@ from tether_companion.samples import ImuSample, RangeSample
 FloatArray = NDArray[np.float64]
 
 
-class DynamicTetherEstimator(InputFeed):
+class DynamicTetherEstimator(InputFeed, GroundStationFeed):
     """Position, velocity, tension, thrust scale, accelerometer bias and wind from samples.
 
     Parameters
@@ -206,82 +207,6 @@ class DynamicTetherEstimator(InputFeed):
         return None if self.bank is None else self.bank.best
 
     # ------------------------------------------------------------------ inputs
-    def set_known_tension_n(self, tension_n: float, time_s: float) -> None:
-        """Load-cell tension at the drone [N] at ``time_s`` [s]: fused when initialised."""
-        if self.ground_station.tension_ok(tension_n, time_s) and self._stepped_to(time_s):
-            assert self.bank is not None
-            self.ground_station.fuse_tension(self.bank, self.constants, tension_n, self._time_s)
-            self.constants.tension_measured |= self.ground_station.load_cell.status.fused > 0
-
-    def set_winch_tension_n(self, tension_n: float, time_s: float) -> None:
-        """The winch's load cell at ``time_s`` [s]: the tension where the cable leaves the
-        winch [N], fused when initialised as the anchor's end of the filter's cable
-        (``|F_c| - w b``, generated ``anchor_tension_*``). While these readings are fused
-        (each within ``staleness.tension_s`` of the last) the chord tension walks at
-        ``noise.winch_tension_n2ps`` instead of ``noise.tension_n2ps``: a constant-tension
-        winch holds the anchor's tension, and the chord tension then moves only as far as
-        the winch's control lets it and the geometry turns a held anchor tension into a
-        chord tension (docs/estimation.md, sag13)."""
-        if not self.ground_station.tension_ok(tension_n, time_s):
-            return
-        if self.bank is None:  # with a cable angle it places a heavy cable's start
-            self._startup.add_winch_tension(time_s - self.dynamic.winch_latency_s, tension_n)
-        elif self._stepped_to(time_s):
-            assert self.bank is not None
-            if self.ground_station.fuse_winch_tension(
-                self.bank, self.constants, tension_n, self._time_s
-            ):
-                self.constants.tension_measured = True
-                self._walk.winch_fused(self._time_s, self.bank.filters)
-
-    def set_paid_out_length_m(self, length_m: float, time_s: float) -> None:
-        """Winch paid-out length [m]: the cable model's length from now on, and fused."""
-        if not self.ground_station.length_ok(length_m, time_s):
-            return
-        self.constants.length_m = length_m
-        if self._stepped_to(time_s):
-            assert self.bank is not None
-            self.ground_station.fuse_length(
-                self.bank, self.constants, length_m, self._time_s, self._time_s - time_s
-            )
-
-    def on_cable_angle(
-        self,
-        elevation_rad: float,
-        azimuth_rad: float,
-        time_s: float,
-        noise_std_rad: float,
-        calibration_std_rad: tuple[float, float] = (0.0, 0.0),
-    ) -> None:
-        """Ground-station cable angle at the anchor [rad]: elevation up, azimuth from north,
-        the sensor's direction noise ``noise_std_rad`` [rad] (aid/cable_angle.py) and its
-        calibration errors (elevation, azimuth) [rad] (position_information.py)."""
-        inputs = self.ground_station
-        if not inputs.angle_ok(
-            elevation_rad, azimuth_rad, time_s, noise_std_rad, calibration_std_rad
-        ):
-            return
-        if self.bank is None:  # it places the start (taken the sensor's latency earlier)
-            self._startup.add_angle(
-                time_s - self.dynamic.cable_angle_latency_s,
-                elevation_rad,
-                azimuth_rad,
-                noise_std_rad,
-                calibration_std_rad,
-            )
-        elif self._stepped_to(time_s):
-            assert self.bank is not None
-            inputs.fuse_angle(
-                self.bank,
-                self.constants,
-                elevation_rad,
-                azimuth_rad,
-                self._time_s,
-                noise_std_rad,
-                calibration_std_rad,
-                self._time_s - time_s,
-            )
-
     def set_autopilot_landed(self, landed: bool, time_s: float) -> None:
         """The flight controller's landed state at ``time_s`` [s] (EXTENDED_SYS_STATE;
         ``landed``: ON_GROUND): while fresh and landed the drone is on the ground (status
@@ -390,18 +315,6 @@ class DynamicTetherEstimator(InputFeed):
         return "" if self.bank is not None else self._startup.reason
 
     # ------------------------------------------------------------------ internals
-    def _fresh(self, time_s: float, bound_s: float) -> bool:
-        return not math.isnan(self._time_s) and abs(time_s - self._time_s) <= bound_s
-
-    def _stepped_to(self, time_s: float) -> bool:
-        """Whether a ground-station reading at ``time_s`` [s] can be fused now: the filter is
-        initialised, the reading within ``staleness.tension_s`` of the filter time, and the
-        members stepped to that time without diverging."""
-        if self.bank is None or not self._fresh(time_s, self.config.staleness.tension_s):
-            return False
-        self._step_batch()
-        return self.bank is not None
-
     def _initialise_tick(self, aligned: AlignedInputs | str, stale: bool) -> NavigationEstimate:
         if stale:
             return self._estimate(False, True, False)

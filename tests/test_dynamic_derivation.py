@@ -49,6 +49,18 @@ def test_regenerating_gives_the_committed_file() -> None:
     )
 
 
+def test_regenerating_gives_the_committed_c_file() -> None:
+    text = derive.OUTPUT_C.read_text()
+    if f"(sympy {sympy.__version__})" not in text:
+        pytest.skip(
+            f"generated_core.c was written by another sympy version than {sympy.__version__}"
+        )
+    assert derive.generate_c_source() == text, (
+        "generated_core.c is out of date: run python -m "
+        "tether_companion.estimation.dynamic.derivation.derive"
+    )
+
+
 def _random_case(rng: np.random.Generator, name: str) -> tuple[list, list, list]:
     x = np.empty(state.N_STATES)
     direction = rng.normal(size=3)

@@ -12,6 +12,7 @@ values and the Jacobian with respect to ``x`` (row-major, 17 columns).
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Sequence
 
 
@@ -736,3 +737,43 @@ def height_above_ground(x: Sequence[float], u: Sequence[float], c: Sequence[floa
     anchor_height_m, = u
     mass_kg, drag_per_s, weight_n_per_m = c
     return (anchor_height_m - p_d,), (0, 0, -1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
+
+
+PYTHON = (
+    force_balance_straight,
+    accel_straight,
+    tension_straight,
+    anchor_tension_straight,
+    cable_angle_straight,
+    force_balance_catenary,
+    accel_catenary,
+    tension_catenary,
+    anchor_tension_catenary,
+    cable_angle_catenary,
+    force_balance_grounded,
+    accel_grounded,
+    tension_grounded,
+    anchor_tension_grounded,
+    cable_angle_grounded,
+    inertial,
+    winch_length_straight,
+    winch_length_catenary,
+    winch_length_grounded,
+    height_above_ground,
+)
+"""The functions above in Python: the reference, and what the C twins call where they could
+differ (derivation/c_core.py)."""
+
+COMPILED = False
+"""Whether the names above are the C extension's twins (``_generated_core``, built by setup.py
+where a compiler is; ``TETHER_PURE_PYTHON=1`` keeps the Python functions)."""
+
+if not os.environ.get("TETHER_PURE_PYTHON"):
+    try:
+        from tether_companion.estimation.dynamic import _generated_core as _core
+    except ImportError:
+        pass
+    else:
+        _core.set_fallbacks(PYTHON)
+        globals().update({name: getattr(_core, name) for name in _core.NAMES})
+        COMPILED = True

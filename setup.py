@@ -1,0 +1,23 @@
+"""The optional C extension of the dynamic filter's generated models (everything else is in
+pyproject.toml).
+
+``tether_companion/estimation/dynamic/generated_core.c`` is written by the derivation
+(``python -m tether_companion.estimation.dynamic.derivation.derive``) next to the Python
+``generated.py``, which stays the reference and the fallback: without a C compiler the build
+skips the extension (``optional=True``) and the package runs the Python functions. The flags
+keep every C function's floats bit for bit the Python function's (derivation/c_core.py): no
+fused multiply-add (GCC's default on ARM) and libm's ``pow`` (as CPython's ``**``) kept.
+"""
+
+from setuptools import Extension, setup
+
+setup(
+    ext_modules=[
+        Extension(
+            "tether_companion.estimation.dynamic._generated_core",
+            ["tether_companion/estimation/dynamic/generated_core.c"],
+            extra_compile_args=["-ffp-contract=off", "-fno-builtin-pow"],
+            optional=True,
+        )
+    ]
+)

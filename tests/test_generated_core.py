@@ -146,3 +146,32 @@ def test_pure_python_is_kept_when_asked() -> None:
             check=True,
         )
         assert out.stdout.split() == expected.split()
+
+
+def test_the_batch_sums_are_the_python_sums_bit_for_bit() -> None:
+    """``imu_batch.batch_sums`` and its C twin over random ticks, and their verdicts on a
+    negative or non-finite tick; where C leaves it to Python it says None."""
+    from tether_companion.estimation.dynamic import imu_batch
+
+    rng = np.random.default_rng(44)
+    sums = ([0.0] * 3, [0.0] * 3, [0.0] * 9, [0.0] * 9)
+    c = [1.5, 0.3, 0.1]
+    for i in range(2000):
+        x, u, _ = _random_case(rng, "inertial")
+        u = [float(v) for v in u]
+        dt_s = float(rng.uniform(0.0, 0.02)) if i % 50 else 0.0
+        expected = imu_batch.batch_sums(*sums, dt_s, u, c)
+        got = core.batch_sums(*sums, dt_s, u, c)
+        _same(tuple(map(tuple, expected)), tuple(map(tuple, got)))
+        assert all(type(part) is list for part in got)
+        sums = got
+    for dt_s, u_bad in ((-1e-3, u), (math.inf, u), (math.nan, u), (0.01, [*u[:-1], math.nan])):
+        assert imu_batch.batch_sums(*sums, dt_s, u_bad, c) is False
+        assert core.batch_sums(*sums, dt_s, u_bad, c) is False
+    for args in (
+        (*sums, 1, u, c),  # an int dt_s
+        (*sums, 0.01, np.array(u), c),  # an array of inputs
+        (*sums, 0.01, u, [1.5, 0.3]),  # short constants
+        (sums[0][:2], *sums[1:], 0.01, u, c),  # short sums
+    ):
+        assert core.batch_sums(*args) is None

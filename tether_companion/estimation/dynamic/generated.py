@@ -764,6 +764,9 @@ PYTHON = (
 """The functions above in Python: the reference, and what the C twins call where they could
 differ (derivation/c_core.py)."""
 
+CORE = None
+"""The C extension when it runs (its ``batch_sums`` is ``imu_batch.batch_sums``'s twin)."""
+
 COMPILED = False
 """Whether the names above are the C extension's twins (``_generated_core``, built by setup.py
 where a compiler is; ``TETHER_PURE_PYTHON=1`` keeps the Python functions)."""
@@ -777,3 +780,4 @@ if not os.environ.get("TETHER_PURE_PYTHON"):
         _core.set_fallbacks(PYTHON)
         globals().update({name: getattr(_core, name) for name in _core.NAMES})
         COMPILED = True
+        CORE = _core

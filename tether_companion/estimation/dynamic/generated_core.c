@@ -104,14 +104,13 @@ pack_pair(const Entry *values, Py_ssize_t n_values, const Entry *jacobian, Py_ss
 
 static const Entry force_balance_straight_values[] = {{INPUT, 0, 3, 0L}, {INPUT, 0, 4, 0L}, {INPUT, 0, 5, 0L}, {COMPUTED, 0, 0, 0L}, {COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
 static const Entry force_balance_straight_jacobian[] = {{COMPUTED, 0, 3, 0L}, {COMPUTED, 0, 4, 0L}, {COMPUTED, 0, 5, 0L}, {COMPUTED, 0, 6, 0L}, {COMPUTED, 0, 7, 0L}, {COMPUTED, 0, 8, 0L}, {COMPUTED, 0, 9, 0L}, {COMPUTED, 0, 10, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 11, 0L}, {COMPUTED, 0, 12, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 13, 0L}, {COMPUTED, 0, 14, 0L}, {COMPUTED, 0, 15, 0L}, {COMPUTED, 0, 16, 0L}, {COMPUTED, 0, 17, 0L}, {COMPUTED, 0, 18, 0L}, {COMPUTED, 0, 19, 0L}, {COMPUTED, 0, 20, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 21, 0L}, {COMPUTED, 0, 22, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 23, 0L}, {COMPUTED, 0, 24, 0L}, {COMPUTED, 0, 25, 0L}, {COMPUTED, 0, 26, 0L}, {COMPUTED, 0, 27, 0L}, {COMPUTED, 0, 28, 0L}, {COMPUTED, 0, 29, 0L}, {COMPUTED, 0, 30, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 31, 0L}, {COMPUTED, 0, 32, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define FORCE_BALANCE_STRAIGHT_COMPUTED 33
 
-static PyObject *
-force_balance_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+force_balance_straight_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[10], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 10, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(0, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -207,7 +206,6 @@ force_balance_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs
     check += t30;
     const double t31 = -t30;
     check += t31;
-    double computed[33];
     computed[0] = -r00*t11 - r10*t12 - scale*t2 - t8*tension;
     check += computed[0];
     computed[1] = -r01*t11 - r11*t12 - scale*t13 - t14*tension;
@@ -275,21 +273,29 @@ force_balance_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs
     computed[32] = t30;
     check += computed[32];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+force_balance_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[10], in2[3];
+    double computed[FORCE_BALANCE_STRAIGHT_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 10, &check) || !read_floats(args[2], in2, 3, &check) || !force_balance_straight_compute(in0, in1, in2, check, computed))
         return fall_back(0, args, nargs);
     return pack_pair(force_balance_straight_values, 17, force_balance_straight_jacobian, 51, computed, args);
 }
 
 static const Entry accel_straight_values[] = {{COMPUTED, 0, 0, 0L}, {COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}};
 static const Entry accel_straight_jacobian[] = {{COMPUTED, 0, 3, 0L}, {COMPUTED, 0, 4, 0L}, {COMPUTED, 0, 5, 0L}, {COMPUTED, 0, 6, 0L}, {COMPUTED, 0, 7, 0L}, {COMPUTED, 0, 8, 0L}, {COMPUTED, 0, 9, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 10, 0L}, {COMPUTED, 0, 11, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 12, 0L}, {COMPUTED, 0, 13, 0L}, {COMPUTED, 0, 14, 0L}, {COMPUTED, 0, 15, 0L}, {COMPUTED, 0, 16, 0L}, {COMPUTED, 0, 17, 0L}, {COMPUTED, 0, 18, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 19, 0L}, {COMPUTED, 0, 20, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 21, 0L}, {COMPUTED, 0, 22, 0L}, {COMPUTED, 0, 23, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 24, 0L}, {COMPUTED, 0, 25, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define ACCEL_STRAIGHT_COMPUTED 26
 
-static PyObject *
-accel_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+accel_straight_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[10], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 10, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(1, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -387,7 +393,6 @@ accel_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     check += t31;
     const double t32 = drag_per_s*r11;
     check += t32;
-    double computed[26];
     computed[0] = b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t11*tension;
     check += computed[0];
     computed[1] = b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t15*tension;
@@ -441,21 +446,29 @@ accel_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     computed[25] = -t16;
     check += computed[25];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+accel_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[10], in2[3];
+    double computed[ACCEL_STRAIGHT_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 10, &check) || !read_floats(args[2], in2, 3, &check) || !accel_straight_compute(in0, in1, in2, check, computed))
         return fall_back(1, args, nargs);
     return pack_pair(accel_straight_values, 3, accel_straight_jacobian, 51, computed, args);
 }
 
 static const Entry tension_straight_values[] = {{COMPUTED, 0, 0, 0L}};
 static const Entry tension_straight_jacobian[] = {{COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}, {COMPUTED, 0, 3, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 4, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define TENSION_STRAIGHT_COMPUTED 5
 
-static PyObject *
-tension_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+tension_straight_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[1], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(2, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -491,7 +504,6 @@ tension_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     check += t5;
     const double t6 = t4*t5*pow(tension, 2)*(t1*t4 + t2*t4 + t3*t4 - 1);
     check += t6;
-    double computed[5];
     computed[0] = t0;
     check += computed[0];
     computed[1] = -p_n*t6;
@@ -503,21 +515,29 @@ tension_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     computed[4] = t5*tension;
     check += computed[4];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+tension_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[1], in2[3];
+    double computed[TENSION_STRAIGHT_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check) || !tension_straight_compute(in0, in1, in2, check, computed))
         return fall_back(2, args, nargs);
     return pack_pair(tension_straight_values, 1, tension_straight_jacobian, 17, computed, args);
 }
 
 static const Entry anchor_tension_straight_values[] = {{COMPUTED, 0, 0, 0L}};
 static const Entry anchor_tension_straight_jacobian[] = {{COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}, {COMPUTED, 0, 3, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 4, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define ANCHOR_TENSION_STRAIGHT_COMPUTED 5
 
-static PyObject *
-anchor_tension_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+anchor_tension_straight_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[1], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(3, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -553,7 +573,6 @@ anchor_tension_straight(PyObject *module, PyObject *const *args, Py_ssize_t narg
     check += t5;
     const double t6 = t4*t5*pow(tension, 2)*(t1*t4 + t2*t4 + t3*t4 - 1);
     check += t6;
-    double computed[5];
     computed[0] = p_d*weight_n_per_m + t0;
     check += computed[0];
     computed[1] = -p_n*t6;
@@ -565,21 +584,29 @@ anchor_tension_straight(PyObject *module, PyObject *const *args, Py_ssize_t narg
     computed[4] = t5*tension;
     check += computed[4];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+anchor_tension_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[1], in2[3];
+    double computed[ANCHOR_TENSION_STRAIGHT_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check) || !anchor_tension_straight_compute(in0, in1, in2, check, computed))
         return fall_back(3, args, nargs);
     return pack_pair(anchor_tension_straight_values, 1, anchor_tension_straight_jacobian, 17, computed, args);
 }
 
 static const Entry cable_angle_straight_values[] = {{COMPUTED, 0, 0, 0L}, {COMPUTED, 0, 1, 0L}};
 static const Entry cable_angle_straight_jacobian[] = {{COMPUTED, 0, 2, 0L}, {COMPUTED, 0, 3, 0L}, {COMPUTED, 0, 4, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 5, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 6, 0L}, {COMPUTED, 0, 7, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}};
+#define CABLE_ANGLE_STRAIGHT_COMPUTED 8
 
-static PyObject *
-cable_angle_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+cable_angle_straight_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[1], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(4, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -635,7 +662,6 @@ cable_angle_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     check += t15;
     const double t16 = 1/t3;
     check += t16;
-    double computed[8];
     computed[0] = elevation_zero + atan2(-p_d*t6, t5*t7*t8);
     check += computed[0];
     computed[1] = azimuth_zero + atan2(p_e*t6, p_n*t6);
@@ -653,21 +679,29 @@ cable_angle_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     computed[7] = p_n*t16;
     check += computed[7];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+cable_angle_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[1], in2[3];
+    double computed[CABLE_ANGLE_STRAIGHT_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check) || !cable_angle_straight_compute(in0, in1, in2, check, computed))
         return fall_back(4, args, nargs);
     return pack_pair(cable_angle_straight_values, 2, cable_angle_straight_jacobian, 34, computed, args);
 }
 
 static const Entry force_balance_catenary_values[] = {{INPUT, 0, 3, 0L}, {INPUT, 0, 4, 0L}, {INPUT, 0, 5, 0L}, {COMPUTED, 0, 0, 0L}, {COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
 static const Entry force_balance_catenary_jacobian[] = {{COMPUTED, 0, 3, 0L}, {COMPUTED, 0, 4, 0L}, {COMPUTED, 0, 5, 0L}, {COMPUTED, 0, 6, 0L}, {COMPUTED, 0, 7, 0L}, {COMPUTED, 0, 8, 0L}, {COMPUTED, 0, 9, 0L}, {COMPUTED, 0, 10, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 11, 0L}, {COMPUTED, 0, 12, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 13, 0L}, {COMPUTED, 0, 14, 0L}, {COMPUTED, 0, 15, 0L}, {COMPUTED, 0, 16, 0L}, {COMPUTED, 0, 17, 0L}, {COMPUTED, 0, 18, 0L}, {COMPUTED, 0, 19, 0L}, {COMPUTED, 0, 20, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 21, 0L}, {COMPUTED, 0, 22, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 23, 0L}, {COMPUTED, 0, 24, 0L}, {COMPUTED, 0, 25, 0L}, {COMPUTED, 0, 26, 0L}, {COMPUTED, 0, 27, 0L}, {COMPUTED, 0, 28, 0L}, {COMPUTED, 0, 29, 0L}, {COMPUTED, 0, 30, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 31, 0L}, {COMPUTED, 0, 32, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define FORCE_BALANCE_CATENARY_COMPUTED 33
 
-static PyObject *
-force_balance_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+force_balance_catenary_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[10], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 10, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(5, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -831,7 +865,6 @@ force_balance_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs
     check += t64;
     const double t65 = t21*t50*t7;
     check += t65;
-    double computed[33];
     computed[0] = -r00*t15 - r10*t16 - scale*t2 - t12;
     check += computed[0];
     computed[1] = -r01*t15 - r11*t16 - scale*t17 - t19;
@@ -899,21 +932,29 @@ force_balance_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs
     computed[32] = t48;
     check += computed[32];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+force_balance_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[10], in2[3];
+    double computed[FORCE_BALANCE_CATENARY_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 10, &check) || !read_floats(args[2], in2, 3, &check) || !force_balance_catenary_compute(in0, in1, in2, check, computed))
         return fall_back(5, args, nargs);
     return pack_pair(force_balance_catenary_values, 17, force_balance_catenary_jacobian, 51, computed, args);
 }
 
 static const Entry accel_catenary_values[] = {{COMPUTED, 0, 0, 0L}, {COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}};
 static const Entry accel_catenary_jacobian[] = {{COMPUTED, 0, 3, 0L}, {COMPUTED, 0, 4, 0L}, {COMPUTED, 0, 5, 0L}, {COMPUTED, 0, 6, 0L}, {COMPUTED, 0, 7, 0L}, {COMPUTED, 0, 8, 0L}, {COMPUTED, 0, 9, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 10, 0L}, {COMPUTED, 0, 11, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 12, 0L}, {COMPUTED, 0, 13, 0L}, {COMPUTED, 0, 14, 0L}, {COMPUTED, 0, 15, 0L}, {COMPUTED, 0, 16, 0L}, {COMPUTED, 0, 17, 0L}, {COMPUTED, 0, 18, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 19, 0L}, {COMPUTED, 0, 20, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 21, 0L}, {COMPUTED, 0, 22, 0L}, {COMPUTED, 0, 23, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 24, 0L}, {COMPUTED, 0, 25, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define ACCEL_CATENARY_COMPUTED 26
 
-static PyObject *
-accel_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+accel_catenary_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[10], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 10, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(6, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -1085,7 +1126,6 @@ accel_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     check += t68;
     const double t69 = t47*t68;
     check += t69;
-    double computed[26];
     computed[0] = b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t29*(-r02*t24 + 2*t2 + 2*t3);
     check += computed[0];
     computed[1] = b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t29*(-r12*t24 + 2*t30 + 2*t31);
@@ -1139,21 +1179,29 @@ accel_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     computed[25] = -t32;
     check += computed[25];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+accel_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[10], in2[3];
+    double computed[ACCEL_CATENARY_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 10, &check) || !read_floats(args[2], in2, 3, &check) || !accel_catenary_compute(in0, in1, in2, check, computed))
         return fall_back(6, args, nargs);
     return pack_pair(accel_catenary_values, 3, accel_catenary_jacobian, 51, computed, args);
 }
 
 static const Entry tension_catenary_values[] = {{COMPUTED, 0, 0, 0L}};
 static const Entry tension_catenary_jacobian[] = {{COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}, {COMPUTED, 0, 3, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 4, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define TENSION_CATENARY_COMPUTED 5
 
-static PyObject *
-tension_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+tension_catenary_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[1], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(7, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -1269,7 +1317,6 @@ tension_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     check += t45;
     const double t46 = t27*t5*t8;
     check += t46;
-    double computed[5];
     computed[0] = t0*t23;
     check += computed[0];
     computed[1] = -p_n*t37;
@@ -1281,21 +1328,29 @@ tension_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     computed[4] = t36*(t2*tension + t22*tension + t3*tension + t45*(-p_d*t41 + t1*t44*(-t14*pow(t5, 3.0/2.0)*t8 + t34 + t43) + t20*t40 + t29*t46 - t46));
     check += computed[4];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+tension_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[1], in2[3];
+    double computed[TENSION_CATENARY_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check) || !tension_catenary_compute(in0, in1, in2, check, computed))
         return fall_back(7, args, nargs);
     return pack_pair(tension_catenary_values, 1, tension_catenary_jacobian, 17, computed, args);
 }
 
 static const Entry anchor_tension_catenary_values[] = {{COMPUTED, 0, 0, 0L}};
 static const Entry anchor_tension_catenary_jacobian[] = {{COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}, {COMPUTED, 0, 3, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 4, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define ANCHOR_TENSION_CATENARY_COMPUTED 5
 
-static PyObject *
-anchor_tension_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+anchor_tension_catenary_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[1], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(8, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -1415,7 +1470,6 @@ anchor_tension_catenary(PyObject *module, PyObject *const *args, Py_ssize_t narg
     check += t47;
     const double t48 = 2*t17*t6;
     check += t48;
-    double computed[5];
     computed[0] = t0 + t1*t26;
     check += computed[0];
     computed[1] = -p_n*t39;
@@ -1427,21 +1481,29 @@ anchor_tension_catenary(PyObject *module, PyObject *const *args, Py_ssize_t narg
     computed[4] = t38*(t25*tension + t3*tension + t37*weight_n_per_m*(-p_d*t44 + t10*t2*t47*(-t10*t16*pow(t6, 3.0/2.0) + t36 + t46) + t22*t43 + t30*t48 - t48) + t4*tension);
     check += computed[4];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+anchor_tension_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[1], in2[3];
+    double computed[ANCHOR_TENSION_CATENARY_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check) || !anchor_tension_catenary_compute(in0, in1, in2, check, computed))
         return fall_back(8, args, nargs);
     return pack_pair(anchor_tension_catenary_values, 1, anchor_tension_catenary_jacobian, 17, computed, args);
 }
 
 static const Entry cable_angle_catenary_values[] = {{COMPUTED, 0, 0, 0L}, {COMPUTED, 0, 1, 0L}};
 static const Entry cable_angle_catenary_jacobian[] = {{COMPUTED, 0, 2, 0L}, {COMPUTED, 0, 3, 0L}, {COMPUTED, 0, 4, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 5, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 6, 0L}, {COMPUTED, 0, 7, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}};
+#define CABLE_ANGLE_CATENARY_COMPUTED 8
 
-static PyObject *
-cable_angle_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+cable_angle_catenary_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[1], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(9, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -1597,7 +1659,6 @@ cable_angle_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     check += t65;
     const double t66 = 1/t3;
     check += t66;
-    double computed[8];
     computed[0] = elevation_zero + atan2(-t18 - 1.0/2.0*t31, t29*t34);
     check += computed[0];
     computed[1] = azimuth_zero + atan2(t35, t36);
@@ -1615,21 +1676,29 @@ cable_angle_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     computed[7] = p_n*t66;
     check += computed[7];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+cable_angle_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[1], in2[3];
+    double computed[CABLE_ANGLE_CATENARY_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check) || !cable_angle_catenary_compute(in0, in1, in2, check, computed))
         return fall_back(9, args, nargs);
     return pack_pair(cable_angle_catenary_values, 2, cable_angle_catenary_jacobian, 34, computed, args);
 }
 
 static const Entry force_balance_grounded_values[] = {{INPUT, 0, 3, 0L}, {INPUT, 0, 4, 0L}, {INPUT, 0, 5, 0L}, {COMPUTED, 0, 0, 0L}, {COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
 static const Entry force_balance_grounded_jacobian[] = {{COMPUTED, 0, 3, 0L}, {COMPUTED, 0, 4, 0L}, {COMPUTED, 0, 5, 0L}, {COMPUTED, 0, 6, 0L}, {COMPUTED, 0, 7, 0L}, {COMPUTED, 0, 8, 0L}, {COMPUTED, 0, 9, 0L}, {COMPUTED, 0, 10, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 11, 0L}, {COMPUTED, 0, 12, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 13, 0L}, {COMPUTED, 0, 14, 0L}, {COMPUTED, 0, 15, 0L}, {COMPUTED, 0, 16, 0L}, {COMPUTED, 0, 17, 0L}, {COMPUTED, 0, 18, 0L}, {COMPUTED, 0, 19, 0L}, {COMPUTED, 0, 20, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 21, 0L}, {COMPUTED, 0, 22, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 23, 0L}, {COMPUTED, 0, 24, 0L}, {COMPUTED, 0, 25, 0L}, {COMPUTED, 0, 26, 0L}, {COMPUTED, 0, 27, 0L}, {COMPUTED, 0, 28, 0L}, {COMPUTED, 0, 29, 0L}, {COMPUTED, 0, 30, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 31, 0L}, {COMPUTED, 0, 32, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define FORCE_BALANCE_GROUNDED_COMPUTED 33
 
-static PyObject *
-force_balance_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+force_balance_grounded_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[10], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 10, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(10, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -1741,7 +1810,6 @@ force_balance_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs
     check += t38;
     const double t39 = t38*(t20*t24 - 1/t20);
     check += t39;
-    double computed[33];
     computed[0] = -r00*t14 - r10*t15 - scale*t2 - t11;
     check += computed[0];
     computed[1] = -r01*t14 - r11*t15 - scale*t16 - t18;
@@ -1809,21 +1877,29 @@ force_balance_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs
     computed[32] = t35;
     check += computed[32];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+force_balance_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[10], in2[3];
+    double computed[FORCE_BALANCE_GROUNDED_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 10, &check) || !read_floats(args[2], in2, 3, &check) || !force_balance_grounded_compute(in0, in1, in2, check, computed))
         return fall_back(10, args, nargs);
     return pack_pair(force_balance_grounded_values, 17, force_balance_grounded_jacobian, 51, computed, args);
 }
 
 static const Entry accel_grounded_values[] = {{COMPUTED, 0, 0, 0L}, {COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}};
 static const Entry accel_grounded_jacobian[] = {{COMPUTED, 0, 3, 0L}, {COMPUTED, 0, 4, 0L}, {COMPUTED, 0, 5, 0L}, {COMPUTED, 0, 6, 0L}, {COMPUTED, 0, 7, 0L}, {COMPUTED, 0, 8, 0L}, {COMPUTED, 0, 9, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 10, 0L}, {COMPUTED, 0, 11, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 12, 0L}, {COMPUTED, 0, 13, 0L}, {COMPUTED, 0, 14, 0L}, {COMPUTED, 0, 15, 0L}, {COMPUTED, 0, 16, 0L}, {COMPUTED, 0, 17, 0L}, {COMPUTED, 0, 18, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 19, 0L}, {COMPUTED, 0, 20, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 21, 0L}, {COMPUTED, 0, 22, 0L}, {COMPUTED, 0, 23, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 24, 0L}, {COMPUTED, 0, 25, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define ACCEL_GROUNDED_COMPUTED 26
 
-static PyObject *
-accel_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+accel_grounded_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[10], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 10, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(11, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -1945,7 +2021,6 @@ accel_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     check += t43;
     const double t44 = t27*t43;
     check += t44;
-    double computed[26];
     computed[0] = b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t2*(-r02*t16 + t10*t11 + t10*t3);
     check += computed[0];
     computed[1] = b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t2*(-r12*t16 + t10*t17 + t10*t18);
@@ -1999,21 +2074,29 @@ accel_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     computed[25] = -t19;
     check += computed[25];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+accel_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[10], in2[3];
+    double computed[ACCEL_GROUNDED_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 10, &check) || !read_floats(args[2], in2, 3, &check) || !accel_grounded_compute(in0, in1, in2, check, computed))
         return fall_back(11, args, nargs);
     return pack_pair(accel_grounded_values, 3, accel_grounded_jacobian, 51, computed, args);
 }
 
 static const Entry tension_grounded_values[] = {{COMPUTED, 0, 0, 0L}};
 static const Entry tension_grounded_jacobian[] = {{COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}, {COMPUTED, 0, 3, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 4, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define TENSION_GROUNDED_COMPUTED 5
 
-static PyObject *
-tension_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+tension_grounded_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[1], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(12, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -2075,7 +2158,6 @@ tension_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     check += t18;
     const double t19 = p_d*t16*t6;
     check += t19;
-    double computed[5];
     computed[0] = t13;
     check += computed[0];
     computed[1] = -p_n*t18;
@@ -2087,21 +2169,29 @@ tension_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     computed[4] = t14*(t0*t15 - t10*t17 + t15*t2);
     check += computed[4];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+tension_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[1], in2[3];
+    double computed[TENSION_GROUNDED_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check) || !tension_grounded_compute(in0, in1, in2, check, computed))
         return fall_back(12, args, nargs);
     return pack_pair(tension_grounded_values, 1, tension_grounded_jacobian, 17, computed, args);
 }
 
 static const Entry anchor_tension_grounded_values[] = {{COMPUTED, 0, 0, 0L}};
 static const Entry anchor_tension_grounded_jacobian[] = {{COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}, {COMPUTED, 0, 3, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 4, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define ANCHOR_TENSION_GROUNDED_COMPUTED 5
 
-static PyObject *
-anchor_tension_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+anchor_tension_grounded_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[1], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(13, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -2165,7 +2255,6 @@ anchor_tension_grounded(PyObject *module, PyObject *const *args, Py_ssize_t narg
     check += t19;
     const double t20 = p_d*t17*t7;
     check += t20;
-    double computed[5];
     computed[0] = t0 + t14;
     check += computed[0];
     computed[1] = -p_n*t19;
@@ -2177,21 +2266,29 @@ anchor_tension_grounded(PyObject *module, PyObject *const *args, Py_ssize_t narg
     computed[4] = t15*(t1*t16 - t11*t18 + t16*t3);
     check += computed[4];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+anchor_tension_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[1], in2[3];
+    double computed[ANCHOR_TENSION_GROUNDED_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check) || !anchor_tension_grounded_compute(in0, in1, in2, check, computed))
         return fall_back(13, args, nargs);
     return pack_pair(anchor_tension_grounded_values, 1, anchor_tension_grounded_jacobian, 17, computed, args);
 }
 
 static const Entry cable_angle_grounded_values[] = {{COMPUTED, 0, 0, 0L}, {COMPUTED, 0, 1, 0L}};
 static const Entry cable_angle_grounded_jacobian[] = {{INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 2, 0L}, {COMPUTED, 0, 3, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}};
+#define CABLE_ANGLE_GROUNDED_COMPUTED 4
 
-static PyObject *
-cable_angle_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+cable_angle_grounded_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[1], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(14, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -2221,7 +2318,6 @@ cable_angle_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     check += t2;
     const double t3 = 1/t0;
     check += t3;
-    double computed[4];
     computed[0] = elevation_zero + atan2(0, sqrt(t0)*t1*fabs(tension));
     check += computed[0];
     computed[1] = azimuth_zero + atan2(p_e*t2, p_n*t2);
@@ -2231,21 +2327,29 @@ cable_angle_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     computed[3] = p_n*t3;
     check += computed[3];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+cable_angle_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[1], in2[3];
+    double computed[CABLE_ANGLE_GROUNDED_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check) || !cable_angle_grounded_compute(in0, in1, in2, check, computed))
         return fall_back(14, args, nargs);
     return pack_pair(cable_angle_grounded_values, 2, cable_angle_grounded_jacobian, 34, computed, args);
 }
 
 static const Entry inertial_values[] = {{INPUT, 0, 3, 0L}, {INPUT, 0, 4, 0L}, {INPUT, 0, 5, 0L}, {COMPUTED, 0, 0, 0L}, {COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
 static const Entry inertial_jacobian[] = {{INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 3, 0L}, {COMPUTED, 0, 4, 0L}, {COMPUTED, 0, 5, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 6, 0L}, {COMPUTED, 0, 7, 0L}, {COMPUTED, 0, 8, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 9, 0L}, {COMPUTED, 0, 10, 0L}, {COMPUTED, 0, 11, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define INERTIAL_COMPUTED 12
 
-static PyObject *
-inertial(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+inertial_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[12], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 12, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(15, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -2285,7 +2389,6 @@ inertial(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     check += t1;
     const double t2 = b_z - f_z;
     check += t2;
-    double computed[12];
     computed[0] = -r00*t0 - r10*t1 - r20*t2;
     check += computed[0];
     computed[1] = -r01*t0 - r11*t1 - r21*t2;
@@ -2311,21 +2414,29 @@ inertial(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     computed[11] = -r22;
     check += computed[11];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+inertial(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[12], in2[3];
+    double computed[INERTIAL_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 12, &check) || !read_floats(args[2], in2, 3, &check) || !inertial_compute(in0, in1, in2, check, computed))
         return fall_back(15, args, nargs);
     return pack_pair(inertial_values, 17, inertial_jacobian, 51, computed, args);
 }
 
 static const Entry winch_length_straight_values[] = {{COMPUTED, 0, 0, 0L}};
 static const Entry winch_length_straight_jacobian[] = {{COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}, {COMPUTED, 0, 3, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}, {COMPUTED, 0, 4, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define WINCH_LENGTH_STRAIGHT_COMPUTED 5
 
-static PyObject *
-winch_length_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+winch_length_straight_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[1], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(16, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -2353,7 +2464,6 @@ winch_length_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     check += t1;
     const double t2 = t0/t1;
     check += t2;
-    double computed[5];
     computed[0] = t0*t1 + winch_offset;
     check += computed[0];
     computed[1] = p_n*t2;
@@ -2365,21 +2475,29 @@ winch_length_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     computed[4] = t1;
     check += computed[4];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+winch_length_straight(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[1], in2[3];
+    double computed[WINCH_LENGTH_STRAIGHT_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check) || !winch_length_straight_compute(in0, in1, in2, check, computed))
         return fall_back(16, args, nargs);
     return pack_pair(winch_length_straight_values, 1, winch_length_straight_jacobian, 17, computed, args);
 }
 
 static const Entry winch_length_catenary_values[] = {{COMPUTED, 0, 0, 0L}};
 static const Entry winch_length_catenary_jacobian[] = {{COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}, {COMPUTED, 0, 3, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 4, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}, {COMPUTED, 0, 5, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define WINCH_LENGTH_CATENARY_COMPUTED 6
 
-static PyObject *
-winch_length_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+winch_length_catenary_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[1], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(17, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -2437,7 +2555,6 @@ winch_length_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     check += t16;
     const double t17 = t11*t16*(-t11*t15*t2 + t12 + t14);
     check += t17;
-    double computed[6];
     computed[0] = t0*t9 + winch_offset;
     check += computed[0];
     computed[1] = p_n*t17;
@@ -2451,21 +2568,29 @@ winch_length_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     computed[5] = t9;
     check += computed[5];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+winch_length_catenary(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[1], in2[3];
+    double computed[WINCH_LENGTH_CATENARY_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check) || !winch_length_catenary_compute(in0, in1, in2, check, computed))
         return fall_back(17, args, nargs);
     return pack_pair(winch_length_catenary_values, 1, winch_length_catenary_jacobian, 17, computed, args);
 }
 
 static const Entry winch_length_grounded_values[] = {{COMPUTED, 0, 0, 0L}};
 static const Entry winch_length_grounded_jacobian[] = {{COMPUTED, 0, 1, 0L}, {COMPUTED, 0, 2, 0L}, {COMPUTED, 0, 3, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {COMPUTED, 0, 4, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 1L}, {COMPUTED, 0, 5, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define WINCH_LENGTH_GROUNDED_COMPUTED 6
 
-static PyObject *
-winch_length_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+winch_length_grounded_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[1], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(18, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -2539,7 +2664,6 @@ winch_length_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     check += t24;
     const double t25 = t0*(p_d*t24*(t6 - t5/t1) - t11*t18*t6 + t11 + t17*t22*t6*(-t11 + t2/t4) + t20);
     check += t25;
-    double computed[6];
     computed[0] = t0*t16 + winch_offset;
     check += computed[0];
     computed[1] = p_n*t25;
@@ -2553,21 +2677,29 @@ winch_length_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     computed[5] = t16;
     check += computed[5];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+winch_length_grounded(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[1], in2[3];
+    double computed[WINCH_LENGTH_GROUNDED_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 0, &check) || !read_floats(args[2], in2, 3, &check) || !winch_length_grounded_compute(in0, in1, in2, check, computed))
         return fall_back(18, args, nargs);
     return pack_pair(winch_length_grounded_values, 1, winch_length_grounded_jacobian, 17, computed, args);
 }
 
 static const Entry height_above_ground_values[] = {{COMPUTED, 0, 0, 0L}};
 static const Entry height_above_ground_jacobian[] = {{INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, -1L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}, {INTEGER, 0, 0, 0L}};
+#define HEIGHT_ABOVE_GROUND_COMPUTED 1
 
-static PyObject *
-height_above_ground(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when
+ * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */
+static int
+height_above_ground_compute(const double *in0, const double *in1, const double *in2, double check, double *computed)
 {
-    double in0[17], in1[1], in2[3];
-    double check = 0.0;
-    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 1, &check) || !read_floats(args[2], in2, 3, &check))
-        return fall_back(19, args, nargs);
     feclearexcept(RAISING);
     const double p_n = in0[0];
     const double p_e = in0[1];
@@ -2590,13 +2722,98 @@ height_above_ground(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
     const double mass_kg = in2[0];
     const double drag_per_s = in2[1];
     const double weight_n_per_m = in2[2];
-    double computed[1];
     computed[0] = anchor_height_m - p_d;
     check += computed[0];
     STORED(computed);
-    if (!isfinite(check) || fetestexcept(RAISING))
+    return isfinite(check) && !fetestexcept(RAISING);
+}
+
+static PyObject *
+height_above_ground(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double in0[17], in1[1], in2[3];
+    double computed[HEIGHT_ABOVE_GROUND_COMPUTED];
+    double check = 0.0;
+    if (nargs != 3 || !read_floats(args[0], in0, 17, &check) || !read_floats(args[1], in1, 1, &check) || !read_floats(args[2], in2, 3, &check) || !height_above_ground_compute(in0, in1, in2, check, computed))
         return fall_back(19, args, nargs);
     return pack_pair(height_above_ground_values, 1, height_above_ground_jacobian, 17, computed, args);
+}
+
+/* imu_batch.batch_sums in C: one IMU tick added to the batch's sums with the inertial model's
+ * acceleration and bias Jacobian at the zero state (the operations of the Python function, in
+ * its order). Returns the new lists (d_p, d_v, b_p, b_v), False (the tick rejected: dt_s
+ * negative or anything not finite), or None where the Python function must decide (an
+ * argument not a float or a list/tuple of floats of its length, a flag raised). */
+static double
+entry_double(const Entry *e, const double *computed, const double *const *inputs)
+{
+    if (e->kind == COMPUTED)
+        return computed[e->index];
+    if (e->kind == INTEGER)
+        return (double)e->value;
+    return inputs[(int)e->arg][e->index];
+}
+
+static PyObject *
+list_of(const double *values, Py_ssize_t n)
+{
+    PyObject *out = PyList_New(n);
+    if (out == NULL)
+        return NULL;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        PyObject *item = PyFloat_FromDouble(values[i]);
+        if (item == NULL) {
+            Py_DECREF(out);
+            return NULL;
+        }
+        PyList_SET_ITEM(out, i, item);
+    }
+    return out;
+}
+
+static PyObject *
+batch_sums(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{
+    double d_p[3], d_v[3], b_p[9], b_v[9], u[12], c[3], unused = 0.0;
+    static const double zero_state[17];
+    if (nargs != 7 || !read_floats(args[0], d_p, 3, &unused)
+        || !read_floats(args[1], d_v, 3, &unused)
+        || !read_floats(args[2], b_p, 9, &unused)
+        || !read_floats(args[3], b_v, 9, &unused)
+        || !PyFloat_Check(args[4]))
+        Py_RETURN_NONE;
+    const double dt_s = PyFloat_AS_DOUBLE(args[4]);
+    double sum_u = 0.0;
+    if (!read_floats(args[5], u, 12, &sum_u))
+        Py_RETURN_NONE;
+    if (!(dt_s >= 0.0 && isfinite(dt_s) && isfinite(sum_u)))
+        Py_RETURN_FALSE;
+    double check = 0.0, computed[INERTIAL_COMPUTED];
+    if (!read_floats(args[6], c, 3, &check)
+        || !inertial_compute(zero_state, u, c, check, computed))
+        Py_RETURN_NONE;
+    const double *inputs[3] = {zero_state, u, c};
+    double out[24];
+    for (int k = 0; k < 3; k++) {
+        out[k] = d_p[k] + dt_s * d_v[k];
+        out[3 + k] = d_v[k] + dt_s * entry_double(&inertial_values[3 + k], computed, inputs);
+    }
+    for (int k = 0; k < 9; k++) {
+        const Entry *bias = &inertial_jacobian[(k / 3) * 17 + 8 + k % 3];
+        out[6 + k] = b_p[k] + dt_s * b_v[k];
+        out[15 + k] = b_v[k] + dt_s * entry_double(bias, computed, inputs);
+    }
+    PyObject *lists[4] = {list_of(out, 3), list_of(out + 3, 3), list_of(out + 6, 9),
+                          list_of(out + 15, 9)};
+    if (lists[0] == NULL || lists[1] == NULL || lists[2] == NULL || lists[3] == NULL) {
+        for (int i = 0; i < 4; i++)
+            Py_XDECREF(lists[i]);
+        return NULL;
+    }
+    PyObject *result = PyTuple_Pack(4, lists[0], lists[1], lists[2], lists[3]);
+    for (int i = 0; i < 4; i++)
+        Py_DECREF(lists[i]);
+    return result;
 }
 
 static PyObject *
@@ -2635,6 +2852,8 @@ static PyMethodDef methods[] = {
     {"winch_length_catenary", (PyCFunction)(void (*)(void))winch_length_catenary, METH_FASTCALL, "generated.winch_length_catenary in C."},
     {"winch_length_grounded", (PyCFunction)(void (*)(void))winch_length_grounded, METH_FASTCALL, "generated.winch_length_grounded in C."},
     {"height_above_ground", (PyCFunction)(void (*)(void))height_above_ground, METH_FASTCALL, "generated.height_above_ground in C."},
+    {"batch_sums", (PyCFunction)(void (*)(void))batch_sums, METH_FASTCALL,
+     "imu_batch.batch_sums in C."},
     {"set_fallbacks", (PyCFunction)set_fallbacks, METH_O,
      "Register the Python functions (in NAMES order) called where C could differ."},
     {NULL, NULL, 0, NULL},

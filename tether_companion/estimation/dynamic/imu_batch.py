@@ -64,6 +64,58 @@ def product(a: FloatArray, b: FloatArray) -> FloatArray:
 _DOT = np.dot
 
 
+def batch_sums(
+    d_p: list[float],
+    d_v: list[float],
+    b_p: list[float],
+    b_v: list[float],
+    dt_s: float,
+    u: Sequence[float],
+    c: Sequence[float],
+) -> tuple[list[float], list[float], list[float], list[float]] | bool:
+    """The sums ``D_p, D_v, B_p, B_v`` (new lists) with one IMU tick of ``dt_s`` [s] and
+    inputs ``u`` added (:meth:`ImuBatch.add`), or ``False`` when ``dt_s`` is negative or
+    anything is not finite. The reference of the C extension's ``batch_sums`` (the same
+    operations in the same order; it returns ``None`` where this function must decide)."""
+    if not (dt_s >= 0.0 and math.isfinite(dt_s) and math.isfinite(sum(u))):
+        return False
+    xdot, jac = generated.inertial(_ZERO_STATE, u, c)
+    v0, v1, v2 = d_v
+    c0, c1, c2, c3, c4, c5, c6, c7, c8 = b_v
+    j0, j1, j2, j3, j4, j5, j6, j7, j8 = _BIAS_OF(jac)
+    # written out (this runs at every IMU tick where the C extension is not built)
+    return (
+        [d_p[0] + dt_s * v0, d_p[1] + dt_s * v1, d_p[2] + dt_s * v2],
+        [v0 + dt_s * xdot[3], v1 + dt_s * xdot[4], v2 + dt_s * xdot[5]],
+        [
+            b_p[0] + dt_s * c0,
+            b_p[1] + dt_s * c1,
+            b_p[2] + dt_s * c2,
+            b_p[3] + dt_s * c3,
+            b_p[4] + dt_s * c4,
+            b_p[5] + dt_s * c5,
+            b_p[6] + dt_s * c6,
+            b_p[7] + dt_s * c7,
+            b_p[8] + dt_s * c8,
+        ],
+        [
+            c0 + dt_s * j0,
+            c1 + dt_s * j1,
+            c2 + dt_s * j2,
+            c3 + dt_s * j3,
+            c4 + dt_s * j4,
+            c5 + dt_s * j5,
+            c6 + dt_s * j6,
+            c7 + dt_s * j7,
+            c8 + dt_s * j8,
+        ],
+    )
+
+
+_CORE_SUMS = generated.CORE.batch_sums if generated.CORE is not None else None
+""":func:`batch_sums` in C where the extension runs (``generated.CORE``)."""
+
+
 class BatchStep:
     """The step of one batch, fixed: its sums as they were when it was taken, with the
     transition built from them on first use (an estimate read later steps with the batch of
@@ -172,39 +224,15 @@ class ImuBatch:
         """One IMU tick of ``dt_s`` [s] with the inputs ``u = (R_v^b row-major, f_x, f_y,
         f_z)`` (floats; specific force [m/s^2], FRD body) and constants ``c``. ``False`` (the
         batch unchanged) when ``dt_s`` is negative or anything is not finite."""
-        if not (dt_s >= 0.0 and math.isfinite(dt_s) and math.isfinite(sum(u))):
+        sums = None
+        if _CORE_SUMS is not None:
+            sums = _CORE_SUMS(self.d_p, self.d_v, self.b_p, self.b_v, dt_s, u, c)
+        if sums is None:
+            sums = batch_sums(self.d_p, self.d_v, self.b_p, self.b_v, dt_s, u, c)
+        if sums is False:
             return False
-        xdot, jac = generated.inertial(_ZERO_STATE, u, c)
-        d_p, d_v, b_p, b_v = self.d_p, self.d_v, self.b_p, self.b_v
-        v0, v1, v2 = d_v
-        # new lists every tick (never changed in place): a BatchStep keeps them as they were;
-        # written out (this runs at every IMU tick)
-        self.d_p = [d_p[0] + dt_s * v0, d_p[1] + dt_s * v1, d_p[2] + dt_s * v2]
-        self.d_v = [v0 + dt_s * xdot[3], v1 + dt_s * xdot[4], v2 + dt_s * xdot[5]]
-        c0, c1, c2, c3, c4, c5, c6, c7, c8 = b_v
-        self.b_p = [
-            b_p[0] + dt_s * c0,
-            b_p[1] + dt_s * c1,
-            b_p[2] + dt_s * c2,
-            b_p[3] + dt_s * c3,
-            b_p[4] + dt_s * c4,
-            b_p[5] + dt_s * c5,
-            b_p[6] + dt_s * c6,
-            b_p[7] + dt_s * c7,
-            b_p[8] + dt_s * c8,
-        ]
-        j0, j1, j2, j3, j4, j5, j6, j7, j8 = _BIAS_OF(jac)
-        self.b_v = [
-            c0 + dt_s * j0,
-            c1 + dt_s * j1,
-            c2 + dt_s * j2,
-            c3 + dt_s * j3,
-            c4 + dt_s * j4,
-            c5 + dt_s * j5,
-            c6 + dt_s * j6,
-            c7 + dt_s * j7,
-            c8 + dt_s * j8,
-        ]
+        # new lists every tick (never changed in place): a BatchStep keeps them as they were
+        self.d_p, self.d_v, self.b_p, self.b_v = sums
         self.duration_s += dt_s
         self.ticks += 1
         self._step = None

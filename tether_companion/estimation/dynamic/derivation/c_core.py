@@ -181,6 +181,8 @@ set_fallbacks(PyObject *module, PyObject *arg)
 
 static PyMethodDef methods[] = {{
 {methods}
+    {{"batch_sums", (PyCFunction)(void (*)(void))batch_sums, METH_FASTCALL,
+     "imu_batch.batch_sums in C."}},
     {{"set_fallbacks", (PyCFunction)set_fallbacks, METH_O,
      "Register the Python functions (in NAMES order) called where C could differ."}},
     {{NULL, NULL, 0, NULL}},
@@ -229,7 +231,9 @@ def function_source(
     printer: CPrinter,
 ) -> str:
     """The C function ``name`` (the ``index``-th registered fallback) for ``derive``'s
-    common subexpressions ``replacements`` and reduced ``values`` and ``jacobian``."""
+    common subexpressions ``replacements`` and reduced ``values`` and ``jacobian``: its
+    kernel ``name_compute`` (the computed doubles; 1 when they are Python's) and the
+    Python-callable wrapper."""
     computed: list[str] = []
     value_entries = [_entry(e, arguments, computed, printer.doprint(e)) for e in values]
     jacobian_entries = [_entry(e, arguments, computed, printer.doprint(e)) for e in jacobian]
@@ -237,16 +241,14 @@ def function_source(
     lines = [
         f"static const Entry {name}_values[] = {{{', '.join(value_entries)}}};",
         f"static const Entry {name}_jacobian[] = {{{', '.join(jacobian_entries) or '{0}'}}};",
+        f"#define {name.upper()}_COMPUTED {max(len(computed), 1)}",
         "",
-        "static PyObject *",
-        f"{name}(PyObject *module, PyObject *const *args, Py_ssize_t nargs)",
+        "/* The computed values at the inputs in0, in1, in2 (check: the inputs' sum); 1 when",
+        " * they are the Python function's (finite, no division-by-zero/invalid/overflow flag). */",
+        "static int",
+        f"{name}_compute(const double *in0, const double *in1, const double *in2, double check,"
+        " double *computed)",
         "{",
-        f"    double in0[{max(sizes[0], 1)}], in1[{max(sizes[1], 1)}], in2[{max(sizes[2], 1)}];",
-        "    double check = 0.0;",
-        f"    if (nargs != 3 || !read_floats(args[0], in0, {sizes[0]}, &check)"
-        f" || !read_floats(args[1], in1, {sizes[1]}, &check)"
-        f" || !read_floats(args[2], in2, {sizes[2]}, &check))",
-        f"        return fall_back({index}, args, nargs);",
         "    feclearexcept(RAISING);",
     ]
     for arg, symbols in enumerate(arguments):
@@ -255,13 +257,24 @@ def function_source(
     for symbol, expr in replacements:
         lines.append(f"    const double {symbol} = {printer.doprint(expr)};")
         lines.append(f"    check += {symbol};")
-    lines.append(f"    double computed[{max(len(computed), 1)}];")
     for i, code in enumerate(computed):
         lines.append(f"    computed[{i}] = {code};")
         lines.append(f"    check += computed[{i}];")
     lines += [
         "    STORED(computed);",
-        "    if (!isfinite(check) || fetestexcept(RAISING))",
+        "    return isfinite(check) && !fetestexcept(RAISING);",
+        "}",
+        "",
+        "static PyObject *",
+        f"{name}(PyObject *module, PyObject *const *args, Py_ssize_t nargs)",
+        "{",
+        f"    double in0[{max(sizes[0], 1)}], in1[{max(sizes[1], 1)}], in2[{max(sizes[2], 1)}];",
+        f"    double computed[{name.upper()}_COMPUTED];",
+        "    double check = 0.0;",
+        f"    if (nargs != 3 || !read_floats(args[0], in0, {sizes[0]}, &check)"
+        f" || !read_floats(args[1], in1, {sizes[1]}, &check)"
+        f" || !read_floats(args[2], in2, {sizes[2]}, &check)"
+        f" || !{name}_compute(in0, in1, in2, check, computed))",
         f"        return fall_back({index}, args, nargs);",
         f"    return pack_pair({name}_values, {len(values)}, {name}_jacobian, {len(jacobian)},"
         " computed, args);",
@@ -270,8 +283,95 @@ def function_source(
     return "\n".join(lines)
 
 
-def module_source(functions: list[str], names: list[str], version: str) -> str:
-    """The whole C file for the function sources ``functions`` named ``names``."""
+BATCH = """
+/* imu_batch.batch_sums in C: one IMU tick added to the batch's sums with the inertial model's
+ * acceleration and bias Jacobian at the zero state (the operations of the Python function, in
+ * its order). Returns the new lists (d_p, d_v, b_p, b_v), False (the tick rejected: dt_s
+ * negative or anything not finite), or None where the Python function must decide (an
+ * argument not a float or a list/tuple of floats of its length, a flag raised). */
+static double
+entry_double(const Entry *e, const double *computed, const double *const *inputs)
+{{
+    if (e->kind == COMPUTED)
+        return computed[e->index];
+    if (e->kind == INTEGER)
+        return (double)e->value;
+    return inputs[(int)e->arg][e->index];
+}}
+
+static PyObject *
+list_of(const double *values, Py_ssize_t n)
+{{
+    PyObject *out = PyList_New(n);
+    if (out == NULL)
+        return NULL;
+    for (Py_ssize_t i = 0; i < n; i++) {{
+        PyObject *item = PyFloat_FromDouble(values[i]);
+        if (item == NULL) {{
+            Py_DECREF(out);
+            return NULL;
+        }}
+        PyList_SET_ITEM(out, i, item);
+    }}
+    return out;
+}}
+
+static PyObject *
+batch_sums(PyObject *module, PyObject *const *args, Py_ssize_t nargs)
+{{
+    double d_p[3], d_v[3], b_p[9], b_v[9], u[{n_inputs}], c[{n_constants}], unused = 0.0;
+    static const double zero_state[{n}];
+    if (nargs != 7 || !read_floats(args[0], d_p, 3, &unused)
+        || !read_floats(args[1], d_v, 3, &unused)
+        || !read_floats(args[2], b_p, 9, &unused)
+        || !read_floats(args[3], b_v, 9, &unused)
+        || !PyFloat_Check(args[4]))
+        Py_RETURN_NONE;
+    const double dt_s = PyFloat_AS_DOUBLE(args[4]);
+    double sum_u = 0.0;
+    if (!read_floats(args[5], u, {n_inputs}, &sum_u))
+        Py_RETURN_NONE;
+    if (!(dt_s >= 0.0 && isfinite(dt_s) && isfinite(sum_u)))
+        Py_RETURN_FALSE;
+    double check = 0.0, computed[INERTIAL_COMPUTED];
+    if (!read_floats(args[6], c, {n_constants}, &check)
+        || !inertial_compute(zero_state, u, c, check, computed))
+        Py_RETURN_NONE;
+    const double *inputs[3] = {{zero_state, u, c}};
+    double out[24];
+    for (int k = 0; k < 3; k++) {{
+        out[k] = d_p[k] + dt_s * d_v[k];
+        out[3 + k] = d_v[k] + dt_s * entry_double(&inertial_values[3 + k], computed, inputs);
+    }}
+    for (int k = 0; k < 9; k++) {{
+        const Entry *bias = &inertial_jacobian[(k / 3) * {n} + {bias} + k % 3];
+        out[6 + k] = b_p[k] + dt_s * b_v[k];
+        out[15 + k] = b_v[k] + dt_s * entry_double(bias, computed, inputs);
+    }}
+    PyObject *lists[4] = {{list_of(out, 3), list_of(out + 3, 3), list_of(out + 6, 9),
+                          list_of(out + 15, 9)}};
+    if (lists[0] == NULL || lists[1] == NULL || lists[2] == NULL || lists[3] == NULL) {{
+        for (int i = 0; i < 4; i++)
+            Py_XDECREF(lists[i]);
+        return NULL;
+    }}
+    PyObject *result = PyTuple_Pack(4, lists[0], lists[1], lists[2], lists[3]);
+    for (int i = 0; i < 4; i++)
+        Py_DECREF(lists[i]);
+    return result;
+}}
+"""
+
+
+def batch_source(n_states: int, bias_start: int, n_inputs: int, n_constants: int) -> str:
+    """``batch_sums`` (after the generated ``inertial``) for ``n_states`` states with the
+    accelerometer bias from ``bias_start``, ``n_inputs`` inputs and ``n_constants`` constants."""
+    return BATCH.format(n=n_states, bias=bias_start, n_inputs=n_inputs, n_constants=n_constants)
+
+
+def module_source(functions: list[str], names: list[str], version: str, batch: str) -> str:
+    """The whole C file for the function sources ``functions`` named ``names`` and the
+    batch's sums ``batch``."""
     methods = "\n".join(
         f'    {{"{name}", (PyCFunction)(void (*)(void)){name}, METH_FASTCALL,'
         f' "generated.{name} in C."}},'
@@ -282,6 +382,7 @@ def module_source(functions: list[str], names: list[str], version: str) -> str:
         + "\n"
         + "\n\n".join(functions)
         + "\n"
+        + batch
         + FOOTER.format(
             module=CORE_MODULE,
             methods=methods,

@@ -352,6 +352,9 @@ PYTHON = (
 """The functions above in Python: the reference, and what the C twins call where they could
 differ (derivation/c_core.py)."""
 
+CORE = None
+"""The C extension when it runs (its ``batch_sums`` is ``imu_batch.batch_sums``'s twin)."""
+
 COMPILED = False
 """Whether the names above are the C extension's twins (``{module}``, built by setup.py
 where a compiler is; ``TETHER_PURE_PYTHON=1`` keeps the Python functions)."""
@@ -365,6 +368,7 @@ if not os.environ.get("TETHER_PURE_PYTHON"):
         _core.set_fallbacks(PYTHON)
         globals().update({{name: getattr(_core, name) for name in _core.NAMES}})
         COMPILED = True
+        CORE = _core
 '''
 
 
@@ -383,7 +387,9 @@ def generate_c_source() -> str:
     """The text of ``generated_core.c`` (the same models for the C extension)."""
     all_models = models()
     functions = [_c_function_source(i, *model) for i, model in enumerate(all_models)]
-    return c_core.module_source(functions, [m[0] for m in all_models], sp.__version__)
+    inertial = next(m for m in all_models if m[0] == "inertial")
+    batch = c_core.batch_source(N, state.BIAS.start, len(inertial[2]), len(CONSTANT_NAMES))
+    return c_core.module_source(functions, [m[0] for m in all_models], sp.__version__, batch)
 
 
 def main() -> int:

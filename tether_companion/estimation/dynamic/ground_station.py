@@ -51,7 +51,7 @@ from tether_companion.estimation.dynamic.calibration_release import (
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.consistency import BearingWindow
 from tether_companion.estimation.dynamic.models import ModelConstants
-from tether_companion.estimation.dynamic.observability import unmodelled_position_rows
+from tether_companion.estimation.dynamic.offset_term import offset_rows
 from tether_companion.estimation.dynamic.output import DynamicHealth
 from tether_companion.estimation.dynamic.position_information import PositionInformation
 from tether_companion.estimation.dynamic.published import StatusSettings
@@ -326,13 +326,12 @@ class GroundStationInputs:
             rows, variances = (jac[0:3], jac[n : n + 3]), (elevation_std**2, azimuth_std**2)
         else:
             rows, variances = (jac[n : n + 3],), (azimuth_std**2,)
-        added = unmodelled_position_rows(  # at the chord tension (the drone's, straight)
-            x[0],
-            x[1],
-            x[2],
-            x[state.TENSION],
+        added = offset_rows(  # as the published term takes it (offset_term.py)
+            x,
+            constants.weight_n_per_m,
             self._bearing.force_std_n,
             self._winch_length_noise_std_m if winch else 0.0,
+            winch,
         )
         self.position_information.add(rows, variances, time_s, added)
 

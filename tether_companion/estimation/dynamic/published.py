@@ -229,7 +229,7 @@ class TickSource:
         if values is None:
             published[2, 2] += self.height_excess_m2
         else:
-            nn, ne, nd, ee, ed, dd = self._added(values, tension)
+            nn, ne, nd, ee, ed, dd = self._added(values)
             published[:3, :3] += ((nn, ne, nd), (ne, ee, ed), (nd, ed, dd))
         status = self._status
         reason = None
@@ -289,12 +289,12 @@ class TickSource:
             ),
         )
 
-    def _added(self, x: list[float], tension_n: float) -> tuple[float, ...]:
-        """What the published position covariance adds at the state's values ``x`` and the
-        tension at the drone ``tension_n`` [N] (:func:`.published_terms.added_position_terms`)."""
+    def _added(self, x: list[float]) -> tuple[float, ...]:
+        """What the published position covariance adds at the state's values ``x``
+        (:func:`.published_terms.added_position_terms`)."""
         return added_position_terms(
             x,
-            tension_n,
+            self.constants.weight_n_per_m,
             self.settings,
             self.force_std_n,
             self.position_information,

@@ -32,11 +32,11 @@ def approximation(
     step: BatchStep | None,
     noise: ProcessNoise,
     constants: ModelConstants,
-    added: Callable[[list[float], float], tuple[float, ...]],
+    added: Callable[[list[float]], tuple[float, ...]],
 ) -> tuple[Approximation, float, float] | None:
     """The tick's approximation, the bias terms' largest spread ``f`` [m] and the stepped
     covariance's largest standard deviation scale [SI], from the ``mixture`` stepped by the
-    batch's ``step`` (None: not stepped) with its process ``noise``; ``added(x, tension)``
+    batch's ``step`` (None: not stepped) with its process ``noise``; ``added(x)``
     gives the unmodelled-force position terms (north-north, north-east, _, east-east, _,
     down-down) [m^2]. None when the mixture's arrays are not finite."""
     bounds = mixture.bounds()
@@ -96,7 +96,7 @@ def approximation(
     # of the stepped state below row_sum max |x| + |(D_p, D_v)|
     largest = bounds.largest_sd * row_sum
     position_scale = bounds.largest_value * row_sum + offset
-    added_nn, added_ne, _, added_ee, _, added_dd = added(x, tension)
+    added_nn, added_ne, _, added_ee, _, added_dd = added(x)
     north += added_nn
     north_east += added_ne
     east += added_ee

@@ -4,7 +4,7 @@ function, :func:`added_position_terms`, read by both the exact values and the ap
 terms).
 
 * the unmodelled force's term, narrowed by the cable angles
-  (:func:`~tether_companion.estimation.dynamic.observability.unmodelled_position_rows`,
+  (:func:`~tether_companion.estimation.dynamic.offset_term.offset_rows`,
   :func:`~tether_companion.estimation.dynamic.position_information.reduce_added_rows`);
 * the rangefinder innovations' excess and the ground's unevenness the height carries (which
   the readings' white noise model averages away:
@@ -30,8 +30,8 @@ from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.observability import (
     horizontal_pull_n,
     min_horizontal_pull_n,
-    unmodelled_position_rows,
 )
+from tether_companion.estimation.dynamic.offset_term import offset_rows
 from tether_companion.estimation.dynamic.position_information import (
     height_excess,
     reduce_added_rows,
@@ -70,7 +70,7 @@ class StatusSettings:
 
 def added_position_terms(
     x: list[float],
-    tension_n: float,
+    weight_n_per_m: float,
     settings: StatusSettings,
     force_std_n: float,
     information: tuple[float, ...] | None,
@@ -80,17 +80,16 @@ def added_position_terms(
     terrain_m2: float = 0.0,
 ) -> tuple[float, float, float, float, float, float]:
     """The position covariance (nn, ne, nd, ee, ed, dd) [m^2] added to the filter's own at
-    the state's values ``x`` (Python floats) and the tension at the drone ``tension_n`` [N]
-    (the module docstring's terms; the arguments as :class:`TickSource`'s of those names)."""
+    the state's values ``x`` (Python floats) on a cable of ``weight_n_per_m`` [N/m] (the
+    module docstring's terms; the arguments as :class:`TickSource`'s of those names)."""
     n, e, d = x[0], x[1], x[2]
     (u00, u01, u02), (_, u11, u12), (_, _, u22) = reduce_added_rows(
-        unmodelled_position_rows(
-            n,
-            e,
-            d,
-            tension_n,
+        offset_rows(
+            x,
+            weight_n_per_m,
             force_std_n,
             settings.winch_length_noise_std_m if winch_fused else 0.0,
+            winch_fused,
         ),
         information,
     )

@@ -65,13 +65,22 @@ def _arc_length_and_slope(
     span_m: float, height_m: float, horizontal_n: float, weight_n_per_m: float
 ) -> tuple[float, float]:
     """The arc length [m] and its derivative along the span at a fixed horizontal tension
-    [m/m]: the derivation's winch-length model
-    (:data:`~tether_companion.estimation.dynamic.models.CATENARY`, generated: the free
-    catenary, or the one resting on the anchor's level where the free curve's lowest point
-    would fall between the ends below the anchor) and its Jacobian at the state with the
-    position ``(a, 0, -h)`` and the chord tension ``T = H r / a`` (``r = |p|``), so
-    ``dL/da = dL/dp_n + dL/dT dT/da`` with ``dT/da = -H h^2 / (r a^2)``; ``(inf, nan)``
-    where the model overflows."""
+    [m/m] (:func:`_arc_length_and_partials`)."""
+    length, slope, _ = _arc_length_and_partials(span_m, height_m, horizontal_n, weight_n_per_m)
+    return length, slope
+
+
+def _arc_length_and_partials(
+    span_m: float, height_m: float, horizontal_n: float, weight_n_per_m: float
+) -> tuple[float, float, float]:
+    """The arc length [m], its derivative along the span at a fixed horizontal tension
+    [m/m] and along the horizontal tension at a fixed span [m/N]: the derivation's
+    winch-length model (:data:`~tether_companion.estimation.dynamic.models.CATENARY`,
+    generated: the free catenary, or the one resting on the anchor's level where the free
+    curve's lowest point would fall between the ends below the anchor) and its Jacobian at the
+    state with the position ``(a, 0, -h)`` and the chord tension ``T = H r / a`` (``r =
+    |p|``), so ``dL/da = dL/dp_n + dL/dT dT/da`` with ``dT/da = -H h^2 / (r a^2)`` and
+    ``dL/dH = dL/dT r / a``; ``(inf, nan, nan)`` where the model overflows."""
     x = [0.0] * state.N_STATES
     x[0], x[2] = span_m, -height_m
     chord = math.hypot(span_m, height_m)
@@ -79,9 +88,29 @@ def _arc_length_and_slope(
     try:
         (length,), jacobian = CATENARY.winch_length(x, (), (0.0, 0.0, weight_n_per_m))
     except UNDEFINED:
-        return math.inf, math.nan
+        return math.inf, math.nan, math.nan
+    per_tension = jacobian[state.TENSION]
     tension_per_span = -horizontal_n * height_m * height_m / (chord * span_m * span_m)
-    return length, jacobian[0] + jacobian[state.TENSION] * tension_per_span
+    return length, jacobian[0] + per_tension * tension_per_span, per_tension * chord / span_m
+
+
+def span_per_horizontal_tension(
+    span_m: float, height_m: float, horizontal_n: float, weight_n_per_m: float
+) -> float:
+    """How far the span moves per newton of horizontal tension [m/N] with the cable's length
+    and the drone's height held (``L(a, H)`` = const: ``da/dH = -(dL/dH)_a / (dL/da)_H``,
+    :func:`_arc_length_and_partials`), for a cable of weight ``weight_n_per_m`` [N/m] with
+    horizontal tension ``horizontal_n`` [N] to a point ``span_m`` [m] > 0 away and
+    ``height_m`` [m] > 0 up: positive (a pull straightens the curve, the drone goes out), 0
+    for a weightless cable (its length alone fixes the span), large near the touchdown (the
+    grounded part takes up length); ``nan`` where the model overflows or the slope is not
+    positive."""
+    _, slope, per_horizontal = _arc_length_and_partials(
+        span_m, height_m, horizontal_n, weight_n_per_m
+    )
+    if not slope > 0.0:
+        return math.nan
+    return -per_horizontal / slope
 
 
 def span_at_length_m(

@@ -5,8 +5,9 @@ The published covariance adds to the filter's own what the filter leaves out: an
 horizontal force turns the cable it reads the bearing from, ``C = |p|^2 (I - u u^T) S_F
 (I - u u^T) / T^2`` on a straight cable (``observability.unmodelled_position_rows``, with the
 winch length's accuracy along the cable; on a cable with weight the curve's motion,
-``offset_term.offset_rows``, which both the readings here and the publisher take), because the force balance is fused every IMU tick as if that force
-were white while it stays the same for about ``tau = unmodelled_force_correlation_s``.
+``offset_term.offset_rows``, which both the readings here and the publisher take), because
+the force balance is fused every IMU tick as if that force were white while it stays the same
+for about ``tau = unmodelled_force_correlation_s``.
 
 That offset ``d`` is a stationary process of covariance ``C`` correlated over ``tau``. It is
 a displacement of the estimated position, which the filter moves only through its velocity:

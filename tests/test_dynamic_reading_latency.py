@@ -51,23 +51,6 @@ def test_a_late_reading_is_measured_where_the_drone_was_with_the_velocity_known(
     assert at_reading_time(_distance, 0.0) is _distance
 
 
-def test_a_late_reading_on_a_turning_drone_adds_the_acceleration_to_second_order() -> None:
-    """With the drone's NED acceleration ``a`` the position then is ``p - latency v +
-    latency^2 a / 2`` (head17: the take-off's figure-eights turn at 2 m/s^2, 0.01 m at 0.1 s,
-    which the released winch scale took as a length error)."""
-    x = np.zeros(state.N_STATES)
-    x[state.POSITION] = (4.0, 1.0, -2.0)
-    x[state.VELOCITY] = (2.0, -0.5, 0.3)
-    acceleration = (-2.0, 1.0, 0.5)
-    value, jac = at_reading_time(_distance, LATENCY_S, acceleration)(x)
-    then = x.copy()
-    then[state.POSITION] += -LATENCY_S * x[state.VELOCITY] + 0.5 * LATENCY_S**2 * np.array(
-        acceleration
-    )
-    assert value[0] == pytest.approx(float(np.linalg.norm(then[state.POSITION])), abs=1e-12)
-    np.testing.assert_array_equal(jac, _distance(then)[1])
-
-
 def _moving_out(latency_s: float) -> tuple[DynamicTetherEstimator, np.ndarray, np.ndarray, float]:
     """A started estimator (paper circle, 3 s) whose members all fly straight out along the
     cable at 2 m/s (velocity known to 1 mm/s), its best position [m], that velocity [m/s] and
@@ -101,25 +84,6 @@ def test_a_winch_length_taken_a_latency_ago_is_no_surprise(latency_s: float) -> 
     innovation = float(status.last_innovation[0])
     expected = 0.0 if latency_s else -LATENCY_S * 2.0
     assert innovation == pytest.approx(expected, abs=0.01)
-
-
-def test_a_winch_length_taken_a_latency_ago_on_a_braking_drone_is_no_surprise() -> None:
-    """The estimator gives the aid the drone's acceleration from its inputs (the rotation and
-    the specific force of the next step, the best member's bias): a drone flying out at 2 m/s
-    and braking at 8 m/s^2 was ``LATENCY_S^2 8 / 2`` = 0.04 m nearer a latency ago than the
-    first-order ``p - latency v`` says; the innovation is ~0 with the second-order term."""
-    est, p, v, t = _moving_out(LATENCY_S)
-    out = p / np.linalg.norm(p)
-    acceleration = -8.0 * out
-    bias = est.bank.best.x[state.BIAS]
-    level = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]  # R_v^b: level, facing north
-    force = acceleration - np.array((0.0, 0.0, 9.80665)) + bias
-    est._inputs = [*level, *force.tolist()]
-    then = p - LATENCY_S * v + 0.5 * LATENCY_S**2 * acceleration
-    est.set_paid_out_length_m(float(np.linalg.norm(then)), t)
-    innovation = float(est.ground_station.winch.status.last_innovation[0])
-    assert innovation == pytest.approx(0.0, abs=0.004)
-    np.testing.assert_allclose(est.constants.acceleration_ned_mps2, acceleration, atol=1e-9)
 
 
 def test_a_reading_stamped_before_the_filters_time_is_measured_at_its_stamp() -> None:

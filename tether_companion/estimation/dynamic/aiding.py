@@ -41,22 +41,13 @@ FloatArray = NDArray[np.float64]
 _threshold = functools.lru_cache(maxsize=32)(chi2_threshold)
 
 
-def at_reading_time(
-    measure: MeasurementFunction,
-    latency_s: float,
-    acceleration_ned_mps2: Sequence[float] = (0.0, 0.0, 0.0),
-) -> MeasurementFunction:
+def at_reading_time(measure: MeasurementFunction, latency_s: float) -> MeasurementFunction:
     """``measure`` of a reading taken ``latency_s`` [s] before it is fused: evaluated at the
-    position ``p - latency_s v + latency_s^2 a / 2`` (the drone's then, to second order, with
-    ``a`` the drone's NED acceleration ``acceleration_ned_mps2`` [m/s^2], the INS's ``R^T (f -
-    b) + g``), with that position's Jacobian. A ground-station report 0.1 s old on the
-    take-off's radial legs (1.5-2 m/s) is otherwise 0.15-0.2 m off the present length, three
-    to four times the winch's told noise: gated, then the range drifts (realistic take-off,
-    tuning seed 3). The second-order term (head17): on the take-off's figure-eights (2 m/s on
-    2 m loops, 2 m/s^2) ``tau^2 a / 2`` is 0.01 m at 0.1 s, radially inward at the far loop and
-    outward at the near one, so without it the winch's readings looked short where the cable is
-    long: the released winch scale learnt -0.007 (1 sd) low on 7 of 8 tuning seeds, and the
-    range with it. ``latency_s`` 0: ``measure`` itself.
+    position ``p - latency_s v`` (the drone's then, to first order), with that position's
+    Jacobian. A ground-station report 0.1 s old on the take-off's radial legs (1.5-2 m/s) is
+    otherwise 0.15-0.2 m off the present length, three to four times the winch's told noise:
+    gated, then the range drifts (realistic take-off, tuning seed 3). ``latency_s`` 0:
+    ``measure`` itself.
 
     The velocity is taken as known: the Jacobian gets no ``-latency_s dh/dp`` velocity
     columns. With them a late position reading corrects the velocity, and where the velocity
@@ -67,13 +58,10 @@ def at_reading_time(
     velocity's standard deviation is below 0.1 m/s, against the winch's told 0.05 m."""
     if latency_s == 0.0:
         return measure
-    half_square = 0.5 * latency_s * latency_s
-    lead = [half_square * float(a) for a in acceleration_ned_mps2]
 
     def delayed(xs: FloatArray) -> tuple[FloatArray, FloatArray]:
         back = xs.copy()
         back[state.POSITION] -= latency_s * xs[state.VELOCITY]
-        back[state.POSITION] += lead
         return measure(back)
 
     return delayed

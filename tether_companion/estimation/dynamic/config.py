@@ -138,8 +138,7 @@ class DynamicFilterConfig:
         minimum=0.0,
         maximum=2.0,
         doc="age of the winch's length at its time stamp (fused as the drone's distance that"
-        " long before the stamp, p - latency v + latency^2 a / 2; 0 for a sensor that stamps"
-        " when it measures) [s]",
+        " long before the stamp, p - latency v; 0 for a sensor that stamps when it measures) [s]",
     )
     cable_angle_latency_s: float = spec(
         0.05,

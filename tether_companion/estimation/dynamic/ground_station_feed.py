@@ -13,9 +13,7 @@ from __future__ import annotations
 
 import math
 
-from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.config import EstimatorConfig
-from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.ground_station import GroundStationInputs
@@ -37,8 +35,6 @@ class GroundStationFeed:
     _startup: FilterStartup
     _walk: TensionWalk
     _time_s: float
-    _inertial: bool
-    _inputs: list[float] | None
 
     def _step_batch(self) -> None:
         """Step the members to the filter time (the estimator's)."""
@@ -131,25 +127,4 @@ class GroundStationFeed:
         if self.bank is None or not self._fresh(time_s, self.config.staleness.tension_s):
             return False
         self._step_batch()
-        if self.bank is None:
-            return False
-        self._note_acceleration(self.bank)
-        return True
-
-    def _note_acceleration(self, bank: FilterBank) -> None:
-        """Put the drone's NED acceleration [m/s^2] at the filter time in the constants for
-        the reading's latency (``a = R^T (f - b) + g``: the next step's rotation ``R_v^b`` and
-        specific force ``f`` [m/s^2], the best member's accelerometer bias ``b``); zeros with
-        the force balance as the process (its inputs hold no specific force)."""
-        inputs = self._inputs
-        if not self._inertial or inputs is None:
-            return
-        x = bank.best.x
-        f0 = inputs[9] - x[state.BIAS.start]
-        f1 = inputs[10] - x[state.BIAS.start + 1]
-        f2 = inputs[11] - x[state.BIAS.start + 2]
-        self.constants.acceleration_ned_mps2 = (
-            inputs[0] * f0 + inputs[3] * f1 + inputs[6] * f2,
-            inputs[1] * f0 + inputs[4] * f1 + inputs[7] * f2,
-            inputs[2] * f0 + inputs[5] * f1 + inputs[8] * f2 + GRAVITY_MPS2,
-        )
+        return self.bank is not None

@@ -123,11 +123,7 @@ class ModelConstants:
     the models do not: the ends, the weight and the tension fix the curve), and whether a
     measured tension (a load cell, the winch's) has been fused (``tension_measured``: the
     tension's variance is then a measurement's, not only the weak pull's reading,
-    :mod:`~tether_companion.estimation.dynamic.sag_range`), and the drone's NED acceleration
-    [m/s^2] at the filter time when a ground-station reading is fused
-    (``acceleration_ned_mps2``, the INS's ``R^T (f - b) + g``; zeros with the force balance as
-    the process): a late reading's second-order term
-    (:func:`~tether_companion.estimation.dynamic.aiding.at_reading_time`)."""
+    :mod:`~tether_companion.estimation.dynamic.sag_range`)."""
 
     mass_kg: float
     drag_per_s: float
@@ -136,7 +132,6 @@ class ModelConstants:
     tension_measured: bool = False
     body_drag_per_m: float = 0.0
     """The body's quadratic drag ``k = rho / (2 B)`` [1/m] (``config.body_drag_per_m``)."""
-    acceleration_ned_mps2: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def models(self) -> CableModels:

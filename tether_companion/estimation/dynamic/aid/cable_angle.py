@@ -173,7 +173,7 @@ class CableAngleAid:
         r = np.diag([sd**2 for sd in self.noise_std_rad(elevation_rad, noise_std_rad)])
         if constants.tension_measured:  # the load cell's filter only (class docstring)
             r[1, 1] += bearing_curvature_variance(bank.best.x, bank.best.P)
-        delayed = at_reading_time(measure, self._latency_s + age_s, constants.acceleration_ned_mps2)
+        delayed = at_reading_time(measure, self._latency_s + age_s)
         return fuse(bank, NAME, self.status, z, delayed, r, time_s)
 
     @classmethod

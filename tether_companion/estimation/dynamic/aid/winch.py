@@ -65,7 +65,7 @@ class WinchAid:
         z = np.array((length_m,))
         latency_s = self._latency_s + age_s
         if self._maybe_slack(best.x, best.P, constants, length_m):
-            chord = at_reading_time(_chord, latency_s, constants.acceleration_ned_mps2)
+            chord = at_reading_time(_chord, latency_s)
             if not float(chord(best.x)[0][0]) > length_m:
                 self.status.skip(SLACK)
                 return False
@@ -76,7 +76,7 @@ class WinchAid:
         def measure(xs: FloatArray) -> tuple[FloatArray, FloatArray]:
             return evaluate(model, xs, (), c, 1)
 
-        delayed = at_reading_time(measure, latency_s, constants.acceleration_ned_mps2)
+        delayed = at_reading_time(measure, latency_s)
         r = self._r
         if constants.weight_n_per_m > 0.0 and constants.tension_measured:
             r = r + tension_curvature_variance(delayed, best.x, best.P)

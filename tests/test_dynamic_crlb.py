@@ -203,7 +203,7 @@ def _reference(track, constants, noise, *, repeat_range: int = 1) -> np.ndarray:
             accel[:, yaw_at] = _yaw_fd(lambda r, xs=x: models.accel(xs, (*r, 16.0), c)[0], euler)
         samples = [(accel, np.diag(noise.force_balance_var_mps2))]
         if track.range_seen[k]:
-            height = wide(_fd(generated.height_above_ground, x, (0.0,), (0.0, 0.0, 0.0, 0.0), 1))
+            height = wide(_fd(generated.height_above_ground, x, (0.0,), (0.0, 0.0, 0.0), 1))
             if terrain_at is not None:
                 height[0, terrain_at] = 1.0
             samples += [(height, np.array([[noise.range_var_m2]]))] * repeat_range

@@ -10,16 +10,9 @@ import pytest
 
 from tether_companion.estimation.dynamic import generated, state
 from tether_companion.estimation.dynamic import models as models_module
-from tether_companion.estimation.dynamic.config import (
-    DynamicFilterConfig,
-    body_drag_per_m,
-    drag_per_s,
-)
 from tether_companion.estimation.tether_models import FourStateModel
 from tether_companion.frames import rotation_ned_to_body
-from tether_companion.physics.aerodynamics import drag_accel_body_mps2
 from tether_companion.physics.cable import CableConfig, make_cable
-from tether_companion.physics.vehicle import load_vehicle
 
 sympy = pytest.importorskip("sympy", reason="sympy (test extra) derives the models")
 from tether_companion.estimation.dynamic.derivation import derive  # noqa: E402
@@ -89,9 +82,7 @@ def _random_case(rng: np.random.Generator, name: str) -> tuple[list, list, list]
     else:
         u = []
     # weight per length: a catenary parameter w |p| / (2 T_ch) up to about 3
-    # the body's quadratic drag k = rho / (2 B): B >= 6 kg/m^2
     c = [rng.uniform(0.5, 3.0), rng.uniform(0.0, 0.6), rng.uniform(0.01, 1.0)]
-    c.append(rng.uniform(0.0, 0.1))
     return list(x), u, c
 
 
@@ -120,7 +111,7 @@ def test_straight_cable_accelerometer_is_the_papers_model() -> None:
     rng = np.random.default_rng(7)
     for _ in range(20):
         x, u, c = _random_case(rng, "accel_straight")
-        x[state.SCALE], x[8:11], c[1], c[2], c[3] = 1.0, [0.0, 0.0, 0.0], 0.0, 0.0, 0.0
+        x[state.SCALE], x[8:11], c[1], c[2] = 1.0, [0.0, 0.0, 0.0], 0.0, 0.0
         rotation = np.array(u[:9]).reshape(3, 3)
         ours, _ = generated.accel_straight(x, u, c)
         paper = FourStateModel(c[0]).accel(np.array([*x[0:3], x[state.TENSION]]), rotation, u[9])[0]
@@ -142,32 +133,6 @@ def test_force_balance_is_the_rotated_specific_force_plus_gravity() -> None:
         np.testing.assert_allclose(xdot[0:3], x[3:6])
         ins, _ = generated.inertial(x, [*u[:9], *accel], c)
         np.testing.assert_allclose(ins[3:6], expected, rtol=1e-10, atol=1e-10)
-
-
-def test_the_drag_is_the_simulators_rotor_and_body_drag() -> None:
-    """The modelled specific force less thrust and cable is the simulator's drag (rotor drag
-    linear, the body's quadratic per body axis) for the realistic quad's profile coefficients;
-    without the body's term (its linear model alone) it is not."""
-    vehicle = load_vehicle("realistic-quad")
-    dynamic = DynamicFilterConfig()
-    rng = np.random.default_rng(11)
-    for _ in range(20):
-        x, u, _ = _random_case(rng, "accel_straight")
-        x[state.TENSION], x[8:11] = 0.0, [0.0, 0.0, 0.0]
-        c = [vehicle.mass_kg, drag_per_s(dynamic, vehicle), 0.0, body_drag_per_m(vehicle)]
-        rotation = np.array(u[:9]).reshape(3, 3)
-        air = rotation @ (np.array(x[3:6]) - np.array([*x[11:13], 0.0]))
-        expected = drag_accel_body_mps2(
-            air[0],
-            air[1],
-            vehicle.rotor_drag_per_s,
-            vehicle.ballistic_coefficient_kg_per_m2,
-        )
-        accel, _ = generated.accel_straight(x, u, c)
-        np.testing.assert_allclose(accel[:2], expected, rtol=1e-12, atol=1e-12)
-        linear, _ = generated.accel_straight(x, u, [*c[:3], 0.0])
-        if np.abs(air[:2]).max() > 1.0:
-            assert np.abs(np.array(linear[:2]) - expected).max() > 0.03
 
 
 @pytest.mark.parametrize(
@@ -207,7 +172,7 @@ def test_catenary_models_match_the_simulators_catenary(
         *NO_CALIBRATION,
     ]
     mass = 1.5
-    c = [mass, 0.0, weight_n_per_m, 0.0]
+    c = [mass, 0.0, weight_n_per_m]
     xdot, _ = generated.force_balance_catenary(x, [*np.eye(3).ravel(), 0.0], c)
     force = mass * (np.array(xdot[3:6]) - np.array([0.0, 0.0, 9.80665]))
     expected = np.array(
@@ -229,7 +194,7 @@ def test_catenary_models_match_the_simulators_catenary(
 
 def test_the_straight_line_is_the_catenarys_taut_limit() -> None:
     x = [3.0, 4.0, -12.0, 0, 0, 0, 5.0, 1.0, 0, 0, 0, 0, 0, *NO_CALIBRATION]
-    light = [1.5, 0.0, 1e-7, 0.0]
+    light = [1.5, 0.0, 1e-7]
     for name in ("tension", "winch_length", "cable_angle"):
         straight, _ = getattr(generated, f"{name}_straight")(x, [], light)
         catenary, _ = getattr(generated, f"{name}_catenary")(x, [], light)
@@ -273,7 +238,7 @@ def test_a_cable_resting_on_the_ground_matches_the_simulators(
     expected = np.array(cable.force_components(*p, 0.0, 0.0, 0.0))
     pull = math.hypot(expected[0], expected[1])
     x = [*p, 0, 0, 0, pull * np.linalg.norm(p) / span_m, 1.0, 0, 0, 0, 0, 0, *NO_CALIBRATION]
-    c = [1.5, 0.0, density_kg_per_m * 9.80665, 0.0]
+    c = [1.5, 0.0, density_kg_per_m * 9.80665]
     assert models_module.rests_on_ground(x, c)
     cable_models = models_module.CATENARY
     np.testing.assert_allclose(_cable_force_n(cable_models, x, c), expected, rtol=1e-8)
@@ -303,7 +268,7 @@ def test_the_free_and_the_grounded_cable_meet_where_the_lowest_point_is_the_anch
     pull = end_tensions(curve, weight).horizontal_n
     p = np.array([span, 0.0, -height])
     x = [*p, 0.2, -0.1, 0.0, pull * np.linalg.norm(p) / span, 1.0, 0, 0, 0, 0, 0, *NO_CALIBRATION]
-    c = [1.5, 0.2, weight, 0.0]
+    c = [1.5, 0.2, weight]
     u_rotation = [*rotation_ned_to_body(0.1, -0.2, 0.5).ravel(), 14.0]
     for name, u in (
         ("force_balance", u_rotation),
@@ -325,7 +290,7 @@ def test_the_calibration_states_enter_the_readings_as_the_sensors_apply_them(cab
     zero errors (``sim/ground_sensors.py``); the other models do not read them."""
     p = [4.0, 1.0, -2.0] if cable != "grounded" else [6.5, 0.5, -1.0]
     x = [*p, 0.3, -0.2, 0.1, 3.0, 1.0, 0, 0, 0, 0, 0, *NO_CALIBRATION]
-    c = [1.5, 0.2, 0.3 if cable != "straight" else 0.0, 0.0]
+    c = [1.5, 0.2, 0.3 if cable != "straight" else 0.0]
     calibrated = list(x)
     calibrated[state.WINCH_OFFSET : state.AZIMUTH_ZERO + 1] = [0.1, 0.02, 0.007, -0.026]
     length = getattr(generated, f"winch_length_{cable}")

@@ -16,7 +16,7 @@ from tether_companion.frames import rotation_ned_to_body
 
 MASS_KG = 1.5
 ROTOR_DRAG_PER_S = 0.2
-CONSTANTS = (MASS_KG, ROTOR_DRAG_PER_S, 0.0, 0.0)
+CONSTANTS = (MASS_KG, ROTOR_DRAG_PER_S, 0.0)
 POSITION_M = np.array([4.0, 0.0, -2.5])
 """The realistic gusty hover's point: 4 m north of the anchor, 2.5 m above it."""
 TENSION_N = 4.0

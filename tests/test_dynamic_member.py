@@ -223,7 +223,7 @@ def test_a_batch_refuses_what_is_not_finite() -> None:
     """A negative interval or a non-finite input leaves the batch as it was."""
     batch = ImuBatch()
     u = [*np.eye(3).ravel().tolist(), 0.0, 0.0, -9.8]
-    c = (1.5, 0.2, 0.0, 0.0)
+    c = (1.5, 0.2, 0.0)
     assert not batch.add(-0.001, u, c)
     assert not batch.add(0.005, [*u[:9], math.nan, 0.0, -9.8], c)
     assert not batch.add(math.inf, u, c)

@@ -159,7 +159,7 @@ def test_the_lengths_curvature_in_the_tension_near_zero_and_at_a_pull() -> None:
     """The light cable 5 m out and 3 m up: at 0.1 +- 0.15 N of chord tension the length's
     second-order term is metres^2 (the encoder's noise is 0.0025 m^2): it is no longer a
     measurement of the tension there; at 1 +- 0.1 N under 5 % of the noise."""
-    c = (1.5, 0.2, LIGHT_N_PER_M, 0.0)
+    c = (1.5, 0.2, LIGHT_N_PER_M)
 
     def length(xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return evaluate(CATENARY.winch_length, xs, (), c, 1)

@@ -71,7 +71,7 @@ def test_the_arc_length_equals_the_closed_form_on_random_cables() -> None:
 
 
 def test_the_arc_length_is_the_generated_models_on_both_sides_of_the_touchdown() -> None:
-    constants = (1.5, 0.3, WEIGHT_N_PER_M, 0.0)
+    constants = (1.5, 0.3, WEIGHT_N_PER_M)
     for span, horizontal in ((5.0, 0.1), (5.0, 0.7), (4.0, 3.0), (6.0, 0.3)):
         x = [span, 0.0, -HEIGHT_M] + [0.0] * (state.N_STATES - 3)
         x[state.TENSION] = _chord_tension(span, horizontal)
@@ -120,7 +120,7 @@ def test_a_grounded_cable_read_as_free_is_withheld_or_covered() -> None:
     assert abs(truth_span - 5.0) < 0.1
     truth = [truth_span, 0.0, -HEIGHT_M] + [0.0] * 10
     truth[state.TENSION] = _chord_tension(truth_span, 0.1)
-    assert rests_on_ground(truth, (1.5, 0.3, WEIGHT_N_PER_M, 0.0))
+    assert rests_on_ground(truth, (1.5, 0.3, WEIGHT_N_PER_M))
     span = span_at_length_m(LENGTH_M, HEIGHT_M, 0.7, WEIGHT_N_PER_M)
     error = span - truth_span
     assert error > 0.9

@@ -32,7 +32,7 @@ from tether_companion.sim.scenario import load_scenario
 
 WEIGHT_N_PER_M = 0.0167 * GRAVITY_MPS2
 """The light cable [N/m]."""
-CONSTANTS = (1.5, 0.2, WEIGHT_N_PER_M, 0.0)
+CONSTANTS = (1.5, 0.2, WEIGHT_N_PER_M)
 """Mass [kg], drag [1/s], weight per length [N/m]."""
 
 

@@ -354,7 +354,7 @@ def test_the_filters_model_is_the_simulated_cables_direction_at_the_anchor(
     p = np.array(position)
     chord_tension = math.hypot(force[0], force[1]) * np.linalg.norm(p) / math.hypot(p[0], p[1])
     x = [*p, 0.0, 0.0, 0.0, chord_tension, 1.0, 0, 0, 0, 0, 0, 0, 0, 0, 0]
-    c = [1.5, 0.0, density_kg_per_m * 9.80665, 0.0]
+    c = [1.5, 0.0, density_kg_per_m * 9.80665]
     (elevation, azimuth), _ = models.CATENARY.cable_angle(x, [], c)
     north, east, down = anchor_direction_ned(cable, position)
     assert elevation == pytest.approx(math.atan2(-down, math.hypot(north, east)), abs=1e-6)

@@ -14,7 +14,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from tether_companion.config import load_yaml, spec
-from tether_companion.physics.aerodynamics import AIR_DENSITY_KG_M3
 from tether_companion.physics.vehicle import VehicleProfile
 
 FORCE_BALANCE = "force_balance"
@@ -277,14 +276,6 @@ def load_dynamic_config(path: str | Path) -> DynamicFilterConfig:
         When the file is missing or a key is unknown, mistyped or out of range.
     """
     return load_yaml(DynamicFilterConfig, path)
-
-
-def body_drag_per_m(vehicle: VehicleProfile) -> float:
-    """The body's quadratic drag ``k = rho / (2 B)`` [1/m] from the profile's ballistic
-    coefficient ``B`` [kg/m^2] (0 without one), sea-level air as the simulator's
-    (``physics/aerodynamics.py``): ``a = -k u |u|`` per body-horizontal axis."""
-    coefficient = vehicle.ballistic_coefficient_kg_per_m2
-    return 0.5 * AIR_DENSITY_KG_M3 / coefficient if coefficient > 0.0 else 0.0
 
 
 def drag_per_s(dynamic: DynamicFilterConfig, vehicle: VehicleProfile) -> float:

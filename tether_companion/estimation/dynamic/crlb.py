@@ -77,7 +77,7 @@ columns are left out; :func:`_add` writes them at the augmented state's columns)
 _CALIBRATION_AT_TRUTH = (0.0,) * (state.N_STATES - _N)
 """The calibration states at which the generated models are evaluated (no Jacobian depends
 on their values but the scale's ``1 + scale`` factor, taken as 1)."""
-_NO_CONSTANTS = (0.0, 0.0, 0.0, 0.0)
+_NO_CONSTANTS = (0.0, 0.0, 0.0)
 _ANCHOR_LEVEL = (0.0,)
 """The height model's input (the anchor's height: its Jacobian does not depend on it)."""
 

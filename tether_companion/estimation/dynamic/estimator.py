@@ -47,12 +47,7 @@ from tether_companion.estimation.dynamic.accel_fusion import AccelFusion
 from tether_companion.estimation.dynamic.aid.rangefinder import RangefinderAid
 from tether_companion.estimation.dynamic.aid.rest import RestAid
 from tether_companion.estimation.dynamic.bank import FilterBank
-from tether_companion.estimation.dynamic.config import (
-    INERTIAL,
-    DynamicFilterConfig,
-    body_drag_per_m,
-    drag_per_s,
-)
+from tether_companion.estimation.dynamic.config import INERTIAL, DynamicFilterConfig, drag_per_s
 from tether_companion.estimation.dynamic.consistency import (
     BearingWindow,
     GustWalk,
@@ -125,10 +120,7 @@ class DynamicTetherEstimator(InputFeed, GroundStationFeed):
         )
         self.thrust_input: ThrustInput = self.aligner.thrust_input
         self.constants = ModelConstants(
-            vehicle.mass_kg,
-            drag_per_s(dynamic, vehicle),
-            dynamic.cable_weight_n_per_m,
-            body_drag_per_m=body_drag_per_m(vehicle),
+            vehicle.mass_kg, drag_per_s(dynamic, vehicle), dynamic.cable_weight_n_per_m
         )
         self.health = DynamicHealth()
         self._weight_n = vehicle.mass_kg * GRAVITY_MPS2

@@ -4,7 +4,7 @@ Regenerate with ``python -m tether_companion.estimation.dynamic.derivation.deriv
 models and their meaning are documented there. sympy 1.14.0.
 
 Every function takes the state ``x`` (17 floats, layout in ``state.py``), the inputs ``u``
-and the constants ``c = (mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m)`` and returns the
+and the constants ``c = (mass_kg, drag_per_s, weight_n_per_m)`` and returns the
 values and the Jacobian with respect to ``x`` (row-major, 17 columns).
 """
 
@@ -20,7 +20,7 @@ def force_balance_straight(x: Sequence[float], u: Sequence[float], c: Sequence[f
     """Formulation (a): ``x' = f(x, u)`` with ``u = (R_v^b row-major, thrust_n)``; returns ``(x' (17,), dv'/dx (3x17 row-major))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = 1/mass_kg
     t1 = t0*thrust_n
     t2 = r20*t1
@@ -32,89 +32,75 @@ def force_balance_straight(x: Sequence[float], u: Sequence[float], c: Sequence[f
     t8 = p_n*t7
     t9 = v_n - wind_n
     t10 = v_e - wind_e
-    t11 = r00*t9 + r01*t10 + r02*v_d
-    t12 = body_drag_per_m*abs(t11) + drag_per_s
-    t13 = t11*t12
-    t14 = r10*t9 + r11*t10 + r12*v_d
-    t15 = body_drag_per_m*abs(t14) + drag_per_s
-    t16 = t14*t15
-    t17 = r21*t1
-    t18 = p_e*t7
-    t19 = r22*t1
-    t20 = p_d*t7
-    t21 = 1/t6
-    t22 = t7*tension
-    t23 = t6**(-3/2)
-    t24 = p_n*t0*t23*tension
-    t25 = p_e*t24
-    t26 = p_d*t24
-    t27 = body_drag_per_m*t11*(0.0 if t11 == 0 else math.copysign(1, t11)) + t12
-    t28 = body_drag_per_m*t14*(0.0 if t14 == 0 else math.copysign(1, t14)) + t15
-    t29 = r00**2*t27 + r10**2*t28
-    t30 = r00*t27
-    t31 = r10*t28
-    t32 = r01*t30 + r11*t31
-    t33 = -t32
-    t34 = r02*t30 + r12*t31
-    t35 = -t34
-    t36 = p_d*p_e*t0*t23*tension
-    t37 = r01**2*t27 + r11**2*t28
-    t38 = r01*r02*t27 + r11*r12*t28
-    t39 = -t38
-    return (v_n, v_e, v_d, -r00*t13 - r10*t16 - scale*t2 - t8*tension, -r01*t13 - r11*t16 - scale*t17 - t18*tension, -r02*t13 - r12*t16 - scale*t19 - t20*tension + 9.80665, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,), (t22*(t21*t5 - 1), t25, t26, -t29, t33, t35, -t8, -t2, 0, 0, 0, t29, t32, 0, 0, 0, 0, t25, t22*(t21*t4 - 1), t36, t33, -t37, t39, -t18, -t17, 0, 0, 0, t32, t37, 0, 0, 0, 0, t26, t36, t22*(t21*t3 - 1), t35, t39, -r02**2*t27 - r12**2*t28, -t20, -t19, 0, 0, 0, t34, t38, 0, 0, 0, 0,)
+    t11 = drag_per_s*(r00*t9 + r01*t10 + r02*v_d)
+    t12 = drag_per_s*(r10*t9 + r11*t10 + r12*v_d)
+    t13 = r21*t1
+    t14 = p_e*t7
+    t15 = r22*t1
+    t16 = p_d*t7
+    t17 = 1/t6
+    t18 = t7*tension
+    t19 = t6**(-3/2)
+    t20 = p_n*t0*t19*tension
+    t21 = p_e*t20
+    t22 = p_d*t20
+    t23 = drag_per_s*(r00**2 + r10**2)
+    t24 = drag_per_s*(r00*r01 + r10*r11)
+    t25 = -t24
+    t26 = drag_per_s*(r00*r02 + r10*r12)
+    t27 = -t26
+    t28 = p_d*p_e*t0*t19*tension
+    t29 = drag_per_s*(r01**2 + r11**2)
+    t30 = drag_per_s*(r01*r02 + r11*r12)
+    t31 = -t30
+    return (v_n, v_e, v_d, -r00*t11 - r10*t12 - scale*t2 - t8*tension, -r01*t11 - r11*t12 - scale*t13 - t14*tension, -r02*t11 - r12*t12 - scale*t15 - t16*tension + 9.80665, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,), (t18*(t17*t5 - 1), t21, t22, -t23, t25, t27, -t8, -t2, 0, 0, 0, t23, t24, 0, 0, 0, 0, t21, t18*(t17*t4 - 1), t28, t25, -t29, t31, -t14, -t13, 0, 0, 0, t24, t29, 0, 0, 0, 0, t22, t28, t18*(t17*t3 - 1), t27, t31, -drag_per_s*(r02**2 + r12**2), -t16, -t15, 0, 0, 0, t26, t30, 0, 0, 0, 0,)
 
 
 def accel_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Accelerometer force balance ``h = f + b`` [m/s^2], FRD body, with ``u = (R_v^b row-major, thrust_n)``; returns ``(h (3,), H (3x17 row-major))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = v_n - wind_n
     t1 = v_e - wind_e
-    t2 = r00*t0 + r01*t1 + r02*v_d
-    t3 = p_d*r02
-    t4 = p_e*r01
-    t5 = p_n*r00
-    t6 = 1/mass_kg
-    t7 = p_d**2
-    t8 = p_e**2
-    t9 = p_n**2
-    t10 = t7 + t8 + t9
-    t11 = t6/math.sqrt(t10)
-    t12 = t11*(t3 + t4 + t5)
-    t13 = body_drag_per_m*abs(t2)
-    t14 = r10*t0 + r11*t1 + r12*v_d
-    t15 = p_d*r12
-    t16 = p_e*r11
-    t17 = p_n*r10
-    t18 = t11*(t15 + t16 + t17)
-    t19 = body_drag_per_m*abs(t14)
-    t20 = t6*thrust_n
-    t21 = p_d*r22
-    t22 = p_e*r21
-    t23 = p_n*r20
-    t24 = t11*(t21 + t22 + t23)
-    t25 = 1/t10
-    t26 = p_n*t25
-    t27 = t25*t9
-    t28 = t11*tension
-    t29 = p_e*t25
-    t30 = t25*t8
-    t31 = p_d*t25
-    t32 = t25*t7
-    t33 = body_drag_per_m*t2*(0.0 if t2 == 0 else math.copysign(1, t2)) + drag_per_s + t13
-    t34 = r00*t33
-    t35 = r01*t33
-    t36 = body_drag_per_m*t14*(0.0 if t14 == 0 else math.copysign(1, t14)) + drag_per_s + t19
-    t37 = r10*t36
-    t38 = r11*t36
-    return (b_x - drag_per_s*t2 - t12*tension - t13*t2, b_y - drag_per_s*t14 - t14*t19 - t18*tension, b_z - scale*t20 - t24*tension,), (t28*(r00*t27 - r00 + t26*t3 + t26*t4), t28*(r01*t30 - r01 + t29*t3 + t29*t5), t28*(r02*t32 - r02 + t31*t4 + t31*t5), -t34, -t35, -r02*t33, -t12, 0, 1, 0, 0, t34, t35, 0, 0, 0, 0, t28*(r10*t27 - r10 + t15*t26 + t16*t26), t28*(r11*t30 - r11 + t15*t29 + t17*t29), t28*(r12*t32 - r12 + t16*t31 + t17*t31), -t37, -t38, -r12*t36, -t18, 0, 0, 1, 0, t37, t38, 0, 0, 0, 0, t28*(r20*t27 - r20 + t21*t26 + t22*t26), t28*(r21*t30 - r21 + t21*t29 + t23*t29), t28*(r22*t32 - r22 + t22*t31 + t23*t31), 0, 0, 0, -t24, -t20, 0, 0, 1, 0, 0, 0, 0, 0, 0,)
+    t2 = p_d*r02
+    t3 = p_e*r01
+    t4 = p_n*r00
+    t5 = 1/mass_kg
+    t6 = p_d**2
+    t7 = p_e**2
+    t8 = p_n**2
+    t9 = t6 + t7 + t8
+    t10 = t5/math.sqrt(t9)
+    t11 = t10*(t2 + t3 + t4)
+    t12 = p_d*r12
+    t13 = p_e*r11
+    t14 = p_n*r10
+    t15 = t10*(t12 + t13 + t14)
+    t16 = t5*thrust_n
+    t17 = p_d*r22
+    t18 = p_e*r21
+    t19 = p_n*r20
+    t20 = t10*(t17 + t18 + t19)
+    t21 = 1/t9
+    t22 = p_n*t21
+    t23 = t21*t8
+    t24 = t10*tension
+    t25 = p_e*t21
+    t26 = t21*t7
+    t27 = p_d*t21
+    t28 = t21*t6
+    t29 = drag_per_s*r00
+    t30 = drag_per_s*r01
+    t31 = drag_per_s*r10
+    t32 = drag_per_s*r11
+    return (b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t11*tension, b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t15*tension, b_z - scale*t16 - t20*tension,), (t24*(r00*t23 - r00 + t2*t22 + t22*t3), t24*(r01*t26 - r01 + t2*t25 + t25*t4), t24*(r02*t28 - r02 + t27*t3 + t27*t4), -t29, -t30, -drag_per_s*r02, -t11, 0, 1, 0, 0, t29, t30, 0, 0, 0, 0, t24*(r10*t23 - r10 + t12*t22 + t13*t22), t24*(r11*t26 - r11 + t12*t25 + t14*t25), t24*(r12*t28 - r12 + t13*t27 + t14*t27), -t31, -t32, -drag_per_s*r12, -t15, 0, 0, 1, 0, t31, t32, 0, 0, 0, 0, t24*(r20*t23 - r20 + t17*t22 + t18*t22), t24*(r21*t26 - r21 + t17*t25 + t19*t25), t24*(r22*t28 - r22 + t18*t27 + t19*t27), 0, 0, 0, -t20, -t16, 0, 0, 1, 0, 0, 0, 0, 0, 0,)
 
 
 def tension_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Load cell at the drone: ``|F_c|`` [N]; returns ``(h (1,), H (1x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = abs(tension)
     t1 = p_d**2
     t2 = p_e**2
@@ -128,7 +114,7 @@ def tension_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float])
 def anchor_tension_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Winch's load cell at the anchor: ``|F_c| - w b`` [N]; returns ``(h (1,), H (1x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = abs(tension)
     t1 = p_d**2
     t2 = p_e**2
@@ -142,7 +128,7 @@ def anchor_tension_straight(x: Sequence[float], u: Sequence[float], c: Sequence[
 def cable_angle_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Ground-station cable angle as read: (elevation up, azimuth from north) plus their zero errors [rad]; returns ``(h (2,), H (2x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = p_d**2
     t1 = p_e**2
     t2 = p_n**2
@@ -167,7 +153,7 @@ def force_balance_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[f
     """Formulation (a): ``x' = f(x, u)`` with ``u = (R_v^b row-major, thrust_n)``; returns ``(x' (17,), dv'/dx (3x17 row-major))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = 1/mass_kg
     t1 = t0*thrust_n
     t2 = r20*t1
@@ -183,156 +169,142 @@ def force_balance_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[f
     t12 = t11*tension
     t13 = v_n - wind_n
     t14 = v_e - wind_e
-    t15 = r00*t13 + r01*t14 + r02*v_d
-    t16 = body_drag_per_m*abs(t15) + drag_per_s
-    t17 = t15*t16
-    t18 = r10*t13 + r11*t14 + r12*v_d
-    t19 = body_drag_per_m*abs(t18) + drag_per_s
-    t20 = t18*t19
-    t21 = r21*t1
-    t22 = p_e*t10
-    t23 = t22*tension
-    t24 = r22*t1
-    t25 = weight_n_per_m/tension
-    t26 = t25*t8
-    t27 = (1/2)*t26
-    t28 = math.sinh(t27)
-    t29 = 1/t28
-    t30 = math.cosh(t27)
+    t15 = drag_per_s*(r00*t13 + r01*t14 + r02*v_d)
+    t16 = drag_per_s*(r10*t13 + r11*t14 + r12*v_d)
+    t17 = r21*t1
+    t18 = p_e*t10
+    t19 = t18*tension
+    t20 = r22*t1
+    t21 = weight_n_per_m/tension
+    t22 = t21*t8
+    t23 = (1/2)*t22
+    t24 = math.sinh(t23)
+    t25 = 1/t24
+    t26 = math.cosh(t23)
+    t27 = t25*t26
+    t28 = t22*t27
+    t29 = t24**(-2)
+    t30 = weight_n_per_m**2/tension**2
     t31 = t29*t30
-    t32 = t26*t31
-    t33 = t28**(-2)
-    t34 = weight_n_per_m**2/tension**2
-    t35 = t33*t34
-    t36 = math.sqrt((1/4)*t3*t35*t7 + t6)
-    t37 = t28*t36
-    t38 = p_d*t32 - 2*t37
-    t39 = t10*tension
-    t40 = 1/t7
-    t41 = t7**(3/2)
-    t42 = 1/t41
-    t43 = p_n*t0*t42*tension
-    t44 = p_e*t43
-    t45 = body_drag_per_m*t15*(0.0 if t15 == 0 else math.copysign(1, t15)) + t16
-    t46 = body_drag_per_m*t18*(0.0 if t18 == 0 else math.copysign(1, t18)) + t19
-    t47 = r00**2*t45 + r10**2*t46
-    t48 = r00*t45
-    t49 = r10*t46
-    t50 = r01*t48 + r11*t49
-    t51 = -t50
-    t52 = r02*t48 + r12*t49
-    t53 = -t52
-    t54 = p_d*tension
-    t55 = r01**2*t45 + r11**2*t46
-    t56 = r01*r02*t45 + r11*r12*t46
-    t57 = -t56
-    t58 = 2*p_d
-    t59 = t34*t58
-    t60 = t30**2*t33
-    t61 = 4*t30
-    t62 = t36*t61*t9
-    t63 = 4*t38*t40
-    t64 = 1/t36
-    t65 = 2*t3
-    t66 = -1/8*p_d*t25*t29*t61*t9 + (1/8)*t25*t62 + (1/8)*t28*t64*(t35*t65 + 8 - t3*t30*t8*weight_n_per_m**3/(t28**3*tension**3)) + (1/8)*t59*t60 - 1/8*t59 + (1/8)*t63
-    t67 = t25*t65
-    t68 = t61*t8
-    t69 = t29*t68
-    t70 = 4*t3
-    t71 = 2*t4 + 2*t5
-    t72 = t25*t29*t64
-    t73 = t25*t58*t7
-    return (v_n, v_e, v_d, -r00*t17 - r10*t20 - scale*t2 - t12, -r01*t17 - r11*t20 - scale*t21 - t23, -r02*t17 - r12*t20 - scale*t24 - 1/2*t38*t39 + 9.80665, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,), (t39*(t40*t5 - 1), t44, p_d*t43, -t47, t51, t53, -t11, -t2, 0, 0, 0, t47, t50, 0, 0, 0, 0, t44, t39*(t4*t40 - 1), p_e*t0*t42*t54, t51, -t55, t57, -t22, -t21, 0, 0, 0, t50, t55, 0, 0, 0, 0, t12*t66, t23*t66, (1/8)*t10*(t54*t63 - weight_n_per_m*(-p_d*t62 - p_d*t72*(-t3*t32 + t70 + t71) + t31*t70*t9 - t60*t67 + t67 + t69)), t53, t57, -r02**2*t45 - r12**2*t46, -t10*(p_d*t27*t31 + (1/8)*t25*(-p_d*t69 + t3*t72*(-t25*t31*t41 + t65 + t71) + t36*t68 + t60*t73 - t73) - t37), -t24, 0, 0, 0, t52, t56, 0, 0, 0, 0,)
+    t32 = math.sqrt((1/4)*t3*t31*t7 + t6)
+    t33 = t24*t32
+    t34 = p_d*t28 - 2*t33
+    t35 = t10*tension
+    t36 = 1/t7
+    t37 = t7**(3/2)
+    t38 = 1/t37
+    t39 = p_n*t0*t38*tension
+    t40 = p_e*t39
+    t41 = drag_per_s*(r00**2 + r10**2)
+    t42 = drag_per_s*(r00*r01 + r10*r11)
+    t43 = -t42
+    t44 = drag_per_s*(r00*r02 + r10*r12)
+    t45 = -t44
+    t46 = p_d*tension
+    t47 = drag_per_s*(r01**2 + r11**2)
+    t48 = drag_per_s*(r01*r02 + r11*r12)
+    t49 = -t48
+    t50 = 2*p_d
+    t51 = t30*t50
+    t52 = t26**2*t29
+    t53 = 4*t26
+    t54 = t32*t53*t9
+    t55 = 4*t34*t36
+    t56 = 1/t32
+    t57 = 2*t3
+    t58 = -1/8*p_d*t21*t25*t53*t9 + (1/8)*t21*t54 + (1/8)*t24*t56*(t31*t57 + 8 - t26*t3*t8*weight_n_per_m**3/(t24**3*tension**3)) + (1/8)*t51*t52 - 1/8*t51 + (1/8)*t55
+    t59 = t21*t57
+    t60 = t53*t8
+    t61 = t25*t60
+    t62 = 4*t3
+    t63 = 2*t4 + 2*t5
+    t64 = t21*t25*t56
+    t65 = t21*t50*t7
+    return (v_n, v_e, v_d, -r00*t15 - r10*t16 - scale*t2 - t12, -r01*t15 - r11*t16 - scale*t17 - t19, -r02*t15 - r12*t16 - scale*t20 - 1/2*t34*t35 + 9.80665, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,), (t35*(t36*t5 - 1), t40, p_d*t39, -t41, t43, t45, -t11, -t2, 0, 0, 0, t41, t42, 0, 0, 0, 0, t40, t35*(t36*t4 - 1), p_e*t0*t38*t46, t43, -t47, t49, -t18, -t17, 0, 0, 0, t42, t47, 0, 0, 0, 0, t12*t58, t19*t58, (1/8)*t10*(t46*t55 - weight_n_per_m*(-p_d*t54 - p_d*t64*(-t28*t3 + t62 + t63) + t27*t62*t9 - t52*t59 + t59 + t61)), t45, t49, -drag_per_s*(r02**2 + r12**2), -t10*(p_d*t23*t27 + (1/8)*t21*(-p_d*t61 + t3*t64*(-t21*t27*t37 + t57 + t63) + t32*t60 + t52*t65 - t65) - t33), -t20, 0, 0, 0, t44, t48, 0, 0, 0, 0,)
 
 
 def accel_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Accelerometer force balance ``h = f + b`` [m/s^2], FRD body, with ``u = (R_v^b row-major, thrust_n)``; returns ``(h (3,), H (3x17 row-major))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = v_n - wind_n
     t1 = v_e - wind_e
-    t2 = r00*t0 + r01*t1 + r02*v_d
-    t3 = body_drag_per_m*abs(t2)
-    t4 = p_e*r01
-    t5 = p_n*r00
-    t6 = p_d**2
-    t7 = p_e**2
-    t8 = p_n**2
-    t9 = t7 + t8
-    t10 = t6 + t9
-    t11 = math.sqrt(t10)
-    t12 = 1/tension
-    t13 = t12*weight_n_per_m
-    t14 = t11*t13
-    t15 = (1/2)*t14
-    t16 = math.sinh(t15)
-    t17 = 1/t16
-    t18 = math.cosh(t15)
-    t19 = t17*t18
-    t20 = t14*t19
-    t21 = t16**(-2)
-    t22 = weight_n_per_m**2/tension**2
-    t23 = t21*t22
-    t24 = math.sqrt((1/4)*t10*t23*t6 + t9)
-    t25 = p_d*t20 - 2*t16*t24
-    t26 = -t25
-    t27 = 1/mass_kg
-    t28 = 1/t11
-    t29 = t27*t28
-    t30 = t29*tension
-    t31 = (1/2)*t30
-    t32 = r10*t0 + r11*t1 + r12*v_d
-    t33 = body_drag_per_m*abs(t32)
-    t34 = p_e*r11
-    t35 = p_n*r10
-    t36 = t27*thrust_n
-    t37 = p_e*r21
-    t38 = p_n*r20
-    t39 = 1/t10
-    t40 = p_n*t39
-    t41 = t39*t8
-    t42 = (1/2)*t25
-    t43 = r02*t42
-    t44 = 2*p_d
-    t45 = t22*t44
-    t46 = t18**2*t21
-    t47 = 4*t18
-    t48 = t24*t28*t47
-    t49 = 1/t24
-    t50 = 2*t6
-    t51 = -p_d*t13*t17*t28*t47 + t13*t48 + t16*t49*(-t11*t18*t6*weight_n_per_m**3/(t16**3*tension**3) + t23*t50 + 8) + t45*t46 - t45
-    t52 = (1/8)*r02
-    t53 = t51*t52
-    t54 = p_e*t39
-    t55 = t39*t7
-    t56 = p_d*t39*tension
-    t57 = t13*t50
-    t58 = t11*t47
-    t59 = 4*t6
-    t60 = 2*t7 + 2*t8
-    t61 = t13*t17*t49
-    t62 = weight_n_per_m*(-p_d*t48 - p_d*t61*(-t20*t6 + t59 + t60) + t17*t58 + t19*t28*t59 - t46*t57 + t57)
-    t63 = body_drag_per_m*t2*(0.0 if t2 == 0 else math.copysign(1, t2)) + drag_per_s + t3
-    t64 = r00*t63
-    t65 = r01*t63
-    t66 = t13*(2*p_d*t10*t12*weight_n_per_m + 4*p_d*t11*t17*t18 - t10*t13*t44*t46 - t24*t58 - t6*t61*(-t10**(3/2)*t13*t19 + t50 + t60))
-    t67 = r12*t42
-    t68 = (1/8)*r12
-    t69 = t51*t68
-    t70 = body_drag_per_m*t32*(0.0 if t32 == 0 else math.copysign(1, t32)) + drag_per_s + t33
-    t71 = r10*t70
-    t72 = r11*t70
-    t73 = r22*t42
-    t74 = (1/8)*r22
-    t75 = t51*t74
-    return (b_x - drag_per_s*t2 - t2*t3 - t31*(-r02*t26 + 2*t4 + 2*t5), b_y - drag_per_s*t32 - t31*(-r12*t26 + 2*t34 + 2*t35) - t32*t33, b_z - scale*t36 - t31*(-r22*t26 + 2*t37 + 2*t38),), (t30*(p_n*t53 + r00*t41 - r00 + t4*t40 + t40*t43), t30*(p_e*t53 + r01*t55 - r01 + t43*t54 + t5*t54), t29*(t4*t56 + t43*t56 + t5*t56 - t52*t62), -t64, -t65, -r02*t63, -t29*(t4 + t43 + t5 - t52*t66), 0, 1, 0, 0, t64, t65, 0, 0, 0, 0, t30*(p_n*t69 + r10*t41 - r10 + t34*t40 + t40*t67), t30*(p_e*t69 + r11*t55 - r11 + t35*t54 + t54*t67), t29*(t34*t56 + t35*t56 + t56*t67 - t62*t68), -t71, -t72, -r12*t70, -t29*(t34 + t35 - t66*t68 + t67), 0, 0, 1, 0, t71, t72, 0, 0, 0, 0, t30*(p_n*t75 + r20*t41 - r20 + t37*t40 + t40*t73), t30*(p_e*t75 + r21*t55 - r21 + t38*t54 + t54*t73), t29*(t37*t56 + t38*t56 + t56*t73 - t62*t74), 0, 0, 0, -t29*(t37 + t38 - t66*t74 + t73), -t36, 0, 0, 1, 0, 0, 0, 0, 0, 0,)
+    t2 = p_e*r01
+    t3 = p_n*r00
+    t4 = p_d**2
+    t5 = p_e**2
+    t6 = p_n**2
+    t7 = t5 + t6
+    t8 = t4 + t7
+    t9 = math.sqrt(t8)
+    t10 = 1/tension
+    t11 = t10*weight_n_per_m
+    t12 = t11*t9
+    t13 = (1/2)*t12
+    t14 = math.sinh(t13)
+    t15 = 1/t14
+    t16 = math.cosh(t13)
+    t17 = t15*t16
+    t18 = t12*t17
+    t19 = t14**(-2)
+    t20 = weight_n_per_m**2/tension**2
+    t21 = t19*t20
+    t22 = math.sqrt((1/4)*t21*t4*t8 + t7)
+    t23 = p_d*t18 - 2*t14*t22
+    t24 = -t23
+    t25 = 1/mass_kg
+    t26 = 1/t9
+    t27 = t25*t26
+    t28 = t27*tension
+    t29 = (1/2)*t28
+    t30 = p_e*r11
+    t31 = p_n*r10
+    t32 = t25*thrust_n
+    t33 = p_e*r21
+    t34 = p_n*r20
+    t35 = 1/t8
+    t36 = p_n*t35
+    t37 = t35*t6
+    t38 = (1/2)*t23
+    t39 = r02*t38
+    t40 = 2*p_d
+    t41 = t20*t40
+    t42 = t16**2*t19
+    t43 = 4*t16
+    t44 = t22*t26*t43
+    t45 = 1/t22
+    t46 = 2*t4
+    t47 = -p_d*t11*t15*t26*t43 + t11*t44 + t14*t45*(t21*t46 + 8 - t16*t4*t9*weight_n_per_m**3/(t14**3*tension**3)) + t41*t42 - t41
+    t48 = (1/8)*r02
+    t49 = t47*t48
+    t50 = p_e*t35
+    t51 = t35*t5
+    t52 = p_d*t35*tension
+    t53 = t11*t46
+    t54 = t43*t9
+    t55 = 4*t4
+    t56 = 2*t5 + 2*t6
+    t57 = t11*t15*t45
+    t58 = weight_n_per_m*(-p_d*t44 - p_d*t57*(-t18*t4 + t55 + t56) + t15*t54 + t17*t26*t55 - t42*t53 + t53)
+    t59 = drag_per_s*r00
+    t60 = drag_per_s*r01
+    t61 = t11*(2*p_d*t10*t8*weight_n_per_m + 4*p_d*t15*t16*t9 - t11*t40*t42*t8 - t22*t54 - t4*t57*(-t11*t17*t8**(3/2) + t46 + t56))
+    t62 = r12*t38
+    t63 = (1/8)*r12
+    t64 = t47*t63
+    t65 = drag_per_s*r10
+    t66 = drag_per_s*r11
+    t67 = r22*t38
+    t68 = (1/8)*r22
+    t69 = t47*t68
+    return (b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t29*(-r02*t24 + 2*t2 + 2*t3), b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t29*(-r12*t24 + 2*t30 + 2*t31), b_z - scale*t32 - t29*(-r22*t24 + 2*t33 + 2*t34),), (t28*(p_n*t49 + r00*t37 - r00 + t2*t36 + t36*t39), t28*(p_e*t49 + r01*t51 - r01 + t3*t50 + t39*t50), t27*(t2*t52 + t3*t52 + t39*t52 - t48*t58), -t59, -t60, -drag_per_s*r02, -t27*(t2 + t3 + t39 - t48*t61), 0, 1, 0, 0, t59, t60, 0, 0, 0, 0, t28*(p_n*t64 + r10*t37 - r10 + t30*t36 + t36*t62), t28*(p_e*t64 + r11*t51 - r11 + t31*t50 + t50*t62), t27*(t30*t52 + t31*t52 + t52*t62 - t58*t63), -t65, -t66, -drag_per_s*r12, -t27*(t30 + t31 - t61*t63 + t62), 0, 0, 1, 0, t65, t66, 0, 0, 0, 0, t28*(p_n*t69 + r20*t37 - r20 + t33*t36 + t36*t67), t28*(p_e*t69 + r21*t51 - r21 + t34*t50 + t50*t67), t27*(t33*t52 + t34*t52 + t52*t67 - t58*t68), 0, 0, 0, -t27*(t33 + t34 - t61*t68 + t67), -t32, 0, 0, 1, 0, 0, 0, 0, 0, 0,)
 
 
 def tension_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Load cell at the drone: ``|F_c|`` [N]; returns ``(h (1,), H (1x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = abs(tension)
     t1 = p_d**2
     t2 = p_e**2
@@ -386,7 +358,7 @@ def tension_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float])
 def anchor_tension_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Winch's load cell at the anchor: ``|F_c| - w b`` [N]; returns ``(h (1,), H (1x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = p_d*weight_n_per_m
     t1 = abs(tension)
     t2 = p_d**2
@@ -442,7 +414,7 @@ def anchor_tension_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[
 def cable_angle_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Ground-station cable angle as read: (elevation up, azimuth from north) plus their zero errors [rad]; returns ``(h (2,), H (2x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = p_d**2
     t1 = p_e**2
     t2 = p_n**2
@@ -517,7 +489,7 @@ def force_balance_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[f
     """Formulation (a): ``x' = f(x, u)`` with ``u = (R_v^b row-major, thrust_n)``; returns ``(x' (17,), dv'/dx (3x17 row-major))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = 1/mass_kg
     t1 = t0*thrust_n
     t2 = r20*t1
@@ -532,106 +504,92 @@ def force_balance_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[f
     t11 = t10*tension
     t12 = v_n - wind_n
     t13 = v_e - wind_e
-    t14 = r00*t12 + r01*t13 + r02*v_d
-    t15 = body_drag_per_m*abs(t14) + drag_per_s
-    t16 = t14*t15
-    t17 = r10*t12 + r11*t13 + r12*v_d
-    t18 = body_drag_per_m*abs(t17) + drag_per_s
-    t19 = t17*t18
-    t20 = r21*t1
-    t21 = p_e*t9
-    t22 = t21*tension
-    t23 = r22*t1
-    t24 = math.sqrt(t6)
-    t25 = t24*tension/weight_n_per_m
-    t26 = t25*t8
-    t27 = math.sqrt(p_d*(p_d - 2*t26))
-    t28 = 1/t7
-    t29 = t9*tension
-    t30 = t7**(-3/2)
-    t31 = p_n*t0*t30*tension
-    t32 = p_e*t31
-    t33 = body_drag_per_m*t14*(0.0 if t14 == 0 else math.copysign(1, t14)) + t15
-    t34 = body_drag_per_m*t17*(0.0 if t17 == 0 else math.copysign(1, t17)) + t18
-    t35 = r00**2*t33 + r10**2*t34
-    t36 = r00*t33
-    t37 = r10*t34
-    t38 = r01*t36 + r11*t37
-    t39 = -t38
-    t40 = r02*t36 + r12*t37
-    t41 = -t40
-    t42 = r01**2*t33 + r11**2*t34
-    t43 = r01*r02*t33 + r11*r12*t34
-    t44 = -t43
-    t45 = 1/t27
-    t46 = p_d*t45
-    t47 = t46*(t24*t28 - 1/t24)
-    return (v_n, v_e, v_d, -r00*t16 - r10*t19 - scale*t2 - t11, -r01*t16 - r11*t19 - scale*t20 - t22, -r02*t16 - r12*t19 - scale*t23 + t0*t27*weight_n_per_m + 9.80665, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,), (t29*(t28*t5 - 1), t32, p_d*t31, -t35, t39, t41, -t10, -t2, 0, 0, 0, t35, t38, 0, 0, 0, 0, t32, t29*(t28*t4 - 1), p_d*p_e*t0*t30*tension, t39, -t42, t44, -t21, -t20, 0, 0, 0, t38, t42, 0, 0, 0, 0, t11*t47, t22*t47, t0*t45*weight_n_per_m*(p_d + t25*t3*t30 - t26), t41, t44, -r02**2*t33 - r12**2*t34, -t24*t46*t9, -t23, 0, 0, 0, t40, t43, 0, 0, 0, 0,)
+    t14 = drag_per_s*(r00*t12 + r01*t13 + r02*v_d)
+    t15 = drag_per_s*(r10*t12 + r11*t13 + r12*v_d)
+    t16 = r21*t1
+    t17 = p_e*t9
+    t18 = t17*tension
+    t19 = r22*t1
+    t20 = math.sqrt(t6)
+    t21 = t20*tension/weight_n_per_m
+    t22 = t21*t8
+    t23 = math.sqrt(p_d*(p_d - 2*t22))
+    t24 = 1/t7
+    t25 = t9*tension
+    t26 = t7**(-3/2)
+    t27 = p_n*t0*t26*tension
+    t28 = p_e*t27
+    t29 = drag_per_s*(r00**2 + r10**2)
+    t30 = drag_per_s*(r00*r01 + r10*r11)
+    t31 = -t30
+    t32 = drag_per_s*(r00*r02 + r10*r12)
+    t33 = -t32
+    t34 = drag_per_s*(r01**2 + r11**2)
+    t35 = drag_per_s*(r01*r02 + r11*r12)
+    t36 = -t35
+    t37 = 1/t23
+    t38 = p_d*t37
+    t39 = t38*(t20*t24 - 1/t20)
+    return (v_n, v_e, v_d, -r00*t14 - r10*t15 - scale*t2 - t11, -r01*t14 - r11*t15 - scale*t16 - t18, -r02*t14 - r12*t15 - scale*t19 + t0*t23*weight_n_per_m + 9.80665, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,), (t25*(t24*t5 - 1), t28, p_d*t27, -t29, t31, t33, -t10, -t2, 0, 0, 0, t29, t30, 0, 0, 0, 0, t28, t25*(t24*t4 - 1), p_d*p_e*t0*t26*tension, t31, -t34, t36, -t17, -t16, 0, 0, 0, t30, t34, 0, 0, 0, 0, t11*t39, t18*t39, t0*t37*weight_n_per_m*(p_d + t21*t26*t3 - t22), t33, t36, -drag_per_s*(r02**2 + r12**2), -t20*t38*t9, -t19, 0, 0, 0, t32, t35, 0, 0, 0, 0,)
 
 
 def accel_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Accelerometer force balance ``h = f + b`` [m/s^2], FRD body, with ``u = (R_v^b row-major, thrust_n)``; returns ``(h (3,), H (3x17 row-major))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, thrust_n = u
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = v_n - wind_n
     t1 = v_e - wind_e
-    t2 = r00*t0 + r01*t1 + r02*v_d
-    t3 = body_drag_per_m*abs(t2)
-    t4 = 1/mass_kg
-    t5 = p_e*r01
-    t6 = p_d**2
-    t7 = p_e**2
-    t8 = p_n**2
-    t9 = t7 + t8
-    t10 = t6 + t9
-    t11 = 1/math.sqrt(t10)
-    t12 = t11*tension
-    t13 = p_n*r00
-    t14 = math.sqrt(t9)
-    t15 = t14/weight_n_per_m
-    t16 = t12*t15
-    t17 = math.sqrt(p_d*(p_d - 2*t16))
-    t18 = t17*weight_n_per_m
-    t19 = r10*t0 + r11*t1 + r12*v_d
-    t20 = body_drag_per_m*abs(t19)
-    t21 = p_e*r11
-    t22 = p_n*r10
-    t23 = t4*thrust_n
-    t24 = p_e*r21
-    t25 = p_n*r20
-    t26 = 1/t10
-    t27 = p_n*t26
-    t28 = t26*t8
-    t29 = 1/t17
-    t30 = r02*t29
-    t31 = p_d*(t14*t26 - 1/t14)
-    t32 = t30*t31
-    t33 = t11*t4
-    t34 = t33*tension
-    t35 = p_e*t26
-    t36 = t26*t7
-    t37 = tension/t10**(3/2)
-    t38 = p_d*t37
-    t39 = weight_n_per_m*(p_d + t15*t37*t6 - t16)
-    t40 = body_drag_per_m*t2*(0.0 if t2 == 0 else math.copysign(1, t2)) + drag_per_s + t3
-    t41 = r00*t40
-    t42 = r01*t40
-    t43 = p_d*t14
-    t44 = r12*t29
-    t45 = t31*t44
-    t46 = body_drag_per_m*t19*(0.0 if t19 == 0 else math.copysign(1, t19)) + drag_per_s + t20
-    t47 = r10*t46
-    t48 = r11*t46
-    t49 = r22*t29
-    t50 = t31*t49
-    return (b_x - drag_per_s*t2 - t2*t3 - t4*(-r02*t18 + t12*t13 + t12*t5), b_y - drag_per_s*t19 - t19*t20 - t4*(-r12*t18 + t12*t21 + t12*t22), b_z - scale*t23 - t4*(-r22*t18 + t12*t24 + t12*t25),), (t34*(p_n*t32 + r00*t28 - r00 + t27*t5), t34*(p_e*t32 + r01*t36 - r01 + t13*t35), t4*(t13*t38 + t30*t39 + t38*t5), -t41, -t42, -r02*t40, -t33*(t13 + t30*t43 + t5), 0, 1, 0, 0, t41, t42, 0, 0, 0, 0, t34*(p_n*t45 + r10*t28 - r10 + t21*t27), t34*(p_e*t45 + r11*t36 - r11 + t22*t35), t4*(t21*t38 + t22*t38 + t39*t44), -t47, -t48, -r12*t46, -t33*(t21 + t22 + t43*t44), 0, 0, 1, 0, t47, t48, 0, 0, 0, 0, t34*(p_n*t50 + r20*t28 - r20 + t24*t27), t34*(p_e*t50 + r21*t36 - r21 + t25*t35), t4*(t24*t38 + t25*t38 + t39*t49), 0, 0, 0, -t33*(t24 + t25 + t43*t49), -t23, 0, 0, 1, 0, 0, 0, 0, 0, 0,)
+    t2 = 1/mass_kg
+    t3 = p_e*r01
+    t4 = p_d**2
+    t5 = p_e**2
+    t6 = p_n**2
+    t7 = t5 + t6
+    t8 = t4 + t7
+    t9 = 1/math.sqrt(t8)
+    t10 = t9*tension
+    t11 = p_n*r00
+    t12 = math.sqrt(t7)
+    t13 = t12/weight_n_per_m
+    t14 = t10*t13
+    t15 = math.sqrt(p_d*(p_d - 2*t14))
+    t16 = t15*weight_n_per_m
+    t17 = p_e*r11
+    t18 = p_n*r10
+    t19 = t2*thrust_n
+    t20 = p_e*r21
+    t21 = p_n*r20
+    t22 = 1/t8
+    t23 = p_n*t22
+    t24 = t22*t6
+    t25 = 1/t15
+    t26 = r02*t25
+    t27 = p_d*(t12*t22 - 1/t12)
+    t28 = t26*t27
+    t29 = t2*t9
+    t30 = t29*tension
+    t31 = p_e*t22
+    t32 = t22*t5
+    t33 = tension/t8**(3/2)
+    t34 = p_d*t33
+    t35 = weight_n_per_m*(p_d + t13*t33*t4 - t14)
+    t36 = drag_per_s*r00
+    t37 = drag_per_s*r01
+    t38 = p_d*t12
+    t39 = r12*t25
+    t40 = t27*t39
+    t41 = drag_per_s*r10
+    t42 = drag_per_s*r11
+    t43 = r22*t25
+    t44 = t27*t43
+    return (b_x - drag_per_s*(r00*t0 + r01*t1 + r02*v_d) - t2*(-r02*t16 + t10*t11 + t10*t3), b_y - drag_per_s*(r10*t0 + r11*t1 + r12*v_d) - t2*(-r12*t16 + t10*t17 + t10*t18), b_z - scale*t19 - t2*(-r22*t16 + t10*t20 + t10*t21),), (t30*(p_n*t28 + r00*t24 - r00 + t23*t3), t30*(p_e*t28 + r01*t32 - r01 + t11*t31), t2*(t11*t34 + t26*t35 + t3*t34), -t36, -t37, -drag_per_s*r02, -t29*(t11 + t26*t38 + t3), 0, 1, 0, 0, t36, t37, 0, 0, 0, 0, t30*(p_n*t40 + r10*t24 - r10 + t17*t23), t30*(p_e*t40 + r11*t32 - r11 + t18*t31), t2*(t17*t34 + t18*t34 + t35*t39), -t41, -t42, -drag_per_s*r12, -t29*(t17 + t18 + t38*t39), 0, 0, 1, 0, t41, t42, 0, 0, 0, 0, t30*(p_n*t44 + r20*t24 - r20 + t20*t23), t30*(p_e*t44 + r21*t32 - r21 + t21*t31), t2*(t20*t34 + t21*t34 + t35*t43), 0, 0, 0, -t29*(t20 + t21 + t38*t43), -t19, 0, 0, 1, 0, 0, 0, 0, 0, 0,)
 
 
 def tension_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Load cell at the drone: ``|F_c|`` [N]; returns ``(h (1,), H (1x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = p_e**2
     t1 = p_d**2
     t2 = p_n**2
@@ -658,7 +616,7 @@ def tension_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float])
 def anchor_tension_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Winch's load cell at the anchor: ``|F_c| - w b`` [N]; returns ``(h (1,), H (1x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = p_d*weight_n_per_m
     t1 = p_e**2
     t2 = p_d**2
@@ -686,7 +644,7 @@ def anchor_tension_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[
 def cable_angle_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Ground-station cable angle as read: (elevation up, azimuth from north) plus their zero errors [rad]; returns ``(h (2,), H (2x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = p_e**2 + p_n**2
     t1 = 1/math.sqrt(p_d**2 + t0)
     t2 = t1*tension
@@ -698,7 +656,7 @@ def inertial(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tupl
     """Formulation (b): ``x' = f(x, u)`` with ``u = (R_v^b row-major, f_x, f_y, f_z)`` (accelerometer as the input); returns ``(x' (17,), dv'/dx (3x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     r00, r01, r02, r10, r11, r12, r20, r21, r22, f_x, f_y, f_z = u
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = b_x - f_x
     t1 = b_y - f_y
     t2 = b_z - f_z
@@ -708,7 +666,7 @@ def inertial(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tupl
 def winch_length_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Winch paid-out length as read: ``offset + (1 + scale)`` times the cable's arc length [m]; returns ``(h (1,), H (1x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = winch_scale + 1
     t1 = math.sqrt(p_d**2 + p_e**2 + p_n**2)
     t2 = t0/t1
@@ -718,7 +676,7 @@ def winch_length_straight(x: Sequence[float], u: Sequence[float], c: Sequence[fl
 def winch_length_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Winch paid-out length as read: ``offset + (1 + scale)`` times the cable's arc length [m]; returns ``(h (1,), H (1x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = winch_scale + 1
     t1 = p_d**2
     t2 = p_e**2 + p_n**2
@@ -743,7 +701,7 @@ def winch_length_catenary(x: Sequence[float], u: Sequence[float], c: Sequence[fl
 def winch_length_grounded(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Winch paid-out length as read: ``offset + (1 + scale)`` times the cable's arc length [m]; returns ``(h (1,), H (1x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     t0 = winch_scale + 1
     t1 = p_e**2 + p_n**2
     t2 = math.sqrt(t1)
@@ -777,7 +735,7 @@ def height_above_ground(x: Sequence[float], u: Sequence[float], c: Sequence[floa
     """Rangefinder: height above the ground ``-p_d + anchor_height_m`` [m] with ``u = (anchor_height_m,)``; returns ``(h (1,), H (1x17))``."""
     p_n, p_e, p_d, v_n, v_e, v_d, tension, scale, b_x, b_y, b_z, wind_n, wind_e, winch_offset, winch_scale, elevation_zero, azimuth_zero = x
     anchor_height_m, = u
-    mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m = c
+    mass_kg, drag_per_s, weight_n_per_m = c
     return (anchor_height_m - p_d,), (0, 0, -1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,)
 
 

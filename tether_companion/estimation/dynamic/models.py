@@ -130,17 +130,15 @@ class ModelConstants:
     weight_n_per_m: float
     length_m: float = math.nan
     tension_measured: bool = False
-    body_drag_per_m: float = 0.0
-    """The body's quadratic drag ``k = rho / (2 B)`` [1/m] (``config.body_drag_per_m``)."""
 
     @property
     def models(self) -> CableModels:
         """The variant for this cable's weight."""
         return CATENARY if self.weight_n_per_m > 0.0 else STRAIGHT
 
-    def values(self) -> tuple[float, float, float, float]:
+    def values(self) -> tuple[float, float, float]:
         """The tuple ``c``."""
-        return (self.mass_kg, self.drag_per_s, self.weight_n_per_m, self.body_drag_per_m)
+        return (self.mass_kg, self.drag_per_s, self.weight_n_per_m)
 
     def tension_at_drone(self, x: list[float], p: FloatArray) -> tuple[float, float]:
         """The cable's tension at the drone [N] and its variance [N^2] (first order through

@@ -86,7 +86,7 @@ def _arc_length_and_partials(
     chord = math.hypot(span_m, height_m)
     x[state.TENSION] = horizontal_n * chord / span_m
     try:
-        (length,), jacobian = CATENARY.winch_length(x, (), (0.0, 0.0, weight_n_per_m, 0.0))
+        (length,), jacobian = CATENARY.winch_length(x, (), (0.0, 0.0, weight_n_per_m))
     except UNDEFINED:
         return math.inf, math.nan, math.nan
     per_tension = jacobian[state.TENSION]
@@ -223,7 +223,7 @@ def grounded_plausible(
     low[state.TENSION] = max(
         tension - TENSION_SIGMAS * math.sqrt(tension_variance_n2), LOW_TENSION_FRACTION * tension
     )
-    return rests_on_ground(low, (0.0, 0.0, weight_n_per_m, 0.0))
+    return rests_on_ground(low, (0.0, 0.0, weight_n_per_m))
 
 
 def mixture_sag(

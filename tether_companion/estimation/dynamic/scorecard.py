@@ -37,11 +37,7 @@ from tether_companion.bench.estimators.registry import (
     register,
 )
 from tether_companion.estimation.config import EstimatorConfig
-from tether_companion.estimation.dynamic.config import (
-    DynamicFilterConfig,
-    body_drag_per_m,
-    drag_per_s,
-)
+from tether_companion.estimation.dynamic.config import DynamicFilterConfig, drag_per_s
 from tether_companion.estimation.dynamic.crlb import (
     TrueTrack,
     force_balance_at_truth,
@@ -115,10 +111,7 @@ def own_model_bound(
     dynamic = filter_config(context)
     vehicle = context.vehicle
     constants = ModelConstants(
-        vehicle.mass_kg,
-        drag_per_s(dynamic, vehicle),
-        dynamic.cable_weight_n_per_m,
-        body_drag_per_m=body_drag_per_m(vehicle),
+        vehicle.mass_kg, drag_per_s(dynamic, vehicle), dynamic.cable_weight_n_per_m
     )
     track = TrueTrack(
         specific_force_body_mps2=record.specific_force_body_mps2,

@@ -22,7 +22,7 @@ FloatArray = NDArray[np.float64]
 NAME = "rangefinder"
 EXCESS_TIME_CONSTANT_S = 2.0
 """Averaging time of the innovations' excess variance [s] (40 readings at 20 Hz)."""
-_NO_CONSTANTS = (0.0, 0.0, 0.0, 0.0)
+_NO_CONSTANTS = (0.0, 0.0, 0.0)
 """The height model uses none of the constants ``c``."""
 
 

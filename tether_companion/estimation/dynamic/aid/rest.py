@@ -53,7 +53,7 @@ REST_SPECIFIC_FORCE_TOLERANCE_MPS2 = 2.0
 vibration and a landing gear rocking stay well within it, a fall reads ``g`` less."""
 NEW_REST_AFTER_S = 1.0
 """A rest sample this long [s] after the last one starts a new rest (a new touchdown)."""
-_NO_CONSTANTS = (0.0, 0.0, 0.0, 0.0)
+_NO_CONSTANTS = (0.0, 0.0, 0.0)
 """The height model uses none of the constants ``c``."""
 
 

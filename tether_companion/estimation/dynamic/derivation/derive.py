@@ -29,15 +29,9 @@ The model (SI units, NED world, FRD body, ``R = R_v^b`` maps NED to body; state 
   grounded), chosen in ``models.py``; at ``x_t = 0`` the two coincide.
 * Rotor drag, body horizontal (ArduPilot's EK3_DRAG_MCOEF "momentum drag"):
   ``a_drag = -mu (R (v - w))_{x,y}`` with ``w = (w_n, w_e, 0)`` the wind, ``mu`` [1/s].
-* The body's (bluff-body) drag, quadratic per body-horizontal axis, as the simulator's and the
-  vehicle profile's (``physics/aerodynamics.py``): ``a_body = -k u |u|`` for each of the air
-  velocity's body x and y parts ``u``, ``k = rho / (2 B)`` [1/m] with ``B`` the profile's
-  ballistic coefficient (``body_drag_per_m``; 0 without one). Left out, a linear model fits the
-  quadratic drag in a steady wind by a wind too strong along it (``k u^2 / mu``: 0.6 m/s at
-  1.8 m/s of wind on the realistic quad) and trades it against the cable's pull.
 * Thrust ``s T`` along body ``-z`` (``T`` from the PWM through the thrust map, ``s`` state).
-* Specific force, body: ``f = (0, 0, -s T/m) + a_drag + a_body + R F_c / m``; the
-  accelerometer reads ``f + b`` (``b`` state, body).
+* Specific force, body: ``f = (0, 0, -s T/m) + a_drag + R F_c / m``; the accelerometer reads
+  ``f + b`` (``b`` state, body).
 * Formulation (a), force balance as the process: ``p' = v``,
   ``v' = R^T f + g e_d`` (``m a = T + F_c + F_drag + m g``); accelerometer as a measurement.
 * Formulation (b), accelerometer as the input: ``p' = v``, ``v' = R^T (f_meas - b) + g e_d``;
@@ -91,13 +85,13 @@ N_CONSTANT = N - 6
 R = sp.Matrix(3, 3, sp.symbols("r00 r01 r02 r10 r11 r12 r20 r21 r22", real=True))
 THRUST = sp.Symbol("thrust_n", real=True)
 F_MEAS = sp.Matrix(sp.symbols("f_x f_y f_z", real=True))
-MASS, DRAG, WPL, ANCHOR_H, BODY_DRAG = sp.symbols(
-    "mass_kg drag_per_s weight_n_per_m anchor_height_m body_drag_per_m", real=True
+MASS, DRAG, WPL, ANCHOR_H = sp.symbols(
+    "mass_kg drag_per_s weight_n_per_m anchor_height_m", real=True
 )
 G = sp.Float(GRAVITY_MPS2)
 E_D = sp.Matrix([0, 0, 1])
 
-CONSTANT_NAMES = ("mass_kg", "drag_per_s", "weight_n_per_m", "body_drag_per_m")
+CONSTANT_NAMES = ("mass_kg", "drag_per_s", "weight_n_per_m")
 """Order of the constants tuple ``c`` every generated model takes."""
 
 
@@ -147,15 +141,9 @@ def cable_force_ned(cable: str) -> sp.Matrix:
 
 
 def rotor_specific_force_body() -> sp.Matrix:
-    """Thrust, rotor drag and the body's quadratic drag per unit mass, FRD body [m/s^2]."""
+    """Thrust and rotor drag per unit mass, FRD body [m/s^2]."""
     air = R * (V - WIND)
-    return sp.Matrix(
-        [
-            -DRAG * air[0] - BODY_DRAG * air[0] * sp.Abs(air[0]),
-            -DRAG * air[1] - BODY_DRAG * air[1] * sp.Abs(air[1]),
-            -SCALE * THRUST / MASS,
-        ]
-    )
+    return sp.Matrix([-DRAG * air[0], -DRAG * air[1], -SCALE * THRUST / MASS])
 
 
 def specific_force_body(cable: str) -> sp.Matrix:
@@ -344,7 +332,7 @@ Regenerate with ``python -m tether_companion.estimation.dynamic.derivation.deriv
 models and their meaning are documented there. sympy {version}.
 
 Every function takes the state ``x`` ({n} floats, layout in ``state.py``), the inputs ``u``
-and the constants ``c = (mass_kg, drag_per_s, weight_n_per_m, body_drag_per_m)`` and returns the
+and the constants ``c = (mass_kg, drag_per_s, weight_n_per_m)`` and returns the
 values and the Jacobian with respect to ``x`` (row-major, {n} columns).
 """
 

@@ -146,19 +146,3 @@ def test_the_estimator_hands_every_fused_reading_over(monkeypatch: pytest.Monkey
     assert estimator.health.range_fused > 20
     assert len(handed) == estimator.health.range_fused
     assert set(handed) == {R_M2}
-
-
-def test_on_a_cable_with_weight_the_readings_are_forgotten() -> None:
-    """The term's vertical plane is the straight cable's: a cable with weight takes no row."""
-    heavy = DynamicFilterConfig(cable_weight_n_per_m=0.0167 * 9.81)
-    bearing = BearingWindow(0.5, 1.0, 0.2, 1.0, 0.0, 0.0)
-    health = DynamicHealth()
-    health.winch_fused = 1
-    ranged = GroundStationInputs(heavy, bearing, health, SETTINGS, 0.0)
-    plain = GroundStationInputs(heavy, bearing, health, SETTINGS, 0.0)
-    for step in range(20):
-        t = 0.1 * step
-        ranged.add_height_reading(R_M2, t)
-        _angle_at(plain, t, 4.0)
-        _angle_at(ranged, t, 4.0)
-    assert _term_dd(ranged) == _term_dd(plain)

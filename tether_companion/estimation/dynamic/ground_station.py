@@ -131,9 +131,6 @@ class GroundStationInputs:
         """The rangefinder readings fused since the last fused angle: (time [s], noise
         variance [m^2]) (:meth:`add_height_reading`)."""
         self._correlation_s = dynamic.unmodelled_force_correlation_s
-        self._straight_cable = dynamic.cable_weight_n_per_m == 0.0
-        """Whether the term's vertical plane is the straight cable's (a weightless one): the
-        height's row narrows it only then (:meth:`_add_angle_information`)."""
         self._bearing = bearing
         self._health = health
         self._status_settings = status_settings
@@ -364,11 +361,7 @@ class GroundStationInputs:
         (docs/estimation-history.md, "The unmodelled term and the cable angle (nees10)").
         For the same reason the rangefinder readings fused since the last angle
         (:meth:`add_height_reading`) are a row on the height, ``(0, 0, -1)``, only with a
-        winch length, and only on a weightless cable: the term's vertical plane couples the
-        height to the range through the straight cable's geometry, and on a cable with
-        weight the held length moves the drone otherwise (measured: the fixed-length sagging
-        circle's load-cell kind went from withheld to 14 % published with 3.9 % of it beyond
-        3 sigma, tuning seeds 1-3). They are forgotten either way."""
+        winch length; they are forgotten either way."""
         _, jac_rows = self.cable_angle.evaluate(constants, np.array(x))
         jac = jac_rows.ravel().tolist()
         if not all(math.isfinite(v) for v in jac):
@@ -388,7 +381,7 @@ class GroundStationInputs:
             winch,
         )
         height_variance = self._height_row_variance(time_s, added[2][2])
-        if winch and self._straight_cable and height_variance < math.inf:
+        if winch and height_variance < math.inf:
             rows.append([0.0, 0.0, -1.0])
             variances.append(height_variance)
         self.position_information.add(rows, variances, time_s, added)

@@ -240,7 +240,6 @@ class DynamicTetherEstimator(InputFeed, GroundStationFeed):
         health.last_range_nis = self.bank.best.sensors["rangefinder"].last_nis
         if fused:
             health.range_fused += 1
-            self.ground_station.add_height_reading(self.rangefinder.noise_variance_m2, self._time_s)
         elif self.rangefinder.status.gated:
             health.range_gated = self.rangefinder.status.gated
 

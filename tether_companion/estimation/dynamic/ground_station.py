@@ -53,10 +53,7 @@ from tether_companion.estimation.dynamic.consistency import BearingWindow
 from tether_companion.estimation.dynamic.models import ModelConstants
 from tether_companion.estimation.dynamic.offset_term import offset_rows
 from tether_companion.estimation.dynamic.output import DynamicHealth
-from tether_companion.estimation.dynamic.position_information import (
-    PositionInformation,
-    kept_fraction,
-)
+from tether_companion.estimation.dynamic.position_information import PositionInformation
 from tether_companion.estimation.dynamic.published import StatusSettings
 
 ANGLE_FRESH_S = 1.0
@@ -70,11 +67,6 @@ the time at zero: a reading down to this many of its noise standard deviations b
 a measurement, lower a fault (dropped, counted). Dropping every negative reading fused only the
 upper part of the noise: on the fixed-length sagging circle (anchor tension ~0.07 N, the
 winch's 0.2 N of noise) the readings fused averaged ~0.19 N."""
-
-
-HEIGHT_READINGS_KEPT = 10.0
-"""Rangefinder readings older than this many unmodelled-force correlation times are dropped
-before the next angle (they tell ``rho^2`` < 1e-6 of the offset then)."""
 
 
 class GroundStationInputs:
@@ -127,10 +119,6 @@ class GroundStationInputs:
         angle's)."""
         self._elevation_noise_std_rad = 0.0
         """The last angle's elevation noise standard deviation [rad]."""
-        self._height_readings: list[tuple[float, float]] = []
-        """The rangefinder readings fused since the last fused angle: (time [s], noise
-        variance [m^2]) (:meth:`add_height_reading`)."""
-        self._correlation_s = dynamic.unmodelled_force_correlation_s
         self._bearing = bearing
         self._health = health
         self._status_settings = status_settings
@@ -277,38 +265,6 @@ class GroundStationInputs:
         watches (the filter restarts)."""
         self.position_information.clear()
         self.calibration_release.clear()
-        self._height_readings.clear()
-
-    def add_height_reading(self, noise_variance_m2: float, time_s: float) -> None:
-        """A rangefinder reading of noise ``noise_variance_m2`` [m^2] was fused at ``time_s``
-        [s]: it measures the height with an error that has nothing to do with the unmodelled
-        force, so with a winch length it narrows the unmodelled offset's down part as the
-        angle's rows do. The readings since the last fused angle go in with the next one as
-        one row on the height (:meth:`_height_row_variance`): rows added at the rangefinder's
-        own times would restart :class:`PositionInformation`'s clock at 20 Hz, whose
-        ``rho(dt)^2`` does not compose (measured: rows of no information at 20 Hz alone
-        narrowed the term by a quarter). Non-positive or non-finite values are ignored;
-        readings older than 10 correlation times are dropped."""
-        if not (0.0 < noise_variance_m2 < math.inf and math.isfinite(time_s)):
-            return
-        readings = self._height_readings
-        if readings and time_s - readings[0][0] > HEIGHT_READINGS_KEPT * self._correlation_s:
-            readings.pop(0)
-        readings.append((time_s, noise_variance_m2))
-
-    def _height_row_variance(self, time_s: float, offset_dd_m2: float) -> float:
-        """The noise variance [m^2] of one row ``(0, 0, -1)`` at ``time_s`` [s] worth the
-        rangefinder readings fused since the last angle (forgotten here), ``inf`` without
-        any. A reading ``dt`` old sees the offset's down part then, ``rho d_now`` plus a part
-        of variance ``(1 - rho^2) C_dd`` the offset has changed since (``offset_dd_m2``, the
-        term's ``C_dd`` now): as a reading of ``d_now`` it weighs ``rho^2 / (R + (1 - rho^2)
-        C_dd)`` (:func:`kept_fraction`); the readings' weights add."""
-        information = 0.0
-        for reading_s, variance in self._height_readings:
-            kept = kept_fraction(max(time_s - reading_s, 0.0), self._correlation_s)
-            information += kept / (variance + (1.0 - kept) * offset_dd_m2)
-        self._height_readings.clear()
-        return 1.0 / information if information > 0.0 else math.inf
 
     def _settle(self, bank: FilterBank, sensor: str, time_s: float, dof: int) -> None:
         """The best member's NIS of the ``sensor``'s sample just tested (``dof`` degrees of
@@ -358,10 +314,7 @@ class GroundStationInputs:
         the elevation the reading measures. Without a length the filter's range comes from
         the height through the elevation (``rho = h / tan(el)``), and the term's vertical part
         stands for that range's error, which the elevation does not remove in the filter
-        (docs/estimation-history.md, "The unmodelled term and the cable angle (nees10)").
-        For the same reason the rangefinder readings fused since the last angle
-        (:meth:`add_height_reading`) are a row on the height, ``(0, 0, -1)``, only with a
-        winch length; they are forgotten either way."""
+        (docs/estimation-history.md, "The unmodelled term and the cable angle (nees10)")."""
         _, jac_rows = self.cable_angle.evaluate(constants, np.array(x))
         jac = jac_rows.ravel().tolist()
         if not all(math.isfinite(v) for v in jac):
@@ -370,9 +323,9 @@ class GroundStationInputs:
         elevation_std, azimuth_std = CableAngleAid.noise_std_rad(elevation_rad, noise_std_rad)
         winch = bool(self._health.winch_fused)
         if winch:
-            rows, variances = [jac[0:3], jac[n : n + 3]], [elevation_std**2, azimuth_std**2]
+            rows, variances = (jac[0:3], jac[n : n + 3]), (elevation_std**2, azimuth_std**2)
         else:
-            rows, variances = [jac[n : n + 3]], [azimuth_std**2]
+            rows, variances = (jac[n : n + 3],), (azimuth_std**2,)
         added = offset_rows(  # as the published term takes it (offset_term.py)
             x,
             constants.weight_n_per_m,
@@ -380,10 +333,6 @@ class GroundStationInputs:
             self._winch_length_noise_std_m if winch else 0.0,
             winch,
         )
-        height_variance = self._height_row_variance(time_s, added[2][2])
-        if winch and height_variance < math.inf:
-            rows.append([0.0, 0.0, -1.0])
-            variances.append(height_variance)
         self.position_information.add(rows, variances, time_s, added)
 
 

@@ -64,15 +64,6 @@ ANGLE_EXCESS_TIME_CONSTANT_S = 2.0
 _ZERO6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
-def kept_fraction(dt_s: float, correlation_s: float) -> float:
-    """``a = rho(dt)^2``, ``rho = (1 + dt / tau) exp(-dt / tau)``: the share of the offset's
-    variance a reading ``dt_s`` [s] old still tells about it (``tau = correlation_s`` [s]; the
-    module docstring)."""
-    x = dt_s / correlation_s
-    rho = (1.0 + x) * math.exp(-x)
-    return rho * rho
-
-
 def _upper(rows: Rows) -> list[float]:
     return [rows[0][0], rows[0][1], rows[0][2], rows[1][1], rows[1][2], rows[2][2]]
 
@@ -148,12 +139,14 @@ class PositionInformation:
         self._excess = _ZERO6
 
     def _kept(self, time_s: float) -> float:
-        """The weight the last reading's covariance keeps at ``time_s`` [s]
-        (:func:`kept_fraction`)."""
+        """The weight ``a = rho(dt)^2``, ``rho = (1 + dt / tau) exp(-dt / tau)``, the last
+        reading's covariance keeps at ``time_s`` [s] (the module docstring)."""
         last = self._last_s
         if math.isnan(last) or not time_s > last:
             return 1.0
-        return kept_fraction(time_s - last, self._tau_s)
+        x = (time_s - last) / self._tau_s
+        rho = (1.0 + x) * math.exp(-x)
+        return rho * rho
 
     def add(
         self,

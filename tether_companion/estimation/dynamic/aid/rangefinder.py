@@ -52,8 +52,6 @@ class RangefinderAid:
         """Height variance [m^2] the innovations show beyond the filter's (published only)."""
         self.ground = GroundFootprint(terrain_std_m, terrain_correlation_m)
         """The ground's variance the height carries [m^2] (published only)."""
-        self.noise_variance_m2 = noise_variance_m2
-        """Reading noise [m^2]."""
         self._r = np.array([[noise_variance_m2]])
         self._u = [anchor_height_m]
         # the model is linear: its Jacobian is the same everywhere

@@ -1,5 +1,5 @@
-"""The optional C extension of the dynamic filter's generated models (everything else is in
-pyproject.toml).
+"""The optional C extensions of the dynamic filter's generated models and of the tension
+filter's generated predict/update (everything else is in pyproject.toml).
 
 ``tether_companion/estimation/dynamic/generated_core.c`` is written by the derivation
 (``python -m tether_companion.estimation.dynamic.derivation.derive``) next to the Python
@@ -18,6 +18,12 @@ setup(
             ["tether_companion/estimation/dynamic/generated_core.c"],
             extra_compile_args=["-ffp-contract=off", "-fno-builtin-pow"],
             optional=True,
-        )
+        ),
+        Extension(
+            "tether_companion.estimation._tension_core",
+            ["tether_companion/estimation/tension_core.c"],
+            extra_compile_args=["-ffp-contract=off"],
+            optional=True,
+        ),
     ]
 )

@@ -17,11 +17,17 @@ straight-line Python per filter, with ``A``, ``Q`` and ``R`` written in as liter
 derivative model's ``A`` is a companion matrix, its ``Q`` one non-zero entry). The covariance
 keeps its lower triangle, mirrored, so it is exactly symmetric. The state and covariance are
 flat row-major lists (``x`` n*3, ``P`` n*n).
+
+Where the optional C extension ``_tension_core`` is built (``setup.py``; not with
+``TETHER_PURE_PYTHON=1``) its twins of the two generated functions run instead: the same
+floats (``tension_core.c`` applies the generator's rules to ``A``, ``Q`` and ``R`` at run time,
+in the same order), the generated function called wherever they could differ.
 """
 
 from __future__ import annotations
 
 import functools
+import os
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,6 +35,14 @@ from numpy.typing import NDArray
 from tether_companion.estimation.scalar_update import compile_function, sum_of, times
 
 FloatArray = NDArray[np.float64]
+
+CORE = None
+"""The C extension ``_tension_core`` when it runs (None: the generated Python functions)."""
+if not os.environ.get("TETHER_PURE_PYTHON"):
+    try:
+        from tether_companion.estimation import _tension_core as CORE  # noqa: N812
+    except ImportError:
+        pass
 
 
 def _lower(n: int, name: str) -> list[str]:
@@ -111,8 +125,13 @@ class TensionKalmanFilter:
         self.R = float(measurement_variance_n2)
         self.n = self.A.shape[0]
         self._p0 = float(initial_variance_n2)
-        self._predict = _predict(_as_tuple(self.A), _as_tuple(self.Q))
+        a, q = _as_tuple(self.A), _as_tuple(self.Q)
+        self._predict = _predict(a, q)
         self._update = _update(self.n, self.R)
+        if CORE is not None:  # the same floats; the generated function where C could differ
+            flat_a, flat_q = sum(a, ()), sum(q, ())
+            self._predict = functools.partial(CORE.predict, self._predict, flat_a, flat_q)
+            self._update = functools.partial(CORE.update, self._update, self.R)
         self._x = [0.0] * (3 * self.n)
         self._p = self._initial_covariance()
         self.started = False

@@ -1,0 +1,254 @@
+/* The tension filter's predict and update (tension_filter.py) in C, float for float.
+ *
+ * tension_filter.py generates, per filter, straight-line Python for
+ *   predict:  x <- A x,  P <- A P A^T + Q   (lower triangle, mirrored)
+ *   update:   v = y - x_c, s = P_cc + R, g = P e_c / s, x <- x + g v^T,
+ *             P <- (I - g e_c^T) P (I - g e_c^T)^T + R g g^T   (lower triangle, mirrored)
+ * with A, Q and R written in as literals and the products with A's zeros left out (its
+ * ``times``/``sum_of``: a zero coefficient drops the term, 1 keeps the bare value, -1 negates
+ * it, an empty sum is 0.0). These functions take A, Q (and n, R) as arguments and apply the
+ * same rules at run time, so they do the generated function's IEEE double operations in the
+ * same order: with -ffp-contract=off (no fused multiply-add) the results are the same floats.
+ *
+ * Where C could differ they call the generated Python function given as their first argument
+ * and return what it returns (or raise what it raises): any input that is not a list/tuple of
+ * the right length of exact Python floats, and a zero innovation variance s (Python's float
+ * division raises ZeroDivisionError there). tests/test_tension_core.py compares the two.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#define MAX_TAPS 8
+
+/* Read `count` exact floats from a list or tuple into `out`; 0 when it is anything else. */
+static int
+read_floats(PyObject *seq, Py_ssize_t count, double *out)
+{
+    PyObject **items;
+    if (PyList_CheckExact(seq)) {
+        if (PyList_GET_SIZE(seq) != count)
+            return 0;
+        items = ((PyListObject *)seq)->ob_item;
+    }
+    else if (PyTuple_CheckExact(seq)) {
+        if (PyTuple_GET_SIZE(seq) != count)
+            return 0;
+        items = ((PyTupleObject *)seq)->ob_item;
+    }
+    else
+        return 0;
+    for (Py_ssize_t i = 0; i < count; i++) {
+        if (!PyFloat_CheckExact(items[i]))
+            return 0;
+        out[i] = PyFloat_AS_DOUBLE(items[i]);
+    }
+    return 1;
+}
+
+/* A new list of the `count` values (NULL on a memory error). */
+static PyObject *
+list_of(const double *values, Py_ssize_t count)
+{
+    PyObject *list = PyList_New(count);
+    if (list == NULL)
+        return NULL;
+    for (Py_ssize_t i = 0; i < count; i++) {
+        PyObject *f = PyFloat_FromDouble(values[i]);
+        if (f == NULL) {
+            Py_DECREF(list);
+            return NULL;
+        }
+        PyList_SET_ITEM(list, i, f);
+    }
+    return list;
+}
+
+/* A new list of the n*n entries of the symmetric matrix whose lower triangle is low[i*n + j]
+ * (j <= i), each entry above the diagonal the same object as its mirror (as the generated
+ * list names the same variable twice). */
+static PyObject *
+mirrored(const double *low, int n)
+{
+    PyObject *list = PyList_New((Py_ssize_t)n * n);
+    if (list == NULL)
+        return NULL;
+    for (int i = 0; i < n; i++) {
+        for (int j = 0; j <= i; j++) {
+            PyObject *f = PyFloat_FromDouble(low[i * n + j]);
+            if (f == NULL) {
+                Py_DECREF(list);
+                return NULL;
+            }
+            PyList_SET_ITEM(list, i * n + j, f);
+            if (j != i) {
+                Py_INCREF(f);
+                PyList_SET_ITEM(list, j * n + i, f);
+            }
+        }
+    }
+    return list;
+}
+
+/* sum_of(times(...)) as it accumulates: the term coefficient * value added to the running
+ * sum (`*started` 0: the term is the sum). */
+static inline void
+add_term(double *sum, int *started, double coefficient, double value)
+{
+    double term;
+    if (coefficient == 0.0)
+        return;
+    if (coefficient == 1.0)
+        term = value;
+    else if (coefficient == -1.0)
+        term = -value;
+    else
+        term = coefficient * value;
+    if (*started)
+        *sum = *sum + term;
+    else {
+        *sum = term;
+        *started = 1;
+    }
+}
+
+static PyObject *
+call_fallback(PyObject *fallback, PyObject *const *args, Py_ssize_t nargs)
+{
+    return PyObject_Vectorcall(fallback, args, (size_t)nargs, NULL);
+}
+
+/* predict(fallback, a, q, x, p) -> [x'], [P'] ; a and q the n*n row-major A and Q. */
+static PyObject *
+predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "predict(fallback, a, q, x, p)");
+        return NULL;
+    }
+    PyObject *fallback = args[0];
+    double a[MAX_TAPS * MAX_TAPS], q[MAX_TAPS * MAX_TAPS], p[MAX_TAPS * MAX_TAPS];
+    double x[MAX_TAPS * 3], m[MAX_TAPS * MAX_TAPS], new_x[MAX_TAPS * 3];
+    double low[MAX_TAPS * MAX_TAPS];
+    Py_ssize_t nn = PyTuple_CheckExact(args[1]) ? PyTuple_GET_SIZE(args[1]) : -1;
+    int n = 0;
+    while (n <= MAX_TAPS && (Py_ssize_t)n * n < nn)
+        n++;
+    if (n < 1 || n > MAX_TAPS || (Py_ssize_t)n * n != nn || !read_floats(args[1], nn, a)
+        || !read_floats(args[2], nn, q) || !read_floats(args[3], 3 * n, x)
+        || !read_floats(args[4], nn, p))
+        return call_fallback(fallback, args + 3, 2);
+    for (int i = 0; i < n; i++) {
+        for (int k = 0; k < 3; k++) {
+            double sum = 0.0;
+            int started = 0;
+            for (int j = 0; j < n; j++)
+                add_term(&sum, &started, a[i * n + j], x[j * 3 + k]);
+            new_x[i * 3 + k] = sum;
+        }
+    }
+    for (int i = 0; i < n; i++) { /* M = A P */
+        for (int j = 0; j < n; j++) {
+            double sum = 0.0;
+            int started = 0;
+            for (int k = 0; k < n; k++)
+                add_term(&sum, &started, a[i * n + k], p[k * n + j]);
+            m[i * n + j] = sum;
+        }
+    }
+    for (int i = 0; i < n; i++) { /* M A^T + Q, lower triangle */
+        for (int j = 0; j <= i; j++) {
+            double sum = 0.0;
+            int started = 0;
+            for (int k = 0; k < n; k++)
+                add_term(&sum, &started, a[j * n + k], m[i * n + k]);
+            if (q[i * n + j] != 0.0) {
+                sum = started ? sum + q[i * n + j] : q[i * n + j];
+            }
+            low[i * n + j] = sum;
+        }
+    }
+    PyObject *xs = list_of(new_x, 3 * n);
+    if (xs == NULL)
+        return NULL;
+    PyObject *ps = mirrored(low, n);
+    if (ps == NULL) {
+        Py_DECREF(xs);
+        return NULL;
+    }
+    PyObject *result = PyTuple_Pack(2, xs, ps);
+    Py_DECREF(xs);
+    Py_DECREF(ps);
+    return result;
+}
+
+/* update(fallback, r, x, p, y0, y1, y2) -> [x'], [P'], [v0, v1, v2] ; n from len(p). */
+static PyObject *
+update(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 7) {
+        PyErr_SetString(PyExc_TypeError, "update(fallback, r, x, p, y0, y1, y2)");
+        return NULL;
+    }
+    PyObject *fallback = args[0];
+    double x[MAX_TAPS * 3], p[MAX_TAPS * MAX_TAPS], b[MAX_TAPS * MAX_TAPS];
+    double low[MAX_TAPS * MAX_TAPS], g[MAX_TAPS], new_x[MAX_TAPS * 3], v[3], y[3];
+    Py_ssize_t nn = PyList_CheckExact(args[3]) ? PyList_GET_SIZE(args[3])
+                    : PyTuple_CheckExact(args[3]) ? PyTuple_GET_SIZE(args[3]) : -1;
+    int n = 0;
+    while (n <= MAX_TAPS && (Py_ssize_t)n * n < nn)
+        n++;
+    if (n < 1 || n > MAX_TAPS || (Py_ssize_t)n * n != nn || !PyFloat_CheckExact(args[1])
+        || !read_floats(args[2], 3 * n, x) || !read_floats(args[3], nn, p)
+        || !PyFloat_CheckExact(args[4]) || !PyFloat_CheckExact(args[5])
+        || !PyFloat_CheckExact(args[6]))
+        return call_fallback(fallback, args + 2, 5);
+    double r = PyFloat_AS_DOUBLE(args[1]);
+    int c = n - 1;
+    for (int k = 0; k < 3; k++) {
+        y[k] = PyFloat_AS_DOUBLE(args[4 + k]);
+        v[k] = y[k] - x[c * 3 + k];
+    }
+    double s = p[c * n + c] + r;
+    if (s == 0.0) /* Python raises ZeroDivisionError: let it */
+        return call_fallback(fallback, args + 2, 5);
+    for (int i = 0; i < n; i++)
+        g[i] = p[i * n + c] / s;
+    for (int i = 0; i < n; i++)
+        for (int k = 0; k < 3; k++)
+            new_x[i * 3 + k] = x[i * 3 + k] + g[i] * v[k];
+    for (int i = 0; i < n; i++) /* B = (I - g e_c^T) P */
+        for (int j = 0; j < n; j++)
+            b[i * n + j] = p[i * n + j] - g[i] * p[c * n + j];
+    for (int i = 0; i < n; i++) /* B (I - g e_c^T)^T + R g g^T, lower triangle */
+        for (int j = 0; j <= i; j++)
+            low[i * n + j] = b[i * n + j] - b[i * n + c] * g[j] + r * g[i] * g[j];
+    PyObject *xs = list_of(new_x, 3 * n);
+    PyObject *ps = xs == NULL ? NULL : mirrored(low, n);
+    PyObject *vs = ps == NULL ? NULL : list_of(v, 3);
+    PyObject *result = vs == NULL ? NULL : PyTuple_Pack(3, xs, ps, vs);
+    Py_XDECREF(xs);
+    Py_XDECREF(ps);
+    Py_XDECREF(vs);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"predict", (PyCFunction)(void (*)(void))predict, METH_FASTCALL,
+     "predict(fallback, a, q, x, p): the generated predict(x, p) of A = a, Q = q (n*n "
+     "row-major tuples of floats)."},
+    {"update", (PyCFunction)(void (*)(void))update, METH_FASTCALL,
+     "update(fallback, r, x, p, y0, y1, y2): the generated update(x, p, y0, y1, y2) of R = r."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module_def = {
+    PyModuleDef_HEAD_INIT, "_tension_core",
+    "The tension filter's generated predict and update in C (tension_filter.py's twins).", -1,
+    methods,
+};
+
+PyMODINIT_FUNC
+PyInit__tension_core(void)
+{
+    return PyModule_Create(&module_def);
+}

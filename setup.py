@@ -1,5 +1,6 @@
-"""The optional C extensions of the dynamic filter's generated models and of the tension
-filter's generated predict/update (everything else is in pyproject.toml).
+"""The optional C extensions (everything else is in pyproject.toml): the dynamic filter's
+generated models, the tension filter's generated predict/update (``tension_core.c``) and the
+published bound approximation's step (``bound_core.c``).
 
 ``tether_companion/estimation/dynamic/generated_core.c`` is written by the derivation
 (``python -m tether_companion.estimation.dynamic.derivation.derive``) next to the Python
@@ -22,6 +23,12 @@ setup(
         Extension(
             "tether_companion.estimation._tension_core",
             ["tether_companion/estimation/tension_core.c"],
+            extra_compile_args=["-ffp-contract=off"],
+            optional=True,
+        ),
+        Extension(
+            "tether_companion.estimation.dynamic._bound_core",
+            ["tether_companion/estimation/dynamic/bound_core.c"],
             extra_compile_args=["-ffp-contract=off"],
             optional=True,
         ),

@@ -10,6 +10,7 @@ where it could have been built (a C compiler and the Python headers here) or wit
 from __future__ import annotations
 
 import functools
+import math
 import os
 import struct
 
@@ -63,8 +64,8 @@ def _matrix(rng: np.random.Generator, n: int) -> tuple[tuple[float, ...], ...]:
 def _floats(rng: np.random.Generator, count: int) -> list[float]:
     scale = 10.0 ** rng.uniform(-6, 6, count)
     values = [float(v) for v in rng.normal(0.0, 1.0, count) * scale]
-    for i in rng.integers(0, count, rng.integers(0, 3)):  # exact zeros too
-        values[i] = 0.0 if rng.integers(0, 2) else -0.0
+    for i in rng.integers(0, count, rng.integers(0, 3)):  # zeros, now and then NaN or inf
+        values[i] = [0.0, -0.0, 0.0, -0.0, math.nan, math.inf, -math.inf][rng.integers(0, 7)]
     return values
 
 
@@ -81,8 +82,9 @@ def _pair(a, q, r):
 @pytest.mark.parametrize("n", [1, 2, 3, 4])
 def test_c_predict_and_update_equal_the_generated_functions_bit_for_bit(n, rng):
     """Random A (with 0, -0, +-1 entries, which the generator leaves out or writes bare), Q,
-    R, states, covariances and observations: C's results are the generated function's floats
-    (a mutation of one operation's order in tension_core.c fails this)."""
+    R, states, covariances and observations (with zeros, NaNs, infinities): C's results are
+    the generated function's floats (a mutation of one operation's order in tension_core.c
+    fails this)."""
     for _ in range(300):
         a, q = _matrix(rng, n), _matrix(rng, n)
         r = float(10.0 ** rng.uniform(-4, 2))

@@ -12,11 +12,12 @@
  *
  * Where C could differ they call the generated Python function given as their first argument
  * and return what it returns (or raise what it raises): any input that is not a list/tuple of
- * the right length of exact Python floats, and a zero innovation variance s (Python's float
- * division raises ZeroDivisionError there). tests/test_tension_core.py compares the two.
+ * the right length of exact Python floats, a zero innovation variance s (Python's float
+ * division raises ZeroDivisionError there) and any non-finite result (NaN bits). tests/test_tension_core.py compares the two.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <math.h>
 
 #define MAX_TAPS 8
 
@@ -111,6 +112,23 @@ add_term(double *sum, int *started, double coefficient, double value)
     }
 }
 
+/* Whether the state's `count` values and the covariance's lower triangle are finite. A NaN's
+ * sign and payload are the operand order's, which the compiler may swap in a commutative
+ * product: a non-finite result is left to Python (finite results come from finite operands
+ * only, and IEEE fixes those bits). */
+static int
+all_finite(const double *x, int count, const double *low, int n)
+{
+    for (int i = 0; i < count; i++)
+        if (!isfinite(x[i]))
+            return 0;
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j <= i; j++)
+            if (!isfinite(low[i * n + j]))
+                return 0;
+    return 1;
+}
+
 static PyObject *
 call_fallback(PyObject *fallback, PyObject *const *args, Py_ssize_t nargs)
 {
@@ -167,6 +185,8 @@ predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             low[i * n + j] = sum;
         }
     }
+    if (!all_finite(new_x, 3 * n, low, n))
+        return call_fallback(fallback, args + 3, 2);
     PyObject *xs = list_of(new_x, 3 * n);
     if (xs == NULL)
         return NULL;
@@ -222,6 +242,8 @@ update(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     for (int i = 0; i < n; i++) /* B (I - g e_c^T)^T + R g g^T, lower triangle */
         for (int j = 0; j <= i; j++)
             low[i * n + j] = b[i * n + j] - b[i * n + c] * g[j] + r * g[i] * g[j];
+    if (!all_finite(new_x, 3 * n, low, n) || !isfinite(v[0] + v[1] + v[2]))
+        return call_fallback(fallback, args + 2, 5);
     PyObject *xs = list_of(new_x, 3 * n);
     PyObject *ps = xs == NULL ? NULL : mirrored(low, n);
     PyObject *vs = ps == NULL ? NULL : list_of(v, 3);

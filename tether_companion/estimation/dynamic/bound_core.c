@@ -1,0 +1,162 @@
+/* published_bound.stepped_terms in C, float for float.
+ *
+ * The published estimate's approximation steps the mixture's state over the batch and bounds
+ * its position block (published_bound.py): every statement of stepped_terms here, the same
+ * IEEE double operations in the same order (Python's left-to-right sums, `max` written out as
+ * comparisons that keep the first value unless a later one is greater, NaN included), built
+ * with -ffp-contract=off (no fused multiply-add), so the results are the same floats.
+ *
+ * Where C could differ it calls the Python function given as its first argument and returns
+ * what it returns (or raises what it raises): any argument that is not an exact float, or a
+ * list/tuple of the length and exact floats the statements read, and any non-finite result
+ * (NaN bits). Python's float +, -, *, abs and comparisons never raise, so there is no other
+ * case. tests/test_bound_core.py compares.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+
+/* The items of a list or tuple and its length (NULL: neither). */
+static PyObject **
+items_of(PyObject *seq, Py_ssize_t *size)
+{
+    if (PyList_CheckExact(seq)) {
+        *size = PyList_GET_SIZE(seq);
+        return ((PyListObject *)seq)->ob_item;
+    }
+    if (PyTuple_CheckExact(seq)) {
+        *size = PyTuple_GET_SIZE(seq);
+        return ((PyTupleObject *)seq)->ob_item;
+    }
+    return NULL;
+}
+
+/* Items first..first+count-1 of a list/tuple of at least `least` (exactly, with `exact`)
+ * items, all exact floats, into out; 0 otherwise. */
+static int
+floats_at(PyObject *seq, Py_ssize_t least, int exact, Py_ssize_t first, Py_ssize_t count,
+          double *out)
+{
+    Py_ssize_t size;
+    PyObject **items = items_of(seq, &size);
+    if (items == NULL || size < least || (exact && size != least))
+        return 0;
+    for (Py_ssize_t i = 0; i < count; i++) {
+        PyObject *item = items[first + i];
+        if (!PyFloat_CheckExact(item))
+            return 0;
+        out[i] = PyFloat_AS_DOUBLE(item);
+    }
+    return 1;
+}
+
+static int
+float_of(PyObject *value, double *out)
+{
+    if (!PyFloat_CheckExact(value))
+        return 0;
+    *out = PyFloat_AS_DOUBLE(value);
+    return 1;
+}
+
+/* stepped_terms(fallback, x, t, d_p, d_v, b, b_v, sd, position_sd, velocity_sd, q, linear,
+ * quadratic, block) -> (x, north, north_east, east, down, spread, moved, row_sum, offset) */
+static PyObject *
+stepped_terms(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 14) {
+        PyErr_SetString(PyExc_TypeError, "stepped_terms takes the fallback and 13 arguments");
+        return NULL;
+    }
+    double xs[11], t, d_p[3], d_v[3], b[9], b_v[9], sd[3], position_sd, velocity_sd, q[3];
+    double linear[4], quadratic[4], block[4];
+    Py_ssize_t n_x;
+    PyObject **x_items = items_of(args[1], &n_x);
+    if (x_items == NULL || !floats_at(args[1], 11, 0, 0, 11, xs) || !float_of(args[2], &t)
+        || !floats_at(args[3], 3, 1, 0, 3, d_p) || !floats_at(args[4], 3, 1, 0, 3, d_v)
+        || !floats_at(args[5], 9, 1, 0, 9, b) || !floats_at(args[6], 9, 1, 0, 9, b_v)
+        || !floats_at(args[7], 11, 0, 8, 3, sd) || !float_of(args[8], &position_sd)
+        || !float_of(args[9], &velocity_sd) || !floats_at(args[10], 3, 0, 0, 3, q)
+        || !floats_at(args[11], 4, 1, 0, 4, linear) || !floats_at(args[12], 4, 1, 0, 4, quadratic)
+        || !floats_at(args[13], 4, 1, 0, 4, block))
+        return PyObject_Vectorcall(args[0], args + 1, 13, NULL);
+
+    double b0 = xs[8], b1 = xs[9], b2 = xs[10];
+    double v0 = xs[3], v1 = xs[4], v2 = xs[5];
+    double nx[6];
+    nx[0] = xs[0] + t * v0 + d_p[0] + (b[0] * b0 + b[1] * b1 + b[2] * b2);
+    nx[1] = xs[1] + t * v1 + d_p[1] + (b[3] * b0 + b[4] * b1 + b[5] * b2);
+    nx[2] = xs[2] + t * v2 + d_p[2] + (b[6] * b0 + b[7] * b1 + b[8] * b2);
+    nx[3] = v0 + d_v[0] + (b_v[0] * b0 + b_v[1] * b1 + b_v[2] * b2);
+    nx[4] = v1 + d_v[1] + (b_v[3] * b0 + b_v[4] * b1 + b_v[5] * b2);
+    nx[5] = v2 + d_v[2] + (b_v[6] * b0 + b_v[7] * b1 + b_v[8] * b2);
+    double a[9], av[9], o[6];
+    for (int i = 0; i < 9; i++) {
+        a[i] = fabs(b[i]);
+        av[i] = fabs(b_v[i]);
+    }
+    double s8 = sd[0], s9 = sd[1], s10 = sd[2];
+    double f0 = a[0] * s8 + a[1] * s9 + a[2] * s10;
+    double f1 = a[3] * s8 + a[4] * s9 + a[5] * s10;
+    double f2 = a[6] * s8 + a[7] * s9 + a[8] * s10;
+    double spread = f1 > f0 ? f1 : f0;
+    double f = f2 > spread ? f2 : spread;
+    double moved = f * (2.0 * (position_sd + t * velocity_sd) + f);
+    double row_sum = 1.0 + t + (a[0] + a[1] + a[2] + a[3] + a[4] + a[5] + a[6] + a[7] + a[8]);
+    row_sum += av[0] + av[1] + av[2] + av[3] + av[4] + av[5] + av[6] + av[7] + av[8];
+    for (int i = 0; i < 3; i++) {
+        o[i] = fabs(d_p[i]);
+        o[3 + i] = fabs(d_v[i]);
+    }
+    double offset = o[1] > o[0] ? o[1] : o[0];
+    for (int i = 2; i < 6; i++)
+        offset = o[i] > offset ? o[i] : offset;
+    double north = block[0] + (t * (linear[0] + t * quadratic[0]) + t * q[0]);
+    double north_east = block[1] + t * (linear[1] + t * quadratic[1]);
+    double east = block[2] + (t * (linear[2] + t * quadratic[2]) + t * q[1]);
+    double down = block[3] + (t * (linear[3] + t * quadratic[3]) + t * q[2]);
+    /* A NaN's sign and payload are the operand order's, which the compiler may swap in a
+     * commutative product: a non-finite result is left to Python (finite results come from
+     * finite operands only, and IEEE fixes those bits). */
+    if (!isfinite(nx[0] + nx[1] + nx[2] + nx[3] + nx[4] + nx[5] + north + north_east + east
+                  + down + spread + moved + row_sum + offset))
+        return PyObject_Vectorcall(args[0], args + 1, 13, NULL);
+
+    PyObject *x = PyList_New(n_x); /* list(x) with its first six replaced */
+    if (x == NULL)
+        return NULL;
+    for (Py_ssize_t i = 0; i < n_x; i++) {
+        PyObject *item;
+        if (i < 6) {
+            item = PyFloat_FromDouble(nx[i]);
+            if (item == NULL) {
+                Py_DECREF(x);
+                return NULL;
+            }
+        }
+        else {
+            item = x_items[i];
+            Py_INCREF(item);
+        }
+        PyList_SET_ITEM(x, i, item);
+    }
+    return Py_BuildValue("(Ndddddddd)", x, north, north_east, east, down, spread, moved,
+                         row_sum, offset);
+}
+
+static PyMethodDef methods[] = {
+    {"stepped_terms", (PyCFunction)(void (*)(void))stepped_terms, METH_FASTCALL,
+     "stepped_terms(fallback, *args): published_bound.stepped_terms(*args) in C."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module_def = {
+    PyModuleDef_HEAD_INIT, "_bound_core",
+    "published_bound.stepped_terms in C (the Python function's twin).", -1, methods,
+};
+
+PyMODINIT_FUNC
+PyInit__bound_core(void)
+{
+    return PyModule_Create(&module_def);
+}

@@ -32,5 +32,11 @@ setup(
             extra_compile_args=["-ffp-contract=off"],
             optional=True,
         ),
+        Extension(
+            "tether_companion.estimation.dynamic._member_core",
+            ["tether_companion/estimation/dynamic/member_core.c"],
+            extra_compile_args=["-ffp-contract=off"],
+            optional=True,
+        ),
     ]
 )

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from scipy.linalg.lapack import dpotrf
 
 from tether_companion.estimation.dynamic import state
-from tether_companion.estimation.dynamic.imu_batch import ImuBatch, product
+from tether_companion.estimation.dynamic.imu_batch import MEMBER_CORE, ImuBatch, product
 from tether_companion.estimation.dynamic.member import MemberFilter, hold_consider
 from tether_companion.estimation.ekf import MeasurementFunction, UpdateResult
 
@@ -184,6 +184,13 @@ class FilterBank:
         """Step every member over the IMU ticks summed in ``batch`` (inertial formulation;
         ``q`` the process noise spectral density (n, n)), all members in stacked arrays."""
         filters = self.filters
+        if MEMBER_CORE is not None:  # member by member, in C (imu_batch.MEMBER_CORE)
+            step = batch.step()
+            for kf in filters:
+                x = step.step_state(kf.x)
+                p, finite = step.step_member_covariance(kf.P, q)
+                kf.set_predicted(x, p, healthy=finite and math.isfinite(_sum(x)))
+            return
         xs = batch.step_state(_stack([kf.x for kf in filters]), q)
         ps = batch.step_covariance(_stack([kf.P for kf in filters]), q)
         # Phi P Phi^T + T Q stays positive definite: only finiteness is in doubt
@@ -215,11 +222,15 @@ class FilterBank:
             value, jacobian = measure(kf.x_values())
             innovations.append((z0 - value[0], z1 - value[1], z2 - value[2]))
             jacobians.append(jacobian)
-        p = _stack(priors)
-        h_jac = np.fromiter(chain.from_iterable(jacobians), float, members * 3 * _N)
-        h_jac = h_jac.reshape(p.shape[:-2] + (3, _N))
-        pht = product(p, h_jac.swapaxes(-1, -2))
-        s_values = product(h_jac, pht).reshape(members, 9).tolist()
+        projected = _project_each(priors, jacobians, 3)
+        if projected is None:  # numpy: all members stacked
+            p = _stack(priors)
+            h_jac = np.fromiter(chain.from_iterable(jacobians), float, members * 3 * _N)
+            h_jac = h_jac.reshape(p.shape[:-2] + (3, _N))
+            pht = product(p, h_jac.swapaxes(-1, -2))
+            s_values = product(h_jac, pht).reshape(members, 9).tolist()
+        else:
+            phts, s_values = projected
         results: list[UpdateResult | None] = []
         chosen = []
         for i, kf in enumerate(filters):
@@ -227,7 +238,14 @@ class FilterBank:
             results.append(result)
             if result is None:
                 chosen.append((i, solved))
-        if chosen:
+        if chosen and projected is not None:  # member by member, in C
+            for i, solved in chosen:
+                kf = filters[i]
+                x, p_new, checked = self._gain_update(
+                    kf.x, priors[i], phts[i], solved[1:10], solved[10:]
+                )
+                results[i] = kf.accept_update(sensor, solved[0], x, p_new, checked=checked)
+        elif chosen:
             index = [i for i, _ in chosen]
             if len(index) < members:
                 p, pht = p[index], pht[index]
@@ -235,18 +253,52 @@ class FilterBank:
             s_inv = np.array([solved[1:10] for _, solved in chosen]).reshape(p.shape[:-2] + (3, 3))
             w = np.array([solved[10:] for _, solved in chosen])
             prior_xs = _stack([filters[i].x for i in index])
-            xs = prior_xs + _apply(pht, w[0] if one else w)
-            ps = p - product(product(pht, s_inv), pht.swapaxes(-1, -2))
-            ps = ps + ps.swapaxes(-1, -2)  # a new array: no copy of the overlapping operand
-            ps *= 0.5
-            if self.consider is not None:
-                hold_consider(xs, ps, prior_xs, p, self.consider)
-            checked = _finite_and_definite(xs, ps)
+            xs, ps, checked = self._gain_numpy(prior_xs, p, pht, s_inv, w[0] if one else w)
             for (i, solved), x, p_new in zip(
                 chosen, _members(xs, one), _members(ps, one), strict=True
             ):
                 results[i] = filters[i].accept_update(sensor, solved[0], x, p_new, checked=checked)
         return results, jacobians, priors  # type: ignore[return-value]
+
+    def _gain_update(
+        self,
+        x: FloatArray,
+        p: FloatArray,
+        pht: FloatArray,
+        s_inv: Sequence[float],
+        w: Sequence[float],
+    ) -> tuple[FloatArray, FloatArray, bool]:
+        """One member's update with the gain ``K = P H^T S^-1``: ``x + P H^T w`` (``w = S^-1
+        y``), ``P - K (P H^T)^T`` made exactly symmetric, the consider states held, and whether
+        both are finite and the covariance positive definite: in C
+        (``MEMBER_CORE.update``), or, where it does not take them, :meth:`_gain_numpy`.
+        ``pht`` is ``P H^T`` (n, m), ``s_inv`` ``S^-1`` (m*m, row-major), ``w`` (m)."""
+        hold = self.consider
+        start, stop, _ = (_HOLD_NONE if hold is None else hold).indices(len(x))
+        x_new, p_new = _EMPTY(x.shape), _EMPTY(p.shape)
+        checked = MEMBER_CORE.update(  # type: ignore[union-attr]
+            x, p, pht, s_inv, w, start, stop, x_new, p_new
+        )
+        if checked is not None:
+            return x_new, p_new, checked
+        m = len(w)
+        return self._gain_numpy(x, p, pht, np.array(s_inv).reshape(m, m), np.array(w))
+
+    def _gain_numpy(
+        self, prior_xs: FloatArray, p: FloatArray, pht: FloatArray, s_inv: FloatArray, w: FloatArray
+    ) -> tuple[FloatArray, FloatArray, bool]:
+        """The update of stacked members (or one member's arrays) with ``K = P H^T S^-1``
+        (numpy; the reference of ``MEMBER_CORE.update``): states ``x + P H^T w``, covariances
+        ``P - K (P H^T)^T`` made exactly symmetric, the consider states held, and whether all
+        are finite and positive definite. ``pht`` (..., n, m), ``s_inv`` (..., m, m), ``w``
+        (..., m)."""
+        xs = prior_xs + _apply(pht, w)
+        ps = p - product(product(pht, s_inv), pht.swapaxes(-1, -2))
+        ps = ps + ps.swapaxes(-1, -2)  # a new array: no copy of the overlapping operand
+        ps *= 0.5
+        if self.consider is not None:
+            hold_consider(xs, ps, prior_xs, p, self.consider)
+        return xs, ps, _finite_and_definite(xs, ps)
 
     def update_scalar(
         self, sensor: str, z: float, measure: MeasurementFunction, r_variance: float
@@ -265,16 +317,28 @@ class FilterBank:
             value, jacobian = measure(kf.x)
             innovations.append(z - float(value[0]))
             jacobians.append(jacobian)
-        p = _stack(priors)
-        rows = np.array(jacobians).reshape(p.shape[:-2] + (_N,))
-        pht = _apply(p, rows)
-        s_values = ((pht * rows).sum(axis=-1) + r_variance).reshape(-1).tolist()
+        projected = _project_each(priors, jacobians, 1)
+        if projected is None:  # numpy: all members stacked
+            p = _stack(priors)
+            rows = np.array(jacobians).reshape(p.shape[:-2] + (_N,))
+            pht = _apply(p, rows)
+            s_values = ((pht * rows).sum(axis=-1) + r_variance).reshape(-1).tolist()
+        else:
+            phts = projected[0]
+            s_values = [s[0] + r_variance for s in projected[1]]
         results: list[UpdateResult | None] = [
             kf.test_scalar(sensor, y, s)
             for kf, y, s in zip(filters, innovations, s_values, strict=True)
         ]
         index = [i for i, result in enumerate(results) if result is None]
-        if index:
+        if index and projected is not None:  # member by member, in C
+            for i in index:
+                kf, s, y = filters[i], s_values[i], innovations[i]
+                x, p_new, checked = self._gain_update(
+                    kf.x, priors[i], phts[i], (1.0 / s,), (y / s,)
+                )
+                results[i] = kf.accept_update(sensor, y * y / s, x, p_new, checked=checked)
+        elif index:
             if len(index) < len(filters):
                 p, pht = p[index], pht[index]
             one = p.ndim == 2
@@ -430,6 +494,30 @@ def log_det_innovation(p: FloatArray, h_jac: FloatArray, r: FloatArray) -> float
     if info != 0:
         return math.nan
     return 2.0 * float(np.log(np.diag(chol)).sum())
+
+
+def _project_each(
+    priors: list[FloatArray], jacobians: Sequence[Sequence[float] | FloatArray], m: int
+) -> tuple[list[FloatArray], list[Sequence[float]]] | None:
+    """Each member's ``P H^T`` (n, m) and ``H P H^T`` (m*m, row-major) in C
+    (``MEMBER_CORE.project``), or None (numpy then) when the extension does not run or does not
+    take a member's arrays (``H`` (m*n) a list or tuple of numbers or a (m, n) float array)."""
+    if MEMBER_CORE is None:
+        return None
+    phts, s_values = [], []
+    for p, h_jac in zip(priors, jacobians, strict=True):
+        pht = _EMPTY((p.shape[0], m))
+        s = MEMBER_CORE.project(p, h_jac, pht)
+        if s is None:
+            return None
+        phts.append(pht)
+        s_values.append(s)
+    return phts, s_values
+
+
+_EMPTY = np.empty
+_HOLD_NONE = slice(0, 0)
+"""No consider state (``MEMBER_CORE.update``'s hold range)."""
 
 
 def _sum(array: FloatArray) -> float:

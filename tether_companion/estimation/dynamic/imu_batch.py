@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import operator
+import os
 from collections.abc import Sequence
 
 import numpy as np
@@ -62,6 +63,20 @@ def product(a: FloatArray, b: FloatArray) -> FloatArray:
 
 
 _DOT = np.dot
+_EMPTY = np.empty
+
+MEMBER_CORE = None
+"""The C extension ``_member_core`` (``member_core.c``) when it runs: one member's transition
+step, projection and gain update in C loops over the arrays' buffers, to 1e-12 relative of the
+numpy code here and in ``bank.py`` (the reference and the fallback; BLAS sums in its own order
+with its own fused multiply-adds, so not bit for bit). Built by setup.py where a compiler is;
+``TETHER_PURE_PYTHON=1`` keeps numpy."""
+
+if not os.environ.get("TETHER_PURE_PYTHON"):
+    try:
+        from tether_companion.estimation.dynamic import _member_core as MEMBER_CORE
+    except ImportError:
+        pass
 
 
 def batch_sums(
@@ -176,7 +191,12 @@ class BatchStep:
         return self._q_step
 
     def step_state(self, x: FloatArray) -> FloatArray:
-        """States (..., 17) stepped over the batch (new array): ``Phi x + (D_p, D_v, 0...)``."""
+        """States (..., 17) stepped over the batch (new array): ``Phi x + (D_p, D_v, 0...)``
+        (one state (17,): in C where :data:`MEMBER_CORE` runs and takes it)."""
+        if MEMBER_CORE is not None and x.ndim == 1:
+            out = _EMPTY(x.shape)
+            if MEMBER_CORE.step(self.phi, x, self.d_p, self.d_v, out) is not None:
+                return out
         out = product(x, self.phi.T)
         out += np.array((*self.d_p, *self.d_v, *_ZERO_STATE[6:]))
         return out
@@ -184,14 +204,25 @@ class BatchStep:
     def step_covariance(self, p: FloatArray, q: FloatArray) -> FloatArray:
         """``Phi P Phi^T + T Q`` (new array, exactly symmetric) for covariances ``p`` (..., 17,
         17) and the process noise spectral density ``q`` (17, 17)."""
+        return self.step_member_covariance(p, q)[0]
+
+    def step_member_covariance(self, p: FloatArray, q: FloatArray) -> tuple[FloatArray, bool]:
+        """:meth:`step_covariance` and whether it is finite (one covariance (17, 17): in C
+        where :data:`MEMBER_CORE` runs and takes it; the C product skips ``Phi``'s zeros)."""
         phi = self.phi
+        if MEMBER_CORE is not None and p.ndim == 2:
+            out = _EMPTY(p.shape)
+            finite = MEMBER_CORE.step_covariance(phi, p, q, self.duration_s, out)
+            if finite is not None:
+                return out, finite
         out = product(product(phi, p), phi.T)
         out = out + out.swapaxes(-1, -2)  # a new array: no copy of the overlapping operand
         out *= 0.5
         out += self.noise(q)
-        return out
+        return out, math.isfinite(_ADD_REDUCE(out, None))
 
 
+_ADD_REDUCE = np.add.reduce
 _NO_ARRAY = np.zeros((0, 0))
 _IDENTITY = np.eye(_N)
 """Copied for each ``Phi`` (cheaper than making it)."""

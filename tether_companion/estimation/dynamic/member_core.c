@@ -1,0 +1,374 @@
+/* The members' per-tick matrix arithmetic in C (the optional extension _member_core).
+ *
+ * One member's arrays (C-contiguous float64, 2-D covariances), read and written through the
+ * buffer protocol (no numpy C API); the outputs are arrays the caller made. The numpy code in
+ * imu_batch.py and bank.py is the reference and the fallback: every function returns None
+ * (and the caller runs the numpy code) where the arguments are not the arrays it was written
+ * for (not float64, not C-contiguous, wrong shapes, more than MAX_N states) or an input is
+ * not finite (the products below skip the transition's zero entries; numpy's 0 * inf gives
+ * nan where they would not).
+ *
+ * Not bit for bit numpy: numpy's 17x17 products are OpenBLAS's dgemm / dgemv, whose summation
+ * order and fused multiply-adds are the library's (and the CPU's). These loops sum in index
+ * order, skip zero entries of the transition and fuse nothing (-ffp-contract=off): each entry
+ * differs from numpy's by rounding only, and tests/test_member_core.py holds them to 1e-12
+ * relative (issue 12, the lead's decision of 2026-11-27). The positive-definiteness test is a
+ * Cholesky factorisation as LAPACK's dpotrf (a pivot not > 0 fails), in the same arithmetic.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <string.h>
+
+#define MAX_N 32 /* the largest state handled here (the dynamic filter has 17) */
+#define MAX_M 3  /* the largest measurement (the force balance: 3 axes) */
+#define ANY (-1)
+
+/* A C-contiguous float64 buffer of `obj` with `ndim` dimensions of sizes d0, d1 (ANY: any);
+ * 0 without an error set when it is not one. */
+static int
+get(PyObject *obj, Py_buffer *view, int ndim, Py_ssize_t d0, Py_ssize_t d1, int writable)
+{
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, view, flags) != 0) {
+        PyErr_Clear();
+        return 0;
+    }
+    if (view->ndim != ndim || view->itemsize != 8 || view->format == NULL ||
+        strcmp(view->format, "d") != 0 || (d0 != ANY && view->shape[0] != d0) ||
+        (ndim == 2 && d1 != ANY && view->shape[1] != d1)) {
+        PyBuffer_Release(view);
+        return 0;
+    }
+    return 1;
+}
+
+/* The buffers of one call, released together. */
+typedef struct {
+    Py_buffer views[8];
+    int count;
+} Views;
+
+static Py_buffer *
+take(Views *v, PyObject *obj, int ndim, Py_ssize_t d0, Py_ssize_t d1, int writable)
+{
+    Py_buffer *view = &v->views[v->count];
+    if (!get(obj, view, ndim, d0, d1, writable))
+        return NULL;
+    v->count++;
+    return view;
+}
+
+static void
+release(Views *v)
+{
+    for (int i = 0; i < v->count; i++)
+        PyBuffer_Release(&v->views[i]);
+    v->count = 0;
+}
+
+static int
+all_finite(const double *a, Py_ssize_t count)
+{
+    double sum = 0.0;
+    for (Py_ssize_t i = 0; i < count; i++)
+        sum += a[i] * 0.0; /* nan for a nan or an infinity */
+    return sum == 0.0;
+}
+
+/* The floats of a list or tuple of exactly n floats or ints into out; 0 (no error set) otherwise. */
+static int
+read_numbers(PyObject *obj, double *out, Py_ssize_t n)
+{
+    if (!(PyList_CheckExact(obj) || PyTuple_CheckExact(obj)) || PySequence_Fast_GET_SIZE(obj) != n)
+        return 0;
+    PyObject **items = PySequence_Fast_ITEMS(obj);
+    for (Py_ssize_t i = 0; i < n; i++) {
+        if (PyFloat_Check(items[i]))
+            out[i] = PyFloat_AS_DOUBLE(items[i]);
+        else if (PyLong_CheckExact(items[i])) {
+            out[i] = PyLong_AsDouble(items[i]);
+            if (out[i] == -1.0 && PyErr_Occurred()) {
+                PyErr_Clear();
+                return 0;
+            }
+        }
+        else
+            return 0;
+    }
+    return 1;
+}
+
+/* Whether the symmetric n x n matrix a is positive definite: every pivot of its Cholesky
+ * factorisation > 0 (dpotrf's test; a nan fails it). */
+static int
+cholesky_ok(const double *a, int n)
+{
+    double l[MAX_N * MAX_N];
+    for (int j = 0; j < n; j++) {
+        double d = a[j * n + j];
+        for (int k = 0; k < j; k++)
+            d -= l[j * n + k] * l[j * n + k];
+        if (!(d > 0.0))
+            return 0;
+        d = sqrt(d);
+        l[j * n + j] = d;
+        for (int i = j + 1; i < n; i++) {
+            double v = a[i * n + j];
+            for (int k = 0; k < j; k++)
+                v -= l[i * n + k] * l[j * n + k];
+            l[i * n + j] = v / d;
+        }
+    }
+    return 1;
+}
+
+/* step(phi, x, d_p, d_v, x_out) -> True: x_out = phi x + (d_p, d_v, 0...) (one state of
+ * imu_batch.BatchStep.step_state; d_p, d_v lists of 3 floats); None: not taken. */
+static PyObject *
+step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 5)
+        return PyErr_Format(PyExc_TypeError, "step takes 5 arguments");
+    double d[6];
+    Views v = {.count = 0};
+    Py_buffer *vx, *vphi, *vout;
+    if (!read_numbers(args[2], d, 3) || !read_numbers(args[3], d + 3, 3) || !all_finite(d, 6) ||
+        !(vx = take(&v, args[1], 1, ANY, 0, 0)) || vx->shape[0] < 6 || vx->shape[0] > MAX_N)
+        goto not_taken;
+    int n = (int)vx->shape[0];
+    if (!(vphi = take(&v, args[0], 2, n, n, 0)) || !(vout = take(&v, args[4], 1, n, 0, 1)))
+        goto not_taken;
+    const double *x = vx->buf, *phi = vphi->buf;
+    double *out = vout->buf;
+    if (!all_finite(x, n) || !all_finite(phi, (Py_ssize_t)n * n))
+        goto not_taken;
+    for (int i = 0; i < n; i++) {
+        double value = 0.0;
+        for (int k = 0; k < n; k++)
+            if (phi[i * n + k] != 0.0)
+                value += phi[i * n + k] * x[k];
+        out[i] = i < 6 ? value + d[i] : value;
+    }
+    release(&v);
+    Py_RETURN_TRUE;
+not_taken:
+    release(&v);
+    Py_RETURN_NONE;
+}
+
+/* step_covariance(phi, p, q, t, out) -> bool: out = (A + A^T) / 2 + q t with A = phi p phi^T
+ * (one covariance of imu_batch.BatchStep.step_covariance), whether out is finite; None: not
+ * taken. */
+static PyObject *
+step_covariance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 5)
+        return PyErr_Format(PyExc_TypeError, "step_covariance takes 5 arguments");
+    if (!PyFloat_Check(args[3]))
+        Py_RETURN_NONE;
+    double t = PyFloat_AS_DOUBLE(args[3]);
+    Views v = {.count = 0};
+    Py_buffer *vp, *vphi, *vq, *vout;
+    if (!(vp = take(&v, args[1], 2, ANY, ANY, 0)) || vp->shape[0] != vp->shape[1] ||
+        vp->shape[0] > MAX_N)
+        goto not_taken;
+    int n = (int)vp->shape[0];
+    if (!(vphi = take(&v, args[0], 2, n, n, 0)) || !(vq = take(&v, args[2], 2, n, n, 0)) ||
+        !(vout = take(&v, args[4], 2, n, n, 1)))
+        goto not_taken;
+    const double *p = vp->buf, *phi = vphi->buf, *q = vq->buf;
+    double *out = vout->buf;
+    if (!all_finite(p, (Py_ssize_t)n * n) || !all_finite(phi, (Py_ssize_t)n * n) || !isfinite(t))
+        goto not_taken;
+    int count[MAX_N], col[MAX_N][MAX_N];
+    for (int i = 0; i < n; i++) {
+        count[i] = 0;
+        for (int k = 0; k < n; k++)
+            if (phi[i * n + k] != 0.0)
+                col[i][count[i]++] = k;
+    }
+    double a[MAX_N * MAX_N], b[MAX_N * MAX_N];
+    for (int i = 0; i < n; i++) /* a = phi p */
+        for (int j = 0; j < n; j++) {
+            double value = 0.0;
+            for (int c = 0; c < count[i]; c++)
+                value += phi[i * n + col[i][c]] * p[col[i][c] * n + j];
+            a[i * n + j] = value;
+        }
+    for (int i = 0; i < n; i++) /* b = a phi^T */
+        for (int j = 0; j < n; j++) {
+            double value = 0.0;
+            for (int c = 0; c < count[j]; c++)
+                value += a[i * n + col[j][c]] * phi[j * n + col[j][c]];
+            b[i * n + j] = value;
+        }
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++)
+            out[i * n + j] = (b[i * n + j] + b[j * n + i]) * 0.5 + q[i * n + j] * t;
+    int ok = all_finite(out, (Py_ssize_t)n * n);
+    release(&v);
+    return PyBool_FromLong(ok);
+not_taken:
+    release(&v);
+    Py_RETURN_NONE;
+}
+
+/* project(p, h, pht) -> S: pht = p h^T (n x m) and the m x m S = h p h^T (a tuple of m*m floats,
+ * row-major) for the m x n h (a list or tuple of m*n floats or ints, or a float64 array);
+ * None: not taken. */
+static PyObject *
+project(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 3)
+        return PyErr_Format(PyExc_TypeError, "project takes 3 arguments");
+    Views v = {.count = 0};
+    Py_buffer *vp, *vpht, *vh;
+    if (!(vp = take(&v, args[0], 2, ANY, ANY, 0)) || vp->shape[0] != vp->shape[1] ||
+        vp->shape[0] > MAX_N || !(vpht = take(&v, args[2], 2, vp->shape[0], ANY, 1)) ||
+        vpht->shape[1] < 1 || vpht->shape[1] > MAX_M)
+        goto not_taken;
+    int n = (int)vp->shape[0], m = (int)vpht->shape[1];
+    double h[MAX_M * MAX_N];
+    if (PyList_CheckExact(args[1]) || PyTuple_CheckExact(args[1])) {
+        if (!read_numbers(args[1], h, (Py_ssize_t)m * n))
+            goto not_taken;
+    }
+    else {
+        if (!(vh = take(&v, args[1], 2, m, n, 0)))
+            goto not_taken;
+        memcpy(h, vh->buf, sizeof(double) * m * n);
+    }
+    const double *p = vp->buf;
+    double *pht = vpht->buf;
+    if (!all_finite(p, (Py_ssize_t)n * n) || !all_finite(h, (Py_ssize_t)m * n))
+        goto not_taken;
+    for (int i = 0; i < n; i++)
+        for (int r = 0; r < m; r++) {
+            double value = 0.0;
+            for (int k = 0; k < n; k++)
+                value += p[i * n + k] * h[r * n + k];
+            pht[i * m + r] = value;
+        }
+    PyObject *s = PyTuple_New(m * m);
+    if (s == NULL) {
+        release(&v);
+        return NULL;
+    }
+    for (int r = 0; r < m; r++)
+        for (int c = 0; c < m; c++) {
+            double value = 0.0;
+            for (int k = 0; k < n; k++)
+                value += h[r * n + k] * pht[k * m + c];
+            PyObject *item = PyFloat_FromDouble(value);
+            if (item == NULL) {
+                Py_DECREF(s);
+                release(&v);
+                return NULL;
+            }
+            PyTuple_SET_ITEM(s, r * m + c, item);
+        }
+    release(&v);
+    return s;
+not_taken:
+    release(&v);
+    Py_RETURN_NONE;
+}
+
+/* update(x, p, pht, s_inv, w, hold_start, hold_stop, x_out, p_out) -> bool: the update with the
+ * gain K = pht S^-1 (pht n x m, s_inv the m x m S^-1 and w = S^-1 y as lists or tuples of
+ * floats): x_out = x + pht w, p_out = (B + B^T) / 2 with B = p - K pht^T, the consider states
+ * hold_start..hold_stop - 1 (none when equal) given back their prior mean and own covariance
+ * block (member.hold_consider); whether x_out and p_out are finite and p_out positive definite
+ * (bank._finite_and_definite); None: not taken. */
+static PyObject *
+update(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 9)
+        return PyErr_Format(PyExc_TypeError, "update takes 9 arguments");
+    Views v = {.count = 0};
+    Py_buffer *vx, *vp, *vpht, *vxo, *vpo;
+    double s_inv[MAX_M * MAX_M], w[MAX_M];
+    if (!(vp = take(&v, args[1], 2, ANY, ANY, 0)) || vp->shape[0] != vp->shape[1] ||
+        vp->shape[0] > MAX_N)
+        goto not_taken;
+    int n = (int)vp->shape[0];
+    if (!(vpht = take(&v, args[2], 2, n, ANY, 0)) || vpht->shape[1] < 1 || vpht->shape[1] > MAX_M)
+        goto not_taken;
+    int m = (int)vpht->shape[1];
+    if (!(vx = take(&v, args[0], 1, n, 0, 0)) || !(vxo = take(&v, args[7], 1, n, 0, 1)) ||
+        !(vpo = take(&v, args[8], 2, n, n, 1)) || !read_numbers(args[3], s_inv, (Py_ssize_t)m * m) ||
+        !read_numbers(args[4], w, m))
+        goto not_taken;
+    Py_ssize_t hold_start = PyLong_AsSsize_t(args[5]), hold_stop = PyLong_AsSsize_t(args[6]);
+    if ((hold_start == -1 || hold_stop == -1) && PyErr_Occurred()) {
+        release(&v);
+        return NULL;
+    }
+    if (hold_start < 0 || hold_stop > n || hold_start > hold_stop)
+        goto not_taken;
+    const double *x = vx->buf, *p = vp->buf, *pht = vpht->buf;
+    double *xo = vxo->buf, *po = vpo->buf;
+    if (!all_finite(x, n) || !all_finite(p, (Py_ssize_t)n * n) || !all_finite(pht, (Py_ssize_t)n * m) ||
+        !all_finite(s_inv, m * m) || !all_finite(w, m))
+        goto not_taken;
+    double k[MAX_N * MAX_M], b[MAX_N * MAX_N];
+    for (int i = 0; i < n; i++) {
+        double value = 0.0;
+        for (int r = 0; r < m; r++)
+            value += pht[i * m + r] * w[r];
+        xo[i] = x[i] + value;
+        for (int c = 0; c < m; c++) { /* K = pht S^-1 */
+            double kv = 0.0;
+            for (int r = 0; r < m; r++)
+                kv += pht[i * m + r] * s_inv[r * m + c];
+            k[i * m + c] = kv;
+        }
+    }
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) {
+            double value = 0.0;
+            for (int r = 0; r < m; r++)
+                value += k[i * m + r] * pht[j * m + r];
+            b[i * n + j] = p[i * n + j] - value;
+        }
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++)
+            po[i * n + j] = (b[i * n + j] + b[j * n + i]) * 0.5;
+    for (Py_ssize_t i = hold_start; i < hold_stop; i++) {
+        xo[i] = x[i];
+        for (Py_ssize_t j = hold_start; j < hold_stop; j++)
+            po[i * n + j] = p[i * n + j];
+    }
+    int ok = all_finite(xo, n) && all_finite(po, (Py_ssize_t)n * n) && cholesky_ok(po, n);
+    release(&v);
+    return PyBool_FromLong(ok);
+not_taken:
+    release(&v);
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef methods[] = {
+    {"step", (PyCFunction)(void (*)(void))step, METH_FASTCALL,
+     "step(phi, x, d_p, d_v, x_out): x_out = phi x + (d_p, d_v, 0...); None: not taken."},
+    {"step_covariance", (PyCFunction)(void (*)(void))step_covariance, METH_FASTCALL,
+     "step_covariance(phi, p, q, t, out): out = sym(phi p phi^T) + q t; whether finite."},
+    {"project", (PyCFunction)(void (*)(void))project, METH_FASTCALL,
+     "project(p, h, pht): pht = p h^T; returns S = h p h^T (m*m floats)."},
+    {"update", (PyCFunction)(void (*)(void))update, METH_FASTCALL,
+     "update(x, p, pht, s_inv, w, hold_start, hold_stop, x_out, p_out): the gain's update; "
+     "whether finite and positive definite."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module_def = {
+    PyModuleDef_HEAD_INIT, "_member_core",
+    "One bank member's matrix arithmetic in C (bank.py's and imu_batch.py's numpy to 1e-12).", -1,
+    methods,
+};
+
+PyMODINIT_FUNC
+PyInit__member_core(void)
+{
+    return PyModule_Create(&module_def);
+}

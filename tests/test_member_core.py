@@ -123,8 +123,8 @@ def test_bank_steps_and_fuses_as_numpy_to_1e_12(
 ) -> None:
     """Two banks from the same start, one in C and one in numpy, fed the same batches, force
     balances (outliers gated), heights (outliers gated) and a non-finite sample: the same
-    outcomes and NIS, every member's state and covariance numpy's to 1e-12 after one step from
-    the same arrays and still after the whole chain."""
+    outcomes and NIS, every member's state and covariance and the mixture's moments numpy's to
+    1e-12 after one step from the same arrays and still after the whole chain."""
     rng = np.random.default_rng(5 + members)
     x0, p0, q = random_start(rng)
     constants = ModelConstants(1.5, 0.2, 0.0)
@@ -155,6 +155,10 @@ def test_bank_steps_and_fuses_as_numpy_to_1e_12(
             statuses.add(got.status)
         for a, b in zip(banks["c"].filters, banks["numpy"].filters, strict=True):
             assert_close(a.x, a.P, b.x, b.P)
+        _c(monkeypatch)
+        got = banks["c"].mixture()
+        _numpy(monkeypatch)
+        assert_close(*got, *banks["numpy"].mixture())
 
     def predict(b: FilterBank, batch: ImuBatch) -> list:
         b.predict_batch(batch, np.diag(q))
@@ -213,6 +217,8 @@ def test_arrays_it_does_not_take_are_left_to_numpy(bad) -> None:  # noqa: ANN001
     assert core.project(bad(p), h.ravel().tolist(), pht) is None
     s_inv, w = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0], [0.1, 0.2, 0.3]
     assert core.update(x, bad(p), pht, s_inv, w, 13, 17, out_x, out_p) is None
+    assert core.mixture([0.5, 0.5], [x, bad(x)], [p, p], out_x, out_p) is None
+    assert core.mixture([0.5, 0.5], [x, x], [p, bad(p)], out_x, out_p) is None
     assert np.all(out_x == 7.0) and np.all(out_p == 7.0)
     with pytest.raises(TypeError):
         core.update(x, p, pht, s_inv, w, 13, 17, out_x)

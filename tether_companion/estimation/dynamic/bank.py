@@ -156,11 +156,15 @@ class FilterBank:
 
     def weights(self) -> FloatArray:
         """Normalised posterior weights, shape (members,)."""
+        return np.array(self._weight_list())
+
+    def _weight_list(self) -> list[float]:
+        """:meth:`weights` as a list of floats."""
         ll = self.log_weight
         top = max(ll)
         w = [math.exp(v - top) for v in ll]
         total = sum(w)
-        return np.array([v / total for v in w])
+        return [v / total for v in w]
 
     def keep(self, indices: list[int]) -> None:
         """Keep only the members at ``indices`` (with their log-likelihoods)."""
@@ -417,6 +421,12 @@ class FilterBank:
             and all(map(is_, arrays, cached_arrays))
         ):
             return moments
+        if MEMBER_CORE is not None:  # in C (imu_batch.MEMBER_CORE)
+            n = filters[0].x.shape[0]
+            mean, cov = _EMPTY(n), _EMPTY((n, n))
+            if MEMBER_CORE.mixture(self._weight_list(), arrays[::2], arrays[1::2], mean, cov):
+                self._mixture_cache = (arrays, list(self.log_weight), (mean, cov))
+                return mean, cov
         w = self.weights()
         xs = np.array([kf.x for kf in self.filters])
         n = xs.shape[1]

@@ -22,6 +22,7 @@
 
 #define MAX_N 32 /* the largest state handled here (the dynamic filter has 17) */
 #define MAX_M 3  /* the largest measurement (the force balance: 3 axes) */
+#define MAX_MEMBERS 64 /* the most bank members mixture() takes */
 #define ANY (-1)
 
 /* A C-contiguous float64 buffer of `obj` with `ndim` dimensions of sizes d0, d1 (ANY: any);
@@ -348,6 +349,79 @@ not_taken:
     Py_RETURN_NONE;
 }
 
+/* mixture(w, xs, ps, mean_out, cov_out) -> True: the weighted mixture's mean sum w_i x_i and
+ * covariance sum w_i P_i + sum w_i s_i s_i^T (s_i = x_i - mean) made exactly symmetric
+ * (bank.FilterBank.mixture; w a list of floats, xs and ps lists of the members' (n,) and (n, n)
+ * arrays); None: not taken. */
+static PyObject *
+mixture(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 5)
+        return PyErr_Format(PyExc_TypeError, "mixture takes 5 arguments");
+    PyObject *wl = args[0], *xl = args[1], *pl = args[2];
+    if (!PyList_CheckExact(wl) || !PyList_CheckExact(xl) || !PyList_CheckExact(pl))
+        Py_RETURN_NONE;
+    Py_ssize_t members = PyList_GET_SIZE(wl);
+    if (members < 1 || members > MAX_MEMBERS || PyList_GET_SIZE(xl) != members ||
+        PyList_GET_SIZE(pl) != members)
+        Py_RETURN_NONE;
+    double w[MAX_MEMBERS];
+    if (!read_numbers(wl, w, members) || !all_finite(w, members))
+        Py_RETURN_NONE;
+    Py_buffer vx[MAX_MEMBERS], vp[MAX_MEMBERS], vmean, vcov;
+    Py_ssize_t got = 0;
+    int n = 0, ok = 0;
+    for (; got < members; got++) {
+        if (!get(PyList_GET_ITEM(xl, got), &vx[got], 1, got ? n : ANY, 0, 0))
+            break;
+        if (got == 0)
+            n = (int)vx[0].shape[0];
+        if (n > MAX_N || !get(PyList_GET_ITEM(pl, got), &vp[got], 2, n, n, 0)) {
+            PyBuffer_Release(&vx[got]);
+            break;
+        }
+        if (!all_finite(vx[got].buf, n) || !all_finite(vp[got].buf, (Py_ssize_t)n * n)) {
+            PyBuffer_Release(&vx[got]);
+            PyBuffer_Release(&vp[got]);
+            break;
+        }
+    }
+    if (got == members && get(args[3], &vmean, 1, n, 0, 1)) {
+        if (get(args[4], &vcov, 2, n, n, 1)) {
+            double *mean = vmean.buf, *cov = vcov.buf, c[MAX_N * MAX_N];
+            for (int j = 0; j < n; j++) {
+                double value = 0.0;
+                for (Py_ssize_t i = 0; i < members; i++)
+                    value += w[i] * ((const double *)vx[i].buf)[j];
+                mean[j] = value;
+            }
+            for (int j = 0; j < n; j++)
+                for (int k = 0; k < n; k++) {
+                    double within = 0.0, between = 0.0;
+                    for (Py_ssize_t i = 0; i < members; i++) {
+                        const double *x = vx[i].buf;
+                        within += w[i] * ((const double *)vp[i].buf)[j * n + k];
+                        between += (x[j] - mean[j]) * w[i] * (x[k] - mean[k]);
+                    }
+                    c[j * n + k] = within + between;
+                }
+            for (int j = 0; j < n; j++)
+                for (int k = 0; k < n; k++)
+                    cov[j * n + k] = (c[j * n + k] + c[k * n + j]) * 0.5;
+            ok = 1;
+            PyBuffer_Release(&vcov);
+        }
+        PyBuffer_Release(&vmean);
+    }
+    for (Py_ssize_t i = 0; i < got; i++) {
+        PyBuffer_Release(&vx[i]);
+        PyBuffer_Release(&vp[i]);
+    }
+    if (ok)
+        Py_RETURN_TRUE;
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef methods[] = {
     {"step", (PyCFunction)(void (*)(void))step, METH_FASTCALL,
      "step(phi, x, d_p, d_v, x_out): x_out = phi x + (d_p, d_v, 0...); None: not taken."},
@@ -358,6 +432,8 @@ static PyMethodDef methods[] = {
     {"update", (PyCFunction)(void (*)(void))update, METH_FASTCALL,
      "update(x, p, pht, s_inv, w, hold_start, hold_stop, x_out, p_out): the gain's update; "
      "whether finite and positive definite."},
+    {"mixture", (PyCFunction)(void (*)(void))mixture, METH_FASTCALL,
+     "mixture(w, xs, ps, mean_out, cov_out): the weighted mixture's moments."},
     {NULL, NULL, 0, NULL},
 };
 

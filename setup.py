@@ -1,6 +1,8 @@
 """The optional C extensions (everything else is in pyproject.toml): the dynamic filter's
-generated models, the tension filter's generated predict/update (``tension_core.c``) and the
-published bound approximation's step (``bound_core.c``).
+generated models, the tension filter's generated predict/update (``tension_core.c``), the
+published bound approximation's step (``bound_core.c``) and the dynamic filter's members'
+matrix arithmetic (``member_core.c``: numpy's to 1e-12, not bit for bit;
+``imu_batch.MEMBER_CORE``).
 
 ``tether_companion/estimation/dynamic/generated_core.c`` is written by the derivation
 (``python -m tether_companion.estimation.dynamic.derivation.derive``) next to the Python

@@ -215,3 +215,21 @@ def test_a_measured_tension_bounds_the_range_near_the_touchdown() -> None:
     )
     assert read[0] > 0.5 > 0.02 > measured[0] > 0.0
     assert measured[1] == 0.0  # the filter's own 0.1 m along the range covers it
+
+
+def test_a_span_off_the_length_is_covered_from_the_estimate() -> None:
+    """The range a tension within 3 sigma allows at the fused length is measured from the
+    estimate's own span: a taut 8 N cable 7 m long 3 m up spans 6.3 m at any plausible
+    tension; a filter whose state sits 0.5 m inside that (its own north sd 0.05 m, e.g. the
+    length's readings gated or bounding a cable it took for slack) is withheld or published
+    with the truth within 3 sigma (from the span its tension gives at the length the sag
+    rule claimed under 1 cm: 10 sigma)."""
+    length_span = span_at_length_m(LENGTH_M, HEIGHT_M, 8.0, WEIGHT_N_PER_M)
+    span = length_span - 0.5
+    source = _source(span, _chord_tension(length_span, 8.0), 0.3, 0.05)
+    assert source.sag_std_m > 0.5 / 3.0
+    estimate = source.values()
+    north_sd = math.sqrt(estimate.covariance[0, 0])
+    assert estimate.status != OK or 0.5 <= 3.0 * north_sd
+    # on the length's curve the taut cable keeps its own covariance (the test above)
+    assert _source(length_span, _chord_tension(length_span, 8.0), 0.3, 0.05).sag_m2 == 0.0

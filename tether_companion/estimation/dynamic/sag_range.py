@@ -12,11 +12,15 @@ tension, so when that tension is too high (a free catenary where the real cable 
 ground: realistic-sagging-hover, seed 9, 2 sigma high, range 1 m long with a 0.3-0.4 m standard
 deviation) it underrates the range's error.
 
-This module evaluates the range at the fused length at the filter's chord tension and at
-``T -+ 3 sigma_T`` (the free or grounded catenary through the anchor and a point at the
-drone's height, solved for its span), and returns the variance the published covariance
-must at least have along the horizontal range: a third of the larger of the two range
-changes, squared, less what the filter already claims along that direction. The publisher's
+This module evaluates the range at the fused length at ``T -+ 3 sigma_T`` (the free or
+grounded catenary through the anchor and a point at the drone's height, solved for its span),
+and returns the variance the published covariance must at least have along the horizontal
+range: a third of the larger distance from the state's own span to those two, squared, less
+what the filter already claims along that direction. From the state's span, not from the span
+the state's tension gives at the length: where the filter does not follow the length (its
+readings gated, or bounding a cable taken for slack) the two differ, and a third of the
+spread about the latter let a state 0.5 m off the length's curve publish a 0.05 m standard
+deviation (honest18, tests/test_dynamic_sag_range.py). The publisher's
 ``max_horizontal_std_m`` rule then withholds where the grounded regime makes the range
 unknown, and the published covariance is honest where it publishes.
 
@@ -145,8 +149,8 @@ def sag_range_std_m(
     tension_measured: bool = False,
 ) -> float:
     """The range's spread at the fused length over the plausible tensions [m]: the larger
-    change of the span at ``length_m`` [m] and the state's height (``x``: the state's values,
-    NED position from the anchor [m], chord tension [N]) between the chord tension and
+    distance from the state's span to the spans at ``length_m`` [m] and the state's height
+    (``x``: the state's values, NED position from the anchor [m], chord tension [N]) at
     ``T -+ TENSION_SIGMAS sigma_T``, divided by ``TENSION_SIGMAS`` (``tension_variance_n2``
     [N^2]; the lower end at least :data:`LOW_TENSION_FRACTION` of ``T``, and that where the
     cable rests on the ground at ``T - TENSION_SIGMAS sigma_T``: then the filter's tension,
@@ -174,7 +178,6 @@ def sag_range_std_m(
     # the chord tension's horizontal part: H = T a / |p| (as rests_on_ground)
     horizontal_per_chord = span / math.hypot(span, height)
     spread = TENSION_SIGMAS * math.sqrt(tension_variance_n2)
-    centre = span_at_length_m(length_m, height, tension * horizontal_per_chord, weight_n_per_m)
     low_tension = max(tension - spread, LOW_TENSION_FRACTION * tension)
     if not tension_measured and grounded_plausible(x, tension_variance_n2, weight_n_per_m):
         low_tension = LOW_TENSION_FRACTION * tension
@@ -182,7 +185,7 @@ def sag_range_std_m(
     upper = span_at_length_m(
         length_m, height, (tension + spread) * horizontal_per_chord, weight_n_per_m
     )
-    return max(centre - lower, upper - centre) / TENSION_SIGMAS
+    return max(span - lower, upper - span) / TENSION_SIGMAS
 
 
 def sag_range_variance_m2(

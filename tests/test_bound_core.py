@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import functools
 import math
-import os
 import struct
 
 import numpy as np
 import pytest
-from test_generated_core import _could_build  # type: ignore[import-not-found]
+from optional_extension import import_extension
 
 from tether_companion.bench.dynamic import record
 from tether_companion.estimation.config import EstimatorConfig
@@ -26,20 +25,7 @@ from tether_companion.estimation.runner import _ATTITUDE, _PWM, _RANGE
 from tether_companion.physics.vehicle import load_vehicle
 from tether_companion.sim.scenario import load_scenario
 
-try:
-    from tether_companion.estimation.dynamic import _bound_core as core
-except ImportError:  # pragma: no cover - depends on the install
-    core = None
-
-if core is None and (os.environ.get("TETHER_REQUIRE_CORE") == "1" or _could_build()):
-    pytest.fail(
-        "the C extension _bound_core is not built although a C compiler and the Python "
-        "headers are here: `python3 -m pip install -e .` builds it",
-        pytrace=False,
-    )
-pytestmark = pytest.mark.skipif(
-    core is None, reason="the C extension _bound_core is not built (no C compiler here)"
-)
+core, pytestmark = import_extension("tether_companion.estimation.dynamic._bound_core")
 
 PY = published_bound.stepped_terms
 

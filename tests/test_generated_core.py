@@ -11,41 +11,17 @@ from __future__ import annotations
 
 import math
 import os
-import shutil
 import struct
 import subprocess
 import sys
-import sysconfig
-from pathlib import Path
 
 import numpy as np
 import pytest
+from optional_extension import import_extension
 
 from tether_companion.estimation.dynamic import generated, state
 
-try:
-    from tether_companion.estimation.dynamic import _generated_core as core
-except ImportError:  # pragma: no cover - depends on the install
-    core = None
-
-
-def _could_build() -> bool:
-    """Whether this interpreter's C compiler and headers are here (then the install builds
-    the extension)."""
-    compiler = (sysconfig.get_config_var("CC") or "").split()
-    headers = Path(sysconfig.get_paths()["include"], "Python.h")
-    return bool(compiler) and shutil.which(compiler[0]) is not None and headers.is_file()
-
-
-if core is None and (os.environ.get("TETHER_REQUIRE_CORE") == "1" or _could_build()):
-    pytest.fail(
-        "the C extension _generated_core is not built although a C compiler and the Python "
-        "headers are here: `python3 -m pip install -e .` builds it",
-        pytrace=False,
-    )
-pytestmark = pytest.mark.skipif(
-    core is None, reason="the C extension _generated_core is not built (no C compiler here)"
-)
+core, pytestmark = import_extension("tether_companion.estimation.dynamic._generated_core")
 
 from test_dynamic_derivation import ALL_MODELS, _random_case  # noqa: E402
 

@@ -15,14 +15,10 @@ Built where a C compiler is (``pip install -e .``); its absence fails this file 
 
 from __future__ import annotations
 
-import os
-import shutil
-import sysconfig
-from pathlib import Path
-
 import numpy as np
 import pytest
 from filter_states import random_start
+from optional_extension import import_extension
 
 from tether_companion.estimation.dynamic import bank as bank_module
 from tether_companion.estimation.dynamic import generated, imu_batch, state
@@ -32,27 +28,7 @@ from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.dynamic.models import ModelConstants
 from tether_companion.frames import rotation_ned_to_body
 
-try:
-    from tether_companion.estimation.dynamic import _member_core as core
-except ImportError:  # pragma: no cover - depends on the install
-    core = None
-
-
-def _could_build() -> bool:
-    compiler = (sysconfig.get_config_var("CC") or "").split()
-    headers = Path(sysconfig.get_paths()["include"], "Python.h")
-    return bool(compiler) and shutil.which(compiler[0]) is not None and headers.is_file()
-
-
-if core is None and (os.environ.get("TETHER_REQUIRE_CORE") == "1" or _could_build()):
-    pytest.fail(
-        "the C extension _member_core is not built although a C compiler and the Python "
-        "headers are here: `python3 -m pip install -e .` builds it",
-        pytrace=False,
-    )
-pytestmark = pytest.mark.skipif(
-    core is None, reason="the C extension _member_core is not built (no C compiler here)"
-)
+core, pytestmark = import_extension("tether_companion.estimation.dynamic._member_core")
 
 N = state.N_STATES
 TOLERANCE = 1e-12

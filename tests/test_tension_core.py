@@ -16,26 +16,13 @@ import struct
 
 import numpy as np
 import pytest
-from test_generated_core import _could_build  # type: ignore[import-not-found]
+from optional_extension import import_extension
 
 from tether_companion.estimation import tension_filter
 from tether_companion.estimation.tension_filter import TensionKalmanFilter
 from tether_companion.estimation.tension_kf import TensionFilterConfig
 
-try:
-    from tether_companion.estimation import _tension_core as core
-except ImportError:  # pragma: no cover - depends on the install
-    core = None
-
-if core is None and (os.environ.get("TETHER_REQUIRE_CORE") == "1" or _could_build()):
-    pytest.fail(
-        "the C extension _tension_core is not built although a C compiler and the Python "
-        "headers are here: `python3 -m pip install -e .` builds it",
-        pytrace=False,
-    )
-pytestmark = pytest.mark.skipif(
-    core is None, reason="the C extension _tension_core is not built (no C compiler here)"
-)
+core, pytestmark = import_extension("tether_companion.estimation._tension_core")
 
 
 def _bits(values: object) -> object:

@@ -27,22 +27,17 @@ in the same order), the generated function called wherever they could differ.
 from __future__ import annotations
 
 import functools
-import os
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tether_companion.estimation import optional_core
 from tether_companion.estimation.scalar_update import compile_function, sum_of, times
 
 FloatArray = NDArray[np.float64]
 
-CORE = None
+CORE = optional_core.load("tether_companion.estimation._tension_core")
 """The C extension ``_tension_core`` when it runs (None: the generated Python functions)."""
-if not os.environ.get("TETHER_PURE_PYTHON"):
-    try:
-        from tether_companion.estimation import _tension_core as CORE  # noqa: N812
-    except ImportError:
-        pass
 
 
 def _lower(n: int, name: str) -> list[str]:

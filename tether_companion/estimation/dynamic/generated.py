@@ -12,8 +12,9 @@ values and the Jacobian with respect to ``x`` (row-major, 17 columns).
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Sequence
+
+from tether_companion.estimation import optional_core
 
 
 def force_balance_straight(x: Sequence[float], u: Sequence[float], c: Sequence[float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
@@ -771,13 +772,9 @@ COMPILED = False
 """Whether the names above are the C extension's twins (``_generated_core``, built by setup.py
 where a compiler is; ``TETHER_PURE_PYTHON=1`` keeps the Python functions)."""
 
-if not os.environ.get("TETHER_PURE_PYTHON"):
-    try:
-        from tether_companion.estimation.dynamic import _generated_core as _core
-    except ImportError:
-        pass
-    else:
-        _core.set_fallbacks(PYTHON)
-        globals().update({name: getattr(_core, name) for name in _core.NAMES})
-        COMPILED = True
-        CORE = _core
+_core = optional_core.load("tether_companion.estimation.dynamic._generated_core")
+if _core is not None:
+    _core.set_fallbacks(PYTHON)
+    globals().update({name: getattr(_core, name) for name in _core.NAMES})
+    COMPILED = True
+    CORE = _core

@@ -28,12 +28,12 @@ from __future__ import annotations
 
 import math
 import operator
-import os
 from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tether_companion.estimation import optional_core
 from tether_companion.estimation.dynamic import generated, state
 
 FloatArray = NDArray[np.float64]
@@ -65,18 +65,12 @@ def product(a: FloatArray, b: FloatArray) -> FloatArray:
 _DOT = np.dot
 _EMPTY = np.empty
 
-MEMBER_CORE = None
+MEMBER_CORE = optional_core.load("tether_companion.estimation.dynamic._member_core")
 """The C extension ``_member_core`` (``member_core.c``) when it runs: one member's transition
 step, projection and gain update in C loops over the arrays' buffers, to 1e-12 relative of the
 numpy code here and in ``bank.py`` (the reference and the fallback; BLAS sums in its own order
 with its own fused multiply-adds, so not bit for bit). Built by setup.py where a compiler is;
 ``TETHER_PURE_PYTHON=1`` keeps numpy."""
-
-if not os.environ.get("TETHER_PURE_PYTHON"):
-    try:
-        from tether_companion.estimation.dynamic import _member_core as MEMBER_CORE
-    except ImportError:
-        pass
 
 
 def batch_sums(

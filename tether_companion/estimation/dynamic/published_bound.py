@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import functools
 import math
-import os
 from collections.abc import Callable, Sequence
 
+from tether_companion.estimation import optional_core
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.imu_batch import BatchStep
 from tether_companion.estimation.dynamic.mixture import ROUNDING, MixtureValues, ProcessNoise
@@ -193,12 +193,7 @@ STEPPED_TERMS: Callable[..., tuple] = stepped_terms
 """:func:`stepped_terms`, or where the optional C extension ``_bound_core`` is built (and
 ``TETHER_PURE_PYTHON`` is not set) its twin: the same floats, :func:`stepped_terms` called
 where C could differ (``bound_core.c``)."""
-CORE = None
+CORE = optional_core.load("tether_companion.estimation.dynamic._bound_core")
 """The C extension when it runs."""
-if not os.environ.get("TETHER_PURE_PYTHON"):
-    try:
-        from tether_companion.estimation.dynamic import _bound_core as CORE  # noqa: N812
-    except ImportError:
-        pass
-    else:
-        STEPPED_TERMS = functools.partial(CORE.stepped_terms, stepped_terms)
+if CORE is not None:
+    STEPPED_TERMS = functools.partial(CORE.stepped_terms, stepped_terms)

@@ -340,8 +340,9 @@ values and the Jacobian with respect to ``x`` (row-major, {n} columns).
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Sequence
+
+from tether_companion.estimation import optional_core
 '''
 
 FOOTER = '''
@@ -359,16 +360,12 @@ COMPILED = False
 """Whether the names above are the C extension's twins (``{module}``, built by setup.py
 where a compiler is; ``TETHER_PURE_PYTHON=1`` keeps the Python functions)."""
 
-if not os.environ.get("TETHER_PURE_PYTHON"):
-    try:
-        from tether_companion.estimation.dynamic import {module} as _core
-    except ImportError:
-        pass
-    else:
-        _core.set_fallbacks(PYTHON)
-        globals().update({{name: getattr(_core, name) for name in _core.NAMES}})
-        COMPILED = True
-        CORE = _core
+_core = optional_core.load("tether_companion.estimation.dynamic.{module}")
+if _core is not None:
+    _core.set_fallbacks(PYTHON)
+    globals().update({{name: getattr(_core, name) for name in _core.NAMES}})
+    COMPILED = True
+    CORE = _core
 '''
 
 

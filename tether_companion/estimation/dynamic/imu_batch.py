@@ -198,11 +198,17 @@ class BatchStep:
     def step_covariance(self, p: FloatArray, q: FloatArray) -> FloatArray:
         """``Phi P Phi^T + T Q`` (new array, exactly symmetric) for covariances ``p`` (..., 17,
         17) and the process noise spectral density ``q`` (17, 17)."""
-        return self.step_member_covariance(p, q)[0]
+        return self._covariance(p, q)[0]
 
     def step_member_covariance(self, p: FloatArray, q: FloatArray) -> tuple[FloatArray, bool]:
-        """:meth:`step_covariance` and whether it is finite (one covariance (17, 17): in C
-        where :data:`MEMBER_CORE` runs and takes it; the C product skips ``Phi``'s zeros)."""
+        """:meth:`step_covariance` of one covariance (17, 17) and whether it is finite."""
+        out, finite = self._covariance(p, q)
+        return out, math.isfinite(_ADD_REDUCE(out, None)) if finite is None else finite
+
+    def _covariance(self, p: FloatArray, q: FloatArray) -> tuple[FloatArray, bool | None]:
+        """:meth:`step_covariance`, in C where :data:`MEMBER_CORE` runs and takes one
+        covariance (the C product skips ``Phi``'s zeros and says whether the result is
+        finite), else numpy (finiteness not checked: ``None``)."""
         phi = self.phi
         if MEMBER_CORE is not None and p.ndim == 2:
             out = _EMPTY(p.shape)
@@ -213,7 +219,7 @@ class BatchStep:
         out = out + out.swapaxes(-1, -2)  # a new array: no copy of the overlapping operand
         out *= 0.5
         out += self.noise(q)
-        return out, math.isfinite(_ADD_REDUCE(out, None))
+        return out, None
 
 
 _ADD_REDUCE = np.add.reduce

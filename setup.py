@@ -2,7 +2,8 @@
 generated models, the tension filter's generated predict/update (``tension_core.c``), the
 published bound approximation's step (``bound_core.c``) and the dynamic filter's members'
 matrix arithmetic (``member_core.c``: numpy's to 1e-12, not bit for bit;
-``imu_batch.MEMBER_CORE``).
+``imu_batch.MEMBER_CORE``) and the flight controller's input frames' test and field read
+(``service/frame_core.c``, ``ingest_frames.FrameIngest``; no floating-point arithmetic).
 
 ``tether_companion/estimation/dynamic/generated_core.c`` is written by the derivation
 (``python -m tether_companion.estimation.dynamic.derivation.derive``) next to the Python
@@ -38,6 +39,11 @@ setup(
             "tether_companion.estimation.dynamic._member_core",
             ["tether_companion/estimation/dynamic/member_core.c"],
             extra_compile_args=["-ffp-contract=off"],
+            optional=True,
+        ),
+        Extension(
+            "tether_companion.service._frame_core",
+            ["tether_companion/service/frame_core.c"],
             optional=True,
         ),
     ]

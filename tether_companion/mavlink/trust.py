@@ -164,8 +164,7 @@ class LinkTrust:
         else:
             system, component = frame[5], frame[6]
             msg_id = frame[7] | (frame[8] << 8) | (frame[9] << 16)
-        signed = is_signed(frame)
-        if self.signing != OFF and (signed or self.signing == REQUIRED):
+        if self.signing != OFF and ((signed := is_signed(frame)) or self.signing == REQUIRED):
             if signed or msg_id != _COMMAND_LONG_ID:
                 assert self.verifier is not None
                 reason = self.verifier.check(frame)

@@ -24,12 +24,15 @@ Pure and synchronous.
 
 from __future__ import annotations
 
-import operator
+import functools
+import re
 import struct
 from collections.abc import Callable
+from operator import itemgetter
 
 from fastcrc.crc16 import mcrf4xx
 
+from tether_companion.estimation.optional_core import load
 from tether_companion.mavlink.fastdecode import MessageLayout, layout_of
 from tether_companion.mavlink.framing import FrameParser, dialect
 from tether_companion.mavlink.units import MILLI_G_TO_MPS2, MILLI_RAD_TO_RAD
@@ -49,12 +52,14 @@ above it."""
 _CHECKSUM = struct.Struct("<H")
 
 Convert = Callable[[tuple], Sample | None]
-"""A message's unpacked wire-order fields to its checked sample (None: dropped, counted)."""
+"""A message's fields, ``(code, value, ...)`` as :meth:`FrameIngest.fields` gives them, to its
+checked sample (None: dropped, counted)."""
 
 
-def _fields(layout: MessageLayout, *names: str) -> list[int]:
-    """Indices of ``names`` among the message's unpacked wire-order items (scalar fields)."""
-    return [layout.wire_index[name] for name in names]
+_IMU_FIELDS = ("time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "id")
+_CORE = load("tether_companion.service._frame_core")
+"""``frame_core.c``: :meth:`FrameIngest.take` and :meth:`FrameIngest.fields` in one C call
+each (None: not built, or ``TETHER_PURE_PYTHON``)."""
 
 
 class FrameIngest:
@@ -88,7 +93,11 @@ class FrameIngest:
         self._system = ingest.link.fc_system_id
         self._component = ingest.link.fc_component_id
         self._table: dict[int, tuple] = {}
-        """msg id -> (its layout, crc_extra byte, kind, convert)."""
+        """msg id -> (its layout, crc_extra byte, code, its fields' picker)."""
+        self._kinds: list[tuple[str, Convert]] = []
+        """code -> (kind, convert)."""
+        self._spec = b""
+        """The table's entries for ``frame_core.c`` (see there)."""
         if ingest.link.autopilot == "ardupilot":
             self._add("RAW_IMU", IMU, self._raw_imu)
         else:
@@ -96,10 +105,28 @@ class FrameIngest:
         self._add("ATTITUDE", ATTITUDE, self._attitude)
         self._add("SERVO_OUTPUT_RAW", PWM, self._servo_output_raw)
         self._add("DISTANCE_SENSOR", RANGE, self._distance_sensor)
+        if _CORE is not None and 0 <= self._system <= 255 and 0 <= self._component <= 255:
+            spec = bytes((self._system, self._component, len(self._kinds))) + self._spec
+            self.take = functools.partial(_CORE.take, spec)  # type: ignore[method-assign]
+            self.fields = functools.partial(_CORE.fields, spec)  # type: ignore[method-assign]
 
-    def _add(self, name: str, kind: str, make: Callable[[MessageLayout], Convert]) -> None:
+    def _add(
+        self, name: str, kind: str, make: Callable[[], tuple[Convert, tuple[str, ...]]]
+    ) -> None:
+        """Message ``name`` of input ``kind``: ``make()`` gives its convert and the names of
+        the fields it takes."""
         layout = layout_of(name)
-        self._table[layout.msg_id] = (layout, bytes((layout.crc_extra,)), kind, make(layout))
+        convert, names = make()
+        code = len(self._kinds)
+        self._kinds.append((kind, convert))
+        picked = [layout.wire_index[field] for field in names]
+        crc_extra = bytes((layout.crc_extra,))
+        self._table[layout.msg_id] = (layout, crc_extra, code, itemgetter(*picked))
+        offsets, types = _wire_offsets(layout)
+        self._spec += struct.pack(
+            "<IBBBB", layout.msg_id, layout.crc_extra, layout.size, code, len(picked)
+        )
+        self._spec += b"".join(bytes((offsets[i], ord(types[i]))) for i in picked)
 
     def receive(self, frame: bytes | bytearray, local_s: float | None) -> list[Sample] | None:
         """The samples ``frame`` releases, as ``Ingest.receive`` gives them for the message the
@@ -112,26 +139,37 @@ class FrameIngest:
             raise ValueError("FrameIngest.receive needs the parser it falls back to")
         if parser.pending_bytes:
             return None
-        entry = self._entry(frame)
-        if entry is None:
+        fields = self.fields(frame)
+        if fields is None:
             return None
         counters = parser.counters
         counters.bytes_in += len(frame)
         counters.frames_ok += 1
-        layout, _, kind, convert = entry  # as samples(), without its second look-up
-        values = layout.flat_of(frame, _HEADER_V2, len(frame) - _CRC_LEN)
-        return self._ingest.receive_input(kind, convert(values), local_s)
+        kind, convert = self._kinds[fields[0]]
+        return self._ingest.receive_input(kind, convert(fields), local_s)
 
     def take(self, frame: bytes | bytearray) -> bool:
         """Whether ``frame`` (a whole datagram or record, starting a frame) is exactly one
         intact unsigned MAVLink 2 frame of an input stream from the flight controller: length
         and ``crc_extra`` checksum checked, nothing counted or changed. Only the configuration
-        is read (the flavour's messages, the flight controller's ids)."""
+        is read (the flavour's messages, the flight controller's ids). (The Python reference;
+        an instance runs ``frame_core.c``'s twin where it is built.)"""
         return self._entry(frame) is not None
+
+    def fields(self, frame: bytes | bytearray) -> tuple | None:
+        """``(code, value, ...)``: the fields the sample of a frame :meth:`take` accepts is made
+        of (its convert's, as the message's wire-order ``struct`` unpacks them; a truncated
+        MAVLink 2 payload padded with zeros), after the code of its table entry; ``None`` for a
+        frame :meth:`take` refuses. (The Python reference, as :meth:`take`.)"""
+        entry = self._entry(frame)
+        if entry is None:
+            return None
+        layout, _, code, pick = entry
+        return (code, *pick(layout.flat_of(frame, _HEADER_V2, len(frame) - _CRC_LEN)))
 
     def _entry(self, frame: bytes | bytearray) -> tuple | None:
         """:meth:`take`'s verdict: the frame's entry of the table (layout, ``crc_extra``,
-        kind, convert) when it takes the frame, else None."""
+        code, fields' picker) when it takes the frame, else None."""
         n = len(frame)
         if n <= _HEADER_V2:
             return None
@@ -152,77 +190,73 @@ class FrameIngest:
         """The samples a frame :meth:`take` accepted releases (received at local time
         ``local_s`` [s], or None), counted by the ingest as ``Ingest.receive`` counts the
         message the parser would decode from it; the framing counts are the caller's."""
-        layout, _, kind, convert = self._table[_FRONT.unpack_from(frame)[5] & 0xFFFFFF]
-        values = layout.flat_of(frame, _HEADER_V2, len(frame) - _CRC_LEN)
-        return self._ingest.receive_input(kind, convert(values), local_s)
+        fields = self.fields(frame)
+        kind, convert = self._kinds[fields[0]]  # type: ignore[index]
+        return self._ingest.receive_input(kind, convert(fields), local_s)
 
     # ------------------------------------------------------------------ per message
-    def _raw_imu(self, layout: MessageLayout) -> Convert:
+    # each: the sample's convert, taking (code, value, ...) as fields() gives them, and the
+    # names of those values (pymavlink's field names)
+    def _raw_imu(self) -> tuple[Convert, tuple[str, ...]]:
         """RAW_IMU (milli-g, milli-rad/s, ``time_usec``), as ``units.raw_imu_si``."""
-        t, ax, ay, az, gx, gy, gz, imu_id = _fields(
-            layout, "time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "id"
-        )
         check = self._ingest.imu_sample
         g, rad = MILLI_G_TO_MPS2, MILLI_RAD_TO_RAD
 
         def convert(f: tuple) -> Sample | None:
-            return check(
-                f[imu_id],
-                f[t] * 1e-6,
-                (f[ax] * g, f[ay] * g, f[az] * g),
-                (f[gx] * rad, f[gy] * rad, f[gz] * rad),
-            )
+            _, t, ax, ay, az, gx, gy, gz, imu_id = f
+            return check(imu_id, t * 1e-6, (ax * g, ay * g, az * g), (gx * rad, gy * rad, gz * rad))
 
-        return convert
+        return convert, _IMU_FIELDS
 
-    def _highres_imu(self, layout: MessageLayout) -> Convert:
+    def _highres_imu(self) -> tuple[Convert, tuple[str, ...]]:
         """HIGHRES_IMU (m/s^2, rad/s, ``time_usec``; floats on the wire), as
         ``units.highres_imu_si``."""
-        t, ax, ay, az, gx, gy, gz, imu_id = _fields(
-            layout, "time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "id"
-        )
         check = self._ingest.imu_sample
 
         def convert(f: tuple) -> Sample | None:
-            return check(f[imu_id], f[t] * 1e-6, (f[ax], f[ay], f[az]), (f[gx], f[gy], f[gz]))
+            _, t, ax, ay, az, gx, gy, gz, imu_id = f
+            return check(imu_id, t * 1e-6, (ax, ay, az), (gx, gy, gz))
 
-        return convert
+        return convert, _IMU_FIELDS
 
-    def _attitude(self, layout: MessageLayout) -> Convert:
+    def _attitude(self) -> tuple[Convert, tuple[str, ...]]:
         """ATTITUDE, as ``units.attitude_from_attitude``."""
-        t, roll, pitch, yaw = _fields(layout, "time_boot_ms", "roll", "pitch", "yaw")
         check = self._ingest.attitude_sample
 
         def convert(f: tuple) -> Sample | None:
-            return check(AttitudeSample(f[t] * 1e-3, f[roll], f[pitch], f[yaw]))
+            _, t, roll, pitch, yaw = f
+            return check(AttitudeSample(t * 1e-3, roll, pitch, yaw))
 
-        return convert
+        return convert, ("time_boot_ms", "roll", "pitch", "yaw")
 
-    def _servo_output_raw(self, layout: MessageLayout) -> Convert:
+    def _servo_output_raw(self) -> tuple[Convert, tuple[str, ...]]:
         """SERVO_OUTPUT_RAW's port, ``time_usec`` and channels 1..n_motors."""
-        channels = _fields(layout, *(f"servo{i + 1}_raw" for i in range(self._ingest.n_motors)))
-        outputs = operator.itemgetter(*channels, channels[0])  # a tuple for one motor too
-        port, t = _fields(layout, "port", "time_usec")
         check = self._ingest.pwm_sample
 
         def convert(f: tuple) -> Sample | None:
-            return check(f[port], f[t], outputs(f)[:-1])
+            return check(f[1], f[2], f[3:])
 
-        return convert
+        channels = tuple(f"servo{i + 1}_raw" for i in range(self._ingest.n_motors))
+        return convert, ("port", "time_usec", *channels)
 
-    def _distance_sensor(self, layout: MessageLayout) -> Convert:
+    def _distance_sensor(self) -> tuple[Convert, tuple[str, ...]]:
         """DISTANCE_SENSOR's orientation, time and distances [cm]."""
-        orientation, t, current, low, high = _fields(
-            layout,
-            "orientation",
-            "time_boot_ms",
-            "current_distance",
-            "min_distance",
-            "max_distance",
-        )
         check = self._ingest.range_sample
 
         def convert(f: tuple) -> Sample | None:
-            return check(f[orientation], f[t], f[current], f[low], f[high])
+            _, orientation, t, current, low, high = f
+            return check(orientation, t, current, low, high)
 
-        return convert
+        names = ("orientation", "time_boot_ms", "current_distance", "min_distance", "max_distance")
+        return convert, names
+
+
+def _wire_offsets(layout: MessageLayout) -> tuple[list[int], str]:
+    """Each unpacked wire-order item's byte offset in the payload and its ``struct`` format
+    character (from the layout's own little-endian ``struct`` format, e.g. ``<QhhBh``)."""
+    codes = "".join(
+        letter * int(count or 1)
+        for count, letter in re.findall(r"(\d*)([a-zA-Z])", layout.unpacker.format.lstrip("<"))
+    )
+    offsets = [struct.calcsize("<" + codes[:i]) for i in range(len(codes))]
+    return offsets, codes

@@ -17,6 +17,10 @@ from tether_companion.commands.lazy import help_line, selected
 
 HEAVY_FOR_HELP = ("numpy", "scipy", "pymavlink", "rich", "matplotlib")
 HEAVY_FOR_RUN = (
+    "scipy.linalg",  # the filters' dpotrf/dpotrs come from estimation.lapack
+    "scipy.special",  # imported at the first chi-square gate (aid_status.chi2_threshold)
+    "scipy._lib._array_api",
+    "numpy.f2py",
     "scipy.stats",
     "scipy.signal",
     "scipy.optimize",

@@ -10,7 +10,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import gammaincinv
 
 FloatArray = NDArray[np.float64]
 
@@ -70,7 +69,11 @@ def chi2_threshold(probability: float, dof: int) -> float:
     if probability >= 1.0:
         return math.inf
     # the chi-square quantile as scipy.stats.chi2.ppf computes it, without importing
-    # scipy.stats (a second of start-up on a small board)
+    # scipy.stats (a second of start-up on a small board); scipy.special itself is imported
+    # at the first gate (callers cache the threshold): its array-API layer costs ~0.2 s of
+    # start-up, paid here once instead
+    from scipy.special import gammaincinv
+
     return float(2.0 * gammaincinv(dof / 2.0, probability))
 
 

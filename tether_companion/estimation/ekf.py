@@ -34,9 +34,9 @@ from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg.lapack import dpotrf, dpotrs
 
 from tether_companion.estimation import scalar_update
+from tether_companion.estimation.lapack import dpotrf, dpotrs
 from tether_companion.estimation.aid_status import (  # noqa: F401 (also imported from here)
     FUSED,
     GATED,

@@ -28,12 +28,12 @@ from operator import is_
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg.lapack import dpotrf
 
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.imu_batch import MEMBER_CORE, ImuBatch, product
 from tether_companion.estimation.dynamic.member import MemberFilter, hold_consider
 from tether_companion.estimation.ekf import MeasurementFunction, UpdateResult
+from tether_companion.estimation.lapack import dpotrf
 
 FloatArray = NDArray[np.float64]
 RowsFunction = Callable[[list[float]], tuple[Sequence[float], Sequence[float]]]

@@ -21,7 +21,7 @@ from tether_companion.bench.dynamic import record
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic import published_bound
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
-from tether_companion.estimation.runner import _ATTITUDE, _PWM, _RANGE
+from tether_companion.estimation.feed import imu_ticks
 from tether_companion.physics.vehicle import load_vehicle
 from tether_companion.sim.scenario import load_scenario
 
@@ -134,17 +134,10 @@ def test_a_flight_runs_c_on_every_tick_with_the_python_floats():
     saved = published_bound.STEPPED_TERMS
     published_bound.STEPPED_TERMS = recorded
     try:
-        for kind, sample in record("realistic-takeoff-figure8", 6.0):
-            if kind == _ATTITUDE:
-                estimator.on_attitude(sample)
-            elif kind == _PWM:
-                estimator.on_pwm(sample)
-            elif kind == _RANGE:
-                estimator.on_range(sample)
-            else:
-                estimate = estimator.on_imu(sample)
-                if estimate is not None:
-                    estimate.status  # noqa: B018 (the status read runs the approximation)
+        for imu in imu_ticks(record("realistic-takeoff-figure8", 6.0), estimator):
+            estimate = estimator.on_imu(imu)
+            if estimate is not None:
+                estimate.status  # noqa: B018 (the status read runs the approximation)
     finally:
         published_bound.STEPPED_TERMS = saved
     assert len(calls) > 200

@@ -36,7 +36,7 @@ from tether_companion.estimation.dynamic.position_information import (
     reduce_added_rows,
 )
 from tether_companion.estimation.dynamic.published import UNKNOWN_VARIANCE
-from tether_companion.estimation.runner import _ATTITUDE, _PWM, _RANGE
+from tether_companion.estimation.feed import hand_over
 from tether_companion.physics.vehicle import load_vehicle
 from tether_companion.service.config import load_service_config, load_vehicle_for
 from tether_companion.service.session import EstimationSession
@@ -180,16 +180,6 @@ def _read(e) -> tuple:  # noqa: ANN001
     )
 
 
-def _feed(est, kind, sample):  # noqa: ANN001, ANN202
-    if kind == _ATTITUDE:
-        return est.on_attitude(sample)
-    if kind == _PWM:
-        return est.on_pwm(sample)
-    if kind == _RANGE:
-        return est.on_range(sample)
-    return est.on_imu(sample)
-
-
 def test_every_field_is_the_former_per_tick_value_whenever_it_is_read(flight) -> None:
     name, samples = flight
     vehicle = load_vehicle(load_scenario(name).vehicle)
@@ -198,10 +188,10 @@ def test_every_field_is_the_former_per_tick_value_whenever_it_is_read(flight) ->
     expected, kept, statuses = [], [], set()
     undecided = 0  # ticks whose status the approximation left to the exact values
     for kind, sample in samples:
-        e = _feed(est, kind, sample)
-        e_later = _feed(later, kind, sample)
-        if kind in (_ATTITUDE, _PWM, _RANGE):
+        if hand_over(kind, sample, (est, later)):
             continue
+        e = est.on_imu(sample)
+        e_later = later.on_imu(sample)
         former = _former_estimate(est, e._source)
         approx = e.approximate()
         status = e.status  # first the cheap status alone, as the service reads it

@@ -53,14 +53,17 @@ def test_loaded_without_the_scipy_linalg_package_which_later_shares_it() -> None
         "import numpy as np, scipy.linalg\n"
         "from scipy.linalg import lapack as reference\n"
         "a = np.array([[4.0, 2.0], [2.0, 3.0]])\n"
-        "same = scipy.linalg.cholesky(a, lower=True).tobytes() == lapack.dpotrf(a, lower=1)[0].tobytes()\n"
+        "factor = scipy.linalg.cholesky(a, lower=True).tobytes()\n"
+        "same = factor == lapack.dpotrf(a, lower=1)[0].tobytes()\n"
         "print(json.dumps([lapack._MODULE.__name__, before,"
         " reference.dpotrf is lapack.dpotrf, reference.dpotrs is lapack.dpotrs, same]))"
     )
     out = subprocess.run(
         [sys.executable, "-c", script], capture_output=True, text=True, timeout=120, check=True
     )
-    name, package_loaded, same_f, same_s, same_factor = json.loads(out.stdout.strip().splitlines()[-1])
+    name, package_loaded, same_f, same_s, same_factor = json.loads(
+        out.stdout.strip().splitlines()[-1]
+    )
     assert name == "scipy.linalg._flapack"
     assert package_loaded is False
     assert same_f and same_s and same_factor

@@ -29,8 +29,8 @@ import numpy as np
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
+from tether_companion.estimation.feed import hand_over, imu_ticks, schedule, simulated
 from tether_companion.estimation.pipeline import TetherEstimator
-from tether_companion.estimation.runner import _ATTITUDE, _PWM, _RANGE, _schedule
 from tether_companion.sim.scenario import load_scenario
 from tether_companion.sim.simulator import Simulator
 
@@ -62,21 +62,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def record(scenario_name: str, duration_s: float) -> list[tuple[int, object]]:
     """Every sample of the flight in time order, as ``(kind, sample)``."""
     scenario = dataclasses.replace(load_scenario(scenario_name), duration_s=duration_s)
-    sim = Simulator(scenario)
-    samples: list[tuple[int, object]] = []
-    for step, kind in _schedule(scenario):
-        sim.advance_to(step * sim.physics_dt_s)
-        if kind == _ATTITUDE:
-            samples.append((kind, sim.read_attitude()))
-        elif kind == _PWM:
-            samples.append((kind, sim.read_pwm()))
-        elif kind == _RANGE:
-            reading = sim.read_rangefinder()
-            if reading is not None:
-                samples.append((kind, reading))
-        else:
-            samples.append((kind, sim.read_imu()))
-    return samples
+    return list(simulated(Simulator(scenario), schedule(scenario)))
 
 
 def replay(
@@ -85,26 +71,14 @@ def replay(
     """Feed ``samples[start:]``; CPU seconds and IMU ticks. ``read_status``: read each
     estimate's ``status`` as the service does at every tick (the dynamic filter computes its
     estimate's values when they are read)."""
-    on_att, on_pwm, on_range, on_imu = (
-        estimator.on_attitude,
-        estimator.on_pwm,
-        estimator.on_range,
-        estimator.on_imu,
-    )
+    on_imu = estimator.on_imu
     ticks = 0
     begin = time.process_time()
-    for kind, sample in samples[start:]:
-        if kind == _ATTITUDE:
-            on_att(sample)
-        elif kind == _PWM:
-            on_pwm(sample)
-        elif kind == _RANGE:
-            on_range(sample)
-        else:
-            estimate = on_imu(sample)
-            if read_status and estimate is not None:
-                estimate.status  # noqa: B018 - read, as the service reads it
-            ticks += 1
+    for imu in imu_ticks(samples[start:], estimator):
+        estimate = on_imu(imu)
+        if read_status and estimate is not None:
+            estimate.status  # noqa: B018 - read, as the service reads it
+        ticks += 1
     return time.process_time() - begin, ticks
 
 
@@ -112,13 +86,7 @@ def _decided_index(samples: list[tuple[int, object]], config: EstimatorConfig, v
     """Index of the first sample after the dynamic filter's bank kept one member."""
     est = DynamicTetherEstimator(config, vehicle)
     for i, (kind, sample) in enumerate(samples):
-        if kind == _ATTITUDE:
-            est.on_attitude(sample)
-        elif kind == _PWM:
-            est.on_pwm(sample)
-        elif kind == _RANGE:
-            est.on_range(sample)
-        else:
+        if not hand_over(kind, sample, (est,)):
             est.on_imu(sample)
             if est.bank is not None and est.bank.decided:
                 return i + 1

@@ -36,7 +36,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation import scalar_update
-from tether_companion.estimation.lapack import dpotrf, dpotrs
 from tether_companion.estimation.aid_status import (  # noqa: F401 (also imported from here)
     FUSED,
     GATED,
@@ -47,6 +46,7 @@ from tether_companion.estimation.aid_status import (  # noqa: F401 (also importe
     chi2_threshold,
     gate_rejects,
 )
+from tether_companion.estimation.lapack import dpotrf, dpotrs
 
 FloatArray = NDArray[np.float64]
 

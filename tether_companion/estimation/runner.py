@@ -11,21 +11,22 @@ import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from itertools import islice
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.estimate import EstimatorHealth
+from tether_companion.estimation.feed import IMU, imu_ticks, schedule, simulated
 from tether_companion.estimation.pipeline import TetherEstimator
 from tether_companion.physics.vehicle import VehicleProfile
+from tether_companion.samples import ImuSample
 from tether_companion.sim.scenario import Scenario
 from tether_companion.sim.simulator import Simulator
 
 FloatArray = NDArray[np.float64]
 
-_ATTITUDE, _PWM, _IMU, _RANGE = 0, 1, 2, 3
-"""Order in which samples due at the same instant are handed over (IMU after its inputs)."""
 BLOCK_SAMPLES = 1024
 """Samples the simulator makes before the estimators take them. Here the estimators never act
 on the simulator, so the two run over a block in turn instead of sample by sample, which gives
@@ -63,23 +64,9 @@ class RunResult:
     health_3s: EstimatorHealth
 
 
-def _schedule(scenario: Scenario) -> list[tuple[int, int]]:
-    """(physics step, sensor) pairs of every sample due in the run, in time order."""
-    physics_hz = scenario.physics_rate_hz
-    sensors = scenario.sensors
-    steps_total = int(round(scenario.duration_s * physics_hz))
-    events: list[tuple[int, int]] = []
-    for kind, rate_hz in (
-        (_ATTITUDE, sensors.attitude_rate_hz),
-        (_PWM, sensors.pwm_rate_hz),
-        (_IMU, sensors.imu_rate_hz),
-        (_RANGE, sensors.range_rate_hz),
-    ):
-        count = int(scenario.duration_s * rate_hz + 1e-9)
-        events += [(int(round(k * physics_hz / rate_hz)), kind) for k in range(1, count + 1)]
-    due = [e for e in events if e[0] <= steps_total]
-    due.sort()
-    return due
+def _imu_with_truth(sim: Simulator) -> tuple[ImuSample, float, tuple[float, float, float]]:
+    """The IMU sample with the true tension and position at its instant (read in this order)."""
+    return sim.read_imu(), sim.tension_n, sim.position_ned_m
 
 
 def run_scenario(
@@ -111,57 +98,34 @@ def run_scenario(
     est3 = TetherEstimator(  # same inputs, aligned once for both
         dataclasses.replace(config, kind="three_state"), vehicle, aligner=est4.aligner
     )
-    schedule = _schedule(scenario)
-    n_ticks = [kind for _, kind in schedule].count(_IMU)
+    due = schedule(scenario)
+    n_ticks = [kind for _, kind in due].count(IMU)
     # one row of Python floats per tick, made into arrays at the end (no array per tick)
     rows: list[tuple[float, ...]] = []
     missing = (math.nan,) * (4 + 4 + 3 + 3)
-    dt_s = sim.physics_dt_s
     report_every = max(1, n_ticks // 50)
-    for first in range(0, len(schedule), BLOCK_SAMPLES):
-        block: list[tuple[int, object]] = []
-        for step, kind in schedule[first : first + BLOCK_SAMPLES]:
-            sim.advance_to(step * dt_s)
-            if kind == _ATTITUDE:
-                block.append((kind, sim.read_attitude()))
-            elif kind == _PWM:
-                block.append((kind, sim.read_pwm()))
-            elif kind == _RANGE:
-                block.append((kind, sim.read_rangefinder()))
+    samples = simulated(sim, due, _imu_with_truth)
+    while block := list(islice(samples, BLOCK_SAMPLES)):
+        for imu, tension_n, position in imu_ticks(block, est4, est3):
+            est3.set_known_tension_n(tension_n, imu.time_s)
+            e4 = est4.on_imu(imu)
+            e3 = est3.on_imu(imu)
+            truth = (imu.time_s, *position, tension_n)
+            if e4 is None or e3 is None:  # a rejected IMU sample: no estimate this tick
+                rows.append(truth + missing)
             else:
-                block.append((kind, (sim.read_imu(), sim.tension_n, sim.position_ned_m)))
-        for kind, sample in block:
-            if kind == _ATTITUDE:
-                est4.on_attitude(sample)  # type: ignore[arg-type]
-                est3.on_attitude(sample)  # type: ignore[arg-type]
-            elif kind == _PWM:
-                est4.on_pwm(sample)  # type: ignore[arg-type]
-                est3.on_pwm(sample)  # type: ignore[arg-type]
-            elif kind == _RANGE:
-                if sample is not None:
-                    est4.on_range(sample)  # type: ignore[arg-type]
-                    est3.on_range(sample)  # type: ignore[arg-type]
-            else:
-                imu, tension_n, position = sample  # type: ignore[misc]
-                est3.set_known_tension_n(tension_n, imu.time_s)
-                e4 = est4.on_imu(imu)
-                e3 = est3.on_imu(imu)
-                truth = (imu.time_s, *position, tension_n)
-                if e4 is None or e3 is None:  # a rejected IMU sample: no estimate this tick
-                    rows.append(truth + missing)
-                else:
-                    c4, c3 = e4.covariance_values, e3.covariance_values
-                    rows.append(
-                        (
-                            *truth,
-                            *e4.state_values,
-                            *c4[::5],  # the diagonal of 4 x 4
-                            *e3.state_values,
-                            *c3[::4],  # of 3 x 3
-                        )
+                c4, c3 = e4.covariance_values, e3.covariance_values
+                rows.append(
+                    (
+                        *truth,
+                        *e4.state_values,
+                        *c4[::5],  # the diagonal of 4 x 4
+                        *e3.state_values,
+                        *c3[::4],  # of 3 x 3
                     )
-                if progress is not None and len(rows) % report_every == 0:
-                    progress(len(rows) / n_ticks)
+                )
+            if progress is not None and len(rows) % report_every == 0:
+                progress(len(rows) / n_ticks)
     table = np.array(rows, dtype=float).reshape(len(rows), 5 + 4 + 4 + 3 + 3)
     return RunResult(
         time_s=table[:, 0].copy(),

@@ -20,7 +20,7 @@ from tether_companion.bench.estimators.registry import (
     FlightContext,
     GroundStation,
 )
-from tether_companion.estimation.runner import _ATTITUDE, _IMU, _PWM, _RANGE, _schedule
+from tether_companion.estimation.feed import IMU, RANGE, hand_over, schedule, simulated
 from tether_companion.physics.cable import cable_weight_n_per_m
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.sim.ground_sensors import GroundSensors
@@ -124,8 +124,8 @@ def fly(
     nominal = estimator_vehicle or load_vehicle(scenario.vehicle)
     context = FlightContext(scenario, nominal, sim.gravity_mps2)
     estimators = [kind.build(context) for kind in kinds]
-    schedule = _schedule(scenario)
-    n = sum(1 for _, what in schedule if what == _IMU)
+    due = schedule(scenario)
+    n = sum(1 for _, what in due if what == IMU)
     time_s = np.empty(n)
     truth = {
         name: np.empty((n, 3))
@@ -139,67 +139,50 @@ def fly(
     outputs = [_empty_trace(n) for _ in kinds]
     tick = 0
     seen = False
-    dt_s = sim.physics_dt_s
     ground = GroundSensors(
         scenario.ground_station,
         scenario.cable.model,
         scenario.seed,
         cable_weight_n_per_m(scenario.cable, sim.gravity_mps2),
     )
-    for step, what in schedule:
-        sim.advance_to(step * dt_s)
-        if what == _ATTITUDE:
-            attitude = sim.read_attitude()
-            for estimator in estimators:
-                estimator.on_attitude(attitude)
-        elif what == _PWM:
-            pwm = sim.read_pwm()
-            for estimator in estimators:
-                estimator.on_pwm(pwm)
-        elif what == _RANGE:
-            reading = sim.read_rangefinder()
-            if reading is not None:
-                seen = True
-                for estimator in estimators:
-                    estimator.on_range(reading)
-        else:
-            imu = sim.read_imu()
-            state = sim.truth
-            readings = ground.read(
-                imu.time_s, sim.cable, tuple(state.position_ned_m), state.tension_n
-            )
-            station = GroundStation(
-                imu.time_s,
-                state.tension_n,
-                readings.paid_out_m,
-                readings.cable_angle_rad,
-                readings.winch_tension_n,
-            )
-            angle_seen[tick] = readings.cable_angle_rad is not None
-            winch_seen[tick] = readings.paid_out_m is not None
-            time_s[tick] = imu.time_s
-            truth["position"][tick] = state.position_ned_m
-            truth["velocity"][tick] = state.velocity_ned_m_s
-            truth["euler"][tick] = state.euler_rad
-            truth["cable"][tick] = state.cable_force_ned_n
-            truth["wind"][tick] = state.wind_ned_m_s
-            truth["force"][tick] = state.specific_force_body_mps2
-            tension[tick] = state.tension_n
-            thrust[tick] = float(state.motor_thrust_n.sum())
-            landed[tick] = state.landed
-            range_seen[tick] = seen
-            seen = False
-            for estimator, out in zip(estimators, outputs, strict=True):
-                estimator.on_ground_station(station)
-                result = estimator.on_imu(imu)
-                if result is not None:
-                    out["position"][tick] = result.position_ned_m
-                    out["covariance"][tick] = result.position_covariance_m2
-                    out["velocity"][tick] = result.velocity_ned_mps
-                    out["tension"][tick] = result.tension_n
-                    out["tension_variance"][tick] = result.tension_variance_n2
-                    out["published"][tick] = result.published
-            tick += 1
+    for what, imu in simulated(sim, due):
+        if hand_over(what, imu, estimators):  # an input, not an IMU sample
+            seen = seen or what == RANGE
+            continue
+        state = sim.truth
+        readings = ground.read(imu.time_s, sim.cable, tuple(state.position_ned_m), state.tension_n)
+        station = GroundStation(
+            imu.time_s,
+            state.tension_n,
+            readings.paid_out_m,
+            readings.cable_angle_rad,
+            readings.winch_tension_n,
+        )
+        angle_seen[tick] = readings.cable_angle_rad is not None
+        winch_seen[tick] = readings.paid_out_m is not None
+        time_s[tick] = imu.time_s
+        truth["position"][tick] = state.position_ned_m
+        truth["velocity"][tick] = state.velocity_ned_m_s
+        truth["euler"][tick] = state.euler_rad
+        truth["cable"][tick] = state.cable_force_ned_n
+        truth["wind"][tick] = state.wind_ned_m_s
+        truth["force"][tick] = state.specific_force_body_mps2
+        tension[tick] = state.tension_n
+        thrust[tick] = float(state.motor_thrust_n.sum())
+        landed[tick] = state.landed
+        range_seen[tick] = seen
+        seen = False
+        for estimator, out in zip(estimators, outputs, strict=True):
+            estimator.on_ground_station(station)
+            result = estimator.on_imu(imu)
+            if result is not None:
+                out["position"][tick] = result.position_ned_m
+                out["covariance"][tick] = result.position_covariance_m2
+                out["velocity"][tick] = result.velocity_ned_mps
+                out["tension"][tick] = result.tension_n
+                out["tension_variance"][tick] = result.tension_variance_n2
+                out["published"][tick] = result.published
+        tick += 1
     return FlightRecord(
         time_s=time_s,
         position_ned_m=truth["position"],

@@ -19,8 +19,8 @@ from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.output import OK
+from tether_companion.estimation.feed import IMU, imu_ticks, schedule, simulated
 from tether_companion.estimation.pipeline import TetherEstimator
-from tether_companion.estimation.runner import _ATTITUDE, _PWM, _RANGE, _schedule
 from tether_companion.estimation.thrust_input import ThrustInput
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.sim.scenario import Scenario
@@ -110,8 +110,8 @@ def run_dynamic(
     vehicle = sim.vehicle
     paper = TetherEstimator(dataclasses.replace(config, kind="four_state"), vehicle, thrust_input)
     est = DynamicTetherEstimator(config, vehicle, dynamic, aligner=paper.aligner)
-    schedule = _schedule(scenario)
-    n = sum(1 for _, kind in schedule if kind not in (_ATTITUDE, _PWM, _RANGE))
+    due = schedule(scenario)
+    n = sum(1 for _, kind in due if kind == IMU)
     t = np.full(n, np.nan)
     tp, tv, tt = np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full(n, np.nan)
     pos, vel, ten = np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full(n, np.nan)
@@ -121,42 +121,26 @@ def run_dynamic(
     pp, pv = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
     nis = np.full(n, np.nan)
     tick = 0
-    for step, kind in schedule:
-        sim.advance_to(step * sim.physics_dt_s)
-        if kind == _ATTITUDE:
-            sample = sim.read_attitude()
-            paper.on_attitude(sample)
-            est.on_attitude(sample)
-        elif kind == _PWM:
-            sample = sim.read_pwm()
-            paper.on_pwm(sample)
-            est.on_pwm(sample)
-        elif kind == _RANGE:
-            reading = sim.read_rangefinder()
-            if reading is not None:
-                paper.on_range(reading)
-                est.on_range(reading)
-        else:
-            imu = sim.read_imu()
-            truth = sim.truth
-            t[tick] = imu.time_s
-            tp[tick], tv[tick], tt[tick] = (
-                truth.position_ned_m,
-                truth.velocity_ned_m_s,
-                truth.tension_n,
-            )
-            e4 = paper.on_imu(imu)
-            if e4 is not None:
-                pp[tick], pv[tick] = e4.position_ned_m, e4.covariance.diagonal()[:3]
-            e = est.on_imu(imu)
-            if e is not None:
-                pos[tick], vel[tick], ten[tick] = e.position_ned_m, e.velocity_ned_mps, e.tension_n
-                cov[tick] = e.position_velocity_covariance
-                status[tick] = e.status
-                scale[tick], bias[tick] = e.thrust_scale, e.accel_bias_body_mps2
-                if e.accel_fused:
-                    nis[tick] = est.health.last_accel_nis
-            tick += 1
+    for imu in imu_ticks(simulated(sim, due), paper, est):
+        truth = sim.truth  # the simulator is at the IMU sample's instant
+        t[tick] = imu.time_s
+        tp[tick], tv[tick], tt[tick] = (
+            truth.position_ned_m,
+            truth.velocity_ned_m_s,
+            truth.tension_n,
+        )
+        e4 = paper.on_imu(imu)
+        if e4 is not None:
+            pp[tick], pv[tick] = e4.position_ned_m, e4.covariance.diagonal()[:3]
+        e = est.on_imu(imu)
+        if e is not None:
+            pos[tick], vel[tick], ten[tick] = e.position_ned_m, e.velocity_ned_mps, e.tension_n
+            cov[tick] = e.position_velocity_covariance
+            status[tick] = e.status
+            scale[tick], bias[tick] = e.thrust_scale, e.accel_bias_body_mps2
+            if e.accel_fused:
+                nis[tick] = est.health.last_accel_nis
+        tick += 1
     return DynamicRun(
         time_s=t[:tick],
         truth_position_ned_m=tp[:tick],

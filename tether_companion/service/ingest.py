@@ -166,6 +166,20 @@ class Ingest:
         self.rebooted = False
         """True right after the message that confirmed a reboot (cleared on the next call)."""
 
+    def check_bounds(self) -> tuple[float, float, float, float, float, float]:
+        """The value checks' bounds (for a twin of the checks): squared specific force
+        [m^2/s^4], angular rate [rad/s], lowest and highest motor output (the command unit's),
+        shortest and longest range [m]."""
+        low, high = self._output_range
+        return (
+            self._max_force_sq,
+            self._max_rate,
+            low,
+            high,
+            self.limits.range_min_m,
+            self.limits.range_max_m,
+        )
+
     def from_flight_controller(self, msg: Received) -> bool:
         """Whether ``msg`` was sent by the configured flight controller."""
         return (

@@ -30,13 +30,18 @@ import struct
 from collections.abc import Callable
 from operator import itemgetter
 
+import numpy as np
 from fastcrc.crc16 import mcrf4xx
 
 from tether_companion.estimation.optional_core import load
 from tether_companion.mavlink.fastdecode import MessageLayout, layout_of
 from tether_companion.mavlink.framing import FrameParser, dialect
-from tether_companion.mavlink.units import MILLI_G_TO_MPS2, MILLI_RAD_TO_RAD
-from tether_companion.samples import AttitudeSample
+from tether_companion.mavlink.units import (
+    DOWNWARD_ORIENTATION,
+    MILLI_G_TO_MPS2,
+    MILLI_RAD_TO_RAD,
+)
+from tether_companion.samples import AttitudeSample, ImuSample, PwmSample, RangeSample
 from tether_companion.service.ingest import ATTITUDE, IMU, PWM, RANGE, Ingest, Sample
 
 __all__ = ["FrameIngest"]
@@ -56,6 +61,8 @@ Convert = Callable[[tuple], Sample | None]
 checked sample (None: dropped, counted)."""
 
 
+_CONVERSIONS = ("RAW_IMU", "HIGHRES_IMU", "ATTITUDE", "SERVO_OUTPUT_RAW", "DISTANCE_SENSOR")
+"""The messages ``frame_core.c``'s ``Reader`` converts, by its conversion number."""
 _IMU_FIELDS = ("time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "id")
 _CORE = load("tether_companion.service._frame_core")
 """``frame_core.c``: :meth:`FrameIngest.take` and :meth:`FrameIngest.fields` in one C call
@@ -98,6 +105,9 @@ class FrameIngest:
         """code -> (kind, convert)."""
         self._spec = b""
         """The table's entries for ``frame_core.c`` (see there)."""
+        self._conversions = b""
+        """Per code, ``frame_core.c``'s conversion of the message (0 RAW_IMU ... 4
+        DISTANCE_SENSOR)."""
         if ingest.link.autopilot == "ardupilot":
             self._add("RAW_IMU", IMU, self._raw_imu)
         else:
@@ -105,10 +115,26 @@ class FrameIngest:
         self._add("ATTITUDE", ATTITUDE, self._attitude)
         self._add("SERVO_OUTPUT_RAW", PWM, self._servo_output_raw)
         self._add("DISTANCE_SENSOR", RANGE, self._distance_sensor)
+        self._read: Callable[[bytes | bytearray], tuple | None] = self._read_fields
+        """``frame -> None | (kind, sample, dropped)``: None for a frame :meth:`take` refuses,
+        else the frame's input kind and its checked sample, or None and the reason it was
+        dropped, when that is not counted yet (C's ``Reader.read``; the Python reference's
+        checks count their drops themselves)."""
         if _CORE is not None and 0 <= self._system <= 255 and 0 <= self._component <= 255:
             spec = bytes((self._system, self._component, len(self._kinds))) + self._spec
             self.take = functools.partial(_CORE.take, spec)  # type: ignore[method-assign]
             self.fields = functools.partial(_CORE.fields, spec)  # type: ignore[method-assign]
+            bounds = (MILLI_G_TO_MPS2, MILLI_RAD_TO_RAD, *ingest.check_bounds())
+            if ingest.n_motors >= 1 and all(float(b) == b for b in bounds):
+                self._read = _CORE.Reader(
+                    spec,
+                    self._conversions,
+                    tuple(kind for kind, _ in self._kinds),
+                    (*map(float, bounds), ingest.n_motors, DOWNWARD_ORIENTATION),
+                    ingest.clock,
+                    (ImuSample, AttitudeSample, PwmSample, RangeSample),
+                    np.array,
+                ).read
 
     def _add(
         self, name: str, kind: str, make: Callable[[], tuple[Convert, tuple[str, ...]]]
@@ -118,6 +144,7 @@ class FrameIngest:
         layout = layout_of(name)
         convert, names = make()
         code = len(self._kinds)
+        self._conversions += bytes((_CONVERSIONS.index(name),))
         self._kinds.append((kind, convert))
         picked = [layout.wire_index[field] for field in names]
         crc_extra = bytes((layout.crc_extra,))
@@ -139,14 +166,13 @@ class FrameIngest:
             raise ValueError("FrameIngest.receive needs the parser it falls back to")
         if parser.pending_bytes:
             return None
-        fields = self.fields(frame)
-        if fields is None:
+        read = self._read(frame)
+        if read is None:
             return None
         counters = parser.counters
         counters.bytes_in += len(frame)
         counters.frames_ok += 1
-        kind, convert = self._kinds[fields[0]]
-        return self._ingest.receive_input(kind, convert(fields), local_s)
+        return self._received(read, local_s)
 
     def take(self, frame: bytes | bytearray) -> bool:
         """Whether ``frame`` (a whole datagram or record, starting a frame) is exactly one
@@ -190,9 +216,25 @@ class FrameIngest:
         """The samples a frame :meth:`take` accepted releases (received at local time
         ``local_s`` [s], or None), counted by the ingest as ``Ingest.receive`` counts the
         message the parser would decode from it; the framing counts are the caller's."""
+        return self._received(self._read(frame), local_s)  # type: ignore[arg-type]
+
+    def _received(self, read: tuple, local_s: float | None) -> list[Sample]:
+        """The samples :meth:`_read`'s ``(kind, sample, dropped)`` releases through the
+        ingest (a drop not counted yet counted under its reason)."""
+        kind, sample, dropped = read
+        if dropped is not None:
+            counters = self._ingest.counters
+            setattr(counters, dropped, getattr(counters, dropped) + 1)
+        return self._ingest.receive_input(kind, sample, local_s)
+
+    def _read_fields(self, frame: bytes | bytearray) -> tuple | None:
+        """:attr:`_read`'s Python reference: the frame's fields through its convert and the
+        ingest's check (which counts a drop itself)."""
         fields = self.fields(frame)
-        kind, convert = self._kinds[fields[0]]  # type: ignore[index]
-        return self._ingest.receive_input(kind, convert(fields), local_s)
+        if fields is None:
+            return None
+        kind, convert = self._kinds[fields[0]]
+        return kind, convert(fields), None
 
     # ------------------------------------------------------------------ per message
     # each: the sample's convert, taking (code, value, ...) as fields() gives them, and the

@@ -40,13 +40,15 @@ multiplications a tick in bytecode cost more than a dozen numpy calls of ~1 us e
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.imu_batch import MEMBER_CORE
 from tether_companion.estimation.dynamic.models import Generated, ModelConstants
 from tether_companion.estimation.ekf import (
     FUSED,
@@ -198,34 +200,17 @@ class MemberFilter(ExtendedKalmanFilter):
         status = self.sensors.get(sensor)
         if status is None:
             status = self.sensors[sensor] = SensorStatus()
-        s00, s01, s02, _, s11, s12, _, _, s22 = s_values
-        s00 += r_variance
-        s11 += r_variance
-        s22 += r_variance
-        # Sylvester: S is positive definite iff its leading minors are (NaN fails each test)
-        m01 = s00 * s11 - s01 * s01
-        c0, c1, c2 = s11 * s22 - s12 * s12, s02 * s12 - s01 * s22, s01 * s12 - s02 * s11
-        det = s00 * c0 + s01 * c1 + s02 * c2
-        if not (s00 > 0.0 and m01 > 0.0 and det > 0.0):
-            self.last_log_det_s = math.nan
-            return self._rejected(status, s00 + s11 + s22 + s01 + s02 + s12), ()
-        self.last_log_det_s = math.log(det)
-        inv = 1.0 / det
-        i00, i01, i02 = c0 * inv, c1 * inv, c2 * inv
-        i11 = (s00 * s22 - s02 * s02) * inv
-        i12 = (s01 * s02 - s00 * s12) * inv
-        i22 = m01 * inv
-        y0, y1, y2 = innovation
-        w0 = i00 * y0 + i01 * y1 + i02 * y2
-        w1 = i01 * y0 + i11 * y1 + i12 * y2
-        w2 = i02 * y0 + i12 * y1 + i22 * y2
-        nis = y0 * w0 + y1 * w1 + y2 * w2
+        log_det, solved = SOLVE_FORCE_BALANCE(s_values, innovation, r_variance)
+        self.last_log_det_s = log_det
+        if log_det != log_det:  # nan: S is not positive definite, ``solved`` its entries' sum
+            return self._rejected(status, solved), ()
+        nis = solved[0]
         status.last_nis = nis
         status.innovation = innovation
         threshold, in_force = self._gate(status, 3)
         if self._gated(status, nis, threshold, in_force):
             return UpdateResult(GATED, nis), ()
-        return None, (nis, i00, i01, i02, i01, i11, i12, i02, i12, i22, w0, w1, w2)
+        return None, solved
 
     def accept_update(
         self, sensor: str, nis: float, x: FloatArray, p: FloatArray, *, checked: bool
@@ -260,6 +245,45 @@ class MemberFilter(ExtendedKalmanFilter):
             return UpdateResult(NONFINITE, math.nan)
         status.singular += 1
         return UpdateResult(SINGULAR, math.nan)
+
+
+def solve_force_balance(
+    s_values: Sequence[float], innovation: Sequence[float], r_variance: float
+) -> tuple[float, tuple[float, ...] | float]:
+    """The scalars of :meth:`MemberFilter.test_force_balance`: ``S = H P H^T + r_variance I``
+    from ``s_values`` (``H P H^T``, 9 row-major) tested for definiteness (Sylvester's leading
+    minors; NaN fails each test) and inverted in scalars, with ``y`` = ``innovation`` (3).
+    Returns ``(log det S, (nis, S^-1 row-major (9), S^-1 y (3)))``, or ``(nan, sum of S's
+    upper entries)`` when ``S`` is not positive definite. The reference of ``_member_core``'s
+    ``force_balance`` (:data:`SOLVE_FORCE_BALANCE`), which is bit for bit this."""
+    s00, s01, s02, _, s11, s12, _, _, s22 = s_values
+    s00 += r_variance
+    s11 += r_variance
+    s22 += r_variance
+    # Sylvester: S is positive definite iff its leading minors are (NaN fails each test)
+    m01 = s00 * s11 - s01 * s01
+    c0, c1, c2 = s11 * s22 - s12 * s12, s02 * s12 - s01 * s22, s01 * s12 - s02 * s11
+    det = s00 * c0 + s01 * c1 + s02 * c2
+    if not (s00 > 0.0 and m01 > 0.0 and det > 0.0):
+        return math.nan, s00 + s11 + s22 + s01 + s02 + s12
+    inv = 1.0 / det
+    i00, i01, i02 = c0 * inv, c1 * inv, c2 * inv
+    i11 = (s00 * s22 - s02 * s02) * inv
+    i12 = (s01 * s02 - s00 * s12) * inv
+    i22 = m01 * inv
+    y0, y1, y2 = innovation
+    w0 = i00 * y0 + i01 * y1 + i02 * y2
+    w1 = i01 * y0 + i11 * y1 + i12 * y2
+    w2 = i02 * y0 + i12 * y1 + i22 * y2
+    nis = y0 * w0 + y1 * w1 + y2 * w2
+    return math.log(det), (nis, i00, i01, i02, i01, i11, i12, i02, i12, i22, w0, w1, w2)
+
+
+SOLVE_FORCE_BALANCE: Callable[..., tuple] = solve_force_balance
+""":func:`solve_force_balance`, or where the optional C extension ``_member_core`` runs its
+twin ``force_balance``: the same floats (the Python function called where C could differ)."""
+if MEMBER_CORE is not None:
+    SOLVE_FORCE_BALANCE = functools.partial(MEMBER_CORE.force_balance, solve_force_balance)
 
 
 def hold_consider(

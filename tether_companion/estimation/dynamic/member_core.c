@@ -422,6 +422,68 @@ mixture(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Py_RETURN_NONE;
 }
 
+/* The exact Python floats of a list or tuple of `count` (0: not one). */
+static int
+exact_floats(PyObject *seq, Py_ssize_t count, double *out)
+{
+    if (!(PyList_CheckExact(seq) || PyTuple_CheckExact(seq)) || PySequence_Fast_GET_SIZE(seq) != count)
+        return 0;
+    PyObject **items = PySequence_Fast_ITEMS(seq);
+    for (Py_ssize_t i = 0; i < count; i++) {
+        if (!PyFloat_CheckExact(items[i]))
+            return 0;
+        out[i] = PyFloat_AS_DOUBLE(items[i]);
+    }
+    return 1;
+}
+
+/* force_balance(fallback, s_values, innovation, r_variance): member.solve_force_balance's
+ * scalars, bit for bit: the same IEEE operations in the same order (no contraction), log()
+ * as math.log. The fallback (the Python function) runs where C could differ: an argument
+ * not exact floats of the right count, or any non-finite input or result (a NaN's sign and
+ * payload depend on which operand the compiler puts first). */
+static PyObject *
+force_balance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 4)
+        return PyErr_Format(PyExc_TypeError, "force_balance takes the fallback and 3 arguments");
+    double s[9], y[3];
+    if (!exact_floats(args[1], 9, s) || !exact_floats(args[2], 3, y) ||
+        !PyFloat_CheckExact(args[3]))
+        return PyObject_Vectorcall(args[0], args + 1, 3, NULL);
+    double r = PyFloat_AS_DOUBLE(args[3]);
+    double s00 = s[0], s01 = s[1], s02 = s[2], s11 = s[4], s12 = s[5], s22 = s[8];
+    if (!isfinite(s00 + s01 + s02 + s11 + s12 + s22 + r + y[0] + y[1] + y[2]) ||
+        !isfinite(s[3] + s[6] + s[7]))
+        return PyObject_Vectorcall(args[0], args + 1, 3, NULL);
+    s00 += r;
+    s11 += r;
+    s22 += r;
+    double m01 = s00 * s11 - s01 * s01;
+    double c0 = s11 * s22 - s12 * s12, c1 = s02 * s12 - s01 * s22, c2 = s01 * s12 - s02 * s11;
+    double det = s00 * c0 + s01 * c1 + s02 * c2;
+    if (!(s00 > 0.0 && m01 > 0.0 && det > 0.0)) {
+        double s_sum = s00 + s11 + s22 + s01 + s02 + s12;
+        if (!isfinite(s_sum))
+            return PyObject_Vectorcall(args[0], args + 1, 3, NULL);
+        return Py_BuildValue("(dd)", (double)NAN, s_sum);
+    }
+    double log_det = log(det);
+    double inv = 1.0 / det;
+    double i00 = c0 * inv, i01 = c1 * inv, i02 = c2 * inv;
+    double i11 = (s00 * s22 - s02 * s02) * inv;
+    double i12 = (s01 * s02 - s00 * s12) * inv;
+    double i22 = m01 * inv;
+    double w0 = i00 * y[0] + i01 * y[1] + i02 * y[2];
+    double w1 = i01 * y[0] + i11 * y[1] + i12 * y[2];
+    double w2 = i02 * y[0] + i12 * y[1] + i22 * y[2];
+    double nis = y[0] * w0 + y[1] * w1 + y[2] * w2;
+    if (!isfinite(log_det + nis + i00 + i01 + i02 + i11 + i12 + i22 + w0 + w1 + w2))
+        return PyObject_Vectorcall(args[0], args + 1, 3, NULL);
+    return Py_BuildValue("(d(ddddddddddddd))", log_det, nis, i00, i01, i02, i01, i11, i12, i02,
+                         i12, i22, w0, w1, w2);
+}
+
 static PyMethodDef methods[] = {
     {"step", (PyCFunction)(void (*)(void))step, METH_FASTCALL,
      "step(phi, x, d_p, d_v, x_out): x_out = phi x + (d_p, d_v, 0...); None: not taken."},
@@ -434,6 +496,9 @@ static PyMethodDef methods[] = {
      "whether finite and positive definite."},
     {"mixture", (PyCFunction)(void (*)(void))mixture, METH_FASTCALL,
      "mixture(w, xs, ps, mean_out, cov_out): the weighted mixture's moments."},
+    {"force_balance", (PyCFunction)(void (*)(void))force_balance, METH_FASTCALL,
+     "force_balance(fallback, s_values, innovation, r_variance): member.solve_force_balance "
+     "bit for bit (the fallback where C could differ)."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -14,6 +14,10 @@
  * differs from numpy's by rounding only, and tests/test_member_core.py holds them to 1e-12
  * relative (issue 12, the lead's decision of 2026-11-27). The positive-definiteness test is a
  * Cholesky factorisation as LAPACK's dpotrf (a pivot not > 0 fails), in the same arithmetic.
+ *
+ * force_balance is the exception: scalar arithmetic written as member.solve_force_balance
+ * writes it, bit for bit (tests/test_force_balance_core.py), the Python function called
+ * wherever C could differ.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>

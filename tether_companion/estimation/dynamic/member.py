@@ -281,8 +281,10 @@ def solve_force_balance(
 
 SOLVE_FORCE_BALANCE: Callable[..., tuple] = solve_force_balance
 """:func:`solve_force_balance`, or where the optional C extension ``_member_core`` runs its
-twin ``force_balance``: the same floats (the Python function called where C could differ)."""
-if MEMBER_CORE is not None:
+twin ``force_balance``: the same floats (the Python function called where C could differ).
+An extension built before ``force_balance`` existed leaves the Python function (rebuild it:
+tests/test_force_balance_core.py fails until then)."""
+if getattr(MEMBER_CORE, "force_balance", None) is not None:
     SOLVE_FORCE_BALANCE = functools.partial(MEMBER_CORE.force_balance, solve_force_balance)
 
 

@@ -65,8 +65,8 @@ _CONVERSIONS = ("RAW_IMU", "HIGHRES_IMU", "ATTITUDE", "SERVO_OUTPUT_RAW", "DISTA
 """The messages ``frame_core.c``'s ``Reader`` converts, by its conversion number."""
 _IMU_FIELDS = ("time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "id")
 _CORE = load("tether_companion.service._frame_core")
-"""``frame_core.c``: :meth:`FrameIngest.take` and :meth:`FrameIngest.fields` in one C call
-each (None: not built, or ``TETHER_PURE_PYTHON``)."""
+"""``frame_core.c``: :meth:`FrameIngest.take`, :meth:`FrameIngest.fields` and the frame's
+checked sample (``Reader``) in one C call each (None: not built, or ``TETHER_PURE_PYTHON``)."""
 
 
 class FrameIngest:
@@ -125,7 +125,7 @@ class FrameIngest:
             self.take = functools.partial(_CORE.take, spec)  # type: ignore[method-assign]
             self.fields = functools.partial(_CORE.fields, spec)  # type: ignore[method-assign]
             bounds = (MILLI_G_TO_MPS2, MILLI_RAD_TO_RAD, *ingest.check_bounds())
-            if ingest.n_motors >= 1 and all(float(b) == b for b in bounds):
+            if 1 <= ingest.n_motors <= 16 and all(float(b) == b for b in bounds):
                 self._read = _CORE.Reader(
                     spec,
                     self._conversions,

@@ -32,6 +32,7 @@ a TCP peer's address, a serial device path, or None when unknown).
 from __future__ import annotations
 
 import math
+import struct
 import time
 from collections import OrderedDict
 from collections.abc import Callable, Collection, Hashable
@@ -53,6 +54,9 @@ MAX_PROTECTED_SOURCES = 8
 _STX_V1 = dialect.PROTOCOL_MARKER_V1
 _HEARTBEAT_ID = dialect.MAVLINK_MSG_ID_HEARTBEAT
 _COMMAND_LONG_ID = dialect.MAVLINK_MSG_ID_COMMAND_LONG
+_IDS_V2 = struct.Struct("<BBI")
+"""A MAVLink 2 frame's system, component and message id (bytes 5-10: a whole frame, with its
+checksum, is at least 12 bytes)."""
 
 
 class FrameGate(Protocol):
@@ -161,9 +165,9 @@ class LinkTrust:
         counters = self.counters
         if frame[0] == _STX_V1:
             system, component, msg_id = frame[3], frame[4], frame[5]
-        else:
-            system, component = frame[5], frame[6]
-            msg_id = frame[7] | (frame[8] << 8) | (frame[9] << 16)
+        else:  # one read, not five indexings: the 24-bit id, the payload's first byte above it
+            system, component, msg_id = _IDS_V2.unpack_from(frame, 5)
+            msg_id &= 0xFFFFFF
         if self.signing != OFF and ((signed := is_signed(frame)) or self.signing == REQUIRED):
             if signed or msg_id != _COMMAND_LONG_ID:
                 assert self.verifier is not None

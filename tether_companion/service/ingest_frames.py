@@ -19,6 +19,12 @@ whether a datagram is such a frame, puts it through its trust gate (signatures, 
 controller's pinned address) and counts it as its parser would, in arrival order; the service
 then turns each admitted frame into samples with :meth:`FrameIngest.samples`.
 
+Where the optional extension ``_frame_core`` is built (``frame_core.c``), the test, the fields'
+read and the frame's checked sample (the message's units and ``Ingest``'s value checks, the
+sample object, or the reason of a drop) are one C call each, bit for bit this module's Python
+and ``Ingest``'s checks, which stay the reference (``TETHER_PURE_PYTHON=1`` runs them;
+``tests/test_frame_core.py`` compares the two).
+
 Pure and synchronous.
 """
 

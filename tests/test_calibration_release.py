@@ -173,3 +173,33 @@ def test_with_a_winch_length_the_thrust_scale_hypotheses_do_not_hold_the_release
     release = CalibrationRelease()
     _steady_error(release, bank, False)
     assert bank.consider == state.CALIBRATION and math.isnan(release.released_time_s)
+
+
+def test_once_released_the_states_are_held_while_the_winchs_length_is_not_fused() -> None:
+    """cal19: a winch reading not fused (skipped as slack, gated) holds the released states
+    again, all four (one contiguous consider block), a fused one releases them (the azimuth
+    zero still held); before the release nothing changes, and the NIS rule does not release
+    the states the length holds."""
+    bank = _Bank()
+    release = CalibrationRelease()
+    release.follow_length(bank, False)  # not released yet: the rule's business
+    assert bank.consider == state.CALIBRATION
+    release.follow_length(bank, True)
+    assert bank.consider == state.CALIBRATION
+    t = 0.0
+    while math.isnan(release.released_time_s):
+        release.add(bank, t, 1.0, 1, (WINCH, 0.0, WINCH_PRIOR_M, WINCH_NOISE_M))
+        t += 0.1
+    assert bank.consider == state.NEVER_RELEASED
+    release.follow_length(bank, False)
+    assert bank.consider == state.CALIBRATION
+    for _ in range(100):  # in band and steady: the rule would release; the length holds
+        release.add(bank, t, 1.0, 1, (WINCH, 0.0, WINCH_PRIOR_M, WINCH_NOISE_M))
+        t += 0.1
+    assert bank.consider == state.CALIBRATION
+    release.follow_length(bank, True)
+    assert bank.consider == state.NEVER_RELEASED
+    release.clear()  # a restart: held again by the rule, not by the length
+    bank.consider = state.CALIBRATION
+    release.follow_length(bank, True)
+    assert bank.consider == state.CALIBRATION

@@ -141,3 +141,22 @@ def test_a_reading_with_absurd_calibration_errors_is_counted_and_dropped(calibra
 def test_absurd_calibration_settings_are_rejected(section, key, value) -> None:
     with pytest.raises(ConfigError, match=key):
         load_service_config(None, {section: {key: value}})
+
+
+def test_the_winchs_calibration_does_not_learn_while_its_length_is_not_fused() -> None:
+    """cal19: the fixed-length sagging circle (7.25 m of cable with weight), winch + angle,
+    tuning seed 6: the states are released at ~6.8 s while the cable is slack, and no length
+    is fused until ~13.5 s (skipped as slack). Learnt meanwhile through the cross-covariance
+    the length's fusions left, the winch's offset moved 0 -> +0.37 m by 12.5 s (the cable
+    angle's updates; truth -0.18 m): the relation between the offset and the position is the
+    length model's, linearised where the cable was taut, and the reading is skipped exactly
+    where it no longer holds. Held while no length is fused, the offset stays where the last
+    fused length left it."""
+    estimator, truth = _fly("realistic-sagging-circle", 6, 12.5)
+    release = estimator.ground_station.calibration_release
+    assert 5.0 < release.released_time_s < 8.0  # released, during the slack stretch
+    assert estimator.ground_station.winch.status.last_fused is False  # slack: skipped
+    x = estimator.bank.best.x
+    assert abs(x[state.WINCH_OFFSET]) < 0.03, x[state.WINCH_OFFSET]
+    assert estimator.bank.consider == state.CALIBRATION  # held again
+    assert abs(truth.winch_offset_m + 0.18) < 0.01  # the draw the docstring describes

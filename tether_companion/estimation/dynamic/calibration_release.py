@@ -40,6 +40,27 @@ elevation zero are released to learning once the filter has settled:
   plateau of the winch's innovation, the external-navigation hold's RMS was 0.165 and
   0.107 m; released by this test 0.073 and 0.078 m (docs/estimation.md, sitl15).
 
+Held while no length is fused (cal19): once released, the states are held again (consider
+states, all four) for a winch reading that may be of a slack cable (skipped, or fused only as
+a bound: the drone no farther than the straight chord, an inequality that says nothing of the
+encoder while the cable may be slack) and after one not fused (skipped, gated), until a
+reading goes through the length's model again. What ties the winch's offset and scale to the
+position is that model, ``offset + (1 + scale) L(p, T)``, through the cross-covariance its
+fusions left: a first-order relation, valid about the state they were fused at. On a cable
+with weight the length's dependence on the tension grows without bound toward slack (the
+catenary's excess over the chord, ``w^2 a^3 / (24 H^2)`` for a shallow sag, has
+``dL/dH = -w^2 a^3 / (12 H^3)``), and the reading is skipped or bounded exactly where that
+relation no longer holds. Learnt through the cross-covariance meanwhile, the states took the
+angle's and the force balance's corrections of the position, and the bound's projection, as
+the encoder's: the sagging circle, winch + angle, tuning seed 6 (truth -0.18 m) moved the
+offset 0 -> +0.37 m in 6 s of slack cable with no length fused (+0.38 m in the cable angle's
+updates), then +0.25 m in the chord bound's fusions as the cable came taut; +1.07 m at 30 s,
++0.24 m held. The elevation zero is held with them (the four are one contiguous block in the
+members' consider hold): while slack, the anchor's elevation is the sag's, which the filter's
+near-zero tension knows poorly. Held, the updates keep the cross-covariance (Schmidt), so a
+length fused later still teaches them with what the position learnt meanwhile. Without a
+winch (the angle alone) nothing changes.
+
 The azimuth zero is never released (``state.NEVER_RELEASED``): the angle sensor is the
 companion's only absolute bearing, and the flight cannot tell its zero from the autopilot's
 heading error (the force balance's and the INS's horizontal directions turn with it) nor from
@@ -143,7 +164,12 @@ class CalibrationRelease:
         deviation in the same unit); the bank's consider states are released when the rule
         holds. ``ranged``: whether a winch length has been fused; without one the rule's
         clock waits for the bank to decide (see the module)."""
-        if not self.enabled or bank.consider != state.CALIBRATION or not math.isfinite(nis):
+        if (
+            not self.enabled
+            or not math.isnan(self.released_time_s)
+            or bank.consider != state.CALIBRATION
+            or not math.isfinite(nis)
+        ):
             return
         if watched is not None and math.isfinite(watched[1]):
             self._tolerance[watched[0]] = STEADY_FRACTION * watched[2]
@@ -174,6 +200,15 @@ class CalibrationRelease:
         ):
             bank.release(state.NEVER_RELEASED)
             self.released_time_s = time_s
+
+    def follow_length(self, bank: FilterBank, length_fused: bool) -> None:
+        """Once released, hold ``bank``'s calibration states (``length_fused`` false: a winch
+        reading skipped, gated, or fused only as the slack cable's bound) or let them learn
+        (true: one through the length's model); see the module, "Held while no length is
+        fused"."""
+        if math.isnan(self.released_time_s):
+            return
+        bank.release(state.NEVER_RELEASED if length_fused else state.CALIBRATION)
 
     def clear(self) -> None:
         """Forget the samples (the filter restarts)."""

@@ -203,11 +203,16 @@ class GroundStationInputs:
         [s] before it."""
         open_calibration(bank, (state.WINCH_OFFSET, state.WINCH_SCALE), self._winch_calibration_m)
         gated_before = self.winch.status.gated
-        fused = self.winch.fuse(bank, constants, length_m, time_s, age_s)
+        slack = self.winch.maybe_slack(bank, constants, length_m)
+        release = self.calibration_release
+        release.follow_length(bank, not slack)  # a bound or a skip: no length's model
+        fused = self.winch.fuse(bank, constants, length_m, time_s, age_s, slack)
         if fused:
             self._health.winch_fused += 1
         if fused or self.winch.status.gated != gated_before:
             self._settle(bank, WINCH_NAME, time_s, 1)
+        if not fused:
+            release.follow_length(bank, False)
 
     def fuse_angle(
         self,

@@ -58,13 +58,17 @@ class WinchAid:
         length_m: float,
         time_s: float,
         age_s: float = 0.0,
+        maybe_slack: bool | None = None,
     ) -> bool:
         """Fuse one reading [m] at filter time ``time_s`` [s], stamped ``age_s`` [s] before
-        it (so taken ``latency_s + age_s`` before)."""
+        it (so taken ``latency_s + age_s`` before); ``maybe_slack``: :meth:`maybe_slack`'s
+        answer for it, if the caller asked already."""
         best = bank.best
         z = np.array((length_m,))
         latency_s = self._latency_s + age_s
-        if self._maybe_slack(best.x, best.P, constants, length_m):
+        if maybe_slack is None:
+            maybe_slack = self.maybe_slack(bank, constants, length_m)
+        if maybe_slack:
             chord = at_reading_time(_chord, latency_s)
             if not float(chord(best.x)[0][0]) > length_m:
                 self.status.skip(SLACK)
@@ -81,6 +85,13 @@ class WinchAid:
         if constants.weight_n_per_m > 0.0 and constants.tension_measured:
             r = r + tension_curvature_variance(delayed, best.x, best.P)
         return fuse(bank, NAME, self.status, z, delayed, r, time_s)
+
+    def maybe_slack(self, bank: FilterBank, constants: ModelConstants, length_m: float) -> bool:
+        """Whether the reading ``length_m`` [m] may be of a slack cable at ``bank``'s best
+        member (:meth:`_maybe_slack`): then it is skipped, or fused as a bound on the distance
+        (the straight chord), not through the length's model."""
+        best = bank.best
+        return self._maybe_slack(best.x, best.P, constants, length_m)
 
     def _maybe_slack(
         self, x: FloatArray, p: FloatArray, constants: ModelConstants, length_m: float

@@ -3,7 +3,8 @@ generated models, the tension filter's generated predict/update (``tension_core.
 published bound approximation's step (``bound_core.c``) and the dynamic filter's members'
 matrix arithmetic (``member_core.c``: numpy's to 1e-12, not bit for bit;
 ``imu_batch.MEMBER_CORE``) and the flight controller's input frames' test and field read
-(``service/frame_core.c``, ``ingest_frames.FrameIngest``: its samples bit for bit).
+(``service/frame_core.c`` with ``frame_reader.c`` and ``frame_wire.h``,
+``ingest_frames.FrameIngest``: its samples bit for bit).
 
 ``tether_companion/estimation/dynamic/generated_core.c`` is written by the derivation
 (``python -m tether_companion.estimation.dynamic.derivation.derive``) next to the Python
@@ -43,7 +44,11 @@ setup(
         ),
         Extension(
             "tether_companion.service._frame_core",
-            ["tether_companion/service/frame_core.c"],
+            [
+                "tether_companion/service/frame_core.c",
+                "tether_companion/service/frame_reader.c",
+            ],
+            depends=["tether_companion/service/frame_wire.h"],
             extra_compile_args=["-ffp-contract=off"],
             optional=True,
         ),

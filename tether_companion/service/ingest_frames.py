@@ -68,7 +68,7 @@ checked sample (None: dropped, counted)."""
 
 
 _CONVERSIONS = ("RAW_IMU", "HIGHRES_IMU", "ATTITUDE", "SERVO_OUTPUT_RAW", "DISTANCE_SENSOR")
-"""The messages ``frame_core.c``'s ``Reader`` converts, by its conversion number."""
+"""The messages ``frame_reader.c``'s ``Reader`` converts, by its conversion number."""
 _IMU_FIELDS = ("time_usec", "xacc", "yacc", "zacc", "xgyro", "ygyro", "zgyro", "id")
 _CORE = load("tether_companion.service._frame_core")
 """``frame_core.c``: :meth:`FrameIngest.take`, :meth:`FrameIngest.fields` and the frame's
@@ -112,7 +112,7 @@ class FrameIngest:
         self._spec = b""
         """The table's entries for ``frame_core.c`` (see there)."""
         self._conversions = b""
-        """Per code, ``frame_core.c``'s conversion of the message (0 RAW_IMU ... 4
+        """Per code, ``frame_reader.c``'s conversion of the message (0 RAW_IMU ... 4
         DISTANCE_SENSOR)."""
         if ingest.link.autopilot == "ardupilot":
             self._add("RAW_IMU", IMU, self._raw_imu)

@@ -27,6 +27,7 @@ setup(
         Extension(
             "tether_companion.estimation._tension_core",
             ["tether_companion/estimation/tension_core.c"],
+            depends=["tether_companion/estimation/exact_floats.h"],
             extra_compile_args=["-ffp-contract=off"],
             optional=True,
         ),
@@ -39,6 +40,7 @@ setup(
         Extension(
             "tether_companion.estimation.dynamic._member_core",
             ["tether_companion/estimation/dynamic/member_core.c"],
+            depends=["tether_companion/estimation/exact_floats.h"],
             extra_compile_args=["-ffp-contract=off"],
             optional=True,
         ),

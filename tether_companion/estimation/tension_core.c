@@ -19,32 +19,9 @@
 #include <Python.h>
 #include <math.h>
 
-#define MAX_TAPS 8
+#include "exact_floats.h"
 
-/* Read `count` exact floats from a list or tuple into `out`; 0 when it is anything else. */
-static int
-read_floats(PyObject *seq, Py_ssize_t count, double *out)
-{
-    PyObject **items;
-    if (PyList_CheckExact(seq)) {
-        if (PyList_GET_SIZE(seq) != count)
-            return 0;
-        items = ((PyListObject *)seq)->ob_item;
-    }
-    else if (PyTuple_CheckExact(seq)) {
-        if (PyTuple_GET_SIZE(seq) != count)
-            return 0;
-        items = ((PyTupleObject *)seq)->ob_item;
-    }
-    else
-        return 0;
-    for (Py_ssize_t i = 0; i < count; i++) {
-        if (!PyFloat_CheckExact(items[i]))
-            return 0;
-        out[i] = PyFloat_AS_DOUBLE(items[i]);
-    }
-    return 1;
-}
+#define MAX_TAPS 8
 
 /* A new list of the `count` values (NULL on a memory error). */
 static PyObject *
@@ -151,9 +128,9 @@ predict(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     int n = 0;
     while (n <= MAX_TAPS && (Py_ssize_t)n * n < nn)
         n++;
-    if (n < 1 || n > MAX_TAPS || (Py_ssize_t)n * n != nn || !read_floats(args[1], nn, a)
-        || !read_floats(args[2], nn, q) || !read_floats(args[3], 3 * n, x)
-        || !read_floats(args[4], nn, p))
+    if (n < 1 || n > MAX_TAPS || (Py_ssize_t)n * n != nn || !read_exact_floats(args[1], nn, a)
+        || !read_exact_floats(args[2], nn, q) || !read_exact_floats(args[3], 3 * n, x)
+        || !read_exact_floats(args[4], nn, p))
         return call_fallback(fallback, args + 3, 2);
     for (int i = 0; i < n; i++) {
         for (int k = 0; k < 3; k++) {
@@ -218,7 +195,7 @@ update(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     while (n <= MAX_TAPS && (Py_ssize_t)n * n < nn)
         n++;
     if (n < 1 || n > MAX_TAPS || (Py_ssize_t)n * n != nn || !PyFloat_CheckExact(args[1])
-        || !read_floats(args[2], 3 * n, x) || !read_floats(args[3], nn, p)
+        || !read_exact_floats(args[2], 3 * n, x) || !read_exact_floats(args[3], nn, p)
         || !PyFloat_CheckExact(args[4]) || !PyFloat_CheckExact(args[5])
         || !PyFloat_CheckExact(args[6]))
         return call_fallback(fallback, args + 2, 5);

@@ -24,6 +24,8 @@
 #include <math.h>
 #include <string.h>
 
+#include "../exact_floats.h"
+
 #define MAX_N 32 /* the largest state handled here (the dynamic filter has 17) */
 #define MAX_M 3  /* the largest measurement (the force balance: 3 axes) */
 #define MAX_MEMBERS 64 /* the most bank members mixture() takes */
@@ -426,21 +428,6 @@ mixture(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Py_RETURN_NONE;
 }
 
-/* The exact Python floats of a list or tuple of `count` (0: not one). */
-static int
-exact_floats(PyObject *seq, Py_ssize_t count, double *out)
-{
-    if (!(PyList_CheckExact(seq) || PyTuple_CheckExact(seq)) || PySequence_Fast_GET_SIZE(seq) != count)
-        return 0;
-    PyObject **items = PySequence_Fast_ITEMS(seq);
-    for (Py_ssize_t i = 0; i < count; i++) {
-        if (!PyFloat_CheckExact(items[i]))
-            return 0;
-        out[i] = PyFloat_AS_DOUBLE(items[i]);
-    }
-    return 1;
-}
-
 /* force_balance(fallback, s_values, innovation, r_variance): member.solve_force_balance's
  * scalars, bit for bit: the same IEEE operations in the same order (no contraction), log()
  * as math.log. The fallback (the Python function) runs where C could differ: an argument
@@ -452,7 +439,7 @@ force_balance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     if (nargs != 4)
         return PyErr_Format(PyExc_TypeError, "force_balance takes the fallback and 3 arguments");
     double s[9], y[3];
-    if (!exact_floats(args[1], 9, s) || !exact_floats(args[2], 3, y) ||
+    if (!read_exact_floats(args[1], 9, s) || !read_exact_floats(args[2], 3, y) ||
         !PyFloat_CheckExact(args[3]))
         return PyObject_Vectorcall(args[0], args + 1, 3, NULL);
     double r = PyFloat_AS_DOUBLE(args[3]);

@@ -10,10 +10,13 @@ extension could not be built.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import os
 import shutil
 import sysconfig
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from types import ModuleType
 
@@ -46,3 +49,34 @@ def import_extension(module: str) -> tuple[ModuleType | None, pytest.MarkDecorat
     return core, pytest.mark.skipif(
         core is None, reason=f"the C extension {name} is not built (no C compiler here)"
     )
+
+
+@contextmanager
+def recording_c_calls(
+    owner: ModuleType, name: str, c_function: Callable, python_function: Callable
+) -> Iterator[tuple[list[tuple], list[tuple]]]:
+    """For the block, ``owner.<name>`` (the package's ``functools.partial(c_function,
+    python_function)``: C with its Python fallback) records every call's arguments and every
+    fallback the C took to Python; yields ``(calls, fallbacks)``. Checks afterwards that the
+    name was bound to ``c_function`` (so the flight ran C, not Python alone); skips where
+    ``TETHER_PURE_PYTHON`` is set (the package then runs the Python alone, by request)."""
+    if os.environ.get("TETHER_PURE_PYTHON"):
+        pytest.skip("TETHER_PURE_PYTHON is set: the package runs the Python alone")
+    calls: list[tuple] = []
+    fallbacks: list[tuple] = []
+
+    def fallback(*args: object) -> object:
+        fallbacks.append(args)
+        return python_function(*args)
+
+    def recorded(*args: object) -> object:
+        calls.append(args)
+        return c_function(fallback, *args)
+
+    saved = getattr(owner, name)
+    setattr(owner, name, recorded)
+    try:
+        yield calls, fallbacks
+    finally:
+        setattr(owner, name, saved)
+    assert isinstance(saved, functools.partial) and saved.func is c_function

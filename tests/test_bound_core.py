@@ -9,13 +9,12 @@ where it could have been built or with ``TETHER_REQUIRE_CORE=1``, as
 
 from __future__ import annotations
 
-import functools
 import math
 import struct
 
 import numpy as np
 import pytest
-from optional_extension import import_extension
+from optional_extension import import_extension, recording_c_calls
 
 from tether_companion.bench.dynamic import record
 from tether_companion.estimation.config import EstimatorConfig
@@ -116,32 +115,17 @@ def test_a_flight_runs_c_on_every_tick_with_the_python_floats():
     """The take-off flight (ground, initialising, the bank): every approximation the estimator
     steps goes through C (no fallback: the filter's arguments are exact floats) and gives the
     Python function's floats."""
-    if published_bound.CORE is None:
-        pytest.skip("TETHER_PURE_PYTHON is set")
-    calls: list[tuple] = []
-    fallbacks: list[tuple] = []
-
-    def fallback(*args: object) -> tuple:
-        fallbacks.append(args)
-        return PY(*args)
-
-    def recorded(*args: object) -> tuple:
-        calls.append(args)
-        return core.stepped_terms(fallback, *args)
-
     vehicle = load_vehicle(load_scenario("realistic-takeoff-figure8").vehicle)
     estimator = DynamicTetherEstimator(EstimatorConfig(), vehicle)
-    saved = published_bound.STEPPED_TERMS
-    published_bound.STEPPED_TERMS = recorded
-    try:
+    with recording_c_calls(published_bound, "STEPPED_TERMS", core.stepped_terms, PY) as (
+        calls,
+        fallbacks,
+    ):
         for imu in imu_ticks(record("realistic-takeoff-figure8", 6.0), estimator):
             estimate = estimator.on_imu(imu)
             if estimate is not None:
                 estimate.status  # noqa: B018 (the status read runs the approximation)
-    finally:
-        published_bound.STEPPED_TERMS = saved
     assert len(calls) > 200
     assert not fallbacks
     for args in calls:
         assert _bits(core.stepped_terms(PY, *args)) == _bits(PY(*args))
-    assert isinstance(saved, functools.partial) and saved.func is core.stepped_terms

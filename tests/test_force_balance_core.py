@@ -8,13 +8,12 @@ where it could have been built, as ``test_member_core.py``.
 
 from __future__ import annotations
 
-import functools
 import math
 import struct
 
 import numpy as np
 import pytest
-from optional_extension import import_extension
+from optional_extension import import_extension, recording_c_calls
 
 from tether_companion.bench.dynamic import record
 from tether_companion.estimation.config import EstimatorConfig
@@ -89,28 +88,15 @@ def test_other_arguments_go_to_python_with_its_result_or_error() -> None:
 
 
 def test_the_member_test_uses_c_on_a_flight_and_equals_python() -> None:
-    calls: list[tuple] = []
-    fallbacks: list[tuple] = []
-
-    def fallback(*args: object) -> tuple:
-        fallbacks.append(args)
-        return PY(*args)
-
-    def recorded(*args: object) -> tuple:
-        calls.append(args)
-        return core.force_balance(fallback, *args)
-
     vehicle = load_vehicle(load_scenario("realistic-circle").vehicle)
     estimator = DynamicTetherEstimator(EstimatorConfig(), vehicle)
-    saved = member.SOLVE_FORCE_BALANCE
-    member.SOLVE_FORCE_BALANCE = recorded
-    try:
+    with recording_c_calls(member, "SOLVE_FORCE_BALANCE", core.force_balance, PY) as (
+        calls,
+        fallbacks,
+    ):
         for imu in imu_ticks(record("realistic-circle", 6.0), estimator):
             estimator.on_imu(imu)
-    finally:
-        member.SOLVE_FORCE_BALANCE = saved
     assert len(calls) > 100
     assert not fallbacks
     for args in calls:
         assert _bits(core.force_balance(PY, *args)) == _bits(PY(*args))
-    assert isinstance(saved, functools.partial) and saved.func is core.force_balance

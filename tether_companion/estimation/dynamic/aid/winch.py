@@ -2,7 +2,7 @@
 zero offset and scale error (states ``winch_offset``, ``winch_scale``; generated
 ``winch_length_*``: the catenary's, ``|p|`` for a weightless cable). While the filter's
 tension is below ``slack_tension_n`` (once a load cell's tension has been fused on a cable
-with weight: surely below it, ``WinchAid._maybe_slack``), or a cable with weight is surely
+with weight: surely below it, ``WinchAid.maybe_slack``), or a cable with weight is surely
 longer than its span plus height (:func:`surely_slack_by_length`: slack whatever the
 tension), the cable may be slack and its length says only that the drone is no farther from
 the anchor than that: the reading is skipped, unless the filter has the drone beyond it,
@@ -57,17 +57,15 @@ class WinchAid:
         constants: ModelConstants,
         length_m: float,
         time_s: float,
-        age_s: float = 0.0,
-        maybe_slack: bool | None = None,
+        age_s: float,
+        maybe_slack: bool,
     ) -> bool:
         """Fuse one reading [m] at filter time ``time_s`` [s], stamped ``age_s`` [s] before
         it (so taken ``latency_s + age_s`` before); ``maybe_slack``: :meth:`maybe_slack`'s
-        answer for it, if the caller asked already."""
+        answer for it (the caller asks first: the calibration's hold follows it)."""
         best = bank.best
         z = np.array((length_m,))
         latency_s = self._latency_s + age_s
-        if maybe_slack is None:
-            maybe_slack = self.maybe_slack(bank, constants, length_m)
         if maybe_slack:
             chord = at_reading_time(_chord, latency_s)
             if not float(chord(best.x)[0][0]) > length_m:
@@ -88,18 +86,10 @@ class WinchAid:
 
     def maybe_slack(self, bank: FilterBank, constants: ModelConstants, length_m: float) -> bool:
         """Whether the reading ``length_m`` [m] may be of a slack cable at ``bank``'s best
-        member (:meth:`_maybe_slack`): then it is skipped, or fused as a bound on the distance
-        (the straight chord), not through the length's model."""
-        best = bank.best
-        return self._maybe_slack(best.x, best.P, constants, length_m)
-
-    def _maybe_slack(
-        self, x: FloatArray, p: FloatArray, constants: ModelConstants, length_m: float
-    ) -> bool:
-        """Whether the reading ``length_m`` [m] may be of a slack cable at the state ``x``
-        (covariance ``p``): a cable with weight surely slack by its length
-        (:func:`surely_slack_by_length`), or its chord tension below ``slack_tension_n``;
-        once a load cell's tension has been fused on a cable with weight
+        member (state ``x``, covariance ``p``); then it is skipped, or fused as a bound on the
+        distance (the straight chord), not through the length's model: a cable with weight
+        surely slack by its length (:func:`surely_slack_by_length`), or its chord tension
+        below ``slack_tension_n``; once a load cell's tension has been fused on a cable with weight
         (``constants.tension_measured``), surely below it (by :data:`~.slack.SURE_SIGMAS`
         standard deviations). Such a cable can pull below that tension (the sagging hover's
         7 m cable 5 m out and 3 m up: 0.12 N, taut), and there its length is the one reading
@@ -109,6 +99,7 @@ class WinchAid:
         beyond 3 sigma). Without a load cell the tension is not measured and the rule stays
         the estimate's (sag14's candidate took the winch + angle filter's sagging circle seed
         1 from NEES 0.13 to 165)."""
+        x, p = bank.best.x, bank.best.P
         weight_n_per_m = constants.weight_n_per_m
         if weight_n_per_m > 0.0 and constants.tension_measured:
             tension = tension_upper_n(x, p)

@@ -277,3 +277,24 @@ def test_the_trust_gate_sees_every_frame_before_the_fast_decoder() -> None:
     assert len(gate.seen) == len(frames)
     assert "ATTITUDE" not in {m.get_type() for m in messages}
     assert parser.counters.untrusted == gate.seen.count(dialect.MAVLINK_MSG_ID_ATTITUDE) > 0
+
+
+def test_wire_offsets_read_every_item_of_every_dialect_message() -> None:
+    """A layout's byte offsets and format characters (what the C frame reader reads a field
+    at) give, for every message of the dialect a layout is made for (no ``char`` fields),
+    exactly the items its ``struct`` unpacks, arrays one item per element."""
+    rng = np.random.default_rng(7)
+    checked = 0
+    for message_class in dialect.mavlink_map.values():
+        try:
+            layout = MessageLayout(message_class)
+        except ValueError:  # char fields: not fast-decoded
+            continue
+        payload = rng.integers(0, 256, layout.size, dtype=np.uint8).tobytes()
+        items = layout.unpacker.unpack(payload)
+        assert len(layout.wire_offsets) == len(layout.wire_formats) == len(items)
+        for item, offset, code in zip(items, layout.wire_offsets, layout.wire_formats, strict=True):
+            (read,) = struct.unpack_from("<" + code, payload, offset)
+            assert read == item or (read != read and item != item)
+        checked += 1
+    assert checked > 100

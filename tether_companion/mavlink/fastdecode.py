@@ -24,6 +24,7 @@ frames that every field of a record is bit for bit pymavlink's, and its header i
 from __future__ import annotations
 
 import functools
+import re
 import struct
 from collections import namedtuple
 from collections.abc import Iterable
@@ -137,6 +138,9 @@ class MessageLayout:
         self.padding = bytes(self.size)
         self.wire_index: dict[str, int] = _wire_index(message_class)
         """Each field's index among the unpacked struct items (wire order; an array's first)."""
+        self.wire_offsets, self.wire_formats = _wire_items(self.unpacker.format)
+        """Each unpacked struct item's byte offset in the payload and its ``struct`` format
+        character (what ``frame_core.c`` reads a field at)."""
         self.make = _record_builder(message_class, self.record)
         """``make(flat, src_system, src_component, seq, frame) -> record`` from the unpacked
         struct items ``flat`` (wire order)."""
@@ -172,6 +176,21 @@ def _wire_index(message_class: type[dialect.MAVLink_message]) -> dict[str, int]:
         index[name] = flat
         flat += length
     return index
+
+
+def _wire_items(fmt: str) -> tuple[tuple[int, ...], str]:
+    """Each item a little-endian ``struct`` format without alignment (``<``) of numbers (no
+    ``char`` fields: :func:`record_class` refuses them) unpacks: its byte offset and its format
+    character (a count repeats its code: an array's elements)."""
+    offsets: list[int] = []
+    codes = []
+    at = 0
+    for count, code in re.findall(r"(\d*)([a-zA-Z])", fmt.lstrip("<")):
+        n, size = int(count or 1), struct.calcsize("<" + code)
+        offsets.extend(range(at, at + n * size, size))
+        codes.append(code * n)
+        at += n * size
+    return tuple(offsets), "".join(codes)
 
 
 def _record_builder(message_class: type[dialect.MAVLink_message], record: type[HotRecord]):

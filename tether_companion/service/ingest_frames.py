@@ -31,7 +31,6 @@ Pure and synchronous.
 from __future__ import annotations
 
 import functools
-import re
 import struct
 from collections.abc import Callable
 from operator import itemgetter
@@ -40,7 +39,7 @@ import numpy as np
 from fastcrc.crc16 import mcrf4xx
 
 from tether_companion.estimation.optional_core import load
-from tether_companion.mavlink.fastdecode import MessageLayout, layout_of
+from tether_companion.mavlink.fastdecode import layout_of
 from tether_companion.mavlink.framing import FrameParser, dialect
 from tether_companion.mavlink.units import (
     DOWNWARD_ORIENTATION,
@@ -155,7 +154,7 @@ class FrameIngest:
         picked = [layout.wire_index[field] for field in names]
         crc_extra = bytes((layout.crc_extra,))
         self._table[layout.msg_id] = (layout, crc_extra, code, itemgetter(*picked))
-        offsets, types = _wire_offsets(layout)
+        offsets, types = layout.wire_offsets, layout.wire_formats
         self._spec += struct.pack(
             "<IBBBB", layout.msg_id, layout.crc_extra, layout.size, code, len(picked)
         )
@@ -297,14 +296,3 @@ class FrameIngest:
 
         names = ("orientation", "time_boot_ms", "current_distance", "min_distance", "max_distance")
         return convert, names
-
-
-def _wire_offsets(layout: MessageLayout) -> tuple[list[int], str]:
-    """Each unpacked wire-order item's byte offset in the payload and its ``struct`` format
-    character (from the layout's own little-endian ``struct`` format, e.g. ``<QhhBh``)."""
-    codes = "".join(
-        letter * int(count or 1)
-        for count, letter in re.findall(r"(\d*)([a-zA-Z])", layout.unpacker.format.lstrip("<"))
-    )
-    offsets = [struct.calcsize("<" + codes[:i]) for i in range(len(codes))]
-    return offsets, codes

@@ -41,6 +41,11 @@ def schedule(scenario: Scenario) -> list[tuple[int, int]]:
     return due
 
 
+def imu_count(due: Iterable[tuple[int, int]]) -> int:
+    """How many IMU ticks the samples ``due`` (:func:`schedule`) hold."""
+    return sum(1 for _, kind in due if kind == IMU)
+
+
 def simulated(
     sim: Simulator,
     due: Iterable[tuple[int, int]],

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.estimate import EstimatorHealth
-from tether_companion.estimation.feed import IMU, imu_ticks, schedule, simulated
+from tether_companion.estimation.feed import imu_count, imu_ticks, schedule, simulated
 from tether_companion.estimation.pipeline import TetherEstimator
 from tether_companion.physics.vehicle import VehicleProfile
 from tether_companion.samples import ImuSample
@@ -99,7 +99,7 @@ def run_scenario(
         dataclasses.replace(config, kind="three_state"), vehicle, aligner=est4.aligner
     )
     due = schedule(scenario)
-    n_ticks = [kind for _, kind in due].count(IMU)
+    n_ticks = imu_count(due)
     # one row of Python floats per tick, made into arrays at the end (no array per tick)
     rows: list[tuple[float, ...]] = []
     missing = (math.nan,) * (4 + 4 + 3 + 3)

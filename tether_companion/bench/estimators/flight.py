@@ -20,7 +20,7 @@ from tether_companion.bench.estimators.registry import (
     FlightContext,
     GroundStation,
 )
-from tether_companion.estimation.feed import IMU, RANGE, hand_over, schedule, simulated
+from tether_companion.estimation.feed import RANGE, hand_over, imu_count, schedule, simulated
 from tether_companion.physics.cable import cable_weight_n_per_m
 from tether_companion.physics.vehicle import VehicleProfile, load_vehicle
 from tether_companion.sim.ground_sensors import GroundSensors
@@ -125,7 +125,7 @@ def fly(
     context = FlightContext(scenario, nominal, sim.gravity_mps2)
     estimators = [kind.build(context) for kind in kinds]
     due = schedule(scenario)
-    n = sum(1 for _, what in due if what == IMU)
+    n = imu_count(due)
     time_s = np.empty(n)
     truth = {
         name: np.empty((n, 3))

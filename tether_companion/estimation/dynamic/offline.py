@@ -19,7 +19,7 @@ from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.output import OK
-from tether_companion.estimation.feed import IMU, imu_ticks, schedule, simulated
+from tether_companion.estimation.feed import imu_count, imu_ticks, schedule, simulated
 from tether_companion.estimation.pipeline import TetherEstimator
 from tether_companion.estimation.thrust_input import ThrustInput
 from tether_companion.physics.vehicle import VehicleProfile
@@ -111,7 +111,7 @@ def run_dynamic(
     paper = TetherEstimator(dataclasses.replace(config, kind="four_state"), vehicle, thrust_input)
     est = DynamicTetherEstimator(config, vehicle, dynamic, aligner=paper.aligner)
     due = schedule(scenario)
-    n = sum(1 for _, kind in due if kind == IMU)
+    n = imu_count(due)
     t = np.full(n, np.nan)
     tp, tv, tt = np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full(n, np.nan)
     pos, vel, ten = np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full(n, np.nan)

@@ -1,6 +1,7 @@
-"""The bound approximation's step in C (``_bound_core``) against its Python reference
-``published_bound.stepped_terms``: the same floats bit for bit on random and on a real
-flight's arguments, and the Python function's result or exception wherever C could differ.
+"""The bound approximation's step and the straight cable's unmodelled-force rows in C
+(``_bound_core``) against their Python references ``published_bound.stepped_terms`` and
+``observability.unmodelled_position_rows``: the same floats bit for bit on random and on a
+real flight's arguments, and the Python function's result or exception wherever C could differ.
 
 The extension is optional (no compiler: the Python function runs). Its absence fails this file
 where it could have been built or with ``TETHER_REQUIRE_CORE=1``, as
@@ -18,7 +19,7 @@ from optional_extension import import_extension, recording_c_calls
 
 from tether_companion.bench.dynamic import record
 from tether_companion.estimation.config import EstimatorConfig
-from tether_companion.estimation.dynamic import published_bound
+from tether_companion.estimation.dynamic import observability, offset_term, published_bound
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.feed import imu_ticks
 from tether_companion.physics.vehicle import load_vehicle
@@ -129,3 +130,74 @@ def test_a_flight_runs_c_on_every_tick_with_the_python_floats():
     assert not fallbacks
     for args in calls:
         assert _bits(core.stepped_terms(PY, *args)) == _bits(PY(*args))
+
+
+# ---------------------------------------------------------------- the straight cable's rows
+
+ROWS_PY = observability.unmodelled_position_rows
+
+
+def _rows_c(*args: object) -> list:
+    return core.unmodelled_rows(ROWS_PY, *args)
+
+
+def test_the_straight_rows_equal_the_python_function_bit_for_bit(rng):
+    """``unmodelled_rows`` against ``observability.unmodelled_position_rows`` on random
+    positions over 12 decades, tensions around and below ``MIN_TENSION_N`` (its clamp), zero
+    positions and, now and then, signed zeros, NaNs and infinities: the same floats in new
+    lists (a change of one operation's order in bound_core.c fails this)."""
+    assert core_min_tension() == observability.MIN_TENSION_N
+    for special in (False, True):
+        for _ in range(20000):
+            n, e, d = _floats(rng, 3, special)
+            if rng.uniform() < 0.02:
+                n = e = d = [0.0, -0.0][rng.integers(0, 2)]
+            tension = [
+                float(rng.uniform(-1.0, 0.02)),
+                _floats(rng, 1, special)[0],
+                observability.MIN_TENSION_N,
+            ][rng.integers(0, 3)]
+            force, length = _floats(rng, 2, special)
+            args = (n, e, d, tension, force, length)
+            expected = ROWS_PY(*args)
+            got = _rows_c(*args)
+            assert _bits(got) == _bits(expected), args
+            assert got is not _rows_c(*args)
+
+
+def core_min_tension() -> float:
+    """The ``MIN_TENSION_N`` bound_core.c compiles in, read through its clamp: at a tension of
+    zero the gain's square over the term's ``r^2 sigma^2`` is ``1 / MIN_TENSION_N^2``."""
+    rows = _rows_c(1.0, 0.0, 0.0, 0.0, 1.0, 0.0)  # north: the east row's east entry is g
+    return 1.0 / math.sqrt(rows[1][1])
+
+
+def test_where_c_could_differ_the_straight_rows_return_what_python_returns():
+    """Ints and numpy floats go to the Python function (its result, bit for bit); a wrong
+    argument count raises."""
+    args = (3.0, 2.0, -2.5, 4.0, 0.2, 0.05)
+    for position, bad in [(0, 3), (3, 4), (5, 0), (1, np.float64(2.0)), (4, np.float64(0.2))]:
+        changed = list(args)
+        changed[position] = bad
+        assert _bits(_rows_c(*changed)) == _bits(ROWS_PY(*changed))
+    with pytest.raises(TypeError):
+        core.unmodelled_rows(ROWS_PY, *args[:5])
+
+
+def test_a_flight_runs_the_straight_rows_in_c_with_the_python_floats():
+    """The take-off flight: every straight-cable term the status read adds goes through C (no
+    fallback) and gives the Python function's floats."""
+    vehicle = load_vehicle(load_scenario("realistic-takeoff-figure8").vehicle)
+    estimator = DynamicTetherEstimator(EstimatorConfig(), vehicle)
+    with recording_c_calls(offset_term, "STRAIGHT_ROWS", core.unmodelled_rows, ROWS_PY) as (
+        calls,
+        fallbacks,
+    ):
+        for imu in imu_ticks(record("realistic-takeoff-figure8", 6.0), estimator):
+            estimate = estimator.on_imu(imu)
+            if estimate is not None:
+                estimate.status  # noqa: B018 (the status read adds the term)
+    assert len(calls) > 200
+    assert not fallbacks
+    for args in calls:
+        assert _bits(_rows_c(*args)) == _bits(ROWS_PY(*args))

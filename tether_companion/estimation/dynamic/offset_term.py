@@ -37,9 +37,11 @@ then published 1.5 % beyond 3 sigma). Pure.
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
+from tether_companion.estimation import optional_core
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.observability import (
     MIN_TENSION_N,
@@ -48,6 +50,15 @@ from tether_companion.estimation.dynamic.observability import (
 from tether_companion.estimation.dynamic.sag_range import span_per_horizontal_tension
 
 Rows = list[list[float]]
+
+STRAIGHT_ROWS: Callable[..., Rows] = unmodelled_position_rows
+""":func:`~tether_companion.estimation.dynamic.observability.unmodelled_position_rows`, or where
+the optional C extension ``_bound_core`` is built (and ``TETHER_PURE_PYTHON`` is not set) its
+twin: the same floats, the Python function called where C could differ (``bound_core.c``;
+it runs at every IMU tick's status read)."""
+_CORE = optional_core.load("tether_companion.estimation.dynamic._bound_core")
+if _CORE is not None and hasattr(_CORE, "unmodelled_rows"):  # not an extension built before it
+    STRAIGHT_ROWS = functools.partial(_CORE.unmodelled_rows, unmodelled_position_rows)
 
 
 def offset_rows(
@@ -75,7 +86,7 @@ def offset_rows(
         )
         if math.isfinite(radial):
             return _plane_rows(n, e, d, span, distance, tension, radial, force_std_n, length_std_m)
-    return unmodelled_position_rows(n, e, d, tension, force_std_n, length_std_m)
+    return STRAIGHT_ROWS(n, e, d, tension, force_std_n, length_std_m)
 
 
 def _plane_rows(

@@ -35,6 +35,29 @@ def test_mixture_covariance_holds_the_spread_between_members() -> None:
     np.testing.assert_allclose(cov, cov.T)
 
 
+def test_the_mixture_is_kept_while_every_member_holds_the_same_arrays() -> None:
+    """The moments are reused while each member's state and covariance are the same objects
+    and the weights the same, and recomputed when either array of one member is replaced, a
+    member holds its values as lists (the scalar path), or a weight moves."""
+    left, right = _member(-0.5), _member(0.5)
+    bank = FilterBank([left, right], start_s=0.0, max_bank_s=30.0)
+    mean, cov = bank.mixture()
+    assert all(a is b for a, b in zip(bank.mixture(), (mean, cov), strict=True))
+    right.P = right.P * 2.0  # the covariance alone replaced
+    _, cov2 = bank.mixture()
+    assert cov2[0, 0] == 0.5 * (0.01 + 0.02) + 0.25
+    right.x = right.x + 1.0  # the state alone replaced
+    mean3, cov3 = bank.mixture()
+    assert mean3[0] == 2.5
+    right._lists()  # the same values as lists: no array to compare, recomputed equal
+    mean4, cov4 = bank.mixture()
+    assert mean4 is not mean3
+    assert mean4.tobytes() == mean3.tobytes() and cov4.tobytes() == cov3.tobytes()
+    assert bank.mixture()[0] is mean4
+    bank.log_weight[0] -= 1.0
+    assert bank.mixture()[0][0] > 2.5
+
+
 def test_the_member_the_data_favour_is_kept() -> None:
     bank = FilterBank([_member(-0.5), _member(0.0), _member(0.5)], start_s=0.0, max_bank_s=30.0)
     for k in range(400):

@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from itertools import chain
-from operator import is_
+from operator import attrgetter, is_
 
 import numpy as np
 from numpy.typing import NDArray
@@ -413,14 +413,16 @@ class FilterBank:
         if len(filters) == 1:  # decided: the member's own arrays: read them, do not change them
             kf = filters[0]
             return kf.x, kf.P
-        arrays = [a for kf in filters for a in (kf.x, kf.P)]
         cached_arrays, cached_ll, moments = self._mixture_cache
-        if (  # the same objects (identity, in C: this runs at every IMU tick)
+        if (  # the same objects (identity, in C: this runs at every IMU tick); a member
+            # holding its values as lists (``_xa``/``_pa`` None) has no array to be the same
             cached_ll == self.log_weight
-            and len(cached_arrays) == len(arrays)
-            and all(map(is_, arrays, cached_arrays))
+            and len(cached_arrays) == 2 * len(filters)
+            and all(map(is_, map(_X_ARRAY, filters), cached_arrays[::2]))
+            and all(map(is_, map(_P_ARRAY, filters), cached_arrays[1::2]))
         ):
             return moments
+        arrays = [a for kf in filters for a in (kf.x, kf.P)]
         if MEMBER_CORE is not None:  # in C (imu_batch.MEMBER_CORE)
             n = filters[0].x.shape[0]
             mean, cov = _EMPTY(n), _EMPTY((n, n))
@@ -526,6 +528,11 @@ def _project_each(
 
 
 _EMPTY = np.empty
+_X_ARRAY = attrgetter("_xa")
+"""A member's state array as it holds it (None while it holds a list): what ``x`` returns when
+it is not None, read without the property (:meth:`FilterBank.mixture`'s identity check)."""
+_P_ARRAY = attrgetter("_pa")
+"""A member's covariance array as it holds it (None while it holds a list)."""
 _HOLD_NONE = slice(0, 0)
 """No consider state (``MEMBER_CORE.update``'s hold range)."""
 

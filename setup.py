@@ -49,6 +49,7 @@ setup(
             [
                 "tether_companion/service/frame_core.c",
                 "tether_companion/service/frame_reader.c",
+                "tether_companion/service/ingest_core.c",
             ],
             depends=["tether_companion/service/frame_wire.h"],
             extra_compile_args=["-ffp-contract=off"],

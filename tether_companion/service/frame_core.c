@@ -156,7 +156,7 @@ PyInit__frame_core(void)
     PyObject *m = PyModule_Create(&module);
     if (m == NULL)
         return NULL;
-    if (!tether_frame_reader_add(m)) {
+    if (!tether_frame_reader_add(m) || !tether_ingest_core_add(m)) {
         Py_DECREF(m);
         return NULL;
     }

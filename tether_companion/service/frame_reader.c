@@ -435,6 +435,17 @@ static PyTypeObject ReaderType = {
     .tp_methods = reader_methods,
 };
 
+int
+tether_is_reader(PyObject *o)
+{
+    return PyObject_TypeCheck(o, &ReaderType);
+}
+
+PyObject *
+tether_reader_read(PyObject *reader, PyObject *frame)
+{
+    return reader_call_read((Reader *)reader, frame);
+}
 
 static int
 intern(PyObject **where, const char *text)

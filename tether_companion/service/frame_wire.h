@@ -104,5 +104,10 @@ field_bits(const unsigned char *p, int length, int offset, int type)
 
 /* Readies the Reader type and adds it to the module `m` (frame_reader.c); 0 with an error set. */
 int tether_frame_reader_add(PyObject *m);
+/* Whether `o` is a Reader; a Reader's read(frame) (frame_reader.c). */
+int tether_is_reader(PyObject *o);
+PyObject *tether_reader_read(PyObject *reader, PyObject *frame);
+/* Readies the IngestCore type and adds it to `m` (ingest_core.c); 0 with an error set. */
+int tether_ingest_core_add(PyObject *m);
 
 #endif

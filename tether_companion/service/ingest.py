@@ -37,9 +37,11 @@ Pure and synchronous (the live service and replay share it). For each message:
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
+from tether_companion.estimation.optional_core import load
 from tether_companion.mavlink.framing import Received
 from tether_companion.mavlink.units import (
     DOWNWARD_ORIENTATION,
@@ -81,6 +83,8 @@ from tether_companion.service.link_config import LinkConfig
 from tether_companion.service.reorder import ReorderBuffer
 from tether_companion.service.winch import WinchConfig, WinchGate
 
+_CORE = load("tether_companion.service._frame_core")
+"""The extension whose ``IngestCore`` (``ingest_core.c``) is :attr:`Ingest.core`."""
 _UINT32_US = 1 << 32
 _NEVER = -math.inf
 
@@ -133,11 +137,18 @@ class Ingest:
         self.tension = tension
         self.n_motors = n_motors
         self.counters = IngestCounters()
-        self.clock = FcTimeGate()
+        self.clock: FcTimeGate | Any = FcTimeGate()
         """Which stamps are believed; ``clock.latest_fc_s`` is the newest."""
-        self.reorder: ReorderBuffer[Sample] = ReorderBuffer(limits.reorder_window_s)
+        self.reorder: ReorderBuffer[Sample] | Any = ReorderBuffer(limits.reorder_window_s)
         self._latest_by_kind: dict[str, float] = {}
         self._local_s: float | None = None
+        self.core = self._new_core()
+        """``ingest_core.c``'s ``IngestCore`` (None: not built, ``TETHER_PURE_PYTHON``, or a
+        window not a float): the clock, the reorder buffer and the order check as one object
+        in C, bit for bit the Python above and below, which stay the reference. It is then
+        :attr:`clock` and :attr:`reorder` (both interfaces) and runs :meth:`receive_input`,
+        :meth:`_believed` and :meth:`_ordered` on the same state, the counters and
+        ``_latest_by_kind`` included, for the frame path and the message path alike."""
         self._imu_type = "RAW_IMU" if link.autopilot == "ardupilot" else "HIGHRES_IMU"
         self._imu_si = raw_imu_si if self._imu_type == "RAW_IMU" else highres_imu_si
         self._inputs = {
@@ -165,6 +176,35 @@ class Ingest:
             self._ground[MESSAGE] = (CABLE_ANGLE, self.cable_angle)
         self.rebooted = False
         """True right after the message that confirmed a reboot (cleared on the next call)."""
+
+    def _new_core(self) -> Any:
+        """The C twin of the clock, reorder buffer and order check, put in their place (see
+        :attr:`core`), or None."""
+        kind = getattr(_CORE, "IngestCore", None)  # an older build has no IngestCore
+        window = self.reorder.max_window_s
+        if kind is None or type(window) is not float:
+            return None
+        gate = self.clock
+        core = kind(
+            self,
+            self.counters,
+            self._latest_by_kind,
+            window,
+            (
+                float(gate.backstep_s),
+                float(gate.future_tolerance_s),
+                float(gate.max_rate),
+                float(gate.confirm_span_s),
+                float(gate.fallback_s),
+                gate.confirmations,
+                gate.fallback_samples,
+            ),
+        )
+        self.clock = self.reorder = core
+        self.receive_input = core.receive_input  # type: ignore[method-assign]
+        self._believed = core.believed  # type: ignore[method-assign]
+        self._ordered = core.ordered  # type: ignore[method-assign]
+        return core
 
     def check_bounds(self) -> tuple[float, float, float, float, float, float]:
         """The value checks' bounds (for a twin of the checks): squared specific force

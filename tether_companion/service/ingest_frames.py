@@ -131,7 +131,7 @@ class FrameIngest:
             self.fields = functools.partial(_CORE.fields, spec)  # type: ignore[method-assign]
             bounds = (MILLI_G_TO_MPS2, MILLI_RAD_TO_RAD, *ingest.check_bounds())
             if 1 <= ingest.n_motors <= 16 and all(float(b) == b for b in bounds):
-                self._read = _CORE.Reader(
+                reader = _CORE.Reader(
                     spec,
                     self._conversions,
                     tuple(kind for kind, _ in self._kinds),
@@ -139,7 +139,11 @@ class FrameIngest:
                     ingest.clock,
                     (ImuSample, AttitudeSample, PwmSample, RangeSample),
                     np.array,
-                ).read
+                )
+                self._read = reader.read
+                if ingest.core is not None:  # read, drop counted, receive_input: one C call
+                    ingest.core.set_reader(reader)
+                    self.samples = ingest.core.samples  # type: ignore[method-assign]
 
     def _add(
         self, name: str, kind: str, make: Callable[[], tuple[Convert, tuple[str, ...]]]
@@ -220,7 +224,10 @@ class FrameIngest:
     def samples(self, frame: bytes | bytearray, local_s: float | None) -> list[Sample]:
         """The samples a frame :meth:`take` accepted releases (received at local time
         ``local_s`` [s], or None), counted by the ingest as ``Ingest.receive`` counts the
-        message the parser would decode from it; the framing counts are the caller's."""
+        message the parser would decode from it; the framing counts are the caller's. (The
+        Python reference; with ``Reader`` and ``Ingest.core`` built, an instance runs
+        ``IngestCore.samples``: the read, the drop's count and ``receive_input`` in one C
+        call.)"""
         return self._received(self._read(frame), local_s)  # type: ignore[arg-type]
 
     def _received(self, read: tuple, local_s: float | None) -> list[Sample]:

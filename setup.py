@@ -4,7 +4,8 @@ published bound approximation's step (``bound_core.c``) and the dynamic filter's
 matrix arithmetic (``member_core.c``: numpy's to 1e-12, not bit for bit;
 ``imu_batch.MEMBER_CORE``) and the flight controller's input frames' test and field read
 (``service/frame_core.c`` with ``frame_reader.c`` and ``frame_wire.h``,
-``ingest_frames.FrameIngest``: its samples bit for bit).
+``ingest_frames.FrameIngest``: its samples bit for bit) with the ingest's clock gate, reorder
+buffer and order check (``service/ingest_core.c``, ``Ingest.core``: bit for bit).
 
 ``tether_companion/estimation/dynamic/generated_core.c`` is written by the derivation
 (``python -m tether_companion.estimation.dynamic.derivation.derive``) next to the Python

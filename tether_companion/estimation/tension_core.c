@@ -1,4 +1,6 @@
-/* The tension filter's predict and update (tension_filter.py) in C, float for float.
+/* The tension filter's predict and update (tension_filter.py) in C, float for float; and the
+ * static thrust curve's sum over the motors (thrust_input.static_thrust_n, once per PWM
+ * sample for both filters), the same way.
  *
  * tension_filter.py generates, per filter, straight-line Python for
  *   predict:  x <- A x,  P <- A P A^T + Q   (lower triangle, mirrored)
@@ -231,18 +233,58 @@ update(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     return result;
 }
 
+#define MAX_MOTORS 16
+
+/* static_thrust(fallback, pwm, pwm_min_us, per_us, scale, total, c1, c2): thrust_input's
+ * static_thrust_n, the curve's sum over the motors, statement for statement. */
+static PyObject *
+static_thrust(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 8) {
+        PyErr_SetString(PyExc_TypeError, "static_thrust takes the fallback and 7 arguments");
+        return NULL;
+    }
+    double pwm[MAX_MOTORS], k[6];
+    PyObject *seq = args[1];
+    Py_ssize_t count = PyList_CheckExact(seq)    ? PyList_GET_SIZE(seq)
+                       : PyTuple_CheckExact(seq) ? PyTuple_GET_SIZE(seq)
+                                                 : -1;
+    int exact = count >= 0 && count <= MAX_MOTORS && read_exact_floats(seq, count, pwm);
+    for (int i = 0; exact && i < 6; i++) {
+        exact = PyFloat_CheckExact(args[2 + i]);
+        if (exact)
+            k[i] = PyFloat_AS_DOUBLE(args[2 + i]);
+    }
+    if (!exact)
+        return PyObject_Vectorcall(args[0], args + 1, 7, NULL);
+    double pwm_min_us = k[0], per_us = k[1], scale = k[2], total = k[3], c1 = k[4], c2 = k[5];
+    for (Py_ssize_t i = 0; i < count; i++) {
+        double u = (pwm[i] - pwm_min_us) * per_us;
+        double cmd = (u < 0.0 ? 0.0 : u > 1.0 ? 1.0 : u) * scale;
+        total += cmd * (c1 + c2 * cmd);
+    }
+    if (!isfinite(total)) /* a NaN's bits are the operand order's: left to Python */
+        return PyObject_Vectorcall(args[0], args + 1, 7, NULL);
+    return PyFloat_FromDouble(total);
+}
+
 static PyMethodDef methods[] = {
     {"predict", (PyCFunction)(void (*)(void))predict, METH_FASTCALL,
      "predict(fallback, a, q, x, p): the generated predict(x, p) of A = a, Q = q (n*n "
      "row-major tuples of floats)."},
     {"update", (PyCFunction)(void (*)(void))update, METH_FASTCALL,
      "update(fallback, r, x, p, y0, y1, y2): the generated update(x, p, y0, y1, y2) of R = r."},
+    {"static_thrust", (PyCFunction)(void (*)(void))static_thrust, METH_FASTCALL,
+     "static_thrust(fallback, pwm, pwm_min_us, per_us, scale, total, c1, c2): "
+     "thrust_input.static_thrust_n in C."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module_def = {
     PyModuleDef_HEAD_INIT, "_tension_core",
-    "The tension filter's generated predict and update in C (tension_filter.py's twins).", -1,
+    "The tension filter's generated predict and update and the static thrust curve's sum in C "
+    "(tension_filter.py's and thrust_input.py's twins).",
+    -1,
     methods,
 };
 

@@ -9,12 +9,15 @@ implementing the same protocol.
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable, Sequence
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tether_companion.estimation import optional_core
 from tether_companion.physics.motors import MotorLag
 from tether_companion.physics.thrust import ThrustCurve
 from tether_companion.physics.vehicle import VehicleProfile
@@ -89,14 +92,45 @@ class StaticThrustInput:
         """
         if len(pwm_us) != self.n_motors:
             raise ValueError(f"expected {self.n_motors} pulse widths, got {len(pwm_us)}")
-        c1, c2, pwm_min_us, per_us = self._c1, self._c2, self._pwm_min_us, self._per_us
-        scale = self._full_scale * self.voltage_ratio
-        total = self._c0 * self.n_motors
-        for pwm in pwm_us.tolist() if isinstance(pwm_us, np.ndarray) else pwm_us:
-            u = (pwm - pwm_min_us) * per_us
-            cmd = (0.0 if u < 0.0 else 1.0 if u > 1.0 else u) * scale
-            total += cmd * (c1 + c2 * cmd)
-        return total
+        return STATIC_THRUST(
+            pwm_us.tolist() if isinstance(pwm_us, np.ndarray) else pwm_us,
+            self._pwm_min_us,
+            self._per_us,
+            self._full_scale * self.voltage_ratio,
+            self._c0 * self.n_motors,
+            self._c1,
+            self._c2,
+        )
+
+
+def static_thrust_n(
+    pwm_us: Sequence[float],
+    pwm_min_us: float,
+    per_us: float,
+    scale: float,
+    total: float,
+    c1: float,
+    c2: float,
+) -> float:
+    """``total`` [N] plus each motor's ``c1 cmd + c2 cmd^2`` [N] for the pulse widths
+    ``pwm_us`` [us]: ``cmd`` the command ``(pwm - pwm_min_us) per_us`` clipped to [0, 1] times
+    ``scale`` (:meth:`StaticThrustInput.total_thrust_n`: ``total`` is ``n c0``). The reference
+    of ``_tension_core.static_thrust`` (:data:`STATIC_THRUST`)."""
+    for pwm in pwm_us:
+        u = (pwm - pwm_min_us) * per_us
+        cmd = (0.0 if u < 0.0 else 1.0 if u > 1.0 else u) * scale
+        total += cmd * (c1 + c2 * cmd)
+    return total
+
+
+STATIC_THRUST: Callable[..., float] = static_thrust_n
+""":func:`static_thrust_n`, or where the optional C extension ``_tension_core`` is built (and
+``TETHER_PURE_PYTHON`` is not set) its twin ``static_thrust``: the same floats, the Python
+function called where C could differ (arguments not exact floats, more than 16 motors, a
+non-finite result). An extension built before the function existed leaves the Python."""
+_CORE = optional_core.load("tether_companion.estimation._tension_core")
+if _CORE is not None and hasattr(_CORE, "static_thrust"):
+    STATIC_THRUST = functools.partial(_CORE.static_thrust, static_thrust_n)
 
 
 HOLD_FRACTION = 0.5

@@ -19,12 +19,14 @@ advanced exactly once per PWM sample.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Iterator
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tether_companion.estimation import optional_core
 from tether_companion.estimation.thrust_input import ThrustInput
 from tether_companion.frames import rotation_ned_to_body_rows
 from tether_companion.samples import AttitudeSample, ImuSample, PwmSample
@@ -37,6 +39,16 @@ STALE_ATTITUDE = "stale_attitude"
 """No attitude yet, or the latest one is further from the IMU time than its bound."""
 STALE_PWM = "stale_pwm"
 """No PWM yet, or the latest one is further from the IMU time than its bound."""
+
+ROTATION_ROWS: Callable[[float, float, float], list[list[float]]] = rotation_ned_to_body_rows
+""":func:`~tether_companion.frames.rotation_ned_to_body_rows`, or where the optional C extension
+``_tension_core`` is built (and ``TETHER_PURE_PYTHON`` is not set) its twin ``rotation_rows``:
+the same floats (libm's ``sin``/``cos`` as ``math``'s), the Python function called where C
+could differ (angles not exact finite floats, for ``math``'s error on an infinity). Once per
+ATTITUDE sample."""
+_CORE = optional_core.load("tether_companion.estimation._tension_core")
+if _CORE is not None and hasattr(_CORE, "rotation_rows"):
+    ROTATION_ROWS = functools.partial(_CORE.rotation_rows, rotation_ned_to_body_rows)
 
 
 class Rotation:
@@ -188,7 +200,7 @@ class InputAligner:
             self._attitude_outcome = NONFINITE_INPUT
             return NONFINITE_INPUT
         self.attitude = sample
-        self._rotation = Rotation(rotation_ned_to_body_rows(roll, pitch, yaw))
+        self._rotation = Rotation(ROTATION_ROWS(roll, pitch, yaw))
         self.cos_tilt = math.cos(roll) * math.cos(pitch)
         self._attitude_outcome = None
         self._imu_in = None

@@ -1,6 +1,8 @@
-/* The tension filter's predict and update (tension_filter.py) in C, float for float; and the
- * static thrust curve's sum over the motors (thrust_input.static_thrust_n, once per PWM
- * sample for both filters), the same way.
+/* The tension filter's predict and update (tension_filter.py) in C, float for float; and, the
+ * same way, the per-sample input arithmetic both filters read: the static thrust curve's sum
+ * over the motors (thrust_input.static_thrust_n, per PWM sample), the attitude's rotation
+ * rows (frames.rotation_ned_to_body_rows, per ATTITUDE sample) and the tension filter's
+ * observation (tension_kf.observe_tension_ned_values, per IMU tick).
  *
  * tension_filter.py generates, per filter, straight-line Python for
  *   predict:  x <- A x,  P <- A P A^T + Q   (lower triangle, mirrored)
@@ -268,6 +270,72 @@ static_thrust(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     return PyFloat_FromDouble(total);
 }
 
+/* Three exact floats of a list or tuple (0: anything else). */
+static int
+row_of(PyObject *seq, double *out)
+{
+    return read_exact_floats(seq, 3, out);
+}
+
+/* observe_tension(fallback, specific_force, rotation_rows, thrust_n, mass_kg) -> (n, e, d):
+ * tension_kf.observe_tension_ned_values, statement for statement. */
+static PyObject *
+observe_tension(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "observe_tension takes the fallback and 4 arguments");
+        return NULL;
+    }
+    double f[3], r[9], thrust_n, mass_kg;
+    PyObject *rows = args[2];
+    PyObject **items = PyList_CheckExact(rows) && PyList_GET_SIZE(rows) == 3
+                           ? ((PyListObject *)rows)->ob_item
+                       : PyTuple_CheckExact(rows) && PyTuple_GET_SIZE(rows) == 3
+                           ? ((PyTupleObject *)rows)->ob_item
+                           : NULL;
+    if (items == NULL || !row_of(args[1], f) || !row_of(items[0], r) || !row_of(items[1], r + 3)
+        || !row_of(items[2], r + 6) || !PyFloat_CheckExact(args[3])
+        || !PyFloat_CheckExact(args[4]))
+        return PyObject_Vectorcall(args[0], args + 1, 4, NULL);
+    thrust_n = PyFloat_AS_DOUBLE(args[3]);
+    mass_kg = PyFloat_AS_DOUBLE(args[4]);
+    double c0 = mass_kg * f[0], c1 = mass_kg * f[1], c2 = mass_kg * f[2] + thrust_n;
+    double n = r[0] * c0 + r[3] * c1 + r[6] * c2;
+    double e = r[1] * c0 + r[4] * c1 + r[7] * c2;
+    double d = r[2] * c0 + r[5] * c1 + r[8] * c2;
+    if (!isfinite(n + e + d)) /* a NaN's bits are the operand order's: left to Python */
+        return PyObject_Vectorcall(args[0], args + 1, 4, NULL);
+    return Py_BuildValue("(ddd)", n, e, d);
+}
+
+/* libm's sin and cos called one by one, as math.sin and math.cos call them (through volatile
+ * pointers: the compiler may not merge a sin and a cos of the same angle into one sincos). */
+static double (*volatile libm_sin)(double) = sin;
+static double (*volatile libm_cos)(double) = cos;
+
+/* rotation_rows(fallback, roll, pitch, yaw) -> 3 lists of 3 floats:
+ * frames.rotation_ned_to_body_rows, statement for statement. */
+static PyObject *
+rotation_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "rotation_rows takes the fallback and 3 arguments");
+        return NULL;
+    }
+    double a[3];
+    for (int i = 0; i < 3; i++) {
+        /* math.sin/cos raise on an infinity: any angle not finite is Python's */
+        if (!PyFloat_CheckExact(args[1 + i]) || !isfinite(a[i] = PyFloat_AS_DOUBLE(args[1 + i])))
+            return PyObject_Vectorcall(args[0], args + 1, 3, NULL);
+    }
+    double cr = libm_cos(a[0]), sr = libm_sin(a[0]);
+    double cp = libm_cos(a[1]), sp = libm_sin(a[1]);
+    double cy = libm_cos(a[2]), sy = libm_sin(a[2]);
+    return Py_BuildValue("[[ddd][ddd][ddd]]", cp * cy, cp * sy, -sp, sr * sp * cy - cr * sy,
+                         sr * sp * sy + cr * cy, sr * cp, cr * sp * cy + sr * sy,
+                         cr * sp * sy - sr * cy, cr * cp);
+}
+
 static PyMethodDef methods[] = {
     {"predict", (PyCFunction)(void (*)(void))predict, METH_FASTCALL,
      "predict(fallback, a, q, x, p): the generated predict(x, p) of A = a, Q = q (n*n "
@@ -277,13 +345,18 @@ static PyMethodDef methods[] = {
     {"static_thrust", (PyCFunction)(void (*)(void))static_thrust, METH_FASTCALL,
      "static_thrust(fallback, pwm, pwm_min_us, per_us, scale, total, c1, c2): "
      "thrust_input.static_thrust_n in C."},
+    {"observe_tension", (PyCFunction)(void (*)(void))observe_tension, METH_FASTCALL,
+     "observe_tension(fallback, specific_force, rotation_rows, thrust_n, mass_kg): "
+     "tension_kf.observe_tension_ned_values in C."},
+    {"rotation_rows", (PyCFunction)(void (*)(void))rotation_rows, METH_FASTCALL,
+     "rotation_rows(fallback, roll, pitch, yaw): frames.rotation_ned_to_body_rows in C."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module_def = {
     PyModuleDef_HEAD_INIT, "_tension_core",
-    "The tension filter's generated predict and update and the static thrust curve's sum in C "
-    "(tension_filter.py's and thrust_input.py's twins).",
+    "The tension filter's generated predict and update, its observation, the static thrust "
+    "curve's sum and the attitude's rotation rows in C (the Python functions' twins).",
     -1,
     methods,
 };

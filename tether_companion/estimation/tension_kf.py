@@ -37,12 +37,14 @@ synchronous.
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tether_companion.estimation import alignment
+from tether_companion.estimation import alignment, optional_core
 from tether_companion.estimation.alignment import AlignedInputs, InputAligner
 from tether_companion.estimation.tension_budget import BUDGET_COLUMNS
 from tether_companion.estimation.tension_config import (  # noqa: F401 (also imported from here)
@@ -95,6 +97,16 @@ def observe_tension_ned_values(
         r01 * c0 + r11 * c1 + r21 * c2,
         r02 * c0 + r12 * c1 + r22 * c2,
     )
+
+
+OBSERVE_TENSION: Callable[..., tuple[float, float, float]] = observe_tension_ned_values
+""":func:`observe_tension_ned_values`, or where the optional C extension ``_tension_core`` is
+built (and ``TETHER_PURE_PYTHON`` is not set) its twin ``observe_tension``: the same floats,
+the Python function called where C could differ (arguments not exact floats in lists/tuples
+of three, a non-finite result). Once per IMU tick."""
+_CORE = optional_core.load("tether_companion.estimation._tension_core")
+if _CORE is not None and hasattr(_CORE, "observe_tension"):
+    OBSERVE_TENSION = functools.partial(_CORE.observe_tension, observe_tension_ned_values)
 
 
 def observe_tension_ned_n(
@@ -238,7 +250,7 @@ class TensionEstimator:
             health.stale_pwm += 1
             return None
         aligner = self.aligner
-        observation = observe_tension_ned_values(
+        observation = OBSERVE_TENSION(
             aligner.specific_force_values, aligner.rotation_rows, aligned.thrust_n, self.mass_kg
         )
         n, e, d = observation

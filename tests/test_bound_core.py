@@ -19,7 +19,7 @@ from optional_extension import import_extension, recording_c_calls
 
 from tether_companion.bench.dynamic import record
 from tether_companion.estimation.config import EstimatorConfig
-from tether_companion.estimation.dynamic import observability, offset_term, published_bound
+from tether_companion.estimation.dynamic import mixture, observability, offset_term, published_bound
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.feed import imu_ticks
 from tether_companion.physics.vehicle import load_vehicle
@@ -201,3 +201,77 @@ def test_a_flight_runs_the_straight_rows_in_c_with_the_python_floats():
     assert not fallbacks
     for args in calls:
         assert _bits(_rows_c(*args)) == _bits(ROWS_PY(*args))
+
+
+# ---------------------------------------------------------------- the mixture's bounds
+
+SD_PY = mixture.sd_bounds
+
+
+def test_the_sd_bounds_equal_the_python_function_bit_for_bit(rng):
+    """``sd_bounds`` against ``mixture.sd_bounds`` on random variances over 12 decades and
+    states (ties of the largest, signed zeros; now and then a negative variance, NaN or
+    infinity, which are Python's): the same floats, a new list (a largest taken from the
+    wrong rows fails this)."""
+    for special in (False, True):
+        for _ in range(20000):
+            n = int(rng.integers(6, 18))
+            diagonal = [abs(v) for v in _floats(rng, n, False)]
+            x = _floats(rng, n, special)
+            if rng.uniform() < 0.2:  # ties: the first of equal values is max's
+                diagonal[int(rng.integers(0, n))] = diagonal[int(rng.integers(0, n))]
+                x[int(rng.integers(0, n))] = -x[int(rng.integers(0, n))]
+            if rng.uniform() < 0.1:
+                x[int(rng.integers(0, n))] = [0.0, -0.0][rng.integers(0, 2)]
+                x[int(rng.integers(0, n))] = [0.0, -0.0][rng.integers(0, 2)]
+            if special and rng.uniform() < 0.3:
+                diagonal[int(rng.integers(0, n))] = [-1.0, -0.0, math.nan, math.inf][
+                    rng.integers(0, 4)
+                ]
+            expected = SD_PY(diagonal, x)
+            got = core.sd_bounds(SD_PY, diagonal, x)
+            assert _bits(got) == _bits(expected), (diagonal, x)
+
+
+def test_the_sd_bounds_keep_max_s_first_of_equal_values():
+    """Signed-zero ties: ``max``/``min`` keep the first of equal values, so the largest
+    ``|x_i|`` of ``(-0.0, 0.0)`` is -0.0 (``>=`` for ``>`` in C gives 0.0)."""
+    diagonal = [1.0, 4.0, 9.0, 0.25, 0.5, 2.0]
+    for x in ([-0.0, 0.0], [0.0, -0.0], [-0.0, -0.0, 0.0]):
+        assert _bits(core.sd_bounds(SD_PY, diagonal, x)) == _bits(SD_PY(diagonal, x))
+    assert struct.pack("<d", core.sd_bounds(SD_PY, diagonal, [-0.0, 0.0])[4]) == struct.pack(
+        "<d", -0.0
+    )
+
+
+def test_where_c_could_differ_the_sd_bounds_are_python_s():
+    """Ints, numpy floats, tuples and fewer than six variances: the Python function's result
+    or its exception."""
+    diagonal, x = [1.0, 4.0, 9.0, 0.25, 0.5, 2.0, 3.0], [1.0, -2.0, 0.5]
+    for args in [
+        ([1, 4, 9, 1, 1, 1], x),
+        (diagonal, [1, -2, 0]),
+        ([np.float64(v) for v in diagonal], x),
+        (tuple(diagonal), tuple(x)),
+    ]:
+        assert _bits(core.sd_bounds(SD_PY, *args)) == _bits(SD_PY(*args))
+    with pytest.raises(IndexError):
+        core.sd_bounds(SD_PY, diagonal[:5], x)
+    with pytest.raises(ValueError):
+        core.sd_bounds(SD_PY, diagonal, [])
+
+
+def test_a_flight_s_mixture_bounds_run_in_c_with_the_python_floats():
+    """The take-off flight: every mixture's bounds the status read makes go through C (no
+    fallback) and give the Python function's floats."""
+    vehicle = load_vehicle(load_scenario("realistic-takeoff-figure8").vehicle)
+    estimator = DynamicTetherEstimator(EstimatorConfig(), vehicle)
+    with recording_c_calls(mixture, "SD_BOUNDS", core.sd_bounds, SD_PY) as (calls, fallbacks):
+        for imu in imu_ticks(record("realistic-takeoff-figure8", 6.0), estimator):
+            estimate = estimator.on_imu(imu)
+            if estimate is not None:
+                estimate.status  # noqa: B018 (the status read makes the bounds)
+    assert len(calls) > 50
+    assert not fallbacks
+    for args in calls:
+        assert _bits(core.sd_bounds(SD_PY, *args)) == _bits(SD_PY(*args))

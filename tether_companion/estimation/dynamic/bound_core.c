@@ -1,5 +1,5 @@
 /* published_bound.stepped_terms and observability.unmodelled_position_rows in C, float for
- * float (both run at every IMU tick's status read).
+ * float (both run at every IMU tick's status read), and mixture.sd_bounds (once a mixture).
  *
  * The published estimate's approximation steps the mixture's state over the batch and bounds
  * its position block (published_bound.py): every statement of stepped_terms here, the same
@@ -193,11 +193,65 @@ unmodelled_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                          r[8]);
 }
 
+#define MAX_STATES 64
+
+/* sd_bounds(fallback, diagonal, x_values) -> (sd, largest_sd, position_sd, velocity_sd,
+ * largest_value): mixture.sd_bounds, statement for statement (builtin max/min: the first
+ * value kept unless a later one is greater/smaller), for a finite state and a finite,
+ * non-negative diagonal (anything else, NaN's place in max() included, is Python's). */
+static PyObject *
+sd_bounds(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 3) {
+        PyErr_SetString(PyExc_TypeError, "sd_bounds takes the fallback and 2 arguments");
+        return NULL;
+    }
+    double diagonal[MAX_STATES], x[MAX_STATES];
+    Py_ssize_t n, m;
+    int usable = items_of(args[1], &n) != NULL && items_of(args[2], &m) != NULL && n >= 6
+                 && n <= MAX_STATES && m >= 1 && m <= MAX_STATES
+                 && floats_at(args[1], n, 1, 0, n, diagonal) && floats_at(args[2], m, 1, 0, m, x);
+    for (Py_ssize_t i = 0; usable && i < n; i++)
+        usable = diagonal[i] >= 0.0 && isfinite(diagonal[i]);
+    for (Py_ssize_t i = 0; usable && i < m; i++)
+        usable = isfinite(x[i]);
+    if (!usable)
+        return PyObject_Vectorcall(args[0], args + 1, 2, NULL);
+    PyObject *sd = PyList_New(n);
+    if (sd == NULL)
+        return NULL;
+    double largest = 0.0, position = 0.0, velocity = 0.0;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double v = sqrt(diagonal[i]);
+        PyObject *item = PyFloat_FromDouble(v);
+        if (item == NULL) {
+            Py_DECREF(sd);
+            return NULL;
+        }
+        PyList_SET_ITEM(sd, i, item);
+        largest = (i == 0 || v > largest) ? v : largest;
+        if (i < 3)
+            position = (i == 0 || v > position) ? v : position;
+        else if (i < 6)
+            velocity = (i == 3 || v > velocity) ? v : velocity;
+    }
+    double most = x[0], least = x[0];
+    for (Py_ssize_t i = 1; i < m; i++) {
+        most = x[i] > most ? x[i] : most;
+        least = x[i] < least ? x[i] : least;
+    }
+    double negated = -least;
+    double largest_value = negated > most ? negated : most;
+    return Py_BuildValue("(Ndddd)", sd, largest, position, velocity, largest_value);
+}
+
 static PyMethodDef methods[] = {
     {"stepped_terms", (PyCFunction)(void (*)(void))stepped_terms, METH_FASTCALL,
      "stepped_terms(fallback, *args): published_bound.stepped_terms(*args) in C."},
     {"unmodelled_rows", (PyCFunction)(void (*)(void))unmodelled_rows, METH_FASTCALL,
      "unmodelled_rows(fallback, *args): observability.unmodelled_position_rows(*args) in C."},
+    {"sd_bounds", (PyCFunction)(void (*)(void))sd_bounds, METH_FASTCALL,
+     "sd_bounds(fallback, diagonal, x_values): mixture.sd_bounds(diagonal, x_values) in C."},
     {NULL, NULL, 0, NULL},
 };
 

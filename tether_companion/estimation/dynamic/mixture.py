@@ -15,12 +15,15 @@ tick of the batch where they are clear by more than the bound. Pure.
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tether_companion.estimation import optional_core
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.observability import _largest_std_values
 
@@ -71,6 +74,32 @@ class MixtureBounds(NamedTuple):
     """The largest ``|x_i|`` [SI units]."""
 
 
+def sd_bounds(
+    diagonal: list[float], x_values: list[float]
+) -> tuple[list[float], float, float, float, float]:
+    """:class:`MixtureBounds`' fields after ``finite`` from the covariance's ``diagonal`` and the
+    state's values: the standard deviations (NaN for a negative variance), their largest, the
+    largest position and velocity ones, the largest ``|x_i|``. The reference of
+    ``_bound_core.sd_bounds`` (:data:`SD_BOUNDS`)."""
+    sd = [math.sqrt(v) if v >= 0.0 else math.nan for v in diagonal]
+    return (
+        sd,
+        max(sd),
+        max(sd[0], sd[1], sd[2]),
+        max(sd[3], sd[4], sd[5]),
+        max(max(x_values), -min(x_values)),
+    )
+
+
+SD_BOUNDS: Callable[..., tuple] = sd_bounds
+""":func:`sd_bounds`, or where the optional C extension ``_bound_core`` is built (and
+``TETHER_PURE_PYTHON`` is not set) its twin: the same floats, :func:`sd_bounds` called for
+anything but a finite state and a finite non-negative diagonal (``bound_core.c``)."""
+_CORE = optional_core.load("tether_companion.estimation.dynamic._bound_core")
+if _CORE is not None and hasattr(_CORE, "sd_bounds"):
+    SD_BOUNDS = functools.partial(_CORE.sd_bounds, sd_bounds)
+
+
 class MixtureValues:
     """The mixture's mean and covariance with what every tick between two member steps reads
     of them as Python floats (made once per mixture: the members replace their arrays when
@@ -100,16 +129,11 @@ class MixtureValues:
         if bounds is None:
             x_values, p = self.x_values, self.p
             diagonal = p.diagonal().tolist()
-            sd = [math.sqrt(v) if v >= 0.0 else math.nan for v in diagonal]
             bounds = self._bounds = MixtureBounds(
                 math.isfinite(sum(x_values))
                 and bool(np.isfinite(p).all())
                 and min(diagonal) >= 0.0,
-                sd,
-                max(sd),
-                max(sd[0], sd[1], sd[2]),
-                max(sd[3], sd[4], sd[5]),
-                max(max(x_values), -min(x_values)),
+                *SD_BOUNDS(diagonal, x_values),
             )
         return bounds
 

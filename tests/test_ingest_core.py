@@ -256,8 +256,12 @@ def test_frames_agree_through_one_call(autopilot: str, monkeypatch) -> None:
     for _ in range(12_000):
         i = min(len(recorded) - 1, max(0, i + int(rng.integers(-6, 8))))  # out of order
         data = bytearray(recorded[i])
-        if rng.random() < 0.05:  # a stamp's bytes (time_usec / time_boot_ms are first)
+        odd = rng.random()
+        if odd < 0.05:  # a stamp's bytes (time_usec / time_boot_ms are first)
             data[10 + int(rng.integers(0, 8))] = int(rng.integers(256))
+            data = _fix_checksum(data, rng)
+        elif odd < 0.08:  # any payload byte (values the checks drop, by reason)
+            data[10 + int(rng.integers(data[1]))] = int(rng.integers(256))
             data = _fix_checksum(data, rng)
         frame = bytes(data)
         fast = with_c.samples(frame, local) if with_c.take(frame) else None
@@ -270,6 +274,7 @@ def test_frames_agree_through_one_call(autopilot: str, monkeypatch) -> None:
     counters = pure._ingest.counters  # noqa: SLF001
     assert counters.reordered and counters.out_of_order and counters.implausible
     assert counters.reorder_widened and counters.duplicate
+    assert counters.absurd and counters.out_of_range
 
 
 def test_pure_python_runs_the_reference(monkeypatch) -> None:

@@ -1,5 +1,7 @@
 /* The ingest's time line in C: the flight controller's clock gate, the reorder buffer and the
- * per-kind order check as ONE object (part of the _frame_core extension).
+ * per-kind order check as ONE object (part of the _frame_core extension). This file is the
+ * object, the ingest's counts and order and its Python type; the gate's steps are
+ * ingest_clock.c's, the buffer's ingest_reorder.c's (ingest_core.h: the state they share).
  *
  * Python stays the reference and the fallback: fc_time.FcTimeGate (the clock),
  * reorder.ReorderBuffer (the buffer) and Ingest's receive_input / _believed / _ordered /
@@ -27,373 +29,12 @@
  * the reference's tuples (stamps are finite: the inputs' integer time fields scaled).
  * tests/test_ingest_core.py runs random streams through both, every counter after every input.
  */
-#include "frame_wire.h"
-#include <math.h>
-#include <stddef.h>
-
-#define MAX_HELD 4096 /* reorder.MAX_HELD */
-#define MARGIN 1.25   /* reorder.MARGIN */
-#define PERIOD_S 5.0  /* reorder.PERIOD_S */
-
-typedef struct {
-    double t;
-    long long seq;
-    PyObject *kind, *sample;
-} Held;
-
-typedef struct {
-    PyObject_HEAD
-    /* the clock gate's parameters and state (fc_time.FcTimeGate) */
-    double backstep_s, future_tolerance_s, max_rate, confirm_span_s, fallback_s;
-    long long confirmations, fallback_samples;
-    double latest_fc_s;
-    int has_latest_local;
-    double latest_local_s;
-    int has_claim, claim_has_local;
-    double claim_fc_s, claim_local_s;
-    long long n_confirm;
-    int confirm_none, confirm_timed; /* a None among them; a local time among them */
-    double confirm_min, confirm_max;
-    long long backsteps;
-    int has_first_backstep_local;
-    double first_backstep_local_s;
-    long long n_ahead;
-    double ahead_fc_s, ahead_local_s, ahead_min, ahead_max;
-    /* the reorder buffer's (reorder.ReorderBuffer) */
-    double max_window_s, window_s, largest_lateness_s, newest_s, period_end_s, lateness_s,
-        previous_lateness_s;
-    long long reordered, widened, narrowed, next_seq;
-    Held *heap;
-    Py_ssize_t held, capacity;
-    PyObject *newest_by_kind;
-    /* the ingest's (Ingest): its per-kind newest stamps, counters, itself, the frame reader */
-    PyObject *latest_by_kind, *counters, *ingest, *reader;
-} Core;
+#include "ingest_core.h"
 
 static PyObject *one;
-static PyObject *v_accept, *v_implausible, *v_backstep, *v_reboot;
+PyObject *v_accept, *v_implausible, *v_backstep, *v_reboot;
 static PyObject *n_messages, *n_implausible, *n_out_of_order, *n_reboots, *n_duplicate,
     *n_reordered, *n_window, *n_widened, *n_accepted, *n_local_s, *n_rebooted, *n_time_s;
-
-/* ------------------------------------------------------------------ the clock gate */
-
-static int
-implausible(Core *c, double fc_s, int has_local, double local_s)
-{
-    if (!has_local || !c->has_latest_local)
-        return 0;
-    double elapsed = local_s - c->latest_local_s;
-    if (!(elapsed > 0.0))
-        elapsed = 0.0;
-    return fc_s > c->latest_fc_s + c->max_rate * elapsed + c->future_tolerance_s;
-}
-
-static void
-gate_reset(Core *c)
-{
-    c->latest_fc_s = -INFINITY;
-    c->has_latest_local = 0;
-    c->has_claim = 0;
-    c->n_confirm = 0;
-    c->confirm_none = c->confirm_timed = 0;
-    c->backsteps = 0;
-    c->has_first_backstep_local = 0;
-    c->n_ahead = 0;
-}
-
-/* max(local times) - min(local times) >= confirm_span_s, or True if one was None. */
-static int
-spans(Core *c, int none, double lo, double hi)
-{
-    return none || hi - lo >= c->confirm_span_s;
-}
-
-static int
-jump_confirmed(Core *c, double fc_s, double local_s)
-{
-    if (c->n_ahead) {
-        double elapsed = local_s - c->ahead_local_s;
-        int agrees = c->ahead_fc_s - c->backstep_s <= fc_s
-                     && fc_s <= c->ahead_fc_s + c->max_rate * elapsed + c->future_tolerance_s;
-        if (!agrees)
-            c->n_ahead = 0;
-    }
-    if (c->n_ahead == 0) {
-        c->ahead_fc_s = fc_s;
-        c->ahead_local_s = c->ahead_min = c->ahead_max = local_s;
-    }
-    else {
-        /* min/max as Python's: the first of equals kept; NaN never here (local times) */
-        if (local_s < c->ahead_min)
-            c->ahead_min = local_s;
-        if (local_s > c->ahead_max)
-            c->ahead_max = local_s;
-    }
-    c->n_ahead++;
-    return c->n_ahead >= c->confirmations && spans(c, 0, c->ahead_min, c->ahead_max);
-}
-
-static PyObject *
-rebooted(Core *c, double fc_s, int has_local, double local_s)
-{
-    gate_reset(c);
-    c->latest_fc_s = fc_s;
-    c->has_latest_local = has_local;
-    c->latest_local_s = local_s;
-    return v_reboot;
-}
-
-static int
-agrees_with_claim(Core *c, double fc_s, int has_local, double local_s)
-{
-    if (fc_s < c->claim_fc_s - c->backstep_s)
-        return 0;
-    if (!has_local || !c->claim_has_local)
-        return 1;
-    return fc_s <= c->claim_fc_s + (local_s - c->claim_local_s) + c->future_tolerance_s;
-}
-
-static int
-fallback_due(Core *c, int has_local, double local_s)
-{
-    if (!has_local || !c->has_first_backstep_local)
-        return c->backsteps >= c->fallback_samples;
-    return local_s - c->first_backstep_local_s >= c->fallback_s;
-}
-
-static PyObject *
-backstep(Core *c, double fc_s, int has_local, double local_s)
-{
-    if (c->backsteps == 0) {
-        c->has_first_backstep_local = has_local;
-        c->first_backstep_local_s = local_s;
-    }
-    c->backsteps++;
-    if (c->has_claim && agrees_with_claim(c, fc_s, has_local, local_s)) {
-        if (!has_local)
-            c->confirm_none = 1;
-        else if (!c->confirm_timed) {
-            c->confirm_timed = 1;
-            c->confirm_min = c->confirm_max = local_s;
-        }
-        else {
-            if (local_s < c->confirm_min)
-                c->confirm_min = local_s;
-            if (local_s > c->confirm_max)
-                c->confirm_max = local_s;
-        }
-        c->n_confirm++;
-        if (c->n_confirm >= c->confirmations
-            && spans(c, c->confirm_none, c->confirm_min, c->confirm_max))
-            return rebooted(c, fc_s, has_local, local_s);
-    }
-    else if (fallback_due(c, has_local, local_s))
-        return rebooted(c, fc_s, has_local, local_s);
-    return v_backstep;
-}
-
-/* FcTimeGate.check: the verdict (a borrowed interned string). */
-static PyObject *
-gate_check(Core *c, double fc_s, int has_local, double local_s)
-{
-    if (implausible(c, fc_s, has_local, local_s) && !jump_confirmed(c, fc_s, local_s))
-        return v_implausible;
-    c->n_ahead = 0;
-    if (fc_s < c->latest_fc_s - c->backstep_s)
-        return backstep(c, fc_s, has_local, local_s);
-    c->has_claim = 0;
-    c->backsteps = 0;
-    c->has_first_backstep_local = 0;
-    if (fc_s >= c->latest_fc_s) {
-        c->latest_fc_s = fc_s;
-        c->has_latest_local = has_local;
-        c->latest_local_s = local_s;
-    }
-    return v_accept;
-}
-
-/* ------------------------------------------------------------------ the reorder buffer */
-
-static int
-held_before(const Held *a, const Held *b)
-{
-    return a->t < b->t || (a->t == b->t && a->seq < b->seq);
-}
-
-static int
-heap_push(Core *c, double t, PyObject *kind, PyObject *sample)
-{
-    if (c->held == c->capacity) {
-        Py_ssize_t capacity = c->capacity ? 2 * c->capacity : 64;
-        Held *heap = PyMem_Realloc(c->heap, capacity * sizeof(Held));
-        if (heap == NULL) {
-            PyErr_NoMemory();
-            return 0;
-        }
-        c->heap = heap;
-        c->capacity = capacity;
-    }
-    Held item = {t, c->next_seq++, Py_NewRef(kind), Py_NewRef(sample)};
-    Py_ssize_t i = c->held++;
-    while (i > 0) {
-        Py_ssize_t parent = (i - 1) / 2;
-        if (!held_before(&item, &c->heap[parent]))
-            break;
-        c->heap[i] = c->heap[parent];
-        i = parent;
-    }
-    c->heap[i] = item;
-    return 1;
-}
-
-/* The oldest held item (its references handed to the caller). */
-static Held
-heap_pop(Core *c)
-{
-    Held top = c->heap[0];
-    Held last = c->heap[--c->held];
-    Py_ssize_t i = 0, n = c->held;
-    for (;;) {
-        Py_ssize_t child = 2 * i + 1;
-        if (child >= n)
-            break;
-        if (child + 1 < n && held_before(&c->heap[child + 1], &c->heap[child]))
-            child++;
-        if (!held_before(&c->heap[child], &last))
-            break;
-        c->heap[i] = c->heap[child];
-        i = child;
-    }
-    if (n > 0)
-        c->heap[i] = last;
-    return top;
-}
-
-static PyObject *
-pair(PyObject *kind, PyObject *sample)
-{
-    return PyTuple_Pack(2, kind, sample);
-}
-
-static void
-reordering_seen(Core *c, double lateness_s)
-{
-    c->reordered++;
-    if (lateness_s > c->largest_lateness_s) /* max(largest, lateness) */
-        c->largest_lateness_s = lateness_s;
-    if (lateness_s > c->lateness_s) {
-        c->lateness_s = lateness_s;
-        double margin = MARGIN * lateness_s;
-        double wanted = margin < c->max_window_s ? margin : c->max_window_s;
-        if (wanted > c->window_s) {
-            c->window_s = wanted;
-            c->widened++;
-        }
-    }
-}
-
-static void
-end_period(Core *c, double time_s)
-{
-    c->previous_lateness_s = c->lateness_s;
-    c->lateness_s = 0.0;
-    c->period_end_s = time_s + PERIOD_S;
-    double margin = MARGIN * c->previous_lateness_s;
-    double wanted = margin < c->max_window_s ? margin : c->max_window_s;
-    if (wanted < c->window_s) {
-        c->window_s = wanted;
-        c->narrowed++;
-    }
-}
-
-/* ReorderBuffer.push: a new list of (kind, sample) due, oldest first. */
-static PyObject *
-buffer_push(Core *c, PyObject *kind, double time_s, PyObject *sample)
-{
-    if (c->max_window_s == 0.0) {
-        PyObject *one = pair(kind, sample);
-        if (one == NULL)
-            return NULL;
-        PyObject *out = PyList_New(1);
-        if (out == NULL) {
-            Py_DECREF(one);
-            return NULL;
-        }
-        PyList_SET_ITEM(out, 0, one);
-        return out;
-    }
-    double newest = c->newest_s;
-    if (time_s >= newest) {
-        c->newest_s = newest = time_s;
-        if (time_s >= c->period_end_s)
-            end_period(c, time_s);
-    }
-    PyObject *seen = PyDict_GetItemWithError(c->newest_by_kind, kind);
-    if (seen == NULL && PyErr_Occurred())
-        return NULL;
-    double seen_s = seen == NULL ? -INFINITY : PyFloat_AsDouble(seen);
-    if (time_s < seen_s)
-        reordering_seen(c, newest - time_s);
-    else {
-        PyObject *t = PyFloat_FromDouble(time_s);
-        if (t == NULL || PyDict_SetItem(c->newest_by_kind, kind, t) < 0) {
-            Py_XDECREF(t);
-            return NULL;
-        }
-        Py_DECREF(t);
-    }
-    if (c->held == 0 && c->window_s == 0.0) {
-        PyObject *one = pair(kind, sample);
-        if (one == NULL)
-            return NULL;
-        PyObject *out = PyList_New(1);
-        if (out == NULL) {
-            Py_DECREF(one);
-            return NULL;
-        }
-        PyList_SET_ITEM(out, 0, one);
-        return out;
-    }
-    if (!heap_push(c, time_s, kind, sample))
-        return NULL;
-    double horizon = newest - c->window_s;
-    PyObject *out = PyList_New(0);
-    if (out == NULL)
-        return NULL;
-    while (c->held && (c->heap[0].t <= horizon || c->held > MAX_HELD)) {
-        Held top = heap_pop(c);
-        PyObject *item = PyTuple_New(2);
-        if (item == NULL) {
-            Py_DECREF(top.kind);
-            Py_DECREF(top.sample);
-            Py_DECREF(out);
-            return NULL;
-        }
-        PyTuple_SET_ITEM(item, 0, top.kind);
-        PyTuple_SET_ITEM(item, 1, top.sample);
-        int failed = PyList_Append(out, item);
-        Py_DECREF(item);
-        if (failed) {
-            Py_DECREF(out);
-            return NULL;
-        }
-    }
-    return out;
-}
-
-static int
-buffer_clear(Core *c)
-{
-    while (c->held) {
-        Held h = c->heap[--c->held];
-        Py_DECREF(h.kind);
-        Py_DECREF(h.sample);
-    }
-    c->newest_s = -INFINITY;
-    PyDict_Clear(c->newest_by_kind);
-    c->period_end_s = -INFINITY;
-    return 1;
-}
 
 /* ------------------------------------------------------------------ the ingest's counts */
 
@@ -437,7 +78,7 @@ believed(Core *c, PyObject *verdict)
             || PyObject_SetAttr(c->ingest, n_rebooted, Py_True) < 0)
             return -1;
         PyDict_Clear(c->latest_by_kind);
-        buffer_clear(c);
+        ingest_buffer_clear(c);
     }
     return 1;
 }
@@ -556,7 +197,7 @@ receive(Core *c, PyObject *kind, PyObject *sample, PyObject *local)
     Py_DECREF(time);
     if (time_s == -1.0 && PyErr_Occurred())
         return NULL;
-    PyObject *verdict = gate_check(c, time_s, has_local, local_s);
+    PyObject *verdict = ingest_gate_check(c, time_s, has_local, local_s);
     if (verdict != v_accept) {
         int goes_on = believed(c, verdict);
         if (goes_on < 0)
@@ -564,7 +205,7 @@ receive(Core *c, PyObject *kind, PyObject *sample, PyObject *local)
         if (!goes_on)
             return PyList_New(0);
     }
-    return ordered(c, buffer_push(c, kind, time_s, sample));
+    return ordered(c, ingest_buffer_push(c, kind, time_s, sample));
 }
 
 /* ------------------------------------------------------------------ Python methods */
@@ -589,7 +230,7 @@ core_check(Core *c, PyObject *const *args, Py_ssize_t nargs)
     int has;
     if (!two_times(args, nargs, &fc_s, &has, &local_s))
         return NULL;
-    return Py_NewRef(gate_check(c, fc_s, has, local_s));
+    return Py_NewRef(ingest_gate_check(c, fc_s, has, local_s));
 }
 
 static PyObject *
@@ -599,27 +240,13 @@ core_on_system_time(Core *c, PyObject *const *args, Py_ssize_t nargs)
     int has;
     if (!two_times(args, nargs, &fc_s, &has, &local_s))
         return NULL;
-    if (!isfinite(c->latest_fc_s))
-        return Py_NewRef(v_accept);
-    if (implausible(c, fc_s, has, local_s))
-        return Py_NewRef(v_implausible);
-    if (fc_s < c->latest_fc_s - c->backstep_s) {
-        c->has_claim = 1;
-        c->claim_fc_s = fc_s;
-        c->claim_has_local = has;
-        c->claim_local_s = local_s;
-        c->n_confirm = 0;
-        c->confirm_none = c->confirm_timed = 0;
-        return Py_NewRef(v_backstep);
-    }
-    c->has_claim = 0;
-    return Py_NewRef(v_accept);
+    return Py_NewRef(ingest_gate_on_system_time(c, fc_s, has, local_s));
 }
 
 static PyObject *
 core_reset(Core *c, PyObject *unused)
 {
-    gate_reset(c);
+    ingest_gate_reset(c);
     Py_RETURN_NONE;
 }
 
@@ -633,13 +260,13 @@ core_push(Core *c, PyObject *const *args, Py_ssize_t nargs)
     double time_s = PyFloat_AsDouble(args[1]);
     if (time_s == -1.0 && PyErr_Occurred())
         return NULL;
-    return buffer_push(c, args[0], time_s, args[2]);
+    return ingest_buffer_push(c, args[0], time_s, args[2]);
 }
 
 static PyObject *
 core_clear(Core *c, PyObject *unused)
 {
-    buffer_clear(c);
+    ingest_buffer_clear(c);
     Py_RETURN_NONE;
 }
 
@@ -743,12 +370,12 @@ core_init(Core *c, PyObject *args, PyObject *kwds)
     if (by_kind == NULL)
         return -1;
     Py_XSETREF(c->newest_by_kind, by_kind);
-    buffer_clear(c);
+    ingest_buffer_clear(c);
     Py_XSETREF(c->ingest, Py_NewRef(ingest));
     Py_XSETREF(c->counters, Py_NewRef(counters));
     Py_XSETREF(c->latest_by_kind, Py_NewRef(latest_by_kind));
     Py_CLEAR(c->reader);
-    gate_reset(c);
+    ingest_gate_reset(c);
     c->max_window_s = max_window_s;
     c->window_s = c->largest_lateness_s = c->lateness_s = c->previous_lateness_s = 0.0;
     c->reordered = c->widened = c->narrowed = 0;

@@ -98,21 +98,28 @@ end_period(Core *c, double time_s)
     }
 }
 
+/* [(kind, sample)]: the input due at once, nothing held (a new list, or NULL with an error set). */
+static PyObject *
+due_alone(PyObject *kind, PyObject *sample)
+{
+    PyObject *item = pair(kind, sample);
+    if (item == NULL)
+        return NULL;
+    PyObject *out = PyList_New(1);
+    if (out == NULL) {
+        Py_DECREF(item);
+        return NULL;
+    }
+    PyList_SET_ITEM(out, 0, item);
+    return out;
+}
+
 /* ReorderBuffer.push: a new list of (kind, sample) due, oldest first. */
 PyObject *
 ingest_buffer_push(Core *c, PyObject *kind, double time_s, PyObject *sample)
 {
     if (c->max_window_s == 0.0) {
-        PyObject *one = pair(kind, sample);
-        if (one == NULL)
-            return NULL;
-        PyObject *out = PyList_New(1);
-        if (out == NULL) {
-            Py_DECREF(one);
-            return NULL;
-        }
-        PyList_SET_ITEM(out, 0, one);
-        return out;
+        return due_alone(kind, sample);
     }
     double newest = c->newest_s;
     if (time_s >= newest) {
@@ -135,16 +142,7 @@ ingest_buffer_push(Core *c, PyObject *kind, double time_s, PyObject *sample)
         Py_DECREF(t);
     }
     if (c->held == 0 && c->window_s == 0.0) {
-        PyObject *one = pair(kind, sample);
-        if (one == NULL)
-            return NULL;
-        PyObject *out = PyList_New(1);
-        if (out == NULL) {
-            Py_DECREF(one);
-            return NULL;
-        }
-        PyList_SET_ITEM(out, 0, one);
-        return out;
+        return due_alone(kind, sample);
     }
     if (!heap_push(c, time_s, kind, sample))
         return NULL;

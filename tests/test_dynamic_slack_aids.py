@@ -16,6 +16,7 @@ from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.aid.cable_angle import turn_about_anchor
 from tether_companion.estimation.dynamic.aid.slack import SLACK
+from tether_companion.estimation.dynamic.aid.winch import _chord
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.offline import run_dynamic
@@ -113,17 +114,40 @@ def test_a_surely_slack_cable_skips_the_angle_and_an_unreachable_length() -> Non
     assert est.ground_station.winch.status.fused == 0
 
 
-def test_a_drone_beyond_the_line_is_pulled_in_whatever_the_tension() -> None:
+def test_a_drone_beyond_the_line_is_pulled_within_it_whatever_the_tension() -> None:
     """Tension surely slack, but the filter has the drone 1 m farther out than the paid-out
-    line reaches: the length is fused (the line bounds the distance) and the range shrinks."""
+    line reaches: the length is fused as the bound it is (the line bounds the distance; a
+    slack cable's drone may be anywhere inside it), so the distance as the encoder reads it
+    moves to the prior's truncated to the line, within it, and keeps the truncated spread,
+    not the encoder's noise: fused as the length itself (the old rule) it sat on the line at
+    a few centimetres (aid/winch.py, truncation.py)."""
     est, truth, t = _started()
     _believe(est, *SURELY_SLACK, (0.0, 0.0, 0.0))
-    before = float(np.linalg.norm(est.bank.best.x[state.POSITION]))
-    length = before - 1.0
+    best = est.bank.best
+    value, jac = _chord(best.x)
+    read = float(value[0])
+    noise = float(est.ground_station.winch._r[0, 0])
+    prior_sd = math.sqrt(float((jac @ best.P @ jac.T)[0, 0]) + noise)
+    length = read - 1.0
     est.set_paid_out_length_m(length, t + 0.001)
-    after = float(np.linalg.norm(est.bank.best.x[state.POSITION]))
+    best = est.bank.best
+    value, jac = _chord(best.x)
+    after = float(value[0])
+    after_sd = math.sqrt(float((jac @ best.P @ jac.T)[0, 0]) + noise)
     assert est.ground_station.winch.status.fused == 1
-    assert abs(after - length) < 0.5 * abs(before - length)
+    beta = -1.0 / prior_sd
+    mills = (
+        math.exp(-0.5 * beta * beta)
+        / math.sqrt(2.0 * math.pi)
+        / (0.5 * math.erfc(-beta / math.sqrt(2.0)))
+    )
+    expected = read - prior_sd * mills  # the truncated mean and spread
+    expected_sd = prior_sd * math.sqrt(1.0 - mills * (beta + mills))
+    assert prior_sd > 0.5  # a start a metre wide: the line cuts the prior's middle
+    assert after < length
+    assert abs(after - expected) < 0.1 * prior_sd
+    assert abs(after_sd - expected_sd) < 0.1 * expected_sd
+    assert after_sd > 0.3 * prior_sd  # not the encoder's noise
 
 
 def test_a_bearing_far_off_is_turned_about_the_anchor() -> None:

@@ -27,6 +27,10 @@ from tether_companion.estimation.dynamic.bank import (
 )
 from tether_companion.estimation.dynamic.imu_batch import product
 from tether_companion.estimation.dynamic.member import MemberFilter
+from tether_companion.estimation.dynamic.truncation import (
+    log_probability_within,
+    pseudo_measurement,
+)
 from tether_companion.estimation.ekf import (
     FUSED,
     GATED,
@@ -183,17 +187,23 @@ def _record_bank(
     r_variance: float,
     time_s: float,
     tempering: float = LIKELIHOOD_TEMPERING,
+    log_likelihoods: Sequence[float] | None = None,
 ) -> bool:
     """Add the members' log-likelihoods of a sample fused into every member (``best`` the
-    best member before it; divided by ``tempering``) and record the best member's outcome
-    in ``status``; whether it was fused into the best member."""
+    best member before it; divided by ``tempering``; the Gaussian's from each outcome, or
+    ``log_likelihoods`` per member when given) and record the best member's outcome in
+    ``status``; whether it was fused into the best member."""
     best_index = 0
     decided = bank.decided
     for i, (kf, result) in enumerate(zip(bank.filters, results, strict=True)):
         if kf is best:
             best_index = i
-        if not decided:
+        if decided:
+            continue
+        if log_likelihoods is None:
             bank.add_evidence(i, result.nis, kf.last_log_det_s, tempering)
+        elif math.isfinite(result.nis):  # fused or gated: the prior's, as the Gaussian's
+            bank.add_evidence(i, -2.0 * log_likelihoods[i], 0.0, tempering)
     best_result = results[best_index]
     if math.isfinite(best_result.nis):
         m = len(best.sensors[name].innovation)
@@ -254,3 +264,40 @@ def fuse(
         threshold = _threshold(kf.gate_probability, z.size)
         status.last_test_ratio = result.nis / threshold if math.isfinite(threshold) else 0.0
     return _record(status, result, time_s)
+
+
+def fuse_bound(
+    bank: FilterBank,
+    name: str,
+    status: AidStatus,
+    bound: float,
+    measure: MeasurementFunction,
+    r_variance: float,
+    time_s: float,
+) -> bool:
+    """Fuse the upper bound ``h(x) + v <= bound`` (``v ~ N(0, r_variance)``; ``measure(x)``
+    gives ``(h(x) (1,), H (1, n))``) into every member as its prior truncated to it
+    (:mod:`~tether_companion.estimation.dynamic.truncation`: each member's own pseudo update,
+    gated on its NIS like any scalar), each member's weight by the probability of the bound
+    under its prior; record the best member's outcome in ``status``. Returns whether it was
+    fused into the best member."""
+    best = bank.best
+    within: list[float] = []
+
+    def pseudo(innovation: float, variance: float) -> tuple[float, float]:
+        within.append(log_probability_within(innovation, variance))
+        return pseudo_measurement(innovation, variance)
+
+    results, jacobians, priors = bank.update_scalar(name, bound, measure, r_variance, pseudo)
+    return _record_bank(
+        bank,
+        best,
+        name,
+        status,
+        results,
+        jacobians,
+        priors,
+        r_variance,
+        time_s,
+        log_likelihoods=within,
+    )

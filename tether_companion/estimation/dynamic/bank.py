@@ -305,13 +305,21 @@ class FilterBank:
         return xs, ps, _finite_and_definite(xs, ps)
 
     def update_scalar(
-        self, sensor: str, z: float, measure: MeasurementFunction, r_variance: float
+        self,
+        sensor: str,
+        z: float,
+        measure: MeasurementFunction,
+        r_variance: float,
+        pseudo: Callable[[float, float], tuple[float, float]] | None = None,
     ) -> tuple[list[UpdateResult], list[FloatArray], list[FloatArray]]:
         """Fuse a scalar measurement ``z`` with noise ``r_variance`` into every member
         (``measure(x)`` gives ``(h(x) (1,), H (1, n))`` at a state array): ``P h``, the gain
         ``K = P h / s`` and ``P - K (P h)^T`` for all members in stacked arrays, the test and
         gate per member
         (:meth:`~tether_companion.estimation.dynamic.member.MemberFilter.test_scalar`).
+        ``pseudo``, when given, maps each member's innovation ``y`` and ``s = H P H^T + R`` to
+        the pair the update and its test use instead (an upper bound's truncation,
+        :func:`~tether_companion.estimation.dynamic.truncation.pseudo_measurement`).
         Returns each member's outcome, Jacobian and prior covariance."""
         filters = self.filters
         priors = [kf.P for kf in filters]
@@ -330,6 +338,10 @@ class FilterBank:
         else:
             phts = projected[0]
             s_values = [s[0] + r_variance for s in projected[1]]
+        if pseudo is not None:
+            pairs = [pseudo(y, s) for y, s in zip(innovations, s_values, strict=True)]
+            innovations = [y for y, _ in pairs]
+            s_values = [s for _, s in pairs]
         results: list[UpdateResult | None] = [
             kf.test_scalar(sensor, y, s)
             for kf, y, s in zip(filters, innovations, s_values, strict=True)

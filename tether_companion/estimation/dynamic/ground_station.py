@@ -209,7 +209,8 @@ class GroundStationInputs:
         fused = self.winch.fuse(bank, constants, length_m, time_s, age_s, slack)
         if fused:
             self._health.winch_fused += 1
-        if fused or self.winch.status.gated != gated_before:
+        # a bound's (pseudo) innovation is no length's: the release rule sees the model's only
+        if not slack and (fused or self.winch.status.gated != gated_before):
             self._settle(bank, WINCH_NAME, time_s, 1)
         if not fused:
             release.follow_length(bank, False)

@@ -30,10 +30,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.bank_arrays import (
+    EMPTY,
+    apply_each,
+    each_member,
+    finite_and_definite,
+    log_det_innovation,
+    stack_members,
+    sum_all,
+)
 from tether_companion.estimation.dynamic.imu_batch import MEMBER_CORE, ImuBatch, product
 from tether_companion.estimation.dynamic.member import MemberFilter, hold_consider
 from tether_companion.estimation.ekf import MeasurementFunction, UpdateResult
-from tether_companion.estimation.lapack import dpotrf
 
 FloatArray = NDArray[np.float64]
 RowsFunction = Callable[[list[float]], tuple[Sequence[float], Sequence[float]]]
@@ -193,14 +201,14 @@ class FilterBank:
             for kf in filters:
                 x = step.step_state(kf.x)
                 p, finite = step.step_member_covariance(kf.P, q)
-                kf.set_predicted(x, p, healthy=finite and math.isfinite(_sum(x)))
+                kf.set_predicted(x, p, healthy=finite and math.isfinite(sum_all(x)))
             return
-        xs = batch.step_state(_stack([kf.x for kf in filters]), q)
-        ps = batch.step_covariance(_stack([kf.P for kf in filters]), q)
+        xs = batch.step_state(stack_members([kf.x for kf in filters]), q)
+        ps = batch.step_covariance(stack_members([kf.P for kf in filters]), q)
         # Phi P Phi^T + T Q stays positive definite: only finiteness is in doubt
-        healthy = math.isfinite(_sum(xs) + _sum(ps))
+        healthy = math.isfinite(sum_all(xs) + sum_all(ps))
         one = len(filters) == 1
-        for kf, x, p in zip(filters, _members(xs, one), _members(ps, one), strict=True):
+        for kf, x, p in zip(filters, each_member(xs, one), each_member(ps, one), strict=True):
             kf.set_predicted(x, p, healthy=healthy)
 
     def update_force_balance(
@@ -226,9 +234,9 @@ class FilterBank:
             value, jacobian = measure(kf.x_values())
             innovations.append((z0 - value[0], z1 - value[1], z2 - value[2]))
             jacobians.append(jacobian)
-        projected = _project_each(priors, jacobians, 3)
+        projected = project_each(priors, jacobians, 3)
         if projected is None:  # numpy: all members stacked
-            p = _stack(priors)
+            p = stack_members(priors)
             h_jac = np.fromiter(chain.from_iterable(jacobians), float, members * 3 * _N)
             h_jac = h_jac.reshape(p.shape[:-2] + (3, _N))
             pht = product(p, h_jac.swapaxes(-1, -2))
@@ -256,10 +264,10 @@ class FilterBank:
             one = p.ndim == 2
             s_inv = np.array([solved[1:10] for _, solved in chosen]).reshape(p.shape[:-2] + (3, 3))
             w = np.array([solved[10:] for _, solved in chosen])
-            prior_xs = _stack([filters[i].x for i in index])
+            prior_xs = stack_members([filters[i].x for i in index])
             xs, ps, checked = self._gain_numpy(prior_xs, p, pht, s_inv, w[0] if one else w)
             for (i, solved), x, p_new in zip(
-                chosen, _members(xs, one), _members(ps, one), strict=True
+                chosen, each_member(xs, one), each_member(ps, one), strict=True
             ):
                 results[i] = filters[i].accept_update(sensor, solved[0], x, p_new, checked=checked)
         return results, jacobians, priors  # type: ignore[return-value]
@@ -279,7 +287,7 @@ class FilterBank:
         ``pht`` is ``P H^T`` (n, m), ``s_inv`` ``S^-1`` (m*m, row-major), ``w`` (m)."""
         hold = self.consider
         start, stop, _ = (_HOLD_NONE if hold is None else hold).indices(len(x))
-        x_new, p_new = _EMPTY(x.shape), _EMPTY(p.shape)
+        x_new, p_new = EMPTY(x.shape), EMPTY(p.shape)
         checked = MEMBER_CORE.update(  # type: ignore[union-attr]
             x, p, pht, s_inv, w, start, stop, x_new, p_new
         )
@@ -296,13 +304,13 @@ class FilterBank:
         ``P - K (P H^T)^T`` made exactly symmetric, the consider states held, and whether all
         are finite and positive definite. ``pht`` (..., n, m), ``s_inv`` (..., m, m), ``w``
         (..., m)."""
-        xs = prior_xs + _apply(pht, w)
+        xs = prior_xs + apply_each(pht, w)
         ps = p - product(product(pht, s_inv), pht.swapaxes(-1, -2))
         ps = ps + ps.swapaxes(-1, -2)  # a new array: no copy of the overlapping operand
         ps *= 0.5
         if self.consider is not None:
             hold_consider(xs, ps, prior_xs, p, self.consider)
-        return xs, ps, _finite_and_definite(xs, ps)
+        return xs, ps, finite_and_definite(xs, ps)
 
     def update_scalar(
         self,
@@ -329,11 +337,11 @@ class FilterBank:
             value, jacobian = measure(kf.x)
             innovations.append(z - float(value[0]))
             jacobians.append(jacobian)
-        projected = _project_each(priors, jacobians, 1)
+        projected = project_each(priors, jacobians, 1)
         if projected is None:  # numpy: all members stacked
-            p = _stack(priors)
+            p = stack_members(priors)
             rows = np.array(jacobians).reshape(p.shape[:-2] + (_N,))
-            pht = _apply(p, rows)
+            pht = apply_each(p, rows)
             s_values = ((pht * rows).sum(axis=-1) + r_variance).reshape(-1).tolist()
         else:
             phts = projected[0]
@@ -361,15 +369,15 @@ class FilterBank:
             s_and_y = np.array([(s_values[i], innovations[i]) for i in index])
             s_and_y = s_and_y[0] if one else s_and_y
             gain = pht / s_and_y[..., :1]
-            prior_xs = _stack([filters[i].x for i in index])
+            prior_xs = stack_members([filters[i].x for i in index])
             xs = prior_xs + gain * s_and_y[..., 1:]
             ps = p - gain[..., :, None] * pht[..., None, :]
             ps = ps + ps.swapaxes(-1, -2)  # a new array: no copy of the overlapping operand
             ps *= 0.5
             if self.consider is not None:
                 hold_consider(xs, ps, prior_xs, p, self.consider)
-            checked = _finite_and_definite(xs, ps)
-            for i, x, p_new in zip(index, _members(xs, one), _members(ps, one), strict=True):
+            checked = finite_and_definite(xs, ps)
+            for i, x, p_new in zip(index, each_member(xs, one), each_member(ps, one), strict=True):
                 nis = innovations[i] * innovations[i] / s_values[i]
                 results[i] = filters[i].accept_update(sensor, nis, x, p_new, checked=checked)
         return results, jacobians, priors  # type: ignore[return-value]
@@ -437,7 +445,7 @@ class FilterBank:
         arrays = [a for kf in filters for a in (kf.x, kf.P)]
         if MEMBER_CORE is not None:  # in C (imu_batch.MEMBER_CORE)
             n = filters[0].x.shape[0]
-            mean, cov = _EMPTY(n), _EMPTY((n, n))
+            mean, cov = EMPTY(n), EMPTY((n, n))
             if MEMBER_CORE.mixture(self._weight_list(), arrays[::2], arrays[1::2], mean, cov):
                 self._mixture_cache = (arrays, list(self.log_weight), (mean, cov))
                 return mean, cov
@@ -509,18 +517,7 @@ class FilterBank:
                 self.bearing_confirmed = True
 
 
-def log_det_innovation(p: FloatArray, h_jac: FloatArray, r: FloatArray) -> float:
-    """``log det (H P H^T + R)`` (``nan`` when not positive definite or not finite)."""
-    s = h_jac @ p @ h_jac.T + r
-    if not np.all(np.isfinite(s)):
-        return math.nan
-    chol, info = dpotrf(s, lower=1, clean=0)
-    if info != 0:
-        return math.nan
-    return 2.0 * float(np.log(np.diag(chol)).sum())
-
-
-def _project_each(
+def project_each(
     priors: list[FloatArray], jacobians: Sequence[Sequence[float] | FloatArray], m: int
 ) -> tuple[list[FloatArray], list[Sequence[float]]] | None:
     """Each member's ``P H^T`` (n, m) and ``H P H^T`` (m*m, row-major) in C
@@ -530,7 +527,7 @@ def _project_each(
         return None
     phts, s_values = [], []
     for p, h_jac in zip(priors, jacobians, strict=True):
-        pht = _EMPTY((p.shape[0], m))
+        pht = EMPTY((p.shape[0], m))
         s = MEMBER_CORE.project(p, h_jac, pht)
         if s is None:
             return None
@@ -539,7 +536,6 @@ def _project_each(
     return phts, s_values
 
 
-_EMPTY = np.empty
 _X_ARRAY = attrgetter("_xa")
 """A member's state array as it holds it (None while it holds a list): what ``x`` returns when
 it is not None, read without the property (:meth:`FilterBank.mixture`'s identity check)."""
@@ -547,41 +543,3 @@ _P_ARRAY = attrgetter("_pa")
 """A member's covariance array as it holds it (None while it holds a list)."""
 _HOLD_NONE = slice(0, 0)
 """No consider state (``MEMBER_CORE.update``'s hold range)."""
-
-
-def _sum(array: FloatArray) -> float:
-    """The sum of every entry (``ndarray.sum()``'s reduction without its method wrapper)."""
-    return _ADD_REDUCE(array, None)  # type: ignore[no-any-return]
-
-
-_ADD_REDUCE = np.add.reduce
-
-
-def _stack(arrays: list[FloatArray]) -> FloatArray:
-    """The members' arrays stacked along a new first axis; one member: its own array (no
-    copy, no new axis: its products go through ``np.dot``, :func:`product`)."""
-    return arrays[0] if len(arrays) == 1 else np.array(arrays)
-
-
-def _members(arrays: FloatArray, one: bool) -> tuple[FloatArray] | FloatArray:
-    """Each member's array of what :func:`_stack` made (``one``: of one member, its own)."""
-    return (arrays,) if one else arrays
-
-
-def _apply(p: FloatArray, v: FloatArray) -> FloatArray:
-    """``P v`` for each member: ``p`` (..., n, m) by ``v`` (..., m) (one member: ``np.dot``,
-    :func:`~tether_companion.estimation.dynamic.imu_batch.product`)."""
-    if p.ndim == 2:
-        return _DOT(p, v)  # type: ignore[no-any-return]
-    return (p @ v[:, :, None])[:, :, 0]
-
-
-_DOT = np.dot
-
-
-def _finite_and_definite(xs: FloatArray, ps: FloatArray) -> bool:
-    """Whether the states (m, n) and covariances (m, n, n) are all finite and every
-    covariance passes the Cholesky test."""
-    if not math.isfinite(_sum(xs) + _sum(ps)):
-        return False
-    return all(dpotrf(p, lower=1, clean=0)[1] == 0 for p in _members(ps, ps.ndim == 2))

@@ -1,7 +1,7 @@
 """One bank member's arithmetic on its own 2-D arrays (``np.dot``, perf14) against the
 arithmetic it replaced, ``matmul`` on the member's arrays with a stacking axis added: **bit for
 bit** the same numbers for every product the bank and the batch step make
-(:func:`~tether_companion.estimation.dynamic.imu_batch.product`, ``bank._apply``), so one
+(:func:`~tether_companion.estimation.dynamic.imu_batch.product`, ``bank_arrays.apply_each``), so one
 member steps and fuses exactly as before. Several members' stacked products (``matmul`` with
 m > 1 uses BLAS's matrix-matrix kernels where one member's uses its matrix-vector ones) agree
 with one member's to rounding only (1e-12), as they did before."""
@@ -13,7 +13,8 @@ import pytest
 from filter_states import random_start
 
 from tether_companion.estimation.dynamic import generated, state
-from tether_companion.estimation.dynamic.bank import FilterBank, _apply
+from tether_companion.estimation.dynamic.bank import FilterBank
+from tether_companion.estimation.dynamic.bank_arrays import apply_each
 from tether_companion.estimation.dynamic.imu_batch import ImuBatch, product
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.dynamic.models import ModelConstants
@@ -114,5 +115,5 @@ def test_apply_to_one_members_vector_is_the_stacked_matmul_bit_for_bit(columns: 
     rng = np.random.default_rng(columns)
     for _ in range(200):
         p, v = rng.normal(size=(17, columns)), rng.normal(size=columns)
-        np.testing.assert_array_equal(_apply(p, v), (p[None] @ v[None, :, None])[0, :, 0])
-        np.testing.assert_array_equal(_apply(p[None], v[None])[0], _apply(p, v))
+        np.testing.assert_array_equal(apply_each(p, v), (p[None] @ v[None, :, None])[0, :, 0])
+        np.testing.assert_array_equal(apply_each(p[None], v[None])[0], apply_each(p, v))

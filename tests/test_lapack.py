@@ -72,8 +72,8 @@ def test_loaded_without_the_scipy_linalg_package_which_later_shares_it() -> None
 @pytest.mark.parametrize("name", ["dpotrf", "dpotrs"])
 def test_the_filters_use_these_functions(name: str) -> None:
     from tether_companion.estimation import ekf
-    from tether_companion.estimation.dynamic import bank
+    from tether_companion.estimation.dynamic import bank_arrays
 
     assert getattr(ekf, name) is getattr(lapack, name)
     if name == "dpotrf":
-        assert bank.dpotrf is lapack.dpotrf
+        assert bank_arrays.dpotrf is lapack.dpotrf

@@ -151,6 +151,17 @@ def _sample_bits(sample) -> object:
     return type(sample), values
 
 
+def _same_samples(with_c: FrameIngest, pure: FrameIngest, frame: bytes, local: float) -> object:
+    """Both ingests' samples of ``frame`` at local time ``local`` [s] (None where not taken),
+    asserted the same, bit for bit; returns the C ingest's."""
+    fast = with_c.samples(frame, local) if with_c.take(frame) else None
+    slow = pure.samples(frame, local) if pure.take(frame) else None
+    assert (fast is None) == (slow is None)
+    if fast is not None:
+        assert [_sample_bits(s) for s in fast] == [_sample_bits(s) for s in slow]
+    return fast
+
+
 @pytest.mark.parametrize("autopilot", FLAVOURS)
 def test_samples_and_counts_agree_on_random_and_mutated_frames(
     autopilot: str, monkeypatch: pytest.MonkeyPatch
@@ -187,11 +198,8 @@ def test_samples_and_counts_agree_on_random_and_mutated_frames(
         if choice:
             data = _fix_checksum(data, rng)
         frame = bytes(data)
-        fast = with_c.samples(frame, local) if with_c.take(frame) else None
-        slow = pure.samples(frame, local) if pure.take(frame) else None
-        assert (fast is None) == (slow is None)
+        fast = _same_samples(with_c, pure, frame, local)
         if fast is not None:
-            assert [_sample_bits(s) for s in fast] == [_sample_bits(s) for s in slow]
             kinds.update(type(s).__name__ for s in fast)
         assert with_c._ingest.counters == pure._ingest.counters  # noqa: SLF001
         local += 0.0025 if rng.random() < 0.99 else 3.0

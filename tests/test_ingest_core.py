@@ -21,7 +21,7 @@ import types
 import numpy as np
 import pytest
 from optional_extension import import_extension
-from test_frame_core import _fix_checksum, _sample_bits
+from test_frame_core import _fix_checksum, _same_samples, _sample_bits
 from test_service_ingest_frames import _hover_frames
 
 from tether_companion.mavlink.framing import FrameEncoder, FrameParser, dialect
@@ -264,11 +264,7 @@ def test_frames_agree_through_one_call(autopilot: str, monkeypatch) -> None:
             data[10 + int(rng.integers(data[1]))] = int(rng.integers(256))
             data = _fix_checksum(data, rng)
         frame = bytes(data)
-        fast = with_c.samples(frame, local) if with_c.take(frame) else None
-        slow = pure.samples(frame, local) if pure.take(frame) else None
-        assert (fast is None) == (slow is None)
-        if fast is not None:
-            assert [_sample_bits(s) for s in fast] == [_sample_bits(s) for s in slow]
+        _same_samples(with_c, pure, frame, local)
         assert _state(with_c._ingest) == _state(pure._ingest)  # noqa: SLF001
         local += 0.0025 if rng.random() < 0.995 else 3.0
     counters = pure._ingest.counters  # noqa: SLF001

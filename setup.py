@@ -2,7 +2,8 @@
 generated models, the tension filter's generated predict/update (``tension_core.c``), the
 published bound approximation's step (``bound_core.c``) and the dynamic filter's members'
 matrix arithmetic (``member_core.c``: numpy's to 1e-12, not bit for bit;
-``imu_batch.MEMBER_CORE``) and the flight controller's input frames' test and field read
+``imu_batch.MEMBER_CORE``) with the bank's force-balance fusion over its members in one call
+(``bank_fusion.c``, ``bank.FUSE_FORCE_BALANCE``: bit for bit the bank's Python on those) and the flight controller's input frames' test and field read
 (``service/frame_core.c`` with ``frame_reader.c`` and ``frame_wire.h``,
 ``ingest_frames.FrameIngest``: its samples bit for bit) with the ingest's clock gate, reorder
 buffer and order check (``service/ingest_core.c``, ``Ingest.core``: bit for bit).
@@ -40,8 +41,14 @@ setup(
         ),
         Extension(
             "tether_companion.estimation.dynamic._member_core",
-            ["tether_companion/estimation/dynamic/member_core.c"],
-            depends=["tether_companion/estimation/exact_floats.h"],
+            [
+                "tether_companion/estimation/dynamic/member_core.c",
+                "tether_companion/estimation/dynamic/bank_fusion.c",
+            ],
+            depends=[
+                "tether_companion/estimation/exact_floats.h",
+                "tether_companion/estimation/dynamic/member_core.h",
+            ],
             extra_compile_args=["-ffp-contract=off"],
             optional=True,
         ),

@@ -41,7 +41,7 @@ from tether_companion.estimation.dynamic.bank_arrays import (
 )
 from tether_companion.estimation.dynamic.imu_batch import MEMBER_CORE, ImuBatch, product
 from tether_companion.estimation.dynamic.member import MemberFilter, hold_consider
-from tether_companion.estimation.ekf import MeasurementFunction, UpdateResult
+from tether_companion.estimation.ekf import FUSED, GATED, MeasurementFunction, UpdateResult
 
 FloatArray = NDArray[np.float64]
 RowsFunction = Callable[[list[float]], tuple[Sequence[float], Sequence[float]]]
@@ -223,8 +223,21 @@ class FilterBank:
         ``H P H^T``, the gain and ``P - K (P H^T)^T`` for all members in stacked arrays, the
         3x3 ``S``, NIS and gate per member in scalars
         (:meth:`~tether_companion.estimation.dynamic.member.MemberFilter.test_force_balance`).
-        Returns each member's outcome, Jacobian and prior covariance."""
+        Returns each member's outcome, Jacobian and prior covariance.
+
+        Where ``_member_core`` runs, all of it is one C call (:data:`FUSE_FORCE_BALANCE`, bit
+        for bit this code with the extension's member functions), which hands back here
+        whatever it does not take (before changing anything)."""
         filters = self.filters
+        if FUSE_FORCE_BALANCE is not None:
+            hold = self.consider
+            start, stop, _ = (_HOLD_NONE if hold is None else hold).indices(_N)
+            done = FUSE_FORCE_BALANCE(
+                filters, sensor, z, measure, r_variance, start, stop, EMPTY, UpdateResult, FUSED,
+                GATED,
+            )  # fmt: skip
+            if done is not None:
+                return done  # type: ignore[no-any-return]
         members = len(filters)
         priors = [kf.P for kf in filters]
         innovations = []
@@ -543,3 +556,10 @@ _P_ARRAY = attrgetter("_pa")
 """A member's covariance array as it holds it (None while it holds a list)."""
 _HOLD_NONE = slice(0, 0)
 """No consider state (``MEMBER_CORE.update``'s hold range)."""
+FUSE_FORCE_BALANCE: Callable[..., tuple[list[UpdateResult], list, list[FloatArray]] | None] | None
+FUSE_FORCE_BALANCE = getattr(MEMBER_CORE, "fuse_force_balance", None)
+"""``_member_core.fuse_force_balance`` (bank_fusion.c) where the extension runs: the whole of
+:meth:`FilterBank.update_force_balance` over the members (model, projection, ``S``'s test and
+inverse, the gate and its counts, the gain's update, keeping it) bit for bit, None (nothing
+changed) where it does not take the members (the Python above then runs). None without the
+extension, ``TETHER_PURE_PYTHON=1``, or an extension built before it."""

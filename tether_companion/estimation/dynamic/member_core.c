@@ -18,117 +18,11 @@
  * force_balance is the exception: scalar arithmetic written as member.solve_force_balance
  * writes it, bit for bit (tests/test_force_balance_core.py), the Python function called
  * wherever C could differ.
+ *
+ * bank_fusion.c (same extension, shared helpers in member_core.h) is the bank's whole
+ * force-balance fusion over its members, bit for bit the bank's Python on these functions.
  */
-#define PY_SSIZE_T_CLEAN
-#include <Python.h>
-#include <math.h>
-#include <string.h>
-
-#include "../exact_floats.h"
-
-#define MAX_N 32 /* the largest state handled here (the dynamic filter has 17) */
-#define MAX_M 3  /* the largest measurement (the force balance: 3 axes) */
-#define MAX_MEMBERS 64 /* the most bank members mixture() takes */
-#define ANY (-1)
-
-/* A C-contiguous float64 buffer of `obj` with `ndim` dimensions of sizes d0, d1 (ANY: any);
- * 0 without an error set when it is not one. */
-static int
-get(PyObject *obj, Py_buffer *view, int ndim, Py_ssize_t d0, Py_ssize_t d1, int writable)
-{
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, view, flags) != 0) {
-        PyErr_Clear();
-        return 0;
-    }
-    if (view->ndim != ndim || view->itemsize != 8 || view->format == NULL ||
-        strcmp(view->format, "d") != 0 || (d0 != ANY && view->shape[0] != d0) ||
-        (ndim == 2 && d1 != ANY && view->shape[1] != d1)) {
-        PyBuffer_Release(view);
-        return 0;
-    }
-    return 1;
-}
-
-/* The buffers of one call, released together. */
-typedef struct {
-    Py_buffer views[8];
-    int count;
-} Views;
-
-static Py_buffer *
-take(Views *v, PyObject *obj, int ndim, Py_ssize_t d0, Py_ssize_t d1, int writable)
-{
-    Py_buffer *view = &v->views[v->count];
-    if (!get(obj, view, ndim, d0, d1, writable))
-        return NULL;
-    v->count++;
-    return view;
-}
-
-static void
-release(Views *v)
-{
-    for (int i = 0; i < v->count; i++)
-        PyBuffer_Release(&v->views[i]);
-    v->count = 0;
-}
-
-static int
-all_finite(const double *a, Py_ssize_t count)
-{
-    double sum = 0.0;
-    for (Py_ssize_t i = 0; i < count; i++)
-        sum += a[i] * 0.0; /* nan for a nan or an infinity */
-    return sum == 0.0;
-}
-
-/* The floats of a list or tuple of exactly n floats or ints into out; 0 (no error set) otherwise. */
-static int
-read_numbers(PyObject *obj, double *out, Py_ssize_t n)
-{
-    if (!(PyList_CheckExact(obj) || PyTuple_CheckExact(obj)) || PySequence_Fast_GET_SIZE(obj) != n)
-        return 0;
-    PyObject **items = PySequence_Fast_ITEMS(obj);
-    for (Py_ssize_t i = 0; i < n; i++) {
-        if (PyFloat_Check(items[i]))
-            out[i] = PyFloat_AS_DOUBLE(items[i]);
-        else if (PyLong_CheckExact(items[i])) {
-            out[i] = PyLong_AsDouble(items[i]);
-            if (out[i] == -1.0 && PyErr_Occurred()) {
-                PyErr_Clear();
-                return 0;
-            }
-        }
-        else
-            return 0;
-    }
-    return 1;
-}
-
-/* Whether the symmetric n x n matrix a is positive definite: every pivot of its Cholesky
- * factorisation > 0 (dpotrf's test; a nan fails it). */
-static int
-cholesky_ok(const double *a, int n)
-{
-    double l[MAX_N * MAX_N];
-    for (int j = 0; j < n; j++) {
-        double d = a[j * n + j];
-        for (int k = 0; k < j; k++)
-            d -= l[j * n + k] * l[j * n + k];
-        if (!(d > 0.0))
-            return 0;
-        d = sqrt(d);
-        l[j * n + j] = d;
-        for (int i = j + 1; i < n; i++) {
-            double v = a[i * n + j];
-            for (int k = 0; k < j; k++)
-                v -= l[i * n + k] * l[j * n + k];
-            l[i * n + j] = v / d;
-        }
-    }
-    return 1;
-}
+#include "member_core.h"
 
 /* step(phi, x, d_p, d_v, x_out) -> True: x_out = phi x + (d_p, d_v, 0...) (one state of
  * imu_batch.BatchStep.step_state; d_p, d_v lists of 3 floats); None: not taken. */
@@ -490,6 +384,10 @@ static PyMethodDef methods[] = {
     {"force_balance", (PyCFunction)(void (*)(void))force_balance, METH_FASTCALL,
      "force_balance(fallback, s_values, innovation, r_variance): member.solve_force_balance "
      "bit for bit (the fallback where C could differ)."},
+    {"fuse_force_balance", (PyCFunction)(void (*)(void))bank_fuse_force_balance, METH_FASTCALL,
+     "fuse_force_balance(filters, sensor, z, measure, r_variance, hold_start, hold_stop, empty, "
+     "result_type, fused, gated): bank.FilterBank.update_force_balance over every member, bit "
+     "for bit (bank_fusion.c); None: not taken, nothing changed."},
     {NULL, NULL, 0, NULL},
 };
 

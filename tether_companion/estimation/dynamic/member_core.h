@@ -1,0 +1,123 @@
+/* The helpers shared by _member_core's sources (member_core.c: one member's arrays;
+ * bank_fusion.c: the bank's fusion over its members): buffers of C-contiguous float64 arrays,
+ * the finite test, numbers from lists, the Cholesky test.
+ */
+#ifndef TETHER_MEMBER_CORE_H
+#define TETHER_MEMBER_CORE_H
+
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <string.h>
+
+#include "../exact_floats.h"
+
+#define MAX_N 32 /* the largest state handled here (the dynamic filter has 17) */
+#define MAX_M 3  /* the largest measurement (the force balance: 3 axes) */
+#define MAX_MEMBERS 64 /* the most bank members mixture() takes */
+#define ANY (-1)
+
+/* A C-contiguous float64 buffer of `obj` with `ndim` dimensions of sizes d0, d1 (ANY: any);
+ * 0 without an error set when it is not one. */
+static inline int
+get(PyObject *obj, Py_buffer *view, int ndim, Py_ssize_t d0, Py_ssize_t d1, int writable)
+{
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, view, flags) != 0) {
+        PyErr_Clear();
+        return 0;
+    }
+    if (view->ndim != ndim || view->itemsize != 8 || view->format == NULL ||
+        strcmp(view->format, "d") != 0 || (d0 != ANY && view->shape[0] != d0) ||
+        (ndim == 2 && d1 != ANY && view->shape[1] != d1)) {
+        PyBuffer_Release(view);
+        return 0;
+    }
+    return 1;
+}
+
+/* The buffers of one call, released together. */
+typedef struct {
+    Py_buffer views[8];
+    int count;
+} Views;
+
+static inline Py_buffer *
+take(Views *v, PyObject *obj, int ndim, Py_ssize_t d0, Py_ssize_t d1, int writable)
+{
+    Py_buffer *view = &v->views[v->count];
+    if (!get(obj, view, ndim, d0, d1, writable))
+        return NULL;
+    v->count++;
+    return view;
+}
+
+static inline void
+release(Views *v)
+{
+    for (int i = 0; i < v->count; i++)
+        PyBuffer_Release(&v->views[i]);
+    v->count = 0;
+}
+
+static inline int
+all_finite(const double *a, Py_ssize_t count)
+{
+    double sum = 0.0;
+    for (Py_ssize_t i = 0; i < count; i++)
+        sum += a[i] * 0.0; /* nan for a nan or an infinity */
+    return sum == 0.0;
+}
+
+/* The floats of a list or tuple of exactly n floats or ints into out; 0 (no error set) otherwise. */
+static inline int
+read_numbers(PyObject *obj, double *out, Py_ssize_t n)
+{
+    if (!(PyList_CheckExact(obj) || PyTuple_CheckExact(obj)) || PySequence_Fast_GET_SIZE(obj) != n)
+        return 0;
+    PyObject **items = PySequence_Fast_ITEMS(obj);
+    for (Py_ssize_t i = 0; i < n; i++) {
+        if (PyFloat_Check(items[i]))
+            out[i] = PyFloat_AS_DOUBLE(items[i]);
+        else if (PyLong_CheckExact(items[i])) {
+            out[i] = PyLong_AsDouble(items[i]);
+            if (out[i] == -1.0 && PyErr_Occurred()) {
+                PyErr_Clear();
+                return 0;
+            }
+        }
+        else
+            return 0;
+    }
+    return 1;
+}
+
+/* Whether the symmetric n x n matrix a is positive definite: every pivot of its Cholesky
+ * factorisation > 0 (dpotrf's test; a nan fails it). */
+static inline int
+cholesky_ok(const double *a, int n)
+{
+    double l[MAX_N * MAX_N];
+    for (int j = 0; j < n; j++) {
+        double d = a[j * n + j];
+        for (int k = 0; k < j; k++)
+            d -= l[j * n + k] * l[j * n + k];
+        if (!(d > 0.0))
+            return 0;
+        d = sqrt(d);
+        l[j * n + j] = d;
+        for (int i = j + 1; i < n; i++) {
+            double v = a[i * n + j];
+            for (int k = 0; k < j; k++)
+                v -= l[i * n + k] * l[j * n + k];
+            l[i * n + j] = v / d;
+        }
+    }
+    return 1;
+}
+
+
+/* bank_fusion.c */
+PyObject *bank_fuse_force_balance(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+
+#endif

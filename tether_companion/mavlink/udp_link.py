@@ -49,6 +49,8 @@ class UdpLink(Link):
         self._sock: socket.socket | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._peers: OrderedDict[tuple[str, int], None] = OrderedDict()
+        self._listening = endpoint.role == "listen"
+        """Whether every sender becomes a peer (the endpoint is frozen: read once)."""
 
     @classmethod
     async def open(
@@ -119,9 +121,10 @@ class UdpLink(Link):
             messages = parser.feed(data, addr)
             if parser.pending_bytes:
                 messages += parser.end_datagram()
-        if messages and self.endpoint.role == "listen":
-            if addr in self._peers:
-                self._peers.move_to_end(addr)
+        if messages and self._listening:
+            peers = self._peers
+            if addr in peers:
+                peers.move_to_end(addr)
             else:
                 self.counters.connections += 1
                 self._peers[addr] = None

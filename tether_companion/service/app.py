@@ -305,11 +305,15 @@ class CompanionService(Housekeeping):
         samples and replies as for the message decoded from it, without the message."""
         if self.recorder is not None:
             self.recorder.write(frame)
-        self.state.received += 1
-        session = self.session
-        self._fc_heard(now_s)  # take() checked the sender ids, the gate the address
+        state = self.state
+        state.received += 1
+        # take() checked the sender ids, the gate the address: the flight controller heard
+        self._fc_heard_s = now_s
+        if not state.link_up:  # the rest of _fc_heard, once per link
+            self._fc_heard(now_s)
         if self.vehicle_fetch is not None and not self._vehicle_read(link, now_s):
             return
+        session = self.session
         self._after_step(link, session, session.on_frame(frame, now_s), now_s)
 
     def _fc_heard(self, now_s: float) -> None:
@@ -323,14 +327,17 @@ class CompanionService(Housekeeping):
     def _after_step(self, link: Link, session: EstimationSession, step: Step, now_s: float) -> None:
         """What follows one message's step: a reboot it confirmed, the clock model, the
         messages to send, the publication record."""
-        if session.ingest.rebooted:
+        ingest = session.ingest
+        if ingest.rebooted:
             self._on_fc_reboot()
-        latest = session.ingest.clock.latest_fc_s
+        latest = ingest.clock.latest_fc_s
         if latest > self._last_latest_fc_s:
             self._last_latest_fc_s = latest
             self.clock.observe(latest, now_s)
-        for out in step.messages:
-            self._send(link, out)
+        messages = step.messages
+        if messages:  # none with send_now wired (the live service): they went out already
+            for out in messages:
+                self._send(link, out)
         if step.publication is not None and self._on_publication is not None:
             self._on_publication(step.publication)
 

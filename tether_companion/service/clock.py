@@ -49,8 +49,16 @@ class FcClock:
         return self._offset_s is not None
 
     def observe(self, fc_time_s: float, local_s: float) -> None:
-        """Feed one flight-controller stamp [s] received at local monotonic time [s]."""
-        self._update_offset(fc_time_s, local_s)
+        """Feed one flight-controller stamp [s] received at local monotonic time [s]: the
+        offset ``fc - local`` [s] is the largest seen, decayed at ``drift_allowance``."""
+        sample = fc_time_s - local_s
+        current = self.offset_s(local_s)
+        if current is None or sample > current:
+            self._offset_s = sample
+            self._offset_local_s = local_s
+        elif current < self._offset_s:  # keep the decayed value as the new anchor
+            self._offset_s = current
+            self._offset_local_s = local_s
 
     def observe_timesync(
         self, fc_time_s: float, sent_local_s: float, received_local_s: float
@@ -80,13 +88,3 @@ class FcClock:
         """How old [s] a sample stamped ``fc_time_s`` is now (inf before sync)."""
         now = self.fc_now_s(local_s)
         return math.inf if now is None else max(0.0, now - fc_time_s)
-
-    def _update_offset(self, fc_time_s: float, local_s: float) -> None:
-        sample = fc_time_s - local_s
-        current = self.offset_s(local_s)
-        if current is None or sample > current:
-            self._offset_s = sample
-            self._offset_local_s = local_s
-        elif current < self._offset_s:  # keep the decayed value as the new anchor
-            self._offset_s = current
-            self._offset_local_s = local_s

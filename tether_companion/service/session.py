@@ -263,7 +263,10 @@ class EstimationSession:
         """Process one intact, admitted frame of the flight controller's input streams that
         :meth:`FrameIngest.take <tether_companion.service.ingest_frames.FrameIngest.take>`
         accepted, as :meth:`on_message` processes the message decoded from it."""
-        return self.on_received(self.frames.samples(frame, local_s))
+        samples = self.frames.samples(frame, local_s)
+        if len(samples) == 1 and not self.ingest.rebooted:  # the usual frame: one sample
+            return self.on_sample(samples[0])
+        return self.on_received(samples)
 
     def on_received(self, samples: list[Sample]) -> Step:
         """Process the samples the ingest just released for one message (its
@@ -340,15 +343,15 @@ class EstimationSession:
         return tension
 
     def _on_attitude(self, sample: AttitudeSample) -> Step:
-        if self._feeds_tension:
-            self.modes.on_attitude(sample)
+        if self._feeds_tension:  # the modes' tension filter itself (the modes only pass it on)
+            self.modes.estimator.on_attitude(sample)
         self.attitude = sample
         self.estimator.on_attitude(sample)
         return Step(messages=self._mode_tick(sample.time_s)) if self.messages else Step()
 
     def _on_pwm(self, sample: PwmSample) -> Step:
         if self._feeds_tension:
-            self.modes.on_pwm(sample)
+            self.modes.estimator.on_pwm(sample)
         self.estimator.on_pwm(sample)
         return Step()
 
@@ -413,8 +416,9 @@ class EstimationSession:
         estimator = self.estimator
         if self.config.tension.source == "config":
             estimator.set_known_tension_n(self.config.tension.known_tension_n, sample.time_s)
-        stale_before = stale_counts(estimator.health)
-        near_anchor_before = estimator.health.near_anchor
+        health = estimator.health
+        stale_before = stale_counts(health)
+        near_anchor_before = health.near_anchor
         estimate = estimator.on_imu(sample)
         if estimate is not None:
             self.last_estimate = estimate

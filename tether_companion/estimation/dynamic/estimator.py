@@ -123,7 +123,9 @@ class DynamicTetherEstimator(InputFeed, GroundStationFeed):
             vehicle.mass_kg, drag_per_s(dynamic, vehicle), dynamic.cable_weight_n_per_m
         )
         self.health = DynamicHealth()
-        self._weight_n = vehicle.mass_kg * GRAVITY_MPS2
+        self._on_ground_thrust_n = dynamic.min_thrust_fraction * (vehicle.mass_kg * GRAVITY_MPS2)
+        """Below this total thrust [N] (a fraction of the weight) the drone stands on the
+        ground."""
         self._ground_down_m = config.ground_station.anchor_height_m
         """The ground's down position, NED from the anchor [m] (taken flat)."""
         self.autopilot_landed = AutopilotLanded()
@@ -264,11 +266,13 @@ class DynamicTetherEstimator(InputFeed, GroundStationFeed):
                 self._restart(f"IMU gap of {gap_s:.2f} s")
         self._time_s = t
         health.imu_ticks += 1
-        stale = aligned is STALE_ATTITUDE or aligned is STALE_PWM
+        stale = False
         if aligned is STALE_ATTITUDE:
             health.stale_attitude += 1
+            stale = True
         elif aligned is STALE_PWM:
             health.stale_pwm += 1
+            stale = True
         if self.bank is None:
             return self._initialise_tick(aligned, stale)
         self._ticks_since_fusion += 1
@@ -291,7 +295,7 @@ class DynamicTetherEstimator(InputFeed, GroundStationFeed):
         accel_fused = False
         if not stale:
             assert isinstance(aligned, AlignedInputs)
-            on_ground = aligned.thrust_n < self.dynamic.min_thrust_fraction * self._weight_n
+            on_ground = aligned.thrust_n < self._on_ground_thrust_n
             rows = aligned.rotation.rows  # Python floats, made once per attitude sample
             force = self.aligner.specific_force_values
             if fusion_tick or not self._inertial:
@@ -400,9 +404,11 @@ class DynamicTetherEstimator(InputFeed, GroundStationFeed):
             if mixture is None or mixture.x is not x or mixture.p is not p:
                 mixture = self._mixture = MixtureValues(x, p)
         batch = self._batch
+        health = self.health
+        winch_fused = bool(health.winch_fused)
         sag = NO_SAG
         if mixture is not None and self.constants.weight_n_per_m > 0.0:
-            sag = self._sag.at(mixture, self.constants, bool(self.health.winch_fused))
+            sag = self._sag.at(mixture, self.constants, winch_fused)
         source = TickSource(
             mixture,
             None if batch is None or bank is None else batch.step(),
@@ -412,7 +418,7 @@ class DynamicTetherEstimator(InputFeed, GroundStationFeed):
                 self._time_s, bank is not None and bank.bearing_confirmed
             ),
             self.rangefinder.excess.variance,
-            bool(self.health.winch_fused),
+            winch_fused,
             self.bearing.force_std_n,
             self.ground_station.position_information.at(self._time_s),
             0 if bank is None else len(bank.filters),
@@ -433,7 +439,7 @@ class DynamicTetherEstimator(InputFeed, GroundStationFeed):
             self._time_s,
             self._resets,
             accel_fused,
-            self.health.values(),
+            health.values(),
             DynamicHealth,
             source,
         )

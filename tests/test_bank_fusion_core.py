@@ -1,6 +1,7 @@
-"""The bank's force-balance fusion over its members in one C call
-(``_member_core.fuse_force_balance``, bank_fusion.c) against its Python reference
-(:meth:`FilterBank.update_force_balance` with the extension's member functions): on random
+"""The bank's force-balance and scalar fusions over its members in one C call
+(``_member_core.fuse_force_balance`` / ``fuse_scalar``, bank_fusion.c) against their Python
+reference (:meth:`FilterBank.update_force_balance` / ``update_scalar`` with the extension's
+member functions): on random
 banks (members, covariances, models, gates, consider states, counters) every outcome, state,
 covariance, ``log det S`` and sensor count equal bit for bit after every fusion; where it does
 not take the members it returns None and changes nothing; on a flight it takes nearly every
@@ -231,6 +232,110 @@ def test_not_taken_changes_nothing(spoil: str) -> None:
     assert [_member_bits(m) for m in bank.filters] == before
 
 
+def _scalar_measure_for(rng: np.random.Generator):  # noqa: ANN202 (a model closure)
+    """A pure random scalar model on the state array ``(h(x) (1,) array, H)``, ``H`` a (1, n)
+    float array, a list or a tuple (floats and the ints 0 and 1)."""
+    h = rng.normal(size=_N) * 10.0 ** rng.uniform(-2, 1)
+    h[rng.uniform(size=_N) < 0.3] = 0.0
+    form = int(rng.integers(0, 3))
+    entries = [int(v) if v == 0.0 else float(v) for v in h]
+    jacobian = h.reshape(1, _N).copy() if form == 0 else (entries if form == 1 else tuple(entries))
+    curvature = float(rng.normal() * 0.1)
+
+    def measure(x: np.ndarray) -> tuple[np.ndarray, object]:
+        return np.array((float(h @ x) + curvature * float(x[0]) * float(x[0]),)), jacobian
+
+    return measure
+
+
+def _fuse_scalar(bank: FilterBank, c_path: bool, *args: object) -> object:
+    saved = bank_module.FUSE_SCALAR
+    bank_module.FUSE_SCALAR = core.fuse_scalar if c_path else None
+    try:
+        return bank.update_scalar(*args)  # type: ignore[arg-type]
+    finally:
+        bank_module.FUSE_SCALAR = saved
+
+
+def _call_scalar(bank: FilterBank, z: object, measure: object, r: object) -> object:
+    return core.fuse_scalar(
+        bank.filters, SENSOR, z, measure, r, *_hold(bank), np.empty, bank_module.UpdateResult,
+        bank_module.FUSED, bank_module.GATED,
+    )  # fmt: skip
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")  # the numpy reference on non-finite states
+def test_scalar_bit_for_bit_on_random_banks() -> None:
+    if os.environ.get("TETHER_PURE_PYTHON"):
+        pytest.skip("TETHER_PURE_PYTHON is set: the package runs the Python alone")
+    rng = np.random.default_rng(2122)
+    taken = fused = gated = 0
+    for _ in range(60):
+        reference = _bank(rng)
+        mine = copy.deepcopy(reference)
+        measure = _scalar_measure_for(rng)
+        r = float(10.0 ** rng.uniform(-3, 0))
+        for _ in range(25):
+            z = float(rng.normal() * 10.0 ** rng.uniform(-2, 1.5))
+            if rng.uniform() < 0.1:  # an innovation exactly zero
+                z = float(measure(mine.filters[0].x)[0][0])
+            expected = _fuse_scalar(reference, False, SENSOR, z, measure, r)
+            taken += _call_scalar(copy.deepcopy(mine), z, measure, r) is not None
+            got = _fuse_scalar(mine, True, SENSOR, z, measure, r)
+            assert _bits(got[0]) == _bits(expected[0])  # type: ignore[index]
+            assert _bits(got[1]) == _bits(expected[1])  # type: ignore[index]
+            assert _bits(got[2]) == _bits(expected[2])  # type: ignore[index]
+            for a, b in zip(mine.filters, reference.filters, strict=True):
+                assert _member_bits(a) == _member_bits(b)
+            for result in got[0]:  # type: ignore[index]
+                fused += result.status == "fused"
+                gated += result.status == "gated"
+    assert taken > 1000 and fused > 1000 and gated > 100, (taken, fused, gated)
+
+
+@pytest.mark.parametrize(
+    "spoil",
+    ["lists", "nan_model", "new_sensor", "no_threshold", "int_z", "flat_jacobian", "zero_s"],
+)
+def test_scalar_not_taken_changes_nothing(spoil: str) -> None:
+    rng = np.random.default_rng(8)
+    bank = _bank(rng)
+    while len(bank.filters) < 2:
+        bank = _bank(rng)
+    measure = _scalar_measure_for(rng)
+    _fuse_scalar(bank, False, SENSOR, 0.1, measure, 0.5)
+    z: object = 0.2
+    r: object = 0.5
+    kf = bank.filters[-1]
+    if spoil == "lists":
+        kf._lists()
+    elif spoil == "nan_model":
+        inner = measure
+
+        def measure(x: np.ndarray) -> object:  # type: ignore[no-redef]
+            return np.array((math.nan,)), inner(x)[1]  # type: ignore[operator]
+
+    elif spoil == "new_sensor":
+        del kf.sensors[SENSOR]
+    elif spoil == "no_threshold":
+        kf._thresholds.clear()
+    elif spoil == "int_z":
+        z = 2
+    elif spoil == "flat_jacobian":
+        inner = measure
+
+        def measure(x: np.ndarray) -> object:  # type: ignore[no-redef]
+            value, _ = inner(x)  # type: ignore[operator]
+            return value, np.ones(_N)
+
+    elif spoil == "zero_s":
+        r = 0.0
+        kf.P = np.zeros((_N, _N))
+    before = [_member_bits(m) for m in bank.filters]
+    assert _call_scalar(bank, z, measure, r) is None
+    assert [_member_bits(m) for m in bank.filters] == before
+
+
 def test_a_flight_takes_c_and_equals_python() -> None:
     if os.environ.get("TETHER_PURE_PYTHON"):
         pytest.skip("TETHER_PURE_PYTHON is set: the package runs the Python alone")
@@ -238,15 +343,21 @@ def test_a_flight_takes_c_and_equals_python() -> None:
     flight = record("realistic-circle", 8.0)
     runs = []
     for c_path in (True, False):
-        saved = bank_module.FUSE_FORCE_BALANCE
-        calls = [0, 0]
+        saved = bank_module.FUSE_FORCE_BALANCE, bank_module.FUSE_SCALAR
+        calls = [0, 0, 0, 0]  # force balance taken, not; scalar taken, not
 
         def counted(*args: object, calls: list[int] = calls) -> object:
             out = core.fuse_force_balance(*args)
             calls[out is None] += 1
             return out
 
+        def counted_scalar(*args: object, calls: list[int] = calls) -> object:
+            out = core.fuse_scalar(*args)
+            calls[2 + (out is None)] += 1
+            return out
+
         bank_module.FUSE_FORCE_BALANCE = counted if c_path else None
+        bank_module.FUSE_SCALAR = counted_scalar if c_path else None
         try:
             estimator = DynamicTetherEstimator(EstimatorConfig(), vehicle)
             outputs = []
@@ -260,9 +371,9 @@ def test_a_flight_takes_c_and_equals_python() -> None:
                 if estimator.bank is not None:
                     outputs.append(_bits(list(estimator.bank.log_weight)))
         finally:
-            bank_module.FUSE_FORCE_BALANCE = saved
+            bank_module.FUSE_FORCE_BALANCE, bank_module.FUSE_SCALAR = saved
         runs.append((outputs, [_member_bits(kf) for kf in estimator.bank.filters], calls))
     (mine, mine_members, calls), (reference, reference_members, _) = runs
-    assert calls[0] > 300 and calls[1] < 10, calls  # 8 s: ~350 fusions
+    assert calls[0] > 300 and calls[1] < 10 and calls[2] > 100 and calls[3] < 10, calls
     assert mine == reference
     assert mine_members == reference_members

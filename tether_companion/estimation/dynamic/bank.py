@@ -341,8 +341,20 @@ class FilterBank:
         ``pseudo``, when given, maps each member's innovation ``y`` and ``s = H P H^T + R`` to
         the pair the update and its test use instead (an upper bound's truncation,
         :func:`~tether_companion.estimation.dynamic.truncation.pseudo_measurement`).
-        Returns each member's outcome, Jacobian and prior covariance."""
+        Returns each member's outcome, Jacobian and prior covariance.
+
+        Without ``pseudo``, where ``_member_core`` runs, all of it is one C call
+        (:data:`FUSE_SCALAR`, as :meth:`update_force_balance`)."""
         filters = self.filters
+        if FUSE_SCALAR is not None and pseudo is None:
+            hold = self.consider
+            start, stop, _ = (_HOLD_NONE if hold is None else hold).indices(_N)
+            done = FUSE_SCALAR(
+                filters, sensor, z, measure, r_variance, start, stop, EMPTY, UpdateResult, FUSED,
+                GATED,
+            )  # fmt: skip
+            if done is not None:
+                return done  # type: ignore[no-any-return]
         priors = [kf.P for kf in filters]
         innovations = []
         jacobians = []
@@ -563,3 +575,7 @@ FUSE_FORCE_BALANCE = getattr(MEMBER_CORE, "fuse_force_balance", None)
 inverse, the gate and its counts, the gain's update, keeping it) bit for bit, None (nothing
 changed) where it does not take the members (the Python above then runs). None without the
 extension, ``TETHER_PURE_PYTHON=1``, or an extension built before it."""
+FUSE_SCALAR: Callable[..., tuple[list[UpdateResult], list, list[FloatArray]] | None] | None
+FUSE_SCALAR = getattr(MEMBER_CORE, "fuse_scalar", None)
+"""``_member_core.fuse_scalar`` (bank_fusion.c): :meth:`FilterBank.update_scalar` without
+``pseudo`` over the members in one call, as :data:`FUSE_FORCE_BALANCE`."""

@@ -34,7 +34,7 @@ typedef struct {
 } Member;
 
 static PyObject *s_xa, *s_pa, *s_xl, *s_pl, *s_sensors, *s_thresholds, *s_limit, *s_log_det,
-    *s_consecutive, *s_last_nis, *s_innovation, *s_gated, *s_forced, *s_fused, *s_three;
+    *s_consecutive, *s_last_nis, *s_innovation, *s_gated, *s_forced, *s_fused, *s_three, *s_one;
 
 static int
 intern_names(void)
@@ -56,9 +56,10 @@ intern_names(void)
     s_forced = PyUnicode_InternFromString("forced");
     s_fused = PyUnicode_InternFromString("fused");
     s_three = PyLong_FromLong(FB_M);
+    s_one = PyLong_FromLong(1);
     return s_xa && s_pa && s_xl && s_pl && s_sensors && s_thresholds && s_limit && s_log_det &&
            s_consecutive && s_last_nis && s_innovation && s_gated && s_forced && s_fused &&
-           s_three;
+           s_three && s_one;
 }
 
 static void
@@ -123,11 +124,12 @@ increment(PyObject *obj, PyObject *name)
     return set_new(obj, name, PyLong_FromLong(value + 1));
 }
 
-/* Everything about one member up to the write: 1 when it takes the common path, 0 (no error
- * set) when the Python must run, -1 with an error set (the model raised). */
+/* A member's held arrays, its sensor's status and its gate (test_force_balance / test_scalar's
+ * sensors.get, _gate's cached threshold for `m` axes): 1 when they take the common path, 0 (no
+ * error set) when the Python must run. */
 static int
-compute_member(Member *mb, PyObject *kf, PyObject *sensor, const double *z, PyObject *measure,
-               double r, Py_ssize_t hold_start, Py_ssize_t hold_stop, PyObject *empty, int *n_all)
+member_setup(Member *mb, PyObject *kf, PyObject *sensor, int m, Py_ssize_t hold_stop, int *n_all,
+             double *threshold, double *in_force)
 {
     Py_INCREF(kf);
     mb->kf = kf;
@@ -145,10 +147,8 @@ compute_member(Member *mb, PyObject *kf, PyObject *sensor, const double *z, PyOb
     *n_all = n;
     if (!(mb->have_p = get(mb->pa, &mb->vp, 2, n, n, 0)))
         return 0;
-    const double *x = mb->vx.buf, *p = mb->vp.buf;
-    if (!all_finite(x, n) || !all_finite(p, (Py_ssize_t)n * n))
+    if (!all_finite(mb->vx.buf, n) || !all_finite(mb->vp.buf, (Py_ssize_t)n * n))
         return 0;
-    /* the status and the gate: MemberFilter.test_force_balance's sensors.get, _gate's cache */
     PyObject *sensors = PyObject_GetAttr(kf, s_sensors);
     if (sensors == NULL) {
         PyErr_Clear();
@@ -165,99 +165,28 @@ compute_member(Member *mb, PyObject *kf, PyObject *sensor, const double *z, PyOb
         PyErr_Clear();
         return 0;
     }
-    PyObject *cached = PyDict_CheckExact(thresholds) ? PyDict_GetItemWithError(thresholds, s_three)
+    PyObject *key = m == FB_M ? s_three : s_one;
+    PyObject *cached = PyDict_CheckExact(thresholds) ? PyDict_GetItemWithError(thresholds, key)
                                                      : NULL;
-    double threshold = (cached != NULL && PyFloat_CheckExact(cached)) ? PyFloat_AS_DOUBLE(cached)
-                                                                      : NAN;
+    *threshold = (cached != NULL && PyFloat_CheckExact(cached)) ? PyFloat_AS_DOUBLE(cached) : NAN;
     Py_DECREF(thresholds);
     PyErr_Clear();
     long limit;
-    if (threshold != threshold || !attr_long(kf, s_limit, &limit) ||
+    if (*threshold != *threshold || !attr_long(kf, s_limit, &limit) ||
         !attr_long(mb->status, s_consecutive, &mb->consecutive))
         return 0;
-    double in_force = (0 < limit && limit <= mb->consecutive) ? INFINITY : threshold;
-    /* the model on the state as a list (x_values) */
-    PyObject *xs = PyList_New(n);
-    if (xs == NULL)
-        return -1;
-    for (int i = 0; i < n; i++) {
-        PyObject *item = PyFloat_FromDouble(x[i]);
-        if (item == NULL) {
-            Py_DECREF(xs);
-            return -1;
-        }
-        PyList_SET_ITEM(xs, i, item);
-    }
-    PyObject *out = PyObject_CallOneArg(measure, xs);
-    Py_DECREF(xs);
-    if (out == NULL)
-        return -1;
-    double value[FB_M], h[FB_M * MAX_N];
-    int ok = PyTuple_CheckExact(out) && PyTuple_GET_SIZE(out) == 2 &&
-             read_exact_floats(PyTuple_GET_ITEM(out, 0), FB_M, value);
-    if (ok) {
-        mb->jac = PyTuple_GET_ITEM(out, 1);
-        Py_INCREF(mb->jac);
-        ok = (PyList_CheckExact(mb->jac) || PyTuple_CheckExact(mb->jac)) &&
-             read_numbers(mb->jac, h, (Py_ssize_t)FB_M * n);
-    }
-    Py_DECREF(out);
-    if (!ok || !all_finite(h, (Py_ssize_t)FB_M * n))
-        return 0;
-    for (int k = 0; k < FB_M; k++)
-        mb->y[k] = z[k] - value[k];
-    /* P H^T and H P H^T: member_core.c's project */
-    double pht[MAX_N * FB_M], s[FB_M * FB_M];
-    for (int i = 0; i < n; i++)
-        for (int c = 0; c < FB_M; c++) {
-            double v = 0.0;
-            for (int k = 0; k < n; k++)
-                v += p[i * n + k] * h[c * n + k];
-            pht[i * FB_M + c] = v;
-        }
-    for (int rr = 0; rr < FB_M; rr++)
-        for (int c = 0; c < FB_M; c++) {
-            double v = 0.0;
-            for (int k = 0; k < n; k++)
-                v += h[rr * n + k] * pht[k * FB_M + c];
-            s[rr * FB_M + c] = v;
-        }
-    /* S = H P H^T + r I tested and inverted: member.solve_force_balance */
-    double s00 = s[0], s01 = s[1], s02 = s[2], s11 = s[4], s12 = s[5], s22 = s[8];
-    const double *y = mb->y;
-    if (!isfinite(s00 + s01 + s02 + s11 + s12 + s22 + r + y[0] + y[1] + y[2]) ||
-        !isfinite(s[3] + s[6] + s[7]))
-        return 0;
-    s00 += r;
-    s11 += r;
-    s22 += r;
-    double m01 = s00 * s11 - s01 * s01;
-    double c0 = s11 * s22 - s12 * s12, c1 = s02 * s12 - s01 * s22, c2 = s01 * s12 - s02 * s11;
-    double det = s00 * c0 + s01 * c1 + s02 * c2;
-    if (!(s00 > 0.0 && m01 > 0.0 && det > 0.0))
-        return 0;
-    double log_det = log(det);
-    double inv = 1.0 / det;
-    double i00 = c0 * inv, i01 = c1 * inv, i02 = c2 * inv;
-    double i11 = (s00 * s22 - s02 * s02) * inv;
-    double i12 = (s01 * s02 - s00 * s12) * inv;
-    double i22 = m01 * inv;
-    double w0 = i00 * y[0] + i01 * y[1] + i02 * y[2];
-    double w1 = i01 * y[0] + i11 * y[1] + i12 * y[2];
-    double w2 = i02 * y[0] + i12 * y[1] + i22 * y[2];
-    double nis = y[0] * w0 + y[1] * w1 + y[2] * w2;
-    if (!isfinite(log_det + nis + i00 + i01 + i02 + i11 + i12 + i22 + w0 + w1 + w2))
-        return 0;
-    mb->log_det = log_det;
-    mb->nis = nis;
-    /* the gate (gate_rejects): a NaN cannot reach here */
-    mb->gated = nis > in_force;
-    mb->forced = !mb->gated && nis > threshold;
-    if (mb->gated)
-        return 1;
-    /* the gain's update into new arrays: member_core.c's update */
-    const double s_inv[FB_M * FB_M] = {i00, i01, i02, i01, i11, i12, i02, i12, i22};
-    const double w[FB_M] = {w0, w1, w2};
+    *in_force = (0 < limit && limit <= mb->consecutive) ? INFINITY : *threshold;
+    return 1;
+}
+
+/* The gain's update into new arrays (member_core.c's update) for a member the gate let
+ * through: 1 when finite and positive definite (kept then), 0 (no error set) when not (the
+ * Python must run), -1 with an error set. */
+static int
+update_member(Member *mb, int n, int m, const double *pht, const double *s_inv, const double *w,
+              Py_ssize_t hold_start, Py_ssize_t hold_stop, PyObject *empty)
+{
+    const double *x = mb->vx.buf, *p = mb->vp.buf;
     PyObject *shape_x = Py_BuildValue("(i)", n), *shape_p = Py_BuildValue("(ii)", n, n);
     if (shape_x == NULL || shape_p == NULL) {
         Py_XDECREF(shape_x);
@@ -276,48 +205,167 @@ compute_member(Member *mb, PyObject *kf, PyObject *sensor, const double *z, PyOb
         release(&v);
         return 0;
     }
-    double *xo = vxo->buf, *po = vpo->buf, k[MAX_N * FB_M], b[MAX_N * MAX_N];
-    for (int i = 0; i < n; i++) {
-        double value_i = 0.0;
-        for (int rr = 0; rr < FB_M; rr++)
-            value_i += pht[i * FB_M + rr] * w[rr];
-        xo[i] = x[i] + value_i;
-        for (int c = 0; c < FB_M; c++) { /* K = pht S^-1 */
-            double kv = 0.0;
-            for (int rr = 0; rr < FB_M; rr++)
-                kv += pht[i * FB_M + rr] * s_inv[rr * FB_M + c];
-            k[i * FB_M + c] = kv;
-        }
-    }
-    for (int i = 0; i < n; i++)
-        for (int j = 0; j < n; j++) {
-            double value_ij = 0.0;
-            for (int rr = 0; rr < FB_M; rr++)
-                value_ij += k[i * FB_M + rr] * pht[j * FB_M + rr];
-            b[i * n + j] = p[i * n + j] - value_ij;
-        }
-    for (int i = 0; i < n; i++)
-        for (int j = 0; j < n; j++)
-            po[i * n + j] = (b[i * n + j] + b[j * n + i]) * 0.5;
-    for (Py_ssize_t i = hold_start; i < hold_stop; i++) {
-        xo[i] = x[i];
-        for (Py_ssize_t j = hold_start; j < hold_stop; j++)
-            po[i * n + j] = p[i * n + j];
-    }
-    int checked = all_finite(xo, n) && all_finite(po, (Py_ssize_t)n * n) && cholesky_ok(po, n);
+    int checked = member_gain_update(x, p, pht, s_inv, w, n, m, hold_start, hold_stop, vxo->buf,
+                                     vpo->buf);
     release(&v);
     return checked;
+}
+
+/* The state as a new list of floats (x_values). */
+static PyObject *
+state_list(const double *x, int n)
+{
+    PyObject *xs = PyList_New(n);
+    if (xs == NULL)
+        return NULL;
+    for (int i = 0; i < n; i++) {
+        PyObject *item = PyFloat_FromDouble(x[i]);
+        if (item == NULL) {
+            Py_DECREF(xs);
+            return NULL;
+        }
+        PyList_SET_ITEM(xs, i, item);
+    }
+    return xs;
+}
+
+/* Everything about one member of a force-balance fusion up to the write: 1 when it takes the
+ * common path, 0 (no error set) when the Python must run, -1 with an error set (the model
+ * raised). */
+static int
+compute_force_balance(Member *mb, PyObject *kf, PyObject *sensor, const double *z,
+                      PyObject *measure, double r, Py_ssize_t hold_start, Py_ssize_t hold_stop,
+                      PyObject *empty, int *n_all)
+{
+    double threshold, in_force;
+    if (!member_setup(mb, kf, sensor, FB_M, hold_stop, n_all, &threshold, &in_force))
+        return 0;
+    int n = *n_all;
+    const double *x = mb->vx.buf;
+    /* the model on the state as a list (x_values) */
+    PyObject *xs = state_list(x, n);
+    if (xs == NULL)
+        return -1;
+    PyObject *out = PyObject_CallOneArg(measure, xs);
+    Py_DECREF(xs);
+    if (out == NULL)
+        return -1;
+    double value[FB_M], h[FB_M * MAX_N];
+    int ok = PyTuple_CheckExact(out) && PyTuple_GET_SIZE(out) == 2 &&
+             read_exact_floats(PyTuple_GET_ITEM(out, 0), FB_M, value);
+    if (ok) {
+        mb->jac = PyTuple_GET_ITEM(out, 1);
+        Py_INCREF(mb->jac);
+        ok = (PyList_CheckExact(mb->jac) || PyTuple_CheckExact(mb->jac)) &&
+             read_numbers(mb->jac, h, (Py_ssize_t)FB_M * n);
+    }
+    Py_DECREF(out);
+    if (!ok || !all_finite(h, (Py_ssize_t)FB_M * n))
+        return 0;
+    for (int k = 0; k < FB_M; k++)
+        mb->y[k] = z[k] - value[k];
+    double pht[MAX_N * FB_M], s[FB_M * FB_M];
+    member_project(mb->vp.buf, h, n, FB_M, pht, s);
+    /* S = H P H^T + r I tested and inverted: member.solve_force_balance */
+    double solved[13];
+    if (member_solve_force_balance(s, mb->y, r, &mb->log_det, solved) != 1)
+        return 0;
+    double nis = mb->nis = solved[0];
+    /* the gate (gate_rejects): a NaN cannot reach here */
+    mb->gated = nis > in_force;
+    mb->forced = !mb->gated && nis > threshold;
+    if (mb->gated)
+        return 1;
+    return update_member(mb, n, FB_M, pht, solved + 1, solved + 10, hold_start, hold_stop, empty);
+}
+
+/* The first float of a model's value: an exact float list/tuple or a float64 array, 1-D. */
+static int
+first_value(PyObject *value, double *out)
+{
+    if (PyList_CheckExact(value) || PyTuple_CheckExact(value)) {
+        if (PySequence_Fast_GET_SIZE(value) < 1)
+            return 0;
+        PyObject *item = PySequence_Fast_ITEMS(value)[0];
+        if (!PyFloat_CheckExact(item))
+            return 0;
+        *out = PyFloat_AS_DOUBLE(item);
+        return 1;
+    }
+    Py_buffer view;
+    if (!get(value, &view, 1, ANY, 0, 0))
+        return 0;
+    int ok = view.shape[0] >= 1;
+    if (ok)
+        *out = ((const double *)view.buf)[0];
+    PyBuffer_Release(&view);
+    return ok;
+}
+
+/* Everything about one member of a scalar fusion up to the write (FilterBank.update_scalar
+ * without `pseudo`, MemberFilter.test_scalar): as compute_force_balance. */
+static int
+compute_scalar(Member *mb, PyObject *kf, PyObject *sensor, double z, PyObject *measure, double r,
+               Py_ssize_t hold_start, Py_ssize_t hold_stop, PyObject *empty, int *n_all)
+{
+    double threshold, in_force;
+    if (!member_setup(mb, kf, sensor, 1, hold_stop, n_all, &threshold, &in_force))
+        return 0;
+    int n = *n_all;
+    PyObject *out = PyObject_CallOneArg(measure, mb->xa); /* measure(kf.x) */
+    if (out == NULL)
+        return -1;
+    double value, h[MAX_N];
+    int ok = PyTuple_CheckExact(out) && PyTuple_GET_SIZE(out) == 2 &&
+             first_value(PyTuple_GET_ITEM(out, 0), &value);
+    if (ok) {
+        mb->jac = PyTuple_GET_ITEM(out, 1);
+        Py_INCREF(mb->jac);
+        if (PyList_CheckExact(mb->jac) || PyTuple_CheckExact(mb->jac))
+            ok = read_numbers(mb->jac, h, n);
+        else {
+            Py_buffer view;
+            ok = get(mb->jac, &view, 2, 1, n, 0);
+            if (ok) {
+                for (int k = 0; k < n; k++)
+                    h[k] = ((const double *)view.buf)[k];
+                PyBuffer_Release(&view);
+            }
+        }
+    }
+    Py_DECREF(out);
+    if (!ok || !all_finite(h, n))
+        return 0;
+    double y = z - value;
+    double pht[MAX_N], hph;
+    member_project(mb->vp.buf, h, n, 1, pht, &hph);
+    double s = hph + r;
+    if (!(s > 0.0) || !isfinite(s) || !isfinite(y))
+        return 0;
+    double log_det = log(s), nis = y * y / s, s_inv = 1.0 / s, w = y / s;
+    if (!isfinite(log_det + nis + s_inv + w))
+        return 0;
+    mb->y[0] = y;
+    mb->log_det = log_det;
+    mb->nis = nis;
+    mb->gated = nis > in_force;
+    mb->forced = !mb->gated && nis > threshold;
+    if (mb->gated)
+        return 1;
+    return update_member(mb, n, 1, pht, &s_inv, &w, hold_start, hold_stop, empty);
 }
 
 /* Write one computed member (its status, counters, arrays) and return its UpdateResult; NULL
  * with an error set on failure. */
 static PyObject *
-commit_member(Member *mb, PyObject *result_type, PyObject *fused, PyObject *gated)
+commit_member(Member *mb, int m, PyObject *result_type, PyObject *fused, PyObject *gated)
 {
     PyObject *status = mb->status;
+    PyObject *innovation = m == FB_M ? Py_BuildValue("(ddd)", mb->y[0], mb->y[1], mb->y[2])
+                                     : Py_BuildValue("(d)", mb->y[0]);
     if (set_new(mb->kf, s_log_det, PyFloat_FromDouble(mb->log_det)) < 0 ||
         set_new(status, s_last_nis, PyFloat_FromDouble(mb->nis)) < 0 ||
-        set_new(status, s_innovation, Py_BuildValue("(ddd)", mb->y[0], mb->y[1], mb->y[2])) < 0)
+        set_new(status, s_innovation, innovation) < 0)
         return NULL;
     if (mb->gated) {
         if (set_new(status, s_consecutive, PyLong_FromLong(mb->consecutive + 1)) < 0 ||
@@ -342,22 +390,25 @@ commit_member(Member *mb, PyObject *result_type, PyObject *fused, PyObject *gate
     return result;
 }
 
-/* bank_fuse_force_balance(filters, sensor, z, measure, r_variance, hold_start, hold_stop, empty,
- * result_type, fused, gated) -> (results, jacobians, priors) as FilterBank.update_force_balance
- * returns them, every member's fusion done; None: not taken, nothing changed. */
-PyObject *
-bank_fuse_force_balance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+/* The members' fusion (m = FB_M: the force balance, z 3 floats; m = 1: a scalar, z a float):
+ * (results, jacobians, priors) with every member's fusion done; None: not taken, nothing
+ * changed. */
+static PyObject *
+fuse_members(PyObject *const *args, Py_ssize_t nargs, int m)
 {
     if (nargs != 11)
-        return PyErr_Format(PyExc_TypeError, "fuse_force_balance takes 11 arguments");
+        return PyErr_Format(PyExc_TypeError, "the bank's fusion takes 11 arguments");
     if (!intern_names())
         return NULL;
     PyObject *filters = args[0], *sensor = args[1], *measure = args[3], *empty = args[7];
     double z[FB_M];
+    int z_ok = m == FB_M ? read_exact_floats(args[2], FB_M, z) : PyFloat_CheckExact(args[2]);
     if (!PyList_CheckExact(filters) || PyList_GET_SIZE(filters) < 1 ||
-        PyList_GET_SIZE(filters) > MAX_MEMBERS || !read_exact_floats(args[2], FB_M, z) ||
-        !PyFloat_CheckExact(args[4]) || !PyLong_CheckExact(args[5]) || !PyLong_CheckExact(args[6]))
+        PyList_GET_SIZE(filters) > MAX_MEMBERS || !z_ok || !PyFloat_CheckExact(args[4]) ||
+        !PyLong_CheckExact(args[5]) || !PyLong_CheckExact(args[6]))
         Py_RETURN_NONE;
+    if (m == 1)
+        z[0] = PyFloat_AS_DOUBLE(args[2]);
     double r = PyFloat_AS_DOUBLE(args[4]);
     Py_ssize_t hold_start = PyLong_AsSsize_t(args[5]), hold_stop = PyLong_AsSsize_t(args[6]);
     if (hold_start < 0 || hold_stop < hold_start) {
@@ -368,16 +419,20 @@ bank_fuse_force_balance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Member mbs[MAX_MEMBERS];
     memset(mbs, 0, sizeof(Member) * (size_t)members);
     int n = 0, state = 1;
-    for (Py_ssize_t i = 0; i < members && state == 1; i++)
-        state = compute_member(&mbs[i], PyList_GET_ITEM(filters, i), sensor, z, measure, r,
-                               hold_start, hold_stop, empty, &n);
+    for (Py_ssize_t i = 0; i < members && state == 1; i++) {
+        PyObject *kf = PyList_GET_ITEM(filters, i);
+        state = m == FB_M ? compute_force_balance(&mbs[i], kf, sensor, z, measure, r, hold_start,
+                                                  hold_stop, empty, &n)
+                          : compute_scalar(&mbs[i], kf, sensor, z[0], measure, r, hold_start,
+                                           hold_stop, empty, &n);
+    }
     PyObject *out = NULL;
     if (state == 1) {
         PyObject *results = PyList_New(members), *jacobians = PyList_New(members),
                  *priors = PyList_New(members);
         int failed = results == NULL || jacobians == NULL || priors == NULL;
         for (Py_ssize_t i = 0; i < members && !failed; i++) {
-            PyObject *result = commit_member(&mbs[i], args[8], args[9], args[10]);
+            PyObject *result = commit_member(&mbs[i], m, args[8], args[9], args[10]);
             if (result == NULL) {
                 failed = 1;
                 break;
@@ -400,4 +455,22 @@ bank_fuse_force_balance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         Py_RETURN_NONE;
     }
     return out; /* NULL with the error set (the model raised, or a write failed) */
+}
+
+/* bank_fuse_force_balance(filters, sensor, z, measure, r_variance, hold_start, hold_stop, empty,
+ * result_type, fused, gated) -> (results, jacobians, priors) as FilterBank.update_force_balance
+ * returns them, every member's fusion done; None: not taken, nothing changed. */
+PyObject *
+bank_fuse_force_balance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    return fuse_members(args, nargs, FB_M);
+}
+
+/* bank_fuse_scalar(filters, sensor, z, measure, r_variance, hold_start, hold_stop, empty,
+ * result_type, fused, gated): FilterBank.update_scalar without `pseudo`, as
+ * bank_fuse_force_balance (z a float, measure(x) on the state array). */
+PyObject *
+bank_fuse_scalar(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    return fuse_members(args, nargs, 1);
 }

@@ -115,6 +115,67 @@ not_taken:
     Py_RETURN_NONE;
 }
 
+/* P H^T (n x m) into pht and H P H^T (m x m, row-major) into s for the m x n h: index-order
+ * sums (project() and bank_fusion.c). */
+void
+member_project(const double *p, const double *h, int n, int m, double *pht, double *s)
+{
+    for (int i = 0; i < n; i++)
+        for (int r = 0; r < m; r++) {
+            double value = 0.0;
+            for (int k = 0; k < n; k++)
+                value += p[i * n + k] * h[r * n + k];
+            pht[i * m + r] = value;
+        }
+    for (int r = 0; r < m; r++)
+        for (int c = 0; c < m; c++) {
+            double value = 0.0;
+            for (int k = 0; k < n; k++)
+                value += h[r * n + k] * pht[k * m + c];
+            s[r * m + c] = value;
+        }
+}
+
+/* The update with the gain K = pht S^-1 into xo, po (update()'s arithmetic, and bank_fusion.c's):
+ * xo = x + pht w, po = (B + B^T) / 2 with B = p - K pht^T, the consider states hold_start ..
+ * hold_stop - 1 given back their prior mean and own block; whether xo and po are finite and po
+ * positive definite. */
+int
+member_gain_update(const double *x, const double *p, const double *pht, const double *s_inv,
+                   const double *w, int n, int m, Py_ssize_t hold_start, Py_ssize_t hold_stop,
+                   double *xo, double *po)
+{
+    double k[MAX_N * MAX_M], b[MAX_N * MAX_N];
+    for (int i = 0; i < n; i++) {
+        double value = 0.0;
+        for (int r = 0; r < m; r++)
+            value += pht[i * m + r] * w[r];
+        xo[i] = x[i] + value;
+        for (int c = 0; c < m; c++) { /* K = pht S^-1 */
+            double kv = 0.0;
+            for (int r = 0; r < m; r++)
+                kv += pht[i * m + r] * s_inv[r * m + c];
+            k[i * m + c] = kv;
+        }
+    }
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) {
+            double value = 0.0;
+            for (int r = 0; r < m; r++)
+                value += k[i * m + r] * pht[j * m + r];
+            b[i * n + j] = p[i * n + j] - value;
+        }
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++)
+            po[i * n + j] = (b[i * n + j] + b[j * n + i]) * 0.5;
+    for (Py_ssize_t i = hold_start; i < hold_stop; i++) {
+        xo[i] = x[i];
+        for (Py_ssize_t j = hold_start; j < hold_stop; j++)
+            po[i * n + j] = p[i * n + j];
+    }
+    return all_finite(xo, n) && all_finite(po, (Py_ssize_t)n * n) && cholesky_ok(po, n);
+}
+
 /* project(p, h, pht) -> S: pht = p h^T (n x m) and the m x m S = h p h^T (a tuple of m*m floats,
  * row-major) for the m x n h (a list or tuple of m*n floats or ints, or a float64 array);
  * None: not taken. */
@@ -144,32 +205,20 @@ project(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     double *pht = vpht->buf;
     if (!all_finite(p, (Py_ssize_t)n * n) || !all_finite(h, (Py_ssize_t)m * n))
         goto not_taken;
-    for (int i = 0; i < n; i++)
-        for (int r = 0; r < m; r++) {
-            double value = 0.0;
-            for (int k = 0; k < n; k++)
-                value += p[i * n + k] * h[r * n + k];
-            pht[i * m + r] = value;
-        }
-    PyObject *s = PyTuple_New(m * m);
-    if (s == NULL) {
-        release(&v);
-        return NULL;
-    }
-    for (int r = 0; r < m; r++)
-        for (int c = 0; c < m; c++) {
-            double value = 0.0;
-            for (int k = 0; k < n; k++)
-                value += h[r * n + k] * pht[k * m + c];
-            PyObject *item = PyFloat_FromDouble(value);
-            if (item == NULL) {
-                Py_DECREF(s);
-                release(&v);
-                return NULL;
-            }
-            PyTuple_SET_ITEM(s, r * m + c, item);
-        }
+    double hph[MAX_M * MAX_M];
+    member_project(p, h, n, m, pht, hph);
     release(&v);
+    PyObject *s = PyTuple_New(m * m);
+    if (s == NULL)
+        return NULL;
+    for (int i = 0; i < m * m; i++) {
+        PyObject *item = PyFloat_FromDouble(hph[i]);
+        if (item == NULL) {
+            Py_DECREF(s);
+            return NULL;
+        }
+        PyTuple_SET_ITEM(s, i, item);
+    }
     return s;
 not_taken:
     release(&v);
@@ -213,35 +262,7 @@ update(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     if (!all_finite(x, n) || !all_finite(p, (Py_ssize_t)n * n) || !all_finite(pht, (Py_ssize_t)n * m) ||
         !all_finite(s_inv, m * m) || !all_finite(w, m))
         goto not_taken;
-    double k[MAX_N * MAX_M], b[MAX_N * MAX_N];
-    for (int i = 0; i < n; i++) {
-        double value = 0.0;
-        for (int r = 0; r < m; r++)
-            value += pht[i * m + r] * w[r];
-        xo[i] = x[i] + value;
-        for (int c = 0; c < m; c++) { /* K = pht S^-1 */
-            double kv = 0.0;
-            for (int r = 0; r < m; r++)
-                kv += pht[i * m + r] * s_inv[r * m + c];
-            k[i * m + c] = kv;
-        }
-    }
-    for (int i = 0; i < n; i++)
-        for (int j = 0; j < n; j++) {
-            double value = 0.0;
-            for (int r = 0; r < m; r++)
-                value += k[i * m + r] * pht[j * m + r];
-            b[i * n + j] = p[i * n + j] - value;
-        }
-    for (int i = 0; i < n; i++)
-        for (int j = 0; j < n; j++)
-            po[i * n + j] = (b[i * n + j] + b[j * n + i]) * 0.5;
-    for (Py_ssize_t i = hold_start; i < hold_stop; i++) {
-        xo[i] = x[i];
-        for (Py_ssize_t j = hold_start; j < hold_stop; j++)
-            po[i * n + j] = p[i * n + j];
-    }
-    int ok = all_finite(xo, n) && all_finite(po, (Py_ssize_t)n * n) && cholesky_ok(po, n);
+    int ok = member_gain_update(x, p, pht, s_inv, w, n, m, hold_start, hold_stop, xo, po);
     release(&v);
     return PyBool_FromLong(ok);
 not_taken:
@@ -322,6 +343,47 @@ mixture(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Py_RETURN_NONE;
 }
 
+/* member.solve_force_balance's scalars (force_balance() and bank_fusion.c): 1 with log det S
+ * and out = (nis, S^-1 row-major (9), S^-1 y (3)); 0 when S is not positive definite, out[0]
+ * the sum of its upper entries; -1 where C could differ (a non-finite input, sum or result:
+ * the Python's). */
+int
+member_solve_force_balance(const double *s, const double *y, double r, double *log_det_out,
+                           double *out)
+{
+    double s00 = s[0], s01 = s[1], s02 = s[2], s11 = s[4], s12 = s[5], s22 = s[8];
+    if (!isfinite(s00 + s01 + s02 + s11 + s12 + s22 + r + y[0] + y[1] + y[2]) ||
+        !isfinite(s[3] + s[6] + s[7]))
+        return -1;
+    s00 += r;
+    s11 += r;
+    s22 += r;
+    double m01 = s00 * s11 - s01 * s01;
+    double c0 = s11 * s22 - s12 * s12, c1 = s02 * s12 - s01 * s22, c2 = s01 * s12 - s02 * s11;
+    double det = s00 * c0 + s01 * c1 + s02 * c2;
+    if (!(s00 > 0.0 && m01 > 0.0 && det > 0.0)) {
+        double s_sum = s00 + s11 + s22 + s01 + s02 + s12;
+        out[0] = s_sum;
+        return isfinite(s_sum) ? 0 : -1;
+    }
+    double log_det = log(det);
+    double inv = 1.0 / det;
+    double i00 = c0 * inv, i01 = c1 * inv, i02 = c2 * inv;
+    double i11 = (s00 * s22 - s02 * s02) * inv;
+    double i12 = (s01 * s02 - s00 * s12) * inv;
+    double i22 = m01 * inv;
+    double w0 = i00 * y[0] + i01 * y[1] + i02 * y[2];
+    double w1 = i01 * y[0] + i11 * y[1] + i12 * y[2];
+    double w2 = i02 * y[0] + i12 * y[1] + i22 * y[2];
+    double nis = y[0] * w0 + y[1] * w1 + y[2] * w2;
+    if (!isfinite(log_det + nis + i00 + i01 + i02 + i11 + i12 + i22 + w0 + w1 + w2))
+        return -1;
+    const double values[13] = {nis, i00, i01, i02, i01, i11, i12, i02, i12, i22, w0, w1, w2};
+    memcpy(out, values, sizeof(values));
+    *log_det_out = log_det;
+    return 1;
+}
+
 /* force_balance(fallback, s_values, innovation, r_variance): member.solve_force_balance's
  * scalars, bit for bit: the same IEEE operations in the same order (no contraction), log()
  * as math.log. The fallback (the Python function) runs where C could differ: an argument
@@ -336,37 +398,17 @@ force_balance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     if (!read_exact_floats(args[1], 9, s) || !read_exact_floats(args[2], 3, y) ||
         !PyFloat_CheckExact(args[3]))
         return PyObject_Vectorcall(args[0], args + 1, 3, NULL);
-    double r = PyFloat_AS_DOUBLE(args[3]);
-    double s00 = s[0], s01 = s[1], s02 = s[2], s11 = s[4], s12 = s[5], s22 = s[8];
-    if (!isfinite(s00 + s01 + s02 + s11 + s12 + s22 + r + y[0] + y[1] + y[2]) ||
-        !isfinite(s[3] + s[6] + s[7]))
+    double log_det, out[13];
+    switch (member_solve_force_balance(s, y, PyFloat_AS_DOUBLE(args[3]), &log_det, out)) {
+    case 1:
+        return Py_BuildValue("(d(ddddddddddddd))", log_det, out[0], out[1], out[2], out[3],
+                             out[4], out[5], out[6], out[7], out[8], out[9], out[10], out[11],
+                             out[12]);
+    case 0:
+        return Py_BuildValue("(dd)", (double)NAN, out[0]);
+    default:
         return PyObject_Vectorcall(args[0], args + 1, 3, NULL);
-    s00 += r;
-    s11 += r;
-    s22 += r;
-    double m01 = s00 * s11 - s01 * s01;
-    double c0 = s11 * s22 - s12 * s12, c1 = s02 * s12 - s01 * s22, c2 = s01 * s12 - s02 * s11;
-    double det = s00 * c0 + s01 * c1 + s02 * c2;
-    if (!(s00 > 0.0 && m01 > 0.0 && det > 0.0)) {
-        double s_sum = s00 + s11 + s22 + s01 + s02 + s12;
-        if (!isfinite(s_sum))
-            return PyObject_Vectorcall(args[0], args + 1, 3, NULL);
-        return Py_BuildValue("(dd)", (double)NAN, s_sum);
     }
-    double log_det = log(det);
-    double inv = 1.0 / det;
-    double i00 = c0 * inv, i01 = c1 * inv, i02 = c2 * inv;
-    double i11 = (s00 * s22 - s02 * s02) * inv;
-    double i12 = (s01 * s02 - s00 * s12) * inv;
-    double i22 = m01 * inv;
-    double w0 = i00 * y[0] + i01 * y[1] + i02 * y[2];
-    double w1 = i01 * y[0] + i11 * y[1] + i12 * y[2];
-    double w2 = i02 * y[0] + i12 * y[1] + i22 * y[2];
-    double nis = y[0] * w0 + y[1] * w1 + y[2] * w2;
-    if (!isfinite(log_det + nis + i00 + i01 + i02 + i11 + i12 + i22 + w0 + w1 + w2))
-        return PyObject_Vectorcall(args[0], args + 1, 3, NULL);
-    return Py_BuildValue("(d(ddddddddddddd))", log_det, nis, i00, i01, i02, i01, i11, i12, i02,
-                         i12, i22, w0, w1, w2);
 }
 
 static PyMethodDef methods[] = {
@@ -388,6 +430,10 @@ static PyMethodDef methods[] = {
      "fuse_force_balance(filters, sensor, z, measure, r_variance, hold_start, hold_stop, empty, "
      "result_type, fused, gated): bank.FilterBank.update_force_balance over every member, bit "
      "for bit (bank_fusion.c); None: not taken, nothing changed."},
+    {"fuse_scalar", (PyCFunction)(void (*)(void))bank_fuse_scalar, METH_FASTCALL,
+     "fuse_scalar(filters, sensor, z, measure, r_variance, hold_start, hold_stop, empty, "
+     "result_type, fused, gated): bank.FilterBank.update_scalar (no pseudo) over every member, "
+     "bit for bit (bank_fusion.c); None: not taken, nothing changed."},
     {NULL, NULL, 0, NULL},
 };
 

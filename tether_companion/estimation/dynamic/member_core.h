@@ -117,7 +117,16 @@ cholesky_ok(const double *a, int n)
 }
 
 
+/* member_core.c's arithmetic, shared with bank_fusion.c */
+void member_project(const double *p, const double *h, int n, int m, double *pht, double *s);
+int member_gain_update(const double *x, const double *p, const double *pht, const double *s_inv,
+                       const double *w, int n, int m, Py_ssize_t hold_start, Py_ssize_t hold_stop,
+                       double *xo, double *po);
+int member_solve_force_balance(const double *s, const double *y, double r, double *log_det_out,
+                               double *out);
+
 /* bank_fusion.c */
 PyObject *bank_fuse_force_balance(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+PyObject *bank_fuse_scalar(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 
 #endif

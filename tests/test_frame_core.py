@@ -145,7 +145,11 @@ def _sample_bits(sample) -> object:
     for name in type(sample).__slots__:
         value = getattr(sample, name)
         if isinstance(value, np.ndarray):
-            values.append((value.dtype.str, value.shape, value.tobytes(), value.flags.writeable))
+            flags = value.flags
+            values.append(
+                (value.dtype.str, value.shape, value.tobytes(), flags.writeable, flags.owndata)
+                + (flags.c_contiguous, flags.aligned, value.base is None)
+            )
         else:
             values.append((type(value), struct.pack("<d", value)))
     return type(sample), values
@@ -359,3 +363,16 @@ def test_samples_agree_at_every_bound(autopilot: str, monkeypatch: pytest.Monkey
     before = pair[1]._ingest.counters.out_of_order  # noqa: SLF001
     assert not _agree(pair, dialect.MAVLink_servo_output_raw_message(1000, 0, *servo), None)
     assert pair[1]._ingest.counters.out_of_order == before + 1  # noqa: SLF001
+
+
+def test_a_build_whose_reader_does_not_fill_arrays_keeps_the_python_read(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The Reader is handed numpy.empty to fill (READER_FILLS); an extension built before
+    that (it would call empty with the values) is not used for the read."""
+    import tether_companion.service.ingest_frames as module
+
+    assert type(_frames("ardupilot")._read).__name__ == "builtin_function_or_method"  # noqa: SLF001
+    monkeypatch.delattr(module._CORE, "READER_FILLS")  # noqa: SLF001
+    frames = _frames("ardupilot")
+    assert frames._read == frames._read_fields  # noqa: SLF001 - the Python reference

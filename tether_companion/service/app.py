@@ -324,9 +324,11 @@ class CompanionService(Housekeeping):
             ids = f"{self.config.link.fc_system_id}/{self.config.link.fc_component_id}"
             self.state.link_text = f"flight controller {ids} on {self._endpoint}"
 
-    def _after_step(self, link: Link, session: EstimationSession, step: Step, now_s: float) -> None:
+    def _after_step(
+        self, link: Link, session: EstimationSession, step: Step | None, now_s: float
+    ) -> None:
         """What follows one message's step: a reboot it confirmed, the clock model, the
-        messages to send, the publication record."""
+        messages to send, the publication record (None: an empty step)."""
         ingest = session.ingest
         if ingest.rebooted:
             self._on_fc_reboot()
@@ -334,6 +336,8 @@ class CompanionService(Housekeeping):
         if latest > self._last_latest_fc_s:
             self._last_latest_fc_s = latest
             self.clock.observe(latest, now_s)
+        if step is None:
+            return
         messages = step.messages
         if messages:  # none with send_now wired (the live service): they went out already
             for out in messages:

@@ -1,7 +1,7 @@
 /* The input frame's checked sample (ingest_frames.FrameIngest's Reader) in C: part of the
  * _frame_core extension (frame_core.c holds the module, frame_wire.h the wire test).
  *
- * Reader(spec, conversions, kinds, limits, clock, types, array).read(frame) does what
+ * Reader(spec, conversions, kinds, limits, clock, types, empty).read(frame) does what
  * FrameIngest's reference does for a frame take() accepts before the ingest's clock, reorder
  * and order steps: the message's convert (units) and Ingest's check of it (imu_sample,
  * attitude_sample, pwm_sample, range_sample), the same IEEE double operations in the same
@@ -18,7 +18,10 @@
  *   types        (ImuSample, AttitudeSample, PwmSample, RangeSample): frozen slotted
  *                dataclasses without __post_init__, filled as their __init__ fills them
  *                (object.__setattr__ per field, in field order)
- *   array        numpy.array
+ *   empty        numpy.empty: an array is empty(n) filled through its buffer, the array
+ *                numpy.array(the n floats) makes (float64, C order, writeable, owning its
+ *                data) without the tuple of floats and numpy's inference from it (the
+ *                module's READER_FILLS says a build does this)
  *
  * read(frame) -> None (not taken), or (kind, sample, None), or (kind, None, reason) with the
  * reason the reference counts (not_input, nonfinite, absurd, out_of_range).
@@ -37,7 +40,7 @@ typedef struct {
     PyObject *kinds;
     double milli_g, milli_rad, max_force_sq, max_rate, out_low, out_high, range_min, range_max;
     int n_motors, downward;
-    PyObject *clock, *imu_type, *attitude_type, *pwm_type, *range_type, *array, *dtype_float;
+    PyObject *clock, *imu_type, *attitude_type, *pwm_type, *range_type, *empty;
 } Reader;
 
 static PyObject *s_not_input, *s_nonfinite, *s_absurd, *s_out_of_range, *s_latest_fc_s;
@@ -112,23 +115,32 @@ done:
     return out;
 }
 
-/* numpy.array of the `n` doubles (as np.array(tuple of floats) makes it). */
+/* A float64 numpy array of the `n` doubles, as np.array(tuple of floats) makes it:
+ * numpy.empty(n) with the doubles' bits copied in through its buffer. */
 static PyObject *
 array_of(Reader *r, const double *v, int n)
 {
-    PyObject *items = PyTuple_New(n);
-    if (items == NULL)
+    PyObject *size = PyLong_FromLong(n);
+    if (size == NULL)
         return NULL;
-    for (int i = 0; i < n; i++) {
-        PyObject *f = PyFloat_FromDouble(v[i]);
-        if (f == NULL) {
-            Py_DECREF(items);
-            return NULL;
-        }
-        PyTuple_SET_ITEM(items, i, f);
+    PyObject *out = PyObject_CallOneArg(r->empty, size);
+    Py_DECREF(size);
+    if (out == NULL)
+        return NULL;
+    Py_buffer view;
+    if (PyObject_GetBuffer(out, &view, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) {
+        Py_DECREF(out);
+        return NULL;
     }
-    PyObject *out = PyObject_CallOneArg(r->array, items);
-    Py_DECREF(items);
+    int fits = view.len == (Py_ssize_t)(n * sizeof(double));
+    if (fits)
+        memcpy(view.buf, v, n * sizeof(double));
+    PyBuffer_Release(&view);
+    if (!fits) {
+        Py_DECREF(out);
+        PyErr_SetString(PyExc_TypeError, "empty(n) is not n doubles");
+        return NULL;
+    }
     return out;
 }
 
@@ -226,25 +238,9 @@ pwm(Reader *r, int code, const unsigned char *p, int length, const unsigned char
     double time_s;
     if (!unwrap(r, field_int(p, length, w + 2), &time_s))
         return NULL;
-    PyObject *items = PyTuple_New(r->n_motors);
-    if (items == NULL)
-        return NULL;
-    for (int i = 0; i < r->n_motors; i++) {
-        PyObject *o = PyLong_FromLongLong((long long)out[i]);
-        if (o == NULL) {
-            Py_DECREF(items);
-            return NULL;
-        }
-        PyTuple_SET_ITEM(items, i, o);
-    }
-    PyObject *args = PyTuple_Pack(1, items);
-    Py_DECREF(items);
-    if (args == NULL)
-        return NULL;
-    PyObject *array = PyObject_Call(r->array, args, r->dtype_float);
-    Py_DECREF(args);
+    /* np.array(the outputs as Python ints, dtype=float): each an integer below 2^16, exact */
     PyObject *names[2] = {s_time_s, s_pwm_us};
-    PyObject *values[2] = {PyFloat_FromDouble(time_s), array};
+    PyObject *values[2] = {PyFloat_FromDouble(time_s), array_of(r, out, r->n_motors)};
     return result(r, code, make(r->pwm_type, 2, names, values), NULL);
 }
 
@@ -303,9 +299,9 @@ static const int conversion_fields[CONVERSIONS] = {8, 8, 4, -1, 5};
 static int
 reader_init(Reader *r, PyObject *args, PyObject *kwds)
 {
-    PyObject *spec, *conversions, *kinds, *limits, *clock, *types, *array;
+    PyObject *spec, *conversions, *kinds, *limits, *clock, *types, *empty;
     if (!PyArg_ParseTuple(args, "SSO!O!OO!O", &spec, &conversions, &PyTuple_Type, &kinds,
-                          &PyTuple_Type, &limits, &clock, &PyTuple_Type, &types, &array))
+                          &PyTuple_Type, &limits, &clock, &PyTuple_Type, &types, &empty))
         return -1;
     Py_ssize_t codes = PyBytes_GET_SIZE(conversions);
     if (codes > MAX_CODES || PyTuple_GET_SIZE(kinds) != codes || PyTuple_GET_SIZE(types) != 4
@@ -345,12 +341,6 @@ reader_init(Reader *r, PyObject *args, PyObject *kwds)
         r->conversion[e] = (unsigned char)conversion;
         pos += 8 + 2 * s[pos + 7];
     }
-    PyObject *dtype = PyDict_New();
-    if (dtype == NULL || PyDict_SetItemString(dtype, "dtype", (PyObject *)&PyFloat_Type) < 0) {
-        Py_XDECREF(dtype);
-        return -1;
-    }
-    Py_XSETREF(r->dtype_float, dtype);
     Py_XSETREF(r->spec, Py_NewRef(spec));
     Py_XSETREF(r->kinds, Py_NewRef(kinds));
     Py_XSETREF(r->clock, Py_NewRef(clock));
@@ -358,7 +348,7 @@ reader_init(Reader *r, PyObject *args, PyObject *kwds)
     Py_XSETREF(r->attitude_type, Py_NewRef(PyTuple_GET_ITEM(types, 1)));
     Py_XSETREF(r->pwm_type, Py_NewRef(PyTuple_GET_ITEM(types, 2)));
     Py_XSETREF(r->range_type, Py_NewRef(PyTuple_GET_ITEM(types, 3)));
-    Py_XSETREF(r->array, Py_NewRef(array));
+    Py_XSETREF(r->empty, Py_NewRef(empty));
     for (int i = 0; i < 4; i++)
         if (!PyType_Check(PyTuple_GET_ITEM(types, i))) {
             PyErr_SetString(PyExc_TypeError, "types must be classes");
@@ -377,8 +367,7 @@ reader_traverse(Reader *r, visitproc visit, void *arg)
     Py_VISIT(r->attitude_type);
     Py_VISIT(r->pwm_type);
     Py_VISIT(r->range_type);
-    Py_VISIT(r->array);
-    Py_VISIT(r->dtype_float);
+    Py_VISIT(r->empty);
     return 0;
 }
 
@@ -392,8 +381,7 @@ reader_clear(Reader *r)
     Py_CLEAR(r->attitude_type);
     Py_CLEAR(r->pwm_type);
     Py_CLEAR(r->range_type);
-    Py_CLEAR(r->array);
-    Py_CLEAR(r->dtype_float);
+    Py_CLEAR(r->empty);
     return 0;
 }
 
@@ -467,5 +455,6 @@ tether_frame_reader_add(PyObject *m)
         return 0;
     if (PyType_Ready(&ReaderType) < 0)
         return 0;
-    return PyModule_AddObjectRef(m, "Reader", (PyObject *)&ReaderType) == 0;
+    return PyModule_AddObjectRef(m, "Reader", (PyObject *)&ReaderType) == 0
+           && PyModule_AddIntConstant(m, "READER_FILLS", 1) == 0;
 }

@@ -130,7 +130,8 @@ class FrameIngest:
             self.take = functools.partial(_CORE.take, spec)  # type: ignore[method-assign]
             self.fields = functools.partial(_CORE.fields, spec)  # type: ignore[method-assign]
             bounds = (MILLI_G_TO_MPS2, MILLI_RAD_TO_RAD, *ingest.check_bounds())
-            if 1 <= ingest.n_motors <= 16 and all(float(b) == b for b in bounds):
+            fills = getattr(_CORE, "READER_FILLS", 0)  # an older build: the Python reads
+            if fills and 1 <= ingest.n_motors <= 16 and all(float(b) == b for b in bounds):
                 reader = _CORE.Reader(
                     spec,
                     self._conversions,
@@ -138,7 +139,7 @@ class FrameIngest:
                     (*map(float, bounds), ingest.n_motors, DOWNWARD_ORIENTATION),
                     ingest.clock,
                     (ImuSample, AttitudeSample, PwmSample, RangeSample),
-                    np.array,
+                    np.empty,  # filled in C: the arrays np.array of the values makes
                 )
                 self._read = reader.read
                 if ingest.core is not None:  # read, drop counted, receive_input: one C call

@@ -259,13 +259,19 @@ class EstimationSession:
             self.on_battery_voltage_v(battery_voltage_v(msg))
         return self.on_received(self.ingest.receive(msg, local_s, kind))
 
-    def on_frame(self, frame: bytes, local_s: float | None = None) -> Step:
+    def on_frame(self, frame: bytes, local_s: float | None = None) -> Step | None:
         """Process one intact, admitted frame of the flight controller's input streams that
         :meth:`FrameIngest.take <tether_companion.service.ingest_frames.FrameIngest.take>`
-        accepted, as :meth:`on_message` processes the message decoded from it."""
+        accepted, as :meth:`on_message` processes the message decoded from it; None for a
+        frame of one motor-output sample (it makes no message, publication or estimate: the
+        step :meth:`on_sample` would give is empty)."""
         samples = self.frames.samples(frame, local_s)
         if len(samples) == 1 and not self.ingest.rebooted:  # the usual frame: one sample
-            return self.on_sample(samples[0])
+            sample = samples[0]
+            if type(sample) is PwmSample:
+                self._feed_pwm(sample)
+                return None
+            return self.on_sample(sample)
         return self.on_received(samples)
 
     def on_received(self, samples: list[Sample]) -> Step:
@@ -350,10 +356,14 @@ class EstimationSession:
         return Step(messages=self._mode_tick(sample.time_s)) if self.messages else Step()
 
     def _on_pwm(self, sample: PwmSample) -> Step:
+        self._feed_pwm(sample)
+        return Step()
+
+    def _feed_pwm(self, sample: PwmSample) -> None:
+        """The motor outputs to the modes' tension filter (when it runs) and the EKF."""
         if self._feeds_tension:
             self.modes.estimator.on_pwm(sample)
         self.estimator.on_pwm(sample)
-        return Step()
 
     def _on_range(self, sample: RangeSample) -> Step:
         self.estimator.on_range(sample)

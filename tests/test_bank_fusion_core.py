@@ -130,14 +130,16 @@ def test_bit_for_bit_on_random_banks() -> None:
         mine = copy.deepcopy(reference)
         measure = _measure_for(rng)
         r = float(10.0 ** rng.uniform(-3, 0))
+        tempering = None if rng.uniform() < 0.3 else float(rng.uniform(1.0, 20.0))
         for _ in range(25):
             z = [float(v) for v in rng.normal(size=3) * 10.0 ** rng.uniform(-2, 1.5)]
             if rng.uniform() < 0.1:  # an innovation exactly zero: its sign is +0.0
                 z = list(measure(mine.filters[0].x_values())[0])
             z = z if rng.uniform() < 0.5 else tuple(z)
-            expected = _fuse(reference, False, SENSOR, z, measure, r)
-            took = _took(mine, z, measure, r)
-            got = _fuse(mine, True, SENSOR, z, measure, r)
+            expected = _fuse(reference, False, SENSOR, z, measure, r, tempering)
+            took = _took(mine, z, measure, r, tempering)
+            got = _fuse(mine, True, SENSOR, z, measure, r, tempering)
+            assert _bits(mine.log_weight) == _bits(reference.log_weight)
             taken += took
             assert _bits(got[0]) == _bits(expected[0])  # type: ignore[index]
             assert _bits(got[1]) == _bits(expected[1])  # type: ignore[index]
@@ -159,9 +161,9 @@ def _hold(bank: FilterBank) -> tuple[int, int]:
     return start, stop
 
 
-def _took(bank: FilterBank, z: object, measure: object, r: float) -> bool:
+def _took(bank: FilterBank, z: object, measure: object, r: float, tempering: object) -> bool:
     """Whether the C takes this fusion (run on a copy: it changes what it takes)."""
-    return _call(copy.deepcopy(bank), z, measure, r) is not None
+    return _call(copy.deepcopy(bank), z, measure, r, tempering) is not None
 
 
 def _ready_bank() -> tuple[FilterBank, object]:
@@ -175,10 +177,12 @@ def _ready_bank() -> tuple[FilterBank, object]:
     return bank, measure
 
 
-def _call(bank: FilterBank, z: object, measure: object, r: object) -> object:
+def _call(
+    bank: FilterBank, z: object, measure: object, r: object, tempering: object = 5.0
+) -> object:
     return core.fuse_force_balance(
         bank.filters, SENSOR, z, measure, r, *_hold(bank), np.empty, bank_module.UpdateResult,
-        bank_module.FUSED, bank_module.GATED,
+        bank_module.FUSED, bank_module.GATED, bank.log_weight, tempering,
     )  # fmt: skip
 
 
@@ -186,7 +190,7 @@ def _call(bank: FilterBank, z: object, measure: object, r: object) -> object:
     "spoil",
     [
         "lists", "nan_p", "inf_x", "new_sensor", "no_threshold", "nan_model", "int_z",
-        "np_float_r", "model_not_tuple", "indefinite",
+        "np_float_r", "model_not_tuple", "indefinite", "int_log_weight", "int_tempering",
     ],
 )  # fmt: skip
 def test_not_taken_changes_nothing(spoil: str) -> None:
@@ -227,9 +231,12 @@ def test_not_taken_changes_nothing(spoil: str) -> None:
 
     elif spoil == "indefinite":
         kf.P = -np.eye(_N)
-    before = [_member_bits(m) for m in bank.filters]
-    assert _call(bank, z, measure, r) is None
-    assert [_member_bits(m) for m in bank.filters] == before
+    elif spoil == "int_log_weight":
+        bank.log_weight[0] = 0
+    tempering = 5 if spoil == "int_tempering" else 5.0
+    before = [_member_bits(m) for m in bank.filters], _bits(bank.log_weight)
+    assert _call(bank, z, measure, r, tempering) is None
+    assert ([_member_bits(m) for m in bank.filters], _bits(bank.log_weight)) == before
 
 
 def _scalar_measure_for(rng: np.random.Generator):  # noqa: ANN202 (a model closure)
@@ -257,10 +264,12 @@ def _fuse_scalar(bank: FilterBank, c_path: bool, *args: object) -> object:
         bank_module.FUSE_SCALAR = saved
 
 
-def _call_scalar(bank: FilterBank, z: object, measure: object, r: object) -> object:
+def _call_scalar(
+    bank: FilterBank, z: object, measure: object, r: object, tempering: object = 20.0
+) -> object:
     return core.fuse_scalar(
         bank.filters, SENSOR, z, measure, r, *_hold(bank), np.empty, bank_module.UpdateResult,
-        bank_module.FUSED, bank_module.GATED,
+        bank_module.FUSED, bank_module.GATED, bank.log_weight, tempering,
     )  # fmt: skip
 
 
@@ -275,13 +284,15 @@ def test_scalar_bit_for_bit_on_random_banks() -> None:
         mine = copy.deepcopy(reference)
         measure = _scalar_measure_for(rng)
         r = float(10.0 ** rng.uniform(-3, 0))
+        tempering = None if rng.uniform() < 0.3 else float(rng.uniform(1.0, 20.0))
         for _ in range(25):
             z = float(rng.normal() * 10.0 ** rng.uniform(-2, 1.5))
             if rng.uniform() < 0.1:  # an innovation exactly zero
                 z = float(measure(mine.filters[0].x)[0][0])
-            expected = _fuse_scalar(reference, False, SENSOR, z, measure, r)
-            taken += _call_scalar(copy.deepcopy(mine), z, measure, r) is not None
-            got = _fuse_scalar(mine, True, SENSOR, z, measure, r)
+            expected = _fuse_scalar(reference, False, SENSOR, z, measure, r, None, tempering)
+            taken += _call_scalar(copy.deepcopy(mine), z, measure, r, tempering) is not None
+            got = _fuse_scalar(mine, True, SENSOR, z, measure, r, None, tempering)
+            assert _bits(mine.log_weight) == _bits(reference.log_weight)
             assert _bits(got[0]) == _bits(expected[0])  # type: ignore[index]
             assert _bits(got[1]) == _bits(expected[1])  # type: ignore[index]
             assert _bits(got[2]) == _bits(expected[2])  # type: ignore[index]
@@ -331,9 +342,9 @@ def test_scalar_not_taken_changes_nothing(spoil: str) -> None:
     elif spoil == "zero_s":
         r = 0.0
         kf.P = np.zeros((_N, _N))
-    before = [_member_bits(m) for m in bank.filters]
+    before = [_member_bits(m) for m in bank.filters], _bits(bank.log_weight)
     assert _call_scalar(bank, z, measure, r) is None
-    assert [_member_bits(m) for m in bank.filters] == before
+    assert ([_member_bits(m) for m in bank.filters], _bits(bank.log_weight)) == before
 
 
 def test_a_flight_takes_c_and_equals_python() -> None:

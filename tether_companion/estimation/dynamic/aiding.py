@@ -161,19 +161,10 @@ def fuse_force_balance(
     stacked update (:meth:`FilterBank.update_force_balance`): ``measure(x)`` gives
     ``(h(x) (3,), H (39, row-major))`` at the state as a list ``x``."""
     best = bank.best
-    results, jacobians, priors = bank.update_force_balance(name, z, measure, r_variance)
-    return _record_bank(
-        bank,
-        best,
-        name,
-        status,
-        results,
-        jacobians,
-        priors,
-        r_variance,
-        time_s,
-        bank.force_balance_tempering,
+    results, jacobians, priors = bank.update_force_balance(
+        name, z, measure, r_variance, bank.force_balance_tempering
     )
+    return _record_bank(bank, best, name, status, results, jacobians, priors, r_variance, time_s)
 
 
 def _record_bank(
@@ -186,24 +177,22 @@ def _record_bank(
     priors: list[FloatArray],
     r_variance: float,
     time_s: float,
-    tempering: float = LIKELIHOOD_TEMPERING,
     log_likelihoods: Sequence[float] | None = None,
 ) -> bool:
-    """Add the members' log-likelihoods of a sample fused into every member (``best`` the
-    best member before it; divided by ``tempering``; the Gaussian's from each outcome, or
-    ``log_likelihoods`` per member when given) and record the best member's outcome in
-    ``status``; whether it was fused into the best member."""
-    best_index = 0
-    decided = bank.decided
-    for i, (kf, result) in enumerate(zip(bank.filters, results, strict=True)):
-        if kf is best:
-            best_index = i
-        if decided:
-            continue
-        if log_likelihoods is None:
-            bank.add_evidence(i, result.nis, kf.last_log_det_s, tempering)
-        elif math.isfinite(result.nis):  # fused or gated: the prior's, as the Gaussian's
-            bank.add_evidence(i, -2.0 * log_likelihoods[i], 0.0, tempering)
+    """Record the best member's outcome of a sample fused into every member (``best`` the
+    best member before it) in ``status``, after adding the members' ``log_likelihoods`` of it
+    when given (divided by :data:`LIKELIHOOD_TEMPERING`; the Gaussian's of each outcome the
+    bank's update adds itself, :meth:`FilterBank.add_outcomes`); whether it was fused into the
+    best member."""
+    filters = bank.filters
+    if len(filters) == 1:
+        best_index = 0  # the best member before the update is the one member
+    else:
+        best_index = next(i for i, kf in enumerate(filters) if kf is best)
+        if log_likelihoods is not None:
+            for i, result in enumerate(results):
+                if math.isfinite(result.nis):  # fused or gated: the prior's, as the Gaussian's
+                    bank.add_evidence(i, -2.0 * log_likelihoods[i], 0.0, LIKELIHOOD_TEMPERING)
     best_result = results[best_index]
     if math.isfinite(best_result.nis):
         m = len(best.sensors[name].innovation)
@@ -239,7 +228,9 @@ def fuse(
     best = bank.best
     if z.size == 1:
         r_variance = float(r[0, 0])
-        results, jacobians, priors = bank.update_scalar(name, float(z[0]), measure, r_variance)
+        results, jacobians, priors = bank.update_scalar(
+            name, float(z[0]), measure, r_variance, tempering=LIKELIHOOD_TEMPERING
+        )
         return _record_bank(
             bank, best, name, status, results, jacobians, priors, r_variance, time_s
         )

@@ -217,13 +217,15 @@ class FilterBank:
         z: Sequence[float],
         measure: RowsFunction,
         r_variance: float,
+        tempering: float | None = None,
     ) -> tuple[list[UpdateResult], list[Sequence[float]], list[FloatArray]]:
         """Fuse a 3-axis measurement ``z`` with ``R = r_variance I`` into every member
         (``measure(x)`` gives ``(h(x) (3,), H (39, row-major))`` at a state list): ``P H^T``,
         ``H P H^T``, the gain and ``P - K (P H^T)^T`` for all members in stacked arrays, the
         3x3 ``S``, NIS and gate per member in scalars
         (:meth:`~tether_companion.estimation.dynamic.member.MemberFilter.test_force_balance`).
-        Returns each member's outcome, Jacobian and prior covariance.
+        With ``tempering``, each member's evidence of the sample is added
+        (:meth:`add_outcomes`). Returns each member's outcome, Jacobian and prior covariance.
 
         Where ``_member_core`` runs, all of it is one C call (:data:`FUSE_FORCE_BALANCE`, bit
         for bit this code with the extension's member functions), which hands back here
@@ -234,7 +236,7 @@ class FilterBank:
             start, stop, _ = (_HOLD_NONE if hold is None else hold).indices(_N)
             done = FUSE_FORCE_BALANCE(
                 filters, sensor, z, measure, r_variance, start, stop, EMPTY, UpdateResult, FUSED,
-                GATED,
+                GATED, None if tempering is None else self.log_weight, tempering,
             )  # fmt: skip
             if done is not None:
                 return done  # type: ignore[no-any-return]
@@ -283,6 +285,8 @@ class FilterBank:
                 chosen, each_member(xs, one), each_member(ps, one), strict=True
             ):
                 results[i] = filters[i].accept_update(sensor, solved[0], x, p_new, checked=checked)
+        if tempering is not None:
+            self.add_outcomes(results, tempering)  # type: ignore[arg-type]
         return results, jacobians, priors  # type: ignore[return-value]
 
     def _gain_update(
@@ -332,6 +336,7 @@ class FilterBank:
         measure: MeasurementFunction,
         r_variance: float,
         pseudo: Callable[[float, float], tuple[float, float]] | None = None,
+        tempering: float | None = None,
     ) -> tuple[list[UpdateResult], list[FloatArray], list[FloatArray]]:
         """Fuse a scalar measurement ``z`` with noise ``r_variance`` into every member
         (``measure(x)`` gives ``(h(x) (1,), H (1, n))`` at a state array): ``P h``, the gain
@@ -341,7 +346,8 @@ class FilterBank:
         ``pseudo``, when given, maps each member's innovation ``y`` and ``s = H P H^T + R`` to
         the pair the update and its test use instead (an upper bound's truncation,
         :func:`~tether_companion.estimation.dynamic.truncation.pseudo_measurement`).
-        Returns each member's outcome, Jacobian and prior covariance.
+        With ``tempering``, each member's evidence of the sample is added
+        (:meth:`add_outcomes`). Returns each member's outcome, Jacobian and prior covariance.
 
         Without ``pseudo``, where ``_member_core`` runs, all of it is one C call
         (:data:`FUSE_SCALAR`, as :meth:`update_force_balance`)."""
@@ -351,7 +357,7 @@ class FilterBank:
             start, stop, _ = (_HOLD_NONE if hold is None else hold).indices(_N)
             done = FUSE_SCALAR(
                 filters, sensor, z, measure, r_variance, start, stop, EMPTY, UpdateResult, FUSED,
-                GATED,
+                GATED, None if tempering is None else self.log_weight, tempering,
             )  # fmt: skip
             if done is not None:
                 return done  # type: ignore[no-any-return]
@@ -405,6 +411,8 @@ class FilterBank:
             for i, x, p_new in zip(index, each_member(xs, one), each_member(ps, one), strict=True):
                 nis = innovations[i] * innovations[i] / s_values[i]
                 results[i] = filters[i].accept_update(sensor, nis, x, p_new, checked=checked)
+        if tempering is not None:
+            self.add_outcomes(results, tempering)  # type: ignore[arg-type]
         return results, jacobians, priors  # type: ignore[return-value]
 
     def update_others(
@@ -418,6 +426,15 @@ class FilterBank:
                 log_det_s = log_det_innovation(kf.P, measure(kf.x)[1], r)
                 result = kf.update(name, z, measure, r)
                 self.add_evidence(i, result.nis, log_det_s)
+
+    def add_outcomes(self, results: list[UpdateResult], tempering: float) -> None:
+        """Add each member's tempered log-likelihood of the sample just fused into every member
+        (``results`` in member order; the Gaussian's from each outcome's NIS and the member's
+        ``log det S``, :meth:`add_evidence`); nothing with one member left."""
+        if len(self.filters) == 1:
+            return
+        for i, (kf, result) in enumerate(zip(self.filters, results, strict=True)):
+            self.add_evidence(i, result.nis, kf.last_log_det_s, tempering)
 
     def add_best_nis(self, nis: float, log_det_s: float) -> None:
         """The best member's NIS and ``log det S`` of the sample just fused."""

@@ -396,8 +396,8 @@ commit_member(Member *mb, int m, PyObject *result_type, PyObject *fused, PyObjec
 static PyObject *
 fuse_members(PyObject *const *args, Py_ssize_t nargs, int m)
 {
-    if (nargs != 11)
-        return PyErr_Format(PyExc_TypeError, "the bank's fusion takes 11 arguments");
+    if (nargs != 13)
+        return PyErr_Format(PyExc_TypeError, "the bank's fusion takes 13 arguments");
     if (!intern_names())
         return NULL;
     PyObject *filters = args[0], *sensor = args[1], *measure = args[3], *empty = args[7];
@@ -416,6 +416,17 @@ fuse_members(PyObject *const *args, Py_ssize_t nargs, int m)
         Py_RETURN_NONE;
     }
     Py_ssize_t members = PyList_GET_SIZE(filters);
+    /* the members' evidence (FilterBank.add_evidence over the outcomes): a bank of several
+     * members given its log weights (exact floats) and a tempering (an exact float) */
+    PyObject *log_weight = args[11];
+    double weights[MAX_MEMBERS], tempering = 0.0;
+    int evidence = log_weight != Py_None && members > 1;
+    if (evidence) {
+        if (!PyList_CheckExact(log_weight) || !read_exact_floats(log_weight, members, weights) ||
+            !PyFloat_CheckExact(args[12]))
+            Py_RETURN_NONE;
+        tempering = PyFloat_AS_DOUBLE(args[12]);
+    }
     Member mbs[MAX_MEMBERS];
     memset(mbs, 0, sizeof(Member) * (size_t)members);
     int n = 0, state = 1;
@@ -438,6 +449,14 @@ fuse_members(PyObject *const *args, Py_ssize_t nargs, int m)
                 break;
             }
             PyList_SET_ITEM(results, i, result);
+            if (evidence) { /* nis and log det S are finite here */
+                double value = mbs[i].nis + mbs[i].log_det;
+                PyObject *weight = PyFloat_FromDouble(weights[i] - 0.5 * value / tempering);
+                if (weight == NULL || PyList_SetItem(log_weight, i, weight) < 0) {
+                    failed = 1;
+                    break;
+                }
+            }
             Py_INCREF(mbs[i].jac);
             PyList_SET_ITEM(jacobians, i, mbs[i].jac);
             Py_INCREF(mbs[i].pa);
@@ -458,8 +477,10 @@ fuse_members(PyObject *const *args, Py_ssize_t nargs, int m)
 }
 
 /* bank_fuse_force_balance(filters, sensor, z, measure, r_variance, hold_start, hold_stop, empty,
- * result_type, fused, gated) -> (results, jacobians, priors) as FilterBank.update_force_balance
- * returns them, every member's fusion done; None: not taken, nothing changed. */
+ * result_type, fused, gated, log_weight, tempering) -> (results, jacobians, priors) as
+ * FilterBank.update_force_balance returns them, every member's fusion done and, with log_weight
+ * (the bank's list) and several members, each one's evidence added to it; None: not taken,
+ * nothing changed. */
 PyObject *
 bank_fuse_force_balance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
@@ -467,7 +488,8 @@ bank_fuse_force_balance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 }
 
 /* bank_fuse_scalar(filters, sensor, z, measure, r_variance, hold_start, hold_stop, empty,
- * result_type, fused, gated): FilterBank.update_scalar without `pseudo`, as
+ * result_type, fused, gated, log_weight, tempering): FilterBank.update_scalar without `pseudo`,
+ * as
  * bank_fuse_force_balance (z a float, measure(x) on the state array). */
 PyObject *
 bank_fuse_scalar(PyObject *self, PyObject *const *args, Py_ssize_t nargs)

@@ -428,12 +428,12 @@ static PyMethodDef methods[] = {
      "bit for bit (the fallback where C could differ)."},
     {"fuse_force_balance", (PyCFunction)(void (*)(void))bank_fuse_force_balance, METH_FASTCALL,
      "fuse_force_balance(filters, sensor, z, measure, r_variance, hold_start, hold_stop, empty, "
-     "result_type, fused, gated): bank.FilterBank.update_force_balance over every member, bit "
-     "for bit (bank_fusion.c); None: not taken, nothing changed."},
+     "result_type, fused, gated, log_weight, tempering): bank.FilterBank.update_force_balance "
+     "over every member, bit for bit (bank_fusion.c); None: not taken, nothing changed."},
     {"fuse_scalar", (PyCFunction)(void (*)(void))bank_fuse_scalar, METH_FASTCALL,
      "fuse_scalar(filters, sensor, z, measure, r_variance, hold_start, hold_stop, empty, "
-     "result_type, fused, gated): bank.FilterBank.update_scalar (no pseudo) over every member, "
-     "bit for bit (bank_fusion.c); None: not taken, nothing changed."},
+     "result_type, fused, gated, log_weight, tempering): bank.FilterBank.update_scalar (no "
+     "pseudo) over every member, bit for bit (bank_fusion.c); None: not taken, nothing changed."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -24,7 +24,7 @@
 #define FB_M 3 /* the force balance's axes */
 
 typedef struct {
-    PyObject *kf, *xa, *pa, *status, *jac; /* new references (status borrowed from a dict) */
+    PyObject *kf, *xa, *pa, *status, *jac; /* new references */
     Py_buffer vx, vp;
     int have_x, have_p;
     long consecutive;
@@ -76,7 +76,7 @@ drop_member(Member *mb)
     Py_CLEAR(mb->jac);
     Py_CLEAR(mb->x_new);
     Py_CLEAR(mb->p_new);
-    mb->status = NULL;
+    Py_CLEAR(mb->status);
 }
 
 /* An attribute that is an exact int into *out; 0 (no error set) when it is not one. */
@@ -155,7 +155,8 @@ member_setup(Member *mb, PyObject *kf, PyObject *sensor, int m, Py_ssize_t hold_
         return 0;
     }
     mb->status = PyDict_CheckExact(sensors) ? PyDict_GetItemWithError(sensors, sensor) : NULL;
-    Py_DECREF(sensors); /* the member keeps the dict and the dict the status */
+    Py_XINCREF(mb->status); /* held: the model (Python) runs before it is written */
+    Py_DECREF(sensors);
     if (mb->status == NULL) {
         PyErr_Clear();
         return 0;

@@ -29,7 +29,7 @@ from operator import attrgetter, is_
 import numpy as np
 from numpy.typing import NDArray
 
-from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic import bank_reduction, state
 from tether_companion.estimation.dynamic.bank_arrays import (
     EMPTY,
     apply_each,
@@ -523,14 +523,43 @@ class FilterBank:
         if w[best] >= SELECT_WEIGHT:
             self.keep([best])  # other bearings rejected: not confirmed
         elif elapsed >= self.max_bank_s:
-            mean, cov = self.mixture()
-            kf = self.filters[best]
-            resets = kf.resets
-            kf.reset(mean, cov)
-            kf.resets = resets  # a collapse is not a restart
-            self.filters = [kf]
-            self.log_weight = [0.0]
-            self.bearings = [0]
+            self._reduce(w.tolist())
+
+    def _reduce(self, w: list[float]) -> None:
+        """The bank undecided after ``max_bank_s`` (``w`` the normalised weights): drop the
+        members below :data:`DROP_WEIGHT` (negligible, as the selection drops them), merge
+        the members one Gaussian represents (:func:`~tether_companion.estimation.dynamic.
+        bank_reduction.clusters`: the cable's sphere linear over them), and when that leaves
+        one set, collapse to its moments; else the sets run on, each merged into its heaviest
+        member, until the data decide (the published state stays the mixture's)."""
+        kept = [i for i, wi in enumerate(w) if wi >= DROP_WEIGHT]
+        filters = self.filters
+        found = bank_reduction.clusters(
+            [w[i] for i in kept],
+            [filters[i].x for i in kept],
+            [filters[i].P for i in kept],
+            bank_reduction.threshold(),
+        )
+        if len(found) == len(w):  # nothing dropped or merged
+            return
+        log_weight = self.log_weight
+        top = max(log_weight)
+        members, weights, bearings = [], [], []
+        for indices, (mean, cov) in found:
+            first = kept[indices[0]]  # the heaviest of the set
+            kf = filters[first]
+            if len(indices) > 1:
+                resets = kf.resets
+                kf.reset(mean, cov)
+                kf.resets = resets  # a merge is not a restart
+            members.append(kf)
+            weights.append(
+                top + math.log(sum(math.exp(log_weight[kept[j]] - top) for j in indices))
+            )
+            bearings.append(self.bearings[first])
+        self.filters = members
+        self.log_weight = [0.0] if len(members) == 1 else weights
+        self.bearings = [0] if len(members) == 1 else bearings
 
     def _drop_rejected_bearings(self) -> None:
         """Drop the members of bearings other than the best member's whose weight is below

@@ -13,8 +13,11 @@ is the mixture's mean and covariance (weights from the log-likelihoods; the cova
 includes the spread between members, so it stays honest while they disagree). When one
 member's weight passes ``SELECT_WEIGHT`` after ``MIN_BANK_S`` the others are dropped; after
 ``max_bank_s`` (the config's ``initial.thrust_scale_bank_max_s``) without a decision (a steady
-hover gives the thrust scale no information) the bank collapses into one filter holding the
-mixture's moments.
+hover gives the thrust scale no information) the members of negligible weight go and those
+one Gaussian represents (:mod:`~tether_companion.estimation.dynamic.bank_reduction`) become
+one filter holding their moments; members one Gaussian does not represent (far apart in
+bearing: one EKF from their moments converges into a wrong mode) run on until the data
+decide.
 
 Pure and synchronous.
 """
@@ -505,8 +508,8 @@ class FilterBank:
 
     def maybe_decide(self, time_s: float) -> None:
         """Drop the members of rejected bearings (:data:`DROP_WEIGHT`); keep one member when
-        its weight passes :data:`SELECT_WEIGHT` (after :data:`MIN_BANK_S`), or collapse to
-        the moments after ``max_bank_s``."""
+        its weight passes :data:`SELECT_WEIGHT` (after :data:`MIN_BANK_S`); after
+        ``max_bank_s``, reduce the mixture to what the data left undecided (:meth:`_reduce`)."""
         if self.decided:
             return
         bearings = self.bearings
@@ -526,40 +529,16 @@ class FilterBank:
             self._reduce(w.tolist())
 
     def _reduce(self, w: list[float]) -> None:
-        """The bank undecided after ``max_bank_s`` (``w`` the normalised weights): drop the
-        members below :data:`DROP_WEIGHT` (negligible, as the selection drops them), merge
-        the members one Gaussian represents (:func:`~tether_companion.estimation.dynamic.
-        bank_reduction.clusters`: the cable's sphere linear over them), and when that leaves
-        one set, collapse to its moments; else the sets run on, each merged into its heaviest
-        member, until the data decide (the published state stays the mixture's)."""
-        kept = [i for i, wi in enumerate(w) if wi >= DROP_WEIGHT]
-        filters = self.filters
-        found = bank_reduction.clusters(
-            [w[i] for i in kept],
-            [filters[i].x for i in kept],
-            [filters[i].P for i in kept],
-            bank_reduction.threshold(),
+        """The bank undecided after ``max_bank_s`` (``w`` the normalised weights): the
+        members below :data:`DROP_WEIGHT` go (negligible, as the selection drops them), the
+        sets one Gaussian represents merge (:func:`~tether_companion.estimation.dynamic.
+        bank_reduction.reduce`); one set left is the collapse, else the sets run on until the
+        data decide (the published state stays the mixture's)."""
+        reduced = bank_reduction.reduce(
+            self.filters, self.log_weight, self.bearings, w, DROP_WEIGHT
         )
-        if len(found) == len(w):  # nothing dropped or merged
-            return
-        log_weight = self.log_weight
-        top = max(log_weight)
-        members, weights, bearings = [], [], []
-        for indices, (mean, cov) in found:
-            first = kept[indices[0]]  # the heaviest of the set
-            kf = filters[first]
-            if len(indices) > 1:
-                resets = kf.resets
-                kf.reset(mean, cov)
-                kf.resets = resets  # a merge is not a restart
-            members.append(kf)
-            weights.append(
-                top + math.log(sum(math.exp(log_weight[kept[j]] - top) for j in indices))
-            )
-            bearings.append(self.bearings[first])
-        self.filters = members
-        self.log_weight = [0.0] if len(members) == 1 else weights
-        self.bearings = [0] if len(members) == 1 else bearings
+        if reduced is not None:
+            self.filters, self.log_weight, self.bearings = reduced
 
     def _drop_rejected_bearings(self) -> None:
         """Drop the members of bearings other than the best member's whose weight is below

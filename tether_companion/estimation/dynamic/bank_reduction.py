@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.aid_status import chi2_threshold
+from tether_companion.estimation.ekf import ExtendedKalmanFilter
 
 FloatArray = NDArray[np.float64]
 
@@ -135,3 +136,42 @@ def clusters(
         else:
             groups.append(([i], (xs[i], ps[i])))
     return groups
+
+
+def reduce(
+    filters: list[ExtendedKalmanFilter],
+    log_weight: list[float],
+    bearings: list[int],
+    weights: list[float],
+    drop_weight: float,
+) -> tuple[list[ExtendedKalmanFilter], list[float], list[int]] | None:
+    """The bank's members, log weights and bearings after the reduction (None: nothing
+    dropped or merged): the members below ``drop_weight`` (normalised ``weights``) go, the
+    rest form :func:`clusters`; each set of several becomes its heaviest member reset to the
+    set's moments (a merge is not a restart: its reset count kept), with the set's summed
+    weight. One set left: that member alone, log weight 0 and bearing 0 (decided)."""
+    kept = [i for i, wi in enumerate(weights) if wi >= drop_weight]
+    found = clusters(
+        [weights[i] for i in kept],
+        [filters[i].x for i in kept],
+        [filters[i].P for i in kept],
+        threshold(),
+    )
+    if len(found) == len(weights):
+        return None
+    top = max(log_weight)
+    members, merged_weights, merged_bearings = [], [], []
+    for indices, (mean, cov) in found:
+        first = kept[indices[0]]  # the heaviest of the set
+        kf = filters[first]
+        if len(indices) > 1:
+            resets = kf.resets
+            kf.reset(mean, cov)
+            kf.resets = resets
+        members.append(kf)
+        total = sum(math.exp(log_weight[kept[j]] - top) for j in indices)
+        merged_weights.append(top + math.log(total))
+        merged_bearings.append(bearings[first])
+    if len(members) == 1:
+        return members, [0.0], [0]
+    return members, merged_weights, merged_bearings

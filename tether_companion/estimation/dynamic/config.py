@@ -98,10 +98,11 @@ class DynamicInitial:
     thrust_scale_bank_max_s: float = spec(
         6.0,
         exclusive_minimum=0.0,
-        doc="the hypotheses run side by side at most this long, then collapse to their"
-        " moments (6 s against 30 s, with imu_ticks_per_fusion 4: 4x cheaper over a 20 s"
-        " flight, more accurate IMU-only; with a winch length the NEES is 4-33 % higher;"
-        " docs/estimation-history.md) [s]",
+        doc="the hypotheses run side by side this long undecided, then those below 1 % weight"
+        " go and those one Gaussian represents collapse to their moments (the cable's"
+        " sphere linear over them, bank_reduction.py); members far apart run on until the"
+        " data decide (6 s against 30 s, with imu_ticks_per_fusion 4: 4x cheaper over a 20 s"
+        " flight; docs/estimation.md, the bank21 section) [s]",
     )
 
 

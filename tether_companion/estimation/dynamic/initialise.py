@@ -46,7 +46,12 @@ the winch's 1 N the force alone started the figure-8 up to 7 m off (tuning seeds
 
 Not possible yet (reported, and the window starts again): no height and no winch length,
 thrust far below the weight (on the ground), cable slack, a cable that does not rise to the
-drone, or one resting on the ground when only a height is known.
+drone, or one resting on the ground when only a height is known; that includes a heavy
+cable without a winch length while any cable angle of the window reads it flat at the anchor
+(:meth:`~.start_angle.AngleReadings.all_lifted`): resting, its pull on the free curve
+places the drone at the touchdown kink, a bound on the range, not the range (the heavy 5 N
+winch figure-8 started 1-4 m short at 1-4 sd on tuning seeds 1-10; docs/estimation.md,
+angle21), and each tick of the motion fit is placed by its own pull.
 """
 
 from __future__ import annotations
@@ -87,6 +92,11 @@ NO_COVARIANCE = (
     "initial covariance not finite (degenerate): the pull does not place the drone nearby"
 )
 """Why the window gave no state when a nearby pull would not place the drone."""
+RESTING = (
+    "the cable angle reads the cable flat at the anchor (resting on the ground) with no"
+    " winch length: the pull places the drone only at the touchdown"
+)
+"""Why the window gave no state on a heavy cable that may rest on the ground (no length)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -286,6 +296,13 @@ class Initialiser:
             )
         if math.isnan(height) and math.isnan(length_m):
             return Initialisation(None, None, "no rangefinder height and no winch length yet")
+        if (  # a heavy cable's pull on the free curve: only where the cable hangs free
+            cfg.cable_weight_n_per_m > 0.0
+            and math.isnan(length_m)
+            and len(self._angles)
+            and not self._angles.all_lifted()
+        ):
+            return Initialisation(None, None, RESTING)
         theta = np.zeros(THETA_SIZE)
         theta[T_ACCEL] = self._sum_a / n
         theta[T_SCALE] = scale

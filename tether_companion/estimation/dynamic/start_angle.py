@@ -25,6 +25,9 @@ MIN_RISE = 0.1
 place the drone."""
 MIN_READINGS = 5
 """Readings placed in the window from which :meth:`AngleReadings.motion` fits the motion."""
+LIFTED_SD = 3.0
+"""Standard deviations of a reading's elevation error above flat at which a reading shows the
+cable lifted at the anchor (:meth:`AngleReadings.all_lifted`)."""
 
 
 class AngleReadings:
@@ -76,6 +79,19 @@ class AngleReadings:
             return math.nan, math.nan
         nearest = min(self._readings, key=lambda reading: abs(reading[0] - time_s))
         return nearest[1], nearest[2]
+
+    def all_lifted(self) -> bool:
+        """Whether every reading shows the cable leaving the anchor lifted: its elevation above
+        :data:`LIFTED_SD` standard deviations of one reading's error (the direction noise
+        and the elevation zero's calibration error). A heavy cable resting on the ground
+        leaves the anchor flat whatever the drone's range beyond its touchdown, so a force
+        placed on the free curve puts the drone at the touchdown kink (a bound, not a
+        position): :meth:`.initialise.Initialiser.solve`. False without a reading."""
+        if not self._readings:
+            return False
+        noise, elevation_zero, _ = self._noise
+        least = LIFTED_SD * math.hypot(noise, elevation_zero)
+        return all(reading[1] > least for reading in self._readings)
 
     def mean_noise_std(self, elevation_rad: float) -> tuple[float, float]:
         """Standard deviations of the mean elevation and azimuth [rad] at ``elevation_rad``

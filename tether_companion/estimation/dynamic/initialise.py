@@ -46,12 +46,9 @@ the winch's 1 N the force alone started the figure-8 up to 7 m off (tuning seeds
 
 Not possible yet (reported, and the window starts again): no height and no winch length,
 thrust far below the weight (on the ground), cable slack, a cable that does not rise to the
-drone, or one resting on the ground when only a height is known; that includes a heavy
-cable without a winch length while any cable angle of the window reads it flat at the anchor
-(:meth:`~.start_angle.AngleReadings.all_lifted`): resting, its pull on the free curve
-places the drone at the touchdown kink, a bound on the range, not the range (the heavy 5 N
-winch figure-8 started 1-4 m short at 1-4 sd on tuning seeds 1-10; docs/estimation.md,
-angle21), and each tick of the motion fit is placed by its own pull.
+drone, or one resting on the ground when only a height is known, as a heavy cable is while
+a cable angle of the window reads it flat (:meth:`~.start_angle.AngleReadings.all_lifted`;
+its pull on the free curve places the drone at the touchdown kink: docs/estimation.md, angle21).
 """
 
 from __future__ import annotations
@@ -92,11 +89,8 @@ NO_COVARIANCE = (
     "initial covariance not finite (degenerate): the pull does not place the drone nearby"
 )
 """Why the window gave no state when a nearby pull would not place the drone."""
-RESTING = (
-    "the cable angle reads the cable flat at the anchor (resting on the ground) with no"
-    " winch length: the pull places the drone only at the touchdown"
-)
-"""Why the window gave no state on a heavy cable that may rest on the ground (no length)."""
+RESTING = "a cable angle reads the heavy cable flat (resting on the ground), no winch length"
+"""Why the window gave no state on a heavy cable that may rest on the ground."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -3,7 +3,7 @@ generated models, the tension filter's generated predict/update (``tension_core.
 published bound approximation's step (``bound_core.c``) and the dynamic filter's members'
 matrix arithmetic (``member_core.c``: numpy's to 1e-12, not bit for bit;
 ``imu_batch.MEMBER_CORE``) with the bank's force-balance and scalar fusions over its members in
-one call each (``bank_fusion.c``, ``bank.FUSE_FORCE_BALANCE`` / ``FUSE_SCALAR``: bit for bit
+one call each (``bank_fusion.c``, ``bank_updates.FUSE_FORCE_BALANCE`` / ``FUSE_SCALAR``: bit for bit
 the bank's Python on those), and the flight controller's input frames' test and field read
 (``service/frame_core.c`` with ``frame_reader.c`` and ``frame_wire.h``,
 ``ingest_frames.FrameIngest``: its samples bit for bit) with the ingest's clock gate, reorder

@@ -24,7 +24,7 @@ from optional_extension import import_extension
 
 from tether_companion.bench.dynamic import record
 from tether_companion.estimation.config import EstimatorConfig
-from tether_companion.estimation.dynamic import bank as bank_module
+from tether_companion.estimation.dynamic import bank_updates as bank_module
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator

@@ -17,7 +17,7 @@ from optional_extension import import_extension, recording_c_calls
 
 from tether_companion.bench.dynamic import record
 from tether_companion.estimation.config import EstimatorConfig
-from tether_companion.estimation.dynamic import bank, member
+from tether_companion.estimation.dynamic import bank_updates, member
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.feed import imu_ticks
 from tether_companion.physics.vehicle import load_vehicle
@@ -91,7 +91,7 @@ def test_the_member_test_uses_c_on_a_flight_and_equals_python(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     # the bank's one-call fusion (bank_fusion.c) off: the member's own test runs
-    monkeypatch.setattr(bank, "FUSE_FORCE_BALANCE", None)
+    monkeypatch.setattr(bank_updates, "FUSE_FORCE_BALANCE", None)
     vehicle = load_vehicle(load_scenario("realistic-circle").vehicle)
     estimator = DynamicTetherEstimator(EstimatorConfig(), vehicle)
     with recording_c_calls(member, "SOLVE_FORCE_BALANCE", core.force_balance, PY) as (

@@ -21,7 +21,7 @@ from filter_states import random_start
 from optional_extension import import_extension
 
 from tether_companion.estimation.dynamic import bank as bank_module
-from tether_companion.estimation.dynamic import generated, imu_batch, state
+from tether_companion.estimation.dynamic import bank_updates, generated, imu_batch, state
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.imu_batch import ImuBatch
 from tether_companion.estimation.dynamic.member import MemberFilter
@@ -38,11 +38,17 @@ def _numpy(monkeypatch: pytest.MonkeyPatch) -> None:
     """Run the numpy reference (as without the extension) from now on in this test."""
     monkeypatch.setattr(imu_batch, "MEMBER_CORE", None)
     monkeypatch.setattr(bank_module, "MEMBER_CORE", None)
+    monkeypatch.setattr(bank_updates, "MEMBER_CORE", None)
+    monkeypatch.setattr(bank_updates, "FUSE_FORCE_BALANCE", None)
+    monkeypatch.setattr(bank_updates, "FUSE_SCALAR", None)
 
 
 def _c(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(imu_batch, "MEMBER_CORE", core)
     monkeypatch.setattr(bank_module, "MEMBER_CORE", core)
+    monkeypatch.setattr(bank_updates, "MEMBER_CORE", core)
+    monkeypatch.setattr(bank_updates, "FUSE_FORCE_BALANCE", core.fuse_force_balance)
+    monkeypatch.setattr(bank_updates, "FUSE_SCALAR", core.fuse_scalar)
 
 
 def assert_close(x: np.ndarray, p: np.ndarray, x_ref: np.ndarray, p_ref: np.ndarray) -> None:

@@ -19,12 +19,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
-from tether_companion.estimation.dynamic.bank import (
-    LIKELIHOOD_TEMPERING,
-    FilterBank,
-    RowsFunction,
-    log_det_innovation,
-)
+from tether_companion.estimation.dynamic.bank import FilterBank, log_det_innovation
+from tether_companion.estimation.dynamic.bank_updates import LIKELIHOOD_TEMPERING, RowsFunction
 from tether_companion.estimation.dynamic.imu_batch import product
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.dynamic.truncation import (

@@ -17,8 +17,10 @@
  *
  * IngestCore(ingest, counters, latest_by_kind, max_window_s, gate) takes the Ingest (whose
  * `_local_s` and `rebooted` it sets as receive_input does), its IngestCounters (counted by
- * name, as the Python counts them), its per-kind newest stamps dict (shared with the Python
- * methods), the buffer's largest window [s] and the gate's parameters (backstep_s,
+ * name, as the Python counts them; the buffer's reordered / reorder_window_s /
+ * reorder_widened, which the reference writes at every order check, only when they differ
+ * from what it last wrote: nothing else writes them), its per-kind newest stamps dict (shared
+ * with the Python methods), the buffer's largest window [s] and the gate's parameters (backstep_s,
  * future_tolerance_s, max_rate, confirm_span_s, fallback_s, confirmations, fallback_samples).
  *
  * Every comparison and sum is the reference's, in its order (-ffp-contract=off): the values
@@ -95,15 +97,25 @@ in_order(Core *c, PyObject *kind, PyObject *sample)
     if (t == -1.0 && PyErr_Occurred())
         return -1;
     PyObject *counters = c->counters;
-    PyObject *window = PyFloat_FromDouble(c->window_s);
-    if (window == NULL)
-        return -1;
-    int failed = !set_long(counters, n_reordered, c->reordered)
+    int failed;
+    /* the buffer's counts into the counters, as the reference writes them every time: only
+     * when they differ from what was last written (the same values; only this writes them) */
+    if (!c->mirrored || c->mirror_reordered != c->reordered || c->mirror_widened != c->widened
+        || memcmp(&c->mirror_window_s, &c->window_s, sizeof(double)) != 0) {
+        PyObject *window = PyFloat_FromDouble(c->window_s);
+        if (window == NULL)
+            return -1;
+        failed = !set_long(counters, n_reordered, c->reordered)
                  || PyObject_SetAttr(counters, n_window, window) < 0
                  || !set_long(counters, n_widened, c->widened);
-    Py_DECREF(window);
-    if (failed)
-        return -1;
+        Py_DECREF(window);
+        if (failed)
+            return -1;
+        c->mirrored = 1;
+        c->mirror_reordered = c->reordered;
+        c->mirror_widened = c->widened;
+        c->mirror_window_s = c->window_s;
+    }
     PyObject *previous = PyDict_GetItemWithError(c->latest_by_kind, kind);
     if (previous == NULL && PyErr_Occurred())
         return -1;
@@ -373,6 +385,7 @@ core_init(Core *c, PyObject *args, PyObject *kwds)
     ingest_buffer_clear(c);
     Py_XSETREF(c->ingest, Py_NewRef(ingest));
     Py_XSETREF(c->counters, Py_NewRef(counters));
+    c->mirrored = 0;
     Py_XSETREF(c->latest_by_kind, Py_NewRef(latest_by_kind));
     Py_CLEAR(c->reader);
     ingest_gate_reset(c);

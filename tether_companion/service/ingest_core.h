@@ -43,6 +43,10 @@ typedef struct {
     PyObject *newest_by_kind;
     /* the ingest's (Ingest): its per-kind newest stamps, counters, itself, the frame reader */
     PyObject *latest_by_kind, *counters, *ingest, *reader;
+    /* the buffer's counts as last written to the counters (mirrored: written at least once) */
+    int mirrored;
+    long long mirror_reordered, mirror_widened;
+    double mirror_window_s;
 } Core;
 
 /* The gate's verdicts, interned by ingest_core.c's module set-up. */

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -235,44 +235,6 @@ def fuse(
     kf = bank.best
     jacobians: list[FloatArray] = []
     priors: list[FloatArray] = []
-    result = kf.update(name, z, _keeping(measure, kf, jacobians, priors), r)
-    if not bank.decided and jacobians:
-        bank.add_best_nis(result.nis, log_det_innovation(priors[0], jacobians[0], r))
-    return _record_best(status, kf, name, result, jacobians, priors, r, time_s)
-
-
-def _record_best(
-    status: AidStatus,
-    kf: MemberFilter,
-    name: str,
-    result: UpdateResult,
-    jacobians: list[FloatArray],
-    priors: list[FloatArray],
-    r: FloatArray,
-    time_s: float,
-) -> bool:
-    """Record the best member ``kf``'s outcome of a sample (its Jacobian and prior as kept
-    by its update, the noise ``r``) in ``status``; whether it was fused."""
-    if math.isfinite(result.nis):
-        status.last_innovation = kf.sensors[name].last_innovation
-        status._last_jacobian, status._last_prior, status._last_noise = jacobians[0], priors[0], r
-        threshold = _threshold(kf.gate_probability, r.shape[0])
-        status.last_test_ratio = result.nis / threshold if math.isfinite(threshold) else 0.0
-    return _record(status, result, time_s)
-
-
-MemberReading = Callable[[MemberFilter], tuple[FloatArray, FloatArray, float]]
-"""A member's own reading: ``(z (m,), R (m, m), log-likelihood)``, the log-likelihood
-without the ``2 pi`` terms (the same for every member) as :meth:`FilterBank.add_evidence`'s."""
-
-
-def _keeping(
-    measure: MeasurementFunction,
-    kf: MemberFilter,
-    jacobians: list[FloatArray],
-    priors: list[FloatArray],
-) -> MeasurementFunction:
-    """``measure``, keeping each Jacobian it gives and ``kf``'s covariance then."""
 
     def measure_and_keep(x: FloatArray) -> tuple[FloatArray, FloatArray]:
         value, h_jac = measure(x)
@@ -280,40 +242,15 @@ def _keeping(
         priors.append(kf.P)
         return value, h_jac
 
-    return measure_and_keep
-
-
-def fuse_each(
-    bank: FilterBank,
-    name: str,
-    status: AidStatus,
-    reading: MemberReading,
-    measure: MeasurementFunction,
-    time_s: float,
-) -> bool:
-    """:func:`fuse` of a reading each member sees as its own ``(z, R)`` (a pseudo reading
-    that depends on the member's prior: :mod:`.aid.elevation_hinge`), each member's weight
-    by its log-likelihood of the sample as ``reading`` gives it (where not rejected as
-    non-finite or singular; a gated sample's too, as :func:`_record_bank`); the best
-    member's outcome recorded in ``status``. Returns whether the sample was fused into the
-    best member."""
-    best = bank.best
-    decided = bank.decided
-    best_record: tuple[UpdateResult, list[FloatArray], list[FloatArray], FloatArray] | None = None
-    for i, kf in enumerate(bank.filters):
-        if decided and kf is not best:
-            continue
-        z, r, log_likelihood = reading(kf)
-        jacobians: list[FloatArray] = []
-        priors: list[FloatArray] = []
-        result = kf.update(name, z, _keeping(measure, kf, jacobians, priors), r)
-        if not decided and math.isfinite(result.nis):
-            bank.add_evidence(i, -2.0 * log_likelihood, 0.0)
-        if kf is best:
-            best_record = (result, jacobians, priors, r)
-    assert best_record is not None
-    result, jacobians, priors, r = best_record
-    return _record_best(status, best, name, result, jacobians, priors, r, time_s)
+    result = kf.update(name, z, measure_and_keep, r)
+    if not bank.decided and jacobians:
+        bank.add_best_nis(result.nis, log_det_innovation(priors[0], jacobians[0], r))
+    if math.isfinite(result.nis):
+        status.last_innovation = kf.sensors[name].last_innovation
+        status._last_jacobian, status._last_prior, status._last_noise = jacobians[0], priors[0], r
+        threshold = _threshold(kf.gate_probability, z.size)
+        status.last_test_ratio = result.nis / threshold if math.isfinite(threshold) else 0.0
+    return _record(status, result, time_s)
 
 
 def fuse_bound(

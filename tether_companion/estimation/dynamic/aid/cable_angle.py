@@ -34,12 +34,6 @@ row) and its azimuth innovation exceeds :data:`TURN_LIMIT_RAD`, the member's hor
 update that moves the drone along the tangent off the circle; counted in
 :attr:`CableAngleAid.turns`.
 
-On a cable with weight the elevation is a hinge, flat where the cable rests on the ground:
-a member whose cable hangs free takes the reading as the censored reading it is
-(:func:`hinged_reading`, :mod:`.elevation_hinge`), not as the free curve's elevation, which
-put the drone on the touchdown kink at the reading's noise wherever beyond it the drone was
-(the heavy 5 N winch figure-8's start, angle alone; docs/estimation.md, angle21).
-
 A reading was taken ``latency_s`` before its time stamp (and the stamp may be older than the
 filter's time): fused at the drone's position then
 (:func:`~tether_companion.estimation.dynamic.aiding.at_reading_time`; 0.05 s at the
@@ -54,18 +48,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
-from tether_companion.estimation.dynamic.aid.elevation_hinge import pseudo_reading
 from tether_companion.estimation.dynamic.aid.slack import SLACK, surely_slack
-from tether_companion.estimation.dynamic.aiding import (
-    AidStatus,
-    at_reading_time,
-    fuse,
-    fuse_each,
-)
+from tether_companion.estimation.dynamic.aiding import AidStatus, at_reading_time, fuse
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.dynamic.models import UNDEFINED, ModelConstants
-from tether_companion.estimation.ekf import MeasurementFunction
 from tether_companion.frames import wrap_pi
 
 FloatArray = NDArray[np.float64]
@@ -128,52 +115,6 @@ def bearing_curvature_variance(x: FloatArray, p: FloatArray) -> float:
     return min(0.5 * float(np.trace(hp @ hp)), UNIFORM_BEARING_VARIANCE_RAD2)
 
 
-def hinged_reading(
-    x: FloatArray,
-    p: FloatArray,
-    z: FloatArray,
-    r: FloatArray,
-    measure: MeasurementFunction,
-) -> tuple[FloatArray, FloatArray, float]:
-    """A member's own ``(z, R, log-likelihood)`` (:func:`~.aiding.fuse_each`) of the reading
-    ``z`` (elevation, azimuth) [rad] of noise ``r`` (2, 2) [rad^2] on a cable with weight,
-    for the member's state ``x`` and covariance ``p`` and the angles' ``measure``.
-
-    Where the member's cable hangs free (the elevation row's position columns nonzero), the
-    elevation is the hinge's pseudo reading (:mod:`.elevation_hinge`: hinge at the zero's
-    mean, the resting reading's variance ``r + var(e0)``) and the log-likelihood the
-    hinge's for the elevation times the Gaussian's of the azimuth given it; where it rests
-    (the resting model: the elevation is its zero's) or the hinge is undefined, the reading
-    and its Gaussian log-likelihood as they are. Without the ``2 pi`` terms."""
-    h, jac = measure(x)
-    elevation_row = jac[0]
-    s = float(elevation_row @ p @ elevation_row)
-    free = bool(np.any(elevation_row[:3])) and s > 0.0 and math.isfinite(s)
-    hinge_ll = 0.0
-    if free:
-        e0 = state.ELEVATION_ZERO
-        z_pseudo, r_pseudo, hinge_ll = pseudo_reading(
-            float(z[0]), float(h[0]), s, float(r[0, 0]), float(x[e0]), float(r[0, 0] + p[e0, e0])
-        )
-        z = np.array((z_pseudo, z[1]))
-        r = r.copy()
-        r[0, 0] = r_pseudo
-    innovation = z - h
-    innovation_cov = jac @ p @ jac.T + r
-    sign, log_det = np.linalg.slogdet(innovation_cov)
-    if not sign > 0.0:
-        return z, r, math.nan
-    log_likelihood = -0.5 * (
-        float(innovation @ np.linalg.solve(innovation_cov, innovation)) + log_det
-    )
-    if free:  # the elevation's Gaussian (pseudo) part replaced by the hinge's
-        s_elevation = float(innovation_cov[0, 0])
-        log_likelihood += hinge_ll + 0.5 * (
-            innovation[0] * innovation[0] / s_elevation + math.log(s_elevation)
-        )
-    return z, r, log_likelihood
-
-
 class CableAngleAid:
     """Fuses (elevation, azimuth) [rad], each taken ``latency_s`` [s] before its stamp, unless
     the chord tension is surely below ``slack_tension_n`` [N].
@@ -233,15 +174,6 @@ class CableAngleAid:
         if constants.tension_measured:  # the load cell's filter only (class docstring)
             r[1, 1] += bearing_curvature_variance(bank.best.x, bank.best.P)
         delayed = at_reading_time(measure, self._latency_s + age_s)
-        if constants.weight_n_per_m > 0.0:  # the elevation's hinge (elevation_hinge.py)
-            return fuse_each(
-                bank,
-                NAME,
-                self.status,
-                lambda member: hinged_reading(member.x, member.P, z, r, delayed),
-                delayed,
-                time_s,
-            )
         return fuse(bank, NAME, self.status, z, delayed, r, time_s)
 
     @classmethod

@@ -119,6 +119,21 @@ def _fuse(bank: FilterBank, c_path: bool, *args: object) -> object:
         bank_module.FUSE_FORCE_BALANCE = saved
 
 
+def _same_fusion(
+    mine: FilterBank, reference: FilterBank, got: object, expected: object
+) -> tuple[int, int]:
+    """Assert one fusion's C and Python results equal bit for bit (outcomes, Jacobians, priors,
+    log weights, every member's arrays and counts); return its (fused, gated) member counts."""
+    assert _bits(mine.log_weight) == _bits(reference.log_weight)
+    assert _bits(got[0]) == _bits(expected[0])  # type: ignore[index]
+    assert _bits(got[1]) == _bits(expected[1])  # type: ignore[index]
+    assert _bits(got[2]) == _bits(expected[2])  # type: ignore[index]
+    for a, b in zip(mine.filters, reference.filters, strict=True):
+        assert _member_bits(a) == _member_bits(b)
+    statuses = [result.status for result in got[0]]  # type: ignore[index]
+    return statuses.count("fused"), statuses.count("gated")
+
+
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")  # the numpy reference on non-finite states
 def test_bit_for_bit_on_random_banks() -> None:
     if os.environ.get("TETHER_PURE_PYTHON"):
@@ -139,16 +154,9 @@ def test_bit_for_bit_on_random_banks() -> None:
             expected = _fuse(reference, False, SENSOR, z, measure, r, tempering)
             took = _took(mine, z, measure, r, tempering)
             got = _fuse(mine, True, SENSOR, z, measure, r, tempering)
-            assert _bits(mine.log_weight) == _bits(reference.log_weight)
             taken += took
-            assert _bits(got[0]) == _bits(expected[0])  # type: ignore[index]
-            assert _bits(got[1]) == _bits(expected[1])  # type: ignore[index]
-            assert _bits(got[2]) == _bits(expected[2])  # type: ignore[index]
-            for a, b in zip(mine.filters, reference.filters, strict=True):
-                assert _member_bits(a) == _member_bits(b)
-            for result in got[0]:  # type: ignore[index]
-                fused += result.status == "fused"
-                gated += result.status == "gated"
+            counts = _same_fusion(mine, reference, got, expected)
+            fused, gated = fused + counts[0], gated + counts[1]
         forced += sum(s.forced for kf in mine.filters for s in kf.sensors.values())
     assert taken > 1000 and fused > 1000 and gated > 100 and forced > 10, (
         taken, fused, gated, forced,
@@ -292,15 +300,8 @@ def test_scalar_bit_for_bit_on_random_banks() -> None:
             expected = _fuse_scalar(reference, False, SENSOR, z, measure, r, None, tempering)
             taken += _call_scalar(copy.deepcopy(mine), z, measure, r, tempering) is not None
             got = _fuse_scalar(mine, True, SENSOR, z, measure, r, None, tempering)
-            assert _bits(mine.log_weight) == _bits(reference.log_weight)
-            assert _bits(got[0]) == _bits(expected[0])  # type: ignore[index]
-            assert _bits(got[1]) == _bits(expected[1])  # type: ignore[index]
-            assert _bits(got[2]) == _bits(expected[2])  # type: ignore[index]
-            for a, b in zip(mine.filters, reference.filters, strict=True):
-                assert _member_bits(a) == _member_bits(b)
-            for result in got[0]:  # type: ignore[index]
-                fused += result.status == "fused"
-                gated += result.status == "gated"
+            counts = _same_fusion(mine, reference, got, expected)
+            fused, gated = fused + counts[0], gated + counts[1]
     assert taken > 1000 and fused > 1000 and gated > 100, (taken, fused, gated)
 
 

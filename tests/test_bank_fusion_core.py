@@ -110,13 +110,30 @@ def _bank(rng: np.random.Generator) -> FilterBank:
     return FilterBank(filters, 0.0, 6.0, consider=consider)
 
 
-def _fuse(bank: FilterBank, c_path: bool, *args: object) -> object:
-    saved = bank_module.FUSE_FORCE_BALANCE
-    bank_module.FUSE_FORCE_BALANCE = core.fuse_force_balance if c_path else None
+def _fuse_through(entry: str, bank: FilterBank, c_path: bool, *args: object) -> object:
+    """The bank's fusion ``entry`` ("FUSE_FORCE_BALANCE" or "FUSE_SCALAR") with its one C call
+    on (``c_path``) or off (the Python reference)."""
+    saved = getattr(bank_module, entry)
+    setattr(bank_module, entry, getattr(core, entry.lower()) if c_path else None)
     try:
-        return bank.update_force_balance(*args)  # type: ignore[arg-type]
+        method = bank.update_force_balance if entry == "FUSE_FORCE_BALANCE" else bank.update_scalar
+        return method(*args)  # type: ignore[arg-type]
     finally:
-        bank_module.FUSE_FORCE_BALANCE = saved
+        setattr(bank_module, entry, saved)
+
+
+def _fuse(bank: FilterBank, c_path: bool, *args: object) -> object:
+    return _fuse_through("FUSE_FORCE_BALANCE", bank, c_path, *args)
+
+
+def _core_call(
+    function: object, bank: FilterBank, z: object, measure: object, r: object, tempering: object
+) -> object:
+    """One C fusion called directly on ``bank``'s members (None: not taken)."""
+    return function(  # type: ignore[operator]
+        bank.filters, SENSOR, z, measure, r, *_hold(bank), np.empty, bank_module.UpdateResult,
+        bank_module.FUSED, bank_module.GATED, bank.log_weight, tempering,
+    )  # fmt: skip
 
 
 def _same_fusion(
@@ -188,10 +205,7 @@ def _ready_bank() -> tuple[FilterBank, object]:
 def _call(
     bank: FilterBank, z: object, measure: object, r: object, tempering: object = 5.0
 ) -> object:
-    return core.fuse_force_balance(
-        bank.filters, SENSOR, z, measure, r, *_hold(bank), np.empty, bank_module.UpdateResult,
-        bank_module.FUSED, bank_module.GATED, bank.log_weight, tempering,
-    )  # fmt: skip
+    return _core_call(core.fuse_force_balance, bank, z, measure, r, tempering)
 
 
 @pytest.mark.parametrize(
@@ -264,21 +278,13 @@ def _scalar_measure_for(rng: np.random.Generator):  # noqa: ANN202 (a model clos
 
 
 def _fuse_scalar(bank: FilterBank, c_path: bool, *args: object) -> object:
-    saved = bank_module.FUSE_SCALAR
-    bank_module.FUSE_SCALAR = core.fuse_scalar if c_path else None
-    try:
-        return bank.update_scalar(*args)  # type: ignore[arg-type]
-    finally:
-        bank_module.FUSE_SCALAR = saved
+    return _fuse_through("FUSE_SCALAR", bank, c_path, *args)
 
 
 def _call_scalar(
     bank: FilterBank, z: object, measure: object, r: object, tempering: object = 20.0
 ) -> object:
-    return core.fuse_scalar(
-        bank.filters, SENSOR, z, measure, r, *_hold(bank), np.empty, bank_module.UpdateResult,
-        bank_module.FUSED, bank_module.GATED, bank.log_weight, tempering,
-    )  # fmt: skip
+    return _core_call(core.fuse_scalar, bank, z, measure, r, tempering)
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")  # the numpy reference on non-finite states

@@ -35,7 +35,7 @@ def test_the_sagitta_is_the_chord_the_linearisation_misses() -> None:
     """``r = |p| - u_m . p = |p| (1 - cos delta)``, over ``u^T P u``."""
     mean = _at(0.0).x
     member = _at(40.0, sd_m=0.2)
-    (nis,) = bank_reduction.chord_nis(mean, [member.x], [member.P])
+    (nis,) = bank_reduction.chord_nis(mean[:3].tolist(), [bank_reduction.chord(member.x, member.P)])
     # both at 60 deg elevation: the angle between them from the anchor
     cos_delta = float(mean[:3] @ member.x[:3]) / RADIUS_M**2
     sagitta = RADIUS_M * (1.0 - cos_delta)

@@ -277,12 +277,12 @@ class FilterBank(BankUpdates):
         elapsed = time_s - self.start_s
         if elapsed < MIN_BANK_S:
             return
-        w = self.weights()
-        best = int(np.argmax(w))
-        if w[best] >= SELECT_WEIGHT:
-            self.keep([best])  # other bearings rejected: not confirmed
+        w = self._weight_list()
+        top = max(w)
+        if top >= SELECT_WEIGHT:
+            self.keep([w.index(top)])  # other bearings rejected: not confirmed
         elif elapsed >= self.max_bank_s:
-            self._reduce(w.tolist())
+            self._reduce(w)
 
     def _reduce(self, w: list[float]) -> None:
         """The bank undecided after ``max_bank_s`` (``w`` the normalised weights): the

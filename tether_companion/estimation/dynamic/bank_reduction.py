@@ -36,6 +36,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -72,69 +73,89 @@ def moments(
     return mean, 0.5 * (cov + cov.T)
 
 
-def chord_nis(mean: FloatArray, xs: Sequence[FloatArray], ps: Sequence[FloatArray]) -> list[float]:
-    """Each member's chord linearisation NIS at ``mean`` (see the module docstring):
-    ``r_i = |p_i| - u_m . p_i`` [m] (``= |p_i| (1 - cos delta_i)``, ``delta_i`` the angle
-    between the member's and the mean's position, NED from the anchor) over the member's own
-    variance along its chord, ``u_i^T P_i u_i`` [m^2]; NaN where a position is at the anchor
-    (no chord direction) or that variance is not positive."""
-    p_m = mean[:3]
-    rho_m = math.sqrt(float(p_m @ p_m))
+@dataclass(frozen=True, slots=True)
+class Chord:
+    """What :func:`chord_nis` reads of a member: its position and how well it resolves its
+    chord (computed once per reduction, not per trial set)."""
+
+    position: tuple[float, float, float]
+    """The member's position, NED from the anchor [m]."""
+    length_m: float
+    """``|p_i|``, the chord [m]."""
+    variance_m2: float
+    """``u_i^T P_i u_i`` (``u_i = p_i / |p_i|``), the member's variance along its chord [m^2];
+    NaN where the position is at the anchor (no chord direction)."""
+
+
+def chord(x: FloatArray, p: FloatArray) -> Chord:
+    """A member's :class:`Chord` from its state (n,) and covariance (n, n)."""
+    n, e, d = x[:3].tolist()
+    rho = math.sqrt(n * n + e * e + d * d)
+    if not rho > 0.0:
+        return Chord((n, e, d), rho, math.nan)
+    un, ue, ud = n / rho, e / rho, d / rho
+    (pnn, pne, pnd), (pen, pee, ped), (pdn, pde, pdd) = p[:3, :3].tolist()
+    variance = (
+        un * (pnn * un + pne * ue + pnd * ud)
+        + ue * (pen * un + pee * ue + ped * ud)
+        + ud * (pdn * un + pde * ue + pdd * ud)
+    )
+    return Chord((n, e, d), rho, variance)
+
+
+def chord_nis(mean_position: Sequence[float], chords: Sequence[Chord]) -> list[float]:
+    """Each member's chord linearisation NIS at the position ``mean_position`` (NED from the
+    anchor [m]; see the module docstring): ``r_i = |p_i| - u_m . p_i`` [m] (``= |p_i| (1 - cos
+    delta_i)``, ``delta_i`` the angle at the anchor between the member's and the mean's
+    position) over the member's own variance along its chord [m^2]; NaN where a position is at
+    the anchor (no chord direction) or that variance is not positive."""
+    mn, me, md = mean_position
+    rho_m = math.sqrt(mn * mn + me * me + md * md)
     out = []
-    for x, p in zip(xs, ps, strict=True):
-        p_i = x[:3]
-        rho = math.sqrt(float(p_i @ p_i))
-        if not (rho > 0.0 and rho_m > 0.0):
+    for c in chords:
+        variance = c.variance_m2
+        if not (rho_m > 0.0 and variance > 0.0):  # NaN too
             out.append(math.nan)
             continue
-        u = p_i / rho
-        variance = float(u @ p[:3, :3] @ u)
-        r = rho - float(p_m @ p_i) / rho_m
-        out.append(r * r / variance if variance > 0.0 else math.nan)
+        pn, pe, pd = c.position
+        r = c.length_m - (mn * pn + me * pe + md * pd) / rho_m
+        out.append(r * r / variance)
     return out
 
 
-def one_gaussian(
-    weights: Sequence[float],
-    xs: Sequence[FloatArray],
-    ps: Sequence[FloatArray],
-    threshold: float,
-) -> tuple[FloatArray, FloatArray] | None:
-    """The moments of the members ``xs``, ``ps`` with ``weights`` when one Gaussian represents
-    them (every member's :func:`chord_nis` at the moments' mean within ``threshold``), else
-    None (a NaN: not shown to be linear, None)."""
-    mean, cov = moments(weights, xs, ps)
-    if len(xs) == 1 or all(nis <= threshold for nis in chord_nis(mean, xs, ps)):
-        return mean, cov
-    return None
+def one_gaussian(weights: Sequence[float], chords: Sequence[Chord], threshold: float) -> bool:
+    """Whether one Gaussian represents the members ``chords`` with ``weights``: every member's
+    :func:`chord_nis` at the weighted mean position within ``threshold`` (a NaN: not shown to
+    be linear, False). Only the mean position is computed here; the set's moments
+    (:func:`moments`) when it is merged."""
+    if len(chords) == 1:
+        return True
+    total = sum(weights)
+    mn = me = md = 0.0
+    for w, c in zip(weights, chords, strict=True):
+        share = w / total
+        pn, pe, pd = c.position
+        mn += share * pn
+        me += share * pe
+        md += share * pd
+    return all(nis <= threshold for nis in chord_nis((mn, me, md), chords))
 
 
-def clusters(
-    weights: Sequence[float],
-    xs: Sequence[FloatArray],
-    ps: Sequence[FloatArray],
-    threshold: float,
-) -> list[tuple[list[int], tuple[FloatArray, FloatArray]]]:
+def clusters(weights: Sequence[float], chords: Sequence[Chord], threshold: float) -> list[list[int]]:
     """Members grouped into sets that one Gaussian each represents (:func:`one_gaussian`),
-    greedily from the heaviest: each member joins the first set (in order of creation) whose
-    moments with it still pass, else starts its own. Returns each set's member indices
-    (heaviest first) and moments."""
+    greedily from the heaviest: each member joins the first set (in order of creation) that
+    still passes with it, else starts its own. Returns each set's member indices (heaviest
+    first)."""
     order = sorted(range(len(weights)), key=lambda i: -weights[i])
-    groups: list[tuple[list[int], tuple[FloatArray, FloatArray]]] = []
+    groups: list[list[int]] = []
     for i in order:
-        for k, (members, _) in enumerate(groups):
+        for members in groups:
             trial = [*members, i]
-            merged = one_gaussian(
-                [weights[j] for j in trial],
-                [xs[j] for j in trial],
-                [ps[j] for j in trial],
-                threshold,
-            )
-            if merged is not None:
-                groups[k] = (trial, merged)
+            if one_gaussian([weights[j] for j in trial], [chords[j] for j in trial], threshold):
+                members.append(i)
                 break
         else:
-            groups.append(([i], (xs[i], ps[i])))
+            groups.append([i])
     return groups
 
 
@@ -148,23 +169,25 @@ def reduce(
     """The bank's members, log weights and bearings after the reduction (None: nothing
     dropped or merged): the members below ``drop_weight`` (normalised ``weights``) go, the
     rest form :func:`clusters`; each set of several becomes its heaviest member reset to the
-    set's moments (a merge is not a restart: its reset count kept), with the set's summed
-    weight. One set left: that member alone, log weight 0 and bearing 0 (decided)."""
+    set's :func:`moments` (a merge is not a restart: its reset count kept), with the set's
+    summed weight. One set left: that member alone, log weight 0 and bearing 0 (decided)."""
     kept = [i for i, wi in enumerate(weights) if wi >= drop_weight]
     found = clusters(
-        [weights[i] for i in kept],
-        [filters[i].x for i in kept],
-        [filters[i].P for i in kept],
-        threshold(),
+        [weights[i] for i in kept], [chord(filters[i].x, filters[i].P) for i in kept], threshold()
     )
     if len(found) == len(weights):
         return None
     top = max(log_weight)
     members, merged_weights, merged_bearings = [], [], []
-    for indices, (mean, cov) in found:
+    for indices in found:
         first = kept[indices[0]]  # the heaviest of the set
         kf = filters[first]
         if len(indices) > 1:
+            mean, cov = moments(
+                [weights[kept[j]] for j in indices],
+                [filters[kept[j]].x for j in indices],
+                [filters[kept[j]].P for j in indices],
+            )
             resets = kf.resets
             kf.reset(mean, cov)
             kf.resets = resets

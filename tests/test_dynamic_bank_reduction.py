@@ -113,3 +113,38 @@ def test_an_unresolved_chord_lets_far_members_collapse() -> None:
     bank = _bank([_at(130.0, sd_m=2.0), _at(31.0, sd_m=2.0)], [0.6, 0.4])
     bank.maybe_decide(6.5)
     assert bank.decided
+
+
+def test_the_scalar_chord_test_is_the_moments_mean_in_arrays() -> None:
+    """The re-test reads each member's chord once and a trial set's mean position only: its
+    NIS equal (to rounding) the sagitta computed in arrays at the mixture moments' mean, for
+    random members (seeded) across the threshold."""
+    rng = np.random.default_rng(7)
+    passed = 0
+    for _ in range(200):
+        members = [
+            _at(rng.uniform(-180.0, 180.0), rng.uniform(0.02, 1.0), rng.uniform(10.0, 80.0))
+            for _ in range(int(rng.integers(2, 5)))
+        ]
+        weights = rng.uniform(0.05, 1.0, len(members)).tolist()
+        xs, ps = [kf.x for kf in members], [kf.P for kf in members]
+        mean = bank_reduction.moments(weights, xs, ps)[0][:3]
+        expected = []
+        for x, p in zip(xs, ps, strict=True):
+            u = x[:3] / np.linalg.norm(x[:3])
+            sagitta = np.linalg.norm(x[:3]) - float(mean @ x[:3]) / np.linalg.norm(mean)
+            expected.append(sagitta**2 / float(u @ p[:3, :3] @ u))
+        chords = [bank_reduction.chord(x, p) for x, p in zip(xs, ps, strict=True)]
+        total = sum(weights)
+        scalar_mean = [
+            sum(w / total * c.position[k] for w, c in zip(weights, chords, strict=True))
+            for k in range(3)
+        ]
+        np.testing.assert_allclose(
+            bank_reduction.chord_nis(scalar_mean, chords), expected, rtol=1e-9, atol=1e-12
+        )
+        represented = all(v <= bank_reduction.threshold() for v in expected)
+        threshold = bank_reduction.threshold()
+        assert bank_reduction.one_gaussian(weights, chords, threshold) is represented
+        passed += represented
+    assert 10 < passed < 190  # both outcomes exercised

@@ -28,6 +28,10 @@ seed 6 the same at +130 / +31 deg). The wind and the thrust scale enter the mode
 (the rotor drag, ``s T``) and are not tested. Where the radius is not resolved (no length:
 the angle alone early) ``sigma_i`` is wide and the sets merge.
 
+While sets run on the bank re-tests them at every force-balance fusion (50 Hz), so the test is
+scalar: each member's :class:`Chord` is read once, a trial set's mean position alone is formed,
+and the full moments only for a set that merges.
+
 Pure.
 """
 
@@ -141,7 +145,9 @@ def one_gaussian(weights: Sequence[float], chords: Sequence[Chord], threshold: f
     return all(nis <= threshold for nis in chord_nis((mn, me, md), chords))
 
 
-def clusters(weights: Sequence[float], chords: Sequence[Chord], threshold: float) -> list[list[int]]:
+def clusters(
+    weights: Sequence[float], chords: Sequence[Chord], threshold: float
+) -> list[list[int]]:
     """Members grouped into sets that one Gaussian each represents (:func:`one_gaussian`),
     greedily from the heaviest: each member joins the first set (in order of creation) that
     still passes with it, else starts its own. Returns each set's member indices (heaviest

@@ -126,7 +126,10 @@ def test_mavsdk_reads_signed_frames_unchecked_and_its_unsigned_commands_are_deni
     service, ack, gate = asyncio.run(scenario())
     assert ack["command"] == TENSION_MODE_COMMAND
     assert ack["result"] == dialect.MAV_RESULT_DENIED
-    assert service.session.commands_refused == {UNSIGNED_COMMAND: 1}
+    # MAVSDK's command sender sends the command again when its ACK is late (a busy machine):
+    # each copy is refused, none is obeyed
+    refused = service.session.commands_refused
+    assert refused.keys() == {UNSIGNED_COMMAND} and refused[UNSIGNED_COMMAND] >= 1, refused
     assert not service.session.modes.modes.enabled
     # its heartbeats dropped; its commands let through only to be refused (MAVSDK also sends
     # its own requests to the systems it found, addressed to others: ignored)

@@ -73,10 +73,14 @@ def place(
         anchor = math.hypot(1.0, down / pull) - height / parameter
         if length >= rise:  # longer than any free curve to this height: on the ground
             span = length - rise + parameter * math.acosh(1.0 + height / parameter)
+        elif length > height:  # a free curve of this length
+            span = free_span(height, length, parameter)
         elif anchor >= 1.0 or not math.isnan(length):
             span = parameter * (math.asinh(down / pull) - math.acosh(max(anchor, 1.0)))
         else:
             return None
+    elif length > height:
+        span = math.sqrt(length * length - height * height)
     else:
         span = height * pull / down
     distance = math.hypot(span, height)
@@ -84,6 +88,12 @@ def place(
         return None
     bearing = -np.asarray(force[:2]) / pull
     return np.array((*(bearing * span), -height, pull * distance / span))
+
+
+def free_span(height: float, length: float, parameter: float) -> float:
+    """The span [m] of a free catenary of ``parameter`` ``c = H/w`` [m] and arc ``length``
+    [m] whose ends are ``height`` [m] apart vertically: ``L^2 = b^2 + (2 c sinh(a / 2c))^2``."""
+    return 2.0 * parameter * math.asinh(math.sqrt(length * length - height * height) / (2.0 * parameter))
 
 
 def place_heavy_by_angle(

@@ -42,7 +42,12 @@ def place(
     span beyond the touchdown, so only the winch length places it: a length at least the
     rise ``sqrt(b^2 + 2 b c)`` (longer than any free curve reaching the height) lies on
     the ground over ``L - rise`` and ``a = L - rise + c acosh(1 + b/c)``; without a
-    length a pull with ``cosh`` at or below 1 places nothing. Without a height, the chord of a
+    length a pull with ``cosh`` at or below 1 places nothing. A free curve with a winch
+    length has the length's span (:func:`free_span`; the straight line's ``sqrt(L^2 - b^2)``),
+    the force giving the bearing and the tension: the slope's span moves metres for a few
+    percent of thrust scale, and started that way the bank's members were scored by the
+    length's first readings for their placements (docs/estimation-history.md, winch22).
+    Without a height, the chord of a
     winch length ``L`` along the force (the weight's pull taken as half the cable's, a
     first guess the filter refines).
 

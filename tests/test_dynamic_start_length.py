@@ -47,6 +47,7 @@ def test_a_straight_cables_chord_is_the_length_whatever_the_slope(down: float) -
     assert np.linalg.norm(placed[:3]) == pytest.approx(5.0, rel=1e-12)
     assert placed[2] == -2.0
     assert placed[1] == pytest.approx(0.0, abs=1e-12) and placed[0] > 0.0  # the pull's bearing
+    assert placed[3] == pytest.approx(math.hypot(4.0, down))  # T_ch: the force's |F|, as before
 
 
 @pytest.mark.parametrize("down", [1.0, 2.5, 4.0])

@@ -44,7 +44,9 @@ def place(
     the ground over ``L - rise`` and ``a = L - rise + c acosh(1 + b/c)``; without a
     length a pull with ``cosh`` at or below 1 places nothing. A free curve with a winch
     length has the length's span (:func:`free_span`; the straight line's ``sqrt(L^2 - b^2)``),
-    the force giving the bearing and the tension: the slope's span moves metres for a few
+    the force giving the bearing and ``T_ch`` as on its own curve (the straight line's ``|F|``;
+    from the length's geometry a weak pull turned by a wind hypothesis read slack and that
+    member did not start): the slope's span moves metres for a few
     percent of thrust scale, and started that way the bank's members were scored by the
     length's first readings for their placements (docs/estimation-history.md, winch22).
     Without a height, the chord of a
@@ -78,21 +80,20 @@ def place(
         anchor = math.hypot(1.0, down / pull) - height / parameter
         if length >= rise:  # longer than any free curve to this height: on the ground
             span = length - rise + parameter * math.acosh(1.0 + height / parameter)
-        elif length > height:  # a free curve of this length
-            span = free_span(height, length, parameter)
+            sloped = span
         elif anchor >= 1.0 or not math.isnan(length):
-            span = parameter * (math.asinh(down / pull) - math.acosh(max(anchor, 1.0)))
+            sloped = parameter * (math.asinh(down / pull) - math.acosh(max(anchor, 1.0)))
+            span = free_span(height, length, parameter) if length > height else sloped
         else:
             return None
-    elif length > height:
-        span = math.sqrt(length * length - height * height)
     else:
-        span = height * pull / down
+        sloped = height * pull / down
+        span = math.sqrt(length * length - height * height) if length > height else sloped
     distance = math.hypot(span, height)
-    if not span > 0.0 or height / distance < MIN_RISE:
+    if not (span > 0.0 and sloped > 0.0) or height / distance < MIN_RISE:
         return None
     bearing = -np.asarray(force[:2]) / pull
-    return np.array((*(bearing * span), -height, pull * distance / span))
+    return np.array((*(bearing * span), -height, pull * math.hypot(sloped, height) / sloped))
 
 
 def free_span(height: float, length: float, parameter: float) -> float:

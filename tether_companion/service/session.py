@@ -263,13 +263,20 @@ class EstimationSession:
         """Process one intact, admitted frame of the flight controller's input streams that
         :meth:`FrameIngest.take <tether_companion.service.ingest_frames.FrameIngest.take>`
         accepted, as :meth:`on_message` processes the message decoded from it; None for a
-        frame of one motor-output sample (it makes no message, publication or estimate: the
-        step :meth:`on_sample` would give is empty)."""
+        frame of one motor-output sample, or of one attitude sample when no mode tick is due
+        (it makes no message, publication or estimate: the step :meth:`on_sample` would give
+        is empty)."""
         samples = self.frames.samples(frame, local_s)
         if len(samples) == 1 and not self.ingest.rebooted:  # the usual frame: one sample
             sample = samples[0]
-            if type(sample) is PwmSample:
+            kind = type(sample)
+            if kind is PwmSample:
                 self._feed_pwm(sample)
+                return None
+            if kind is AttitudeSample and (
+                not self.messages or sample.time_s < self._next_mode_tick_s
+            ):  # what _on_attitude does when _mode_tick returns no messages
+                self._feed_attitude(sample)
                 return None
             return self.on_sample(sample)
         return self.on_received(samples)
@@ -349,11 +356,15 @@ class EstimationSession:
         return tension
 
     def _on_attitude(self, sample: AttitudeSample) -> Step:
+        self._feed_attitude(sample)
+        return Step(messages=self._mode_tick(sample.time_s)) if self.messages else Step()
+
+    def _feed_attitude(self, sample: AttitudeSample) -> None:
+        """The attitude to the modes' tension filter (when it runs) and the EKF."""
         if self._feeds_tension:  # the modes' tension filter itself (the modes only pass it on)
             self.modes.estimator.on_attitude(sample)
         self.attitude = sample
         self.estimator.on_attitude(sample)
-        return Step(messages=self._mode_tick(sample.time_s)) if self.messages else Step()
 
     def _on_pwm(self, sample: PwmSample) -> Step:
         self._feed_pwm(sample)

@@ -254,7 +254,8 @@ class Publisher:
                 self._ever_ok = True
         elif not self._ever_ok:
             self._ok_since_s = math.inf
-        out += self._health_transition(health, t)
+        if health != self.health or health != self._announced:  # else it returns [] unchanged
+            out += self._health_transition(health, t)
         self.counters.by_health[health] += 1
         if (
             self.messages

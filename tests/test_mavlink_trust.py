@@ -5,6 +5,7 @@ flight controller out of."""
 from __future__ import annotations
 
 import asyncio
+import random
 import socket
 
 import pytest
@@ -105,6 +106,40 @@ def test_the_flight_controller_is_pinned_to_its_first_address() -> None:
     assert trust.fc_source == OTHER and trust.counters.repins == 1
     assert any("moved" in event for event in trust.events)
     assert not trust.admit(_imu(fc), FC)
+
+
+def _pin_state(trust: LinkTrust) -> tuple:
+    return (
+        trust.fc_source,
+        trust._fc_heard_s,  # noqa: SLF001 - the state the short cut must keep
+        trust._candidate,  # noqa: SLF001
+        trust._candidate_heartbeats,  # noqa: SLF001
+        list(trust.events),
+        trust.counters.repins,
+    )
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_the_pinned_address_short_cut_keeps_what_fc_source_ok_does(seed: int) -> None:
+    """``admit``'s short cut for the pinned address's frames (no call of ``_fc_source_ok``)
+    gives the same verdict and leaves the pin, its heard time, the candidate and the events as
+    ``_fc_source_ok`` does, over random frames from four sources (one unknown) and clock steps
+    across the repin silence."""
+    rng = random.Random(seed)
+    clock = Clock()
+    fast, reference = _trust(OFF, clock), _trust(OFF, clock)
+    fc = FrameEncoder(1, 1)
+    sources = (FC, OTHER, ("127.0.0.1", 7000), None)
+    for _ in range(3000):
+        clock.t += rng.choice((0.0, 0.1, 0.7, 2.5))
+        source = rng.choice(sources)
+        heartbeat = rng.random() < 0.5
+        frame = _heartbeat(fc) if heartbeat else _imu(fc)
+        msg_id = mav.MAVLINK_MSG_ID_HEARTBEAT if heartbeat else mav.MAVLINK_MSG_ID_RAW_IMU
+        expected = reference._fc_source_ok(source, msg_id)  # noqa: SLF001 - the reference
+        assert fast.admit(frame, source) == expected
+        assert _pin_state(fast) == _pin_state(reference)
+    assert fast.counters.repins > 0  # the sequences move the pin
 
 
 def test_frame_parser_drops_what_the_gate_refuses_before_decoding() -> None:

@@ -179,9 +179,15 @@ class LinkTrust:
                     self.signer.observe(self.verifier.timestamp)
             else:
                 counters.unsigned_commands += 1
-        if (system, component) == self.fc_ids and not self._fc_source_ok(source, msg_id):
-            counters.foreign_source += 1
-            return False
+        if (system, component) == self.fc_ids:
+            fc_source = self.fc_source
+            if fc_source is not None and source == fc_source and not self._candidate_heartbeats:
+                # the usual frame: what _fc_source_ok does for the pinned address with no
+                # candidate (heartbeats are 0 only while the candidate is None), without a call
+                self._fc_heard_s = self._monotonic_s()
+            elif not self._fc_source_ok(source, msg_id):
+                counters.foreign_source += 1
+                return False
         if system in self.command_sources and source is not None:
             self._ground_stations[source] = None
             self._ground_stations.move_to_end(source)

@@ -44,13 +44,12 @@ def place(
     the ground over ``L - rise`` and ``a = L - rise + c acosh(1 + b/c)``; without a
     length a pull with ``cosh`` at or below 1 places nothing. A free curve with a winch
     length has the length's span (:func:`free_span`; the straight line's ``sqrt(L^2 - b^2)``),
-    the force giving the bearing and ``T_ch`` as on its own curve (the straight line's ``|F|``;
-    from the length's geometry a weak pull turned by a wind hypothesis read slack and that
-    member did not start): the slope's span moves metres for a few
-    percent of thrust scale, and started that way the bank's members were scored by the
-    length's first readings for their placements (docs/estimation-history.md, winch22).
-    Without a height, the chord of a
-    winch length ``L`` along the force (the weight's pull taken as half the cable's, a
+    the force giving the bearing and ``T_ch`` as on its own curve (the straight line's
+    ``|F|``; from the length's geometry a weak pull turned by a wind hypothesis read slack and
+    that member did not start): the slope's span moves metres for a few percent of thrust
+    scale, and started that way the bank's members were scored by the length's first readings
+    for their placements (docs/estimation-history.md, winch22). Without a height, the chord
+    of a winch length ``L`` along the force (the weight's pull taken as half the cable's, a
     first guess the filter refines).
 
     With a cable angle at the anchor (``elevation``, ``azimuth`` [rad]; ``nan``: none;
@@ -99,7 +98,8 @@ def place(
 def free_span(height: float, length: float, parameter: float) -> float:
     """The span [m] of a free catenary of ``parameter`` ``c = H/w`` [m] and arc ``length``
     [m] whose ends are ``height`` [m] apart vertically: ``L^2 = b^2 + (2 c sinh(a / 2c))^2``."""
-    return 2.0 * parameter * math.asinh(math.sqrt(length * length - height * height) / (2.0 * parameter))
+    chord_m = math.sqrt(length * length - height * height)
+    return 2.0 * parameter * math.asinh(chord_m / (2.0 * parameter))
 
 
 def place_heavy_by_angle(

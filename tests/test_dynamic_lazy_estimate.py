@@ -267,3 +267,9 @@ def test_an_approximate_decision_near_a_threshold_is_left_to_the_exact_values() 
     near = dict(common, horizontal_m2=(0.09 + 1e-13, 0.0, 0.01))
     assert decide(tension_n=4.0, margin=1e-9, variance_tol=1e-12, **near) is None
     assert decide(tension_n=4.0, **near) == WEAK_PULL  # exact: std 0.3 + 2e-13 m > 0.3 m
+    # the pull rule the same way: clear, within the margin, not a number
+    weak = dict(common, tension_n=4.0, min_horizontal_pull_n=3.5)
+    assert decide(margin=1e-9, **weak) == WEAK_PULL
+    assert decide(margin=1e-9, **dict(weak, min_horizontal_pull_n=3.0 * (1 + 1e-12))) is None
+    assert decide(margin=1e-9, **dict(weak, horizontal_pull_n=math.nan)) is None
+    assert decide(**dict(weak, horizontal_pull_n=math.nan)) == OK  # exact: nan < b is False

@@ -473,4 +473,4 @@ class EstimationSession:
                 unavailable=CATENARY_UNAVAILABLE.get(catenary.status),
                 send_now=self.send_now,
             )
-        return Step(messages=messages, publication=publication, estimate=estimate)
+        return Step(messages, publication, estimate)  # positional: no keywords' dict a tick

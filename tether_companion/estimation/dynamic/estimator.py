@@ -406,9 +406,9 @@ class DynamicTetherEstimator(InputFeed, GroundStationFeed):
         batch = self._batch
         health = self.health
         winch_fused = bool(health.winch_fused)
-        sag = NO_SAG
+        sag_std_m, sag_m2 = NO_SAG
         if mixture is not None and self.constants.weight_n_per_m > 0.0:
-            sag = self._sag.at(mixture, self.constants, winch_fused)
+            sag_std_m, sag_m2 = self._sag.at(mixture, self.constants, winch_fused)
         source = TickSource(
             mixture,
             None if batch is None or bank is None else batch.step(),
@@ -432,8 +432,9 @@ class DynamicTetherEstimator(InputFeed, GroundStationFeed):
                 self.autopilot_landed.on_ground(self._time_s),
             ),
             stale,
-            *sag,
-            terrain_m2=self.rangefinder.ground.variance_m2,
+            sag_std_m,
+            sag_m2,
+            self.rangefinder.ground.variance_m2,
         )
         return NavigationEstimate.of_tick(
             self._time_s,

@@ -374,7 +374,6 @@ def assess(
 
 
 def decide(
-    *,
     initialised: bool,
     reset: bool,
     on_ground: str,

@@ -374,6 +374,7 @@ def assess(
 
 
 def decide(
+    *,
     initialised: bool,
     reset: bool,
     on_ground: str,
@@ -420,26 +421,16 @@ def decide(
         return ON_GROUND
     if inputs_stale:
         return STALE_INPUTS
-    # ``a < b``, undecided (None) when ``margin`` > 0 and ``a`` is within ``margin``
-    # (relative) of ``b`` or either is not a number; written out (no call: this runs at
-    # every IMU tick's status read)
-    approximate = margin > 0.0
-    if approximate and not abs(tension_n - slack_tension_n) > margin * (
-        abs(tension_n) + abs(slack_tension_n)
-    ):
-        return None
-    if tension_n < slack_tension_n:
-        return SLACK
+    slack = _less(tension_n, slack_tension_n, margin)
+    if slack is None or slack:
+        return None if slack is None else SLACK
     if range_unknown:
         return WEAK_PULL
-    if approximate and not abs(horizontal_pull_n - min_horizontal_pull_n) > margin * (
-        abs(horizontal_pull_n) + abs(min_horizontal_pull_n)
-    ):
-        return None
-    if horizontal_pull_n < min_horizontal_pull_n:
-        return WEAK_PULL
+    weak = _less(horizontal_pull_n, min_horizontal_pull_n, margin)
+    if weak is None or weak:
+        return None if weak is None else WEAK_PULL
     std = _largest_std_values(*horizontal_m2)
-    if approximate or variance_tol > 0.0:  # the larger eigenvalue moves by <= 2 tol
+    if margin > 0.0 or variance_tol > 0.0:  # the larger eigenvalue moves by <= 2 tol
         bound_sq = max_horizontal_std_m * max_horizontal_std_m
         if not abs(std * std - bound_sq) > 4.0 * variance_tol + margin * (std * std + bound_sq):
             return None
@@ -451,6 +442,14 @@ def decide(
     if learning is None:
         return None
     return LEARNING if learning else WEAK_PULL
+
+
+def _less(a: float, b: float, margin: float) -> bool | None:
+    """``a < b``; None when ``margin`` > 0 and ``a`` is within ``margin`` (relative) of ``b``
+    or either is not a number."""
+    if margin > 0.0 and not abs(a - b) > margin * (abs(a) + abs(b)):
+        return None
+    return a < b
 
 
 def _largest_std_values(a: float, b: float, c: float) -> float:

@@ -336,21 +336,21 @@ class TickSource:
             min_pull = min_horizontal_pull_n(
                 settings.pull_per_wind_n_s_per_m, settings.wind_std_mps, x[11], x[12]
             )
-        return decide(  # positional: by keywords, ~0.9k instructions more a tick
-            self.initialised_reason is None,  # initialised
-            self.reset_reason is not None,  # reset
-            self.on_ground,
-            self.inputs_stale,
-            tension,
-            settings.slack_tension_n,
-            horizontal,  # horizontal_m2
-            settings.max_horizontal_std_m,
-            pull,  # horizontal_pull_n
-            min_pull,  # min_horizontal_pull_n
-            self._explained,  # explained
-            MARGIN,  # margin
-            tol,  # variance_tol
-            self.sag_std_m == math.inf,  # range_unknown
+        return decide(
+            initialised=self.initialised_reason is None,
+            reset=self.reset_reason is not None,
+            on_ground=self.on_ground,
+            inputs_stale=self.inputs_stale,
+            tension_n=tension,
+            slack_tension_n=settings.slack_tension_n,
+            horizontal_m2=horizontal,
+            max_horizontal_std_m=settings.max_horizontal_std_m,
+            horizontal_pull_n=pull,
+            min_horizontal_pull_n=min_pull,
+            explained=self._explained,
+            margin=MARGIN,
+            variance_tol=tol,
+            range_unknown=self.sag_std_m == math.inf,
         )
 
     def _explained(self) -> bool | None:

@@ -63,8 +63,8 @@ def test_sitls_recovering_bad_start_is_not_learnt_as_the_winchs_calibration() ->
     """ArduPilot SITL's bad start (the recorded innovations, SITL's winch exact): the NIS is in
     band from 69 s while the winch's innovation sits at +0.07 m until 73 s and decays to 0 by
     76 s. The NIS rule alone released at 72.2 s, in the plateau, and the states learnt it (the
-    hold's RMS 0.107 m; 0.078 m released at 74.2 s by the steadiness test: docs/estimation.md,
-    sitl15); the steadiness test waits until the plateau has ended."""
+    hold's RMS 0.107 m; 0.078 m released at 74.2 s by the steadiness test:
+    docs/estimation-history.md, sitl15); the steadiness test waits until the plateau has ended."""
     rows = _recorded()
     bank = _Bank()
     release = CalibrationRelease()

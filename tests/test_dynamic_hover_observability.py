@@ -2,7 +2,7 @@
 linearised model (force balance, winch length, height) at a hover equilibrium has two
 unobservable directions, and one of them is the bearing traded against the wind across the
 cable. A filter that claims to know the bearing there learned it from something other than the
-first-order model (docs/estimation.md, "The gusty hover ... measured again (gust10)")."""
+first-order model (docs/estimation-history.md, "The gusty hover ... measured again (gust10)")."""
 
 from __future__ import annotations
 

@@ -13,7 +13,7 @@ Both were measured on the fixed-length sagging circle (tuning seed 1): one lengt
 slack cable moved the drone 1.4 m, one flat angle linearised on the free side of the kink cut
 the position's standard deviation from 0.46 to 0.03 m with the drone 1.6 m off (with the load
 cell's negative readings taken)
-(docs/estimation.md, sag14).
+(docs/estimation-history.md, sag14).
 
 Once a load cell's tension has been fused (sag15), a cable with weight gives its length unless
 its tension is surely below the slack threshold, with the length's second-order term in the

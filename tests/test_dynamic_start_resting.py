@@ -4,7 +4,7 @@ resting on the ground leaves the anchor flat whatever the drone's range beyond i
 touchdown, and the pull placed on the free curve puts the drone at the touchdown kink. On the
 heavy 5 N winch figure-8 (angle alone) that started the filter 1-4 m short with its
 covariance 1-4 sd narrower, and 4-11 % of the published ticks were beyond 3 sigma on tuning
-seeds 1-10 (docs/estimation.md, angle21)."""
+seeds 1-10 (docs/estimation-history.md, angle21)."""
 
 from __future__ import annotations
 

@@ -12,7 +12,7 @@ the one at the drone less the hanging cable's weight ``w h`` (a heavy cable's te
 that from the drone down to the winch), with the load cell's noise of ``emulator.winch``: near
 zero it reads below zero at times, as a load cell does (the service passes such readings and
 the dynamic filter takes them down to 5 noise standard deviations below zero; clamped at zero
-they averaged above the true tension, docs/estimation.md sag15). Every
+they averaged above the true tension, docs/estimation-history.md sag15). Every
 random draw comes from the sensors' own generators (seeded from the scenario's seed), so
 switching the winch on does not change the simulated flight.
 """

@@ -1,5 +1,5 @@
 """Where a dynamic kind's RMSE / own CRLB comes from: the bound split by what the filter leaves
-unused by design (docs/estimation.md, "RMSE / own CRLB where it is missed (crlb14)").
+unused by design (docs/estimation-history.md, "RMSE / own CRLB where it is missed (crlb14)").
 
 For one scenario and one dynamic kind, each seed is flown with the kind (``flight.fly``), its
 estimated ticks from ``settle_s`` are scored as ``bench estimators`` scores them, and the

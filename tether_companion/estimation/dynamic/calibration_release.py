@@ -38,7 +38,7 @@ elevation zero are released to learning once the filter has settled:
   error still moves takes the transient as a constant and keeps it (no process noise): on
   ArduPilot SITL, released at the end of the fly-out or in a recovering bad start's +0.07 m
   plateau of the winch's innovation, the external-navigation hold's RMS was 0.165 and
-  0.107 m; released by this test 0.073 and 0.078 m (docs/estimation.md, sitl15).
+  0.107 m; released by this test 0.073 and 0.078 m (docs/estimation-history.md, sitl15).
 
 Held while no length is fused (cal19): once released, the states are held again (consider
 states, all four) for a winch reading that may be of a slack cable (skipped, or fused only as

@@ -102,7 +102,7 @@ class DynamicInitial:
         " go and those one Gaussian represents collapse to their moments (the cable's"
         " sphere linear over them, bank_reduction.py); members far apart run on until the"
         " data decide (6 s against 30 s, with imu_ticks_per_fusion 4: 4x cheaper over a 20 s"
-        " flight; docs/estimation.md, the bank21 section) [s]",
+        " flight; docs/estimation-history.md, the bank21 section) [s]",
     )
 
 

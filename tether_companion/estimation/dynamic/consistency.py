@@ -57,7 +57,7 @@ BEARING_PRIOR_RAD = 1.0
 across the cable starts as unknown as this times the horizontal range, so what the window
 then holds is what its own samples and the wind's prior tell (not the filter's covariance,
 which a hover's thrust-scale bank makes confident before the data tell the bearing:
-docs/estimation.md, "The ground a moving drone averages, and the bearing before the data
+docs/estimation-history.md, "The ground a moving drone averages, and the bearing before the data
 tell it (terrain12)")."""
 
 

@@ -59,7 +59,7 @@ class GroundStationFeed:
         ``noise.winch_tension_n2ps`` instead of ``noise.tension_n2ps``: a constant-tension
         winch holds the anchor's tension, and the chord tension then moves only as far as
         the winch's control lets it and the geometry turns a held anchor tension into a
-        chord tension (docs/estimation.md, sag13)."""
+        chord tension (docs/estimation-history.md, sag13)."""
         if not self.ground_station.tension_ok(tension_n, time_s):
             return
         if self.bank is None:  # with a cable angle it places a heavy cable's start

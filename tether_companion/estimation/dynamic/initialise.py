@@ -48,7 +48,8 @@ Not possible yet (reported, and the window starts again): no height and no winch
 thrust far below the weight (on the ground), cable slack, a cable that does not rise to the
 drone, or one resting on the ground when only a height is known, as a heavy cable is while
 a cable angle of the window reads it flat (:meth:`~.start_angle.AngleReadings.all_lifted`;
-its pull on the free curve places the drone at the touchdown kink: docs/estimation.md, angle21).
+its pull on the free curve places the drone at the touchdown kink:
+docs/estimation-history.md, angle21).
 """
 
 from __future__ import annotations

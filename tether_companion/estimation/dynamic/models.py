@@ -78,7 +78,7 @@ def _free_or_grounded(free: Generated, grounded: Generated) -> Generated:
     is its mirror image, a cable bowed upward that pushes, whose tension at the drone grows
     without bound as ``T_ch -> 0-`` (``dh/dT_ch`` 11-110 instead of ~0.9 on the light 1 N
     figure-8): a filter that went there fused the winch's measured tension with no effect
-    and stayed slack the whole flight (docs/estimation.md, slack12)."""
+    and stayed slack the whole flight (docs/estimation-history.md, slack12)."""
 
     def model(
         x: Sequence[float], u: Sequence[float], c: Sequence[float]

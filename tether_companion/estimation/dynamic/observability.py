@@ -71,7 +71,7 @@ class InnovationExcess:
     the former rule (2 of its standard deviations, or any time within ``time_constant_s``
     of an innovation beyond 3 sigma, which 0.27 % of honest readings are) still 0.022 S, 2x
     the height's variance on the 4 N circle (nees15); this test adds 0.0005 S, nonzero 0.09 %
-    of the time (1 h of 20 Hz innovations as predicted; rng16 in docs/estimation.md).
+    of the time (1 h of 20 Hz innovations as predicted; rng16 in docs/estimation-history.md).
     """
 
     FALSE_ALARM = 1e-3

@@ -31,8 +31,8 @@ Without a fused length, or on a weightless cable, the straight cable's term at t
 tension: without a length the filter's range is the force balance's and the elevation's, and
 the straight term's part in the plane stands for that range's error (nees10); the curve's
 motion at a held elevation instead (``da/dH`` from the cable-angle model's Jacobian) was
-measured and is not it (docs/estimation.md, heavy17: the light 5 N winch circle's angle alone
-then published 1.5 % beyond 3 sigma). Pure.
+measured and is not it (docs/estimation-history.md, heavy17: the light 5 N winch circle's
+angle alone then published 1.5 % beyond 3 sigma). Pure.
 """
 
 from __future__ import annotations

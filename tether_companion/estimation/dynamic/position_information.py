@@ -18,7 +18,7 @@ increments grow as ``sqrt(dt)``: that one let ``d`` jump ``0.43 sqrt(C)`` betwee
 readings (0.08 m across the cable on the 4 N circle: a velocity error of 0.8 m/s where the
 filter's is 0.06 m/s) and kept the term at 0.6-1.4 times the error's variance across the
 cable where the filter's own variance already matched it (36 times at 0.5 N; nees15,
-docs/estimation.md). A measurement that sees the
+docs/estimation-history.md). A measurement that sees the
 position directly, and whose error has nothing to do with that force (the cable angle: the
 direction from the anchor), measures it; so the added term is the offset's covariance given
 the readings, a small Kalman filter of ``d`` (the variance recursion of the scalar-Markov

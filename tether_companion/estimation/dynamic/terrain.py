@@ -23,7 +23,7 @@ the Laplace transform of ``J0``). Ground with an exponential correlation average
 (``sigma^2 / (1 + D / l)``); the form above keeps more. Measured on the realistic circle
 with the cable angle alone, tuning seed 1 (a 0.1 m step added to every reading from 15 s):
 the down estimate reached 63 % of it after about 2.1 s, the gain's memory ``dt / K`` read
-1.7 s (docs/estimation.md, "The ground a moving drone averages, and the bearing before
+1.7 s (docs/estimation-history.md, "The ground a moving drone averages, and the bearing before
 the data tell it (terrain12)").
 
 Pure.

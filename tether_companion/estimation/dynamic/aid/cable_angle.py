@@ -24,7 +24,7 @@ curve's rises ~1 rad per metre of position; a state at 0.15 N resting on the gro
 at 0.2 N, was put on the free side (0.28 rad against a flat reading) and one update cut its
 horizontal standard deviation 0.46 -> 0.03 m with the drone 1.6 m off (the fixed-length
 sagging circle, tuning seed 1, 5.7 s, with the load cell's negative readings taken;
-docs/estimation.md, sag14).
+docs/estimation-history.md, sag14).
 
 A bearing that far off is beyond the linearisation anyway: when a sample is going to be fused
 regardless of the gate (the member's angle was gated ``max_consecutive_rejections`` times in a
@@ -124,7 +124,7 @@ class CableAngleAid:
     ``sd_radial^2 sd_across^2 / a^4``, which an angle-only filter's metres of radial spread
     make large, and it took that filter's fixed-length sagging circle, tuning seed 2, from
     NEES 0.71 to 19.3 (sag14's candidate), so the filters without a load cell keep the plain
-    linearisation (docs/estimation.md, sag15).
+    linearisation (docs/estimation-history.md, sag15).
 
     Attributes
     ----------

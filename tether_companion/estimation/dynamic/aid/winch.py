@@ -13,7 +13,7 @@ member's prior truncated to it (:func:`~tether_companion.estimation.dynamic.aidi
 Fused as the equality ``|p| = length`` it put the drone ON the line with the encoder's
 noise wherever the slack cable's drone was: the fixed-length sagging circle, winch + angle,
 tuning seed 6, 3.6 s: the radial deviation 1.17 -> 0.165 m with the drone 1.5 m inside
-(docs/estimation.md, cal20). Fused as the catenary's length
+(docs/estimation-history.md, cal20). Fused as the catenary's length
 after a load cell's tension on a cable with weight, the reading's variance also holds the
 length's second-order term in the tension (:func:`tension_curvature_variance`). The reading
 was taken ``latency_s`` before its time stamp (and the stamp may be older than the filter):
@@ -139,7 +139,7 @@ def surely_slack_by_length(
     there (a chord tension the load cell's noise had lifted over ``slack_tension_n``) one
     length moved the drone of a truly slack cable 1.4 m out to ``a + b = L`` and its chord
     tension to -0.4 N with a 0.11 N standard deviation (the fixed-length sagging circle,
-    tuning seed 1, 21.9 s; docs/estimation.md, sag14)."""
+    tuning seed 1, 21.9 s; docs/estimation-history.md, sag14)."""
     span = math.hypot(float(x[0]), float(x[1]))
     if weight_n_per_m <= 0.0 or span <= 0.0:
         return False

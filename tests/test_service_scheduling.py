@@ -135,8 +135,12 @@ def test_kill_9_leaves_a_readable_recording_up_to_the_last_moments(tmp_path) -> 
     killed_unix_s, record_dir = asyncio.run(scenario())
     (path,) = record_dir.glob("*.tlog")
     records = list(read_tlog(path, allow_truncated=True))
-    assert len(records) > 1000
+    first_unix_s = records[0][0] * 1e-6
     last_unix_s = records[-1][0] * 1e-6
+    # The streams run at ~620 frames/s in and the estimates go out; how much of the 3 s the
+    # service's start-up takes depends on the machine's load, so the bar is a rate over the
+    # span it recorded (a recording thread that stalled or lost frames falls far below it).
+    assert len(records) >= 100 * (last_unix_s - first_unix_s) > 0, len(records)
     lag_s = killed_unix_s - last_unix_s
     print(f"last record {lag_s * 1e3:.0f} ms before the kill")
     assert lag_s < 0.25, lag_s

@@ -188,16 +188,23 @@ update_member(Member *mb, int n, int m, const double *pht, const double *s_inv, 
               Py_ssize_t hold_start, Py_ssize_t hold_stop, PyObject *empty)
 {
     const double *x = mb->vx.buf, *p = mb->vp.buf;
-    PyObject *shape_x = Py_BuildValue("(i)", n), *shape_p = Py_BuildValue("(ii)", n, n);
-    if (shape_x == NULL || shape_p == NULL) {
-        Py_XDECREF(shape_x);
-        Py_XDECREF(shape_p);
-        return -1;
+    /* the shapes (n,) and (n, n), kept for the last n (every member of a bank has the same) */
+    static PyObject *shape_x, *shape_p;
+    static int shape_n;
+    if (shape_x == NULL || shape_n != n) {
+        Py_CLEAR(shape_x);
+        Py_CLEAR(shape_p);
+        shape_x = Py_BuildValue("(i)", n);
+        shape_p = Py_BuildValue("(ii)", n, n);
+        if (shape_x == NULL || shape_p == NULL) {
+            Py_CLEAR(shape_x);
+            Py_CLEAR(shape_p);
+            return -1;
+        }
+        shape_n = n;
     }
     mb->x_new = PyObject_CallOneArg(empty, shape_x);
     mb->p_new = mb->x_new ? PyObject_CallOneArg(empty, shape_p) : NULL;
-    Py_DECREF(shape_x);
-    Py_DECREF(shape_p);
     if (mb->p_new == NULL)
         return -1;
     Views v = {.count = 0};

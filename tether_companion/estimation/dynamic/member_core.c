@@ -58,9 +58,17 @@ not_taken:
     Py_RETURN_NONE;
 }
 
-/* step_covariance(phi, p, q, t, out) -> bool: out = (A + A^T) / 2 + q t with A = phi p phi^T
- * (one covariance of imu_batch.BatchStep.step_covariance), whether out is finite; None: not
- * taken. */
+/* step_covariance(phi, p, q, t, out) -> bool: out = phi p phi^T + q t (one covariance of
+ * imu_batch.BatchStep.step_covariance; p and q symmetric), whether out is finite; None: not
+ * taken (also for a q not exactly symmetric).
+ *
+ * The product is computed once per entry of the upper triangle and mirrored, so out is exactly
+ * symmetric without numpy's (A + A^T) / 2, and with phi's known sparsity: the zeros of phi are
+ * skipped, and a unit row of phi (e_i: 1 on the diagonal, nothing else; the dynamic filter's
+ * rows from 6 on) takes p's own row (phi p) or entry (A phi^T) without arithmetic. Only the
+ * entries where both rows carry the batch's terms (the 6 x 6 position/velocity block) are sums
+ * of sums; they differ from the symmetrised full product by rounding (tests/test_member_core.py
+ * holds them to 1e-12 of the entry's scale). */
 static PyObject *
 step_covariance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
@@ -82,31 +90,48 @@ step_covariance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     double *out = vout->buf;
     if (!all_finite(p, (Py_ssize_t)n * n) || !all_finite(phi, (Py_ssize_t)n * n) || !isfinite(t))
         goto not_taken;
-    int count[MAX_N], col[MAX_N][MAX_N];
+    for (int i = 0; i < n; i++)
+        for (int j = i + 1; j < n; j++)
+            if (q[i * n + j] != q[j * n + i])
+                goto not_taken;
+    int count[MAX_N], col[MAX_N][MAX_N], unit[MAX_N];
     for (int i = 0; i < n; i++) {
         count[i] = 0;
         for (int k = 0; k < n; k++)
             if (phi[i * n + k] != 0.0)
                 col[i][count[i]++] = k;
+        unit[i] = count[i] == 1 && col[i][0] == i && phi[i * n + i] == 1.0;
     }
-    double a[MAX_N * MAX_N], b[MAX_N * MAX_N];
-    for (int i = 0; i < n; i++) /* a = phi p */
-        for (int j = 0; j < n; j++) {
-            double value = 0.0;
-            for (int c = 0; c < count[i]; c++)
-                value += phi[i * n + col[i][c]] * p[col[i][c] * n + j];
-            a[i * n + j] = value;
+    double a[MAX_N * MAX_N];
+    const double *a_row[MAX_N]; /* row i of A = phi p: p's own row for a unit row of phi */
+    for (int i = 0; i < n; i++) {
+        if (unit[i]) {
+            a_row[i] = p + i * n;
+            continue;
         }
-    for (int i = 0; i < n; i++) /* b = a phi^T */
-        for (int j = 0; j < n; j++) {
-            double value = 0.0;
-            for (int c = 0; c < count[j]; c++)
-                value += a[i * n + col[j][c]] * phi[j * n + col[j][c]];
-            b[i * n + j] = value;
-        }
-    for (int i = 0; i < n; i++)
+        double *restrict row = a + i * n; /* sum_c phi_ic p_cj, c in index order, along j */
         for (int j = 0; j < n; j++)
-            out[i * n + j] = (b[i * n + j] + b[j * n + i]) * 0.5 + q[i * n + j] * t;
+            row[j] = 0.0;
+        for (int c = 0; c < count[i]; c++) {
+            const double f = phi[i * n + col[i][c]];
+            const double *restrict p_row = p + col[i][c] * n;
+            for (int j = 0; j < n; j++)
+                row[j] += f * p_row[j];
+        }
+        a_row[i] = row;
+    }
+    for (int i = 0; i < n; i++) /* (A phi^T)_ij for j >= i, mirrored */
+        for (int j = i; j < n; j++) {
+            double value;
+            if (unit[j])
+                value = a_row[i][j];
+            else {
+                value = 0.0;
+                for (int c = 0; c < count[j]; c++)
+                    value += a_row[i][col[j][c]] * phi[j * n + col[j][c]];
+            }
+            out[i * n + j] = out[j * n + i] = value + q[i * n + j] * t;
+        }
     int ok = all_finite(out, (Py_ssize_t)n * n);
     release(&v);
     return PyBool_FromLong(ok);
@@ -115,37 +140,47 @@ not_taken:
     Py_RETURN_NONE;
 }
 
-/* P H^T (n x m) into pht and H P H^T (m x m, row-major) into s for the m x n h: index-order
- * sums (project() and bank_fusion.c). */
+/* P H^T (n x m) into pht and H P H^T (m x m, row-major) into s for the m x n h (p finite):
+ * index-order sums over h's nonzero entries (project() and bank_fusion.c). Skipping a zero of h
+ * changes no bit: p's term is then +-0, and a sum begun at +0 is never -0, so adding it gives
+ * the sum back. */
 void
 member_project(const double *p, const double *h, int n, int m, double *pht, double *s)
 {
+    int count[MAX_M], col[MAX_M][MAX_N];
+    for (int r = 0; r < m; r++) {
+        count[r] = 0;
+        for (int k = 0; k < n; k++)
+            if (h[r * n + k] != 0.0)
+                col[r][count[r]++] = k;
+    }
     for (int i = 0; i < n; i++)
         for (int r = 0; r < m; r++) {
             double value = 0.0;
-            for (int k = 0; k < n; k++)
-                value += p[i * n + k] * h[r * n + k];
+            for (int c = 0; c < count[r]; c++)
+                value += p[i * n + col[r][c]] * h[r * n + col[r][c]];
             pht[i * m + r] = value;
         }
     for (int r = 0; r < m; r++)
         for (int c = 0; c < m; c++) {
             double value = 0.0;
-            for (int k = 0; k < n; k++)
-                value += h[r * n + k] * pht[k * m + c];
+            for (int k = 0; k < count[r]; k++)
+                value += h[r * n + col[r][k]] * pht[col[r][k] * m + c];
             s[r * m + c] = value;
         }
 }
 
 /* The update with the gain K = pht S^-1 into xo, po (update()'s arithmetic, and bank_fusion.c's):
- * xo = x + pht w, po = (B + B^T) / 2 with B = p - K pht^T, the consider states hold_start ..
- * hold_stop - 1 given back their prior mean and own block; whether xo and po are finite and po
- * positive definite. */
+ * xo = x + pht w, po = p - K pht^T (p symmetric) computed on the upper triangle and mirrored
+ * (exactly symmetric; numpy's (B + B^T) / 2 of the full B differs by rounding), the consider
+ * states hold_start .. hold_stop - 1 given back their prior mean and own block; whether xo and
+ * po are finite and po positive definite. */
 int
 member_gain_update(const double *x, const double *p, const double *pht, const double *s_inv,
                    const double *w, int n, int m, Py_ssize_t hold_start, Py_ssize_t hold_stop,
                    double *xo, double *po)
 {
-    double k[MAX_N * MAX_M], b[MAX_N * MAX_N];
+    double k[MAX_N * MAX_M];
     for (int i = 0; i < n; i++) {
         double value = 0.0;
         for (int r = 0; r < m; r++)
@@ -159,15 +194,12 @@ member_gain_update(const double *x, const double *p, const double *pht, const do
         }
     }
     for (int i = 0; i < n; i++)
-        for (int j = 0; j < n; j++) {
+        for (int j = i; j < n; j++) {
             double value = 0.0;
             for (int r = 0; r < m; r++)
                 value += k[i * m + r] * pht[j * m + r];
-            b[i * n + j] = p[i * n + j] - value;
+            po[i * n + j] = po[j * n + i] = p[i * n + j] - value;
         }
-    for (int i = 0; i < n; i++)
-        for (int j = 0; j < n; j++)
-            po[i * n + j] = (b[i * n + j] + b[j * n + i]) * 0.5;
     for (Py_ssize_t i = hold_start; i < hold_stop; i++) {
         xo[i] = x[i];
         for (Py_ssize_t j = hold_start; j < hold_stop; j++)
@@ -271,9 +303,10 @@ not_taken:
 }
 
 /* mixture(w, xs, ps, mean_out, cov_out) -> True: the weighted mixture's mean sum w_i x_i and
- * covariance sum w_i P_i + sum w_i s_i s_i^T (s_i = x_i - mean) made exactly symmetric
- * (bank.FilterBank.mixture; w a list of floats, xs and ps lists of the members' (n,) and (n, n)
- * arrays); None: not taken. */
+ * covariance sum w_i P_i + sum w_i s_i s_i^T (s_i = x_i - mean; the P_i symmetric) on the upper
+ * triangle, mirrored: exactly symmetric (bank.FilterBank.mixture, whose (C + C^T) / 2 of the
+ * full C differs by rounding; w a list of floats, xs and ps lists of the members' (n,) and
+ * (n, n) arrays); None: not taken. */
 static PyObject *
 mixture(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
@@ -309,7 +342,7 @@ mixture(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     }
     if (got == members && get(args[3], &vmean, 1, n, 0, 1)) {
         if (get(args[4], &vcov, 2, n, n, 1)) {
-            double *mean = vmean.buf, *cov = vcov.buf, c[MAX_N * MAX_N];
+            double *mean = vmean.buf, *cov = vcov.buf;
             for (int j = 0; j < n; j++) {
                 double value = 0.0;
                 for (Py_ssize_t i = 0; i < members; i++)
@@ -317,18 +350,15 @@ mixture(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
                 mean[j] = value;
             }
             for (int j = 0; j < n; j++)
-                for (int k = 0; k < n; k++) {
+                for (int k = j; k < n; k++) {
                     double within = 0.0, between = 0.0;
                     for (Py_ssize_t i = 0; i < members; i++) {
                         const double *x = vx[i].buf;
                         within += w[i] * ((const double *)vp[i].buf)[j * n + k];
                         between += (x[j] - mean[j]) * w[i] * (x[k] - mean[k]);
                     }
-                    c[j * n + k] = within + between;
+                    cov[j * n + k] = cov[k * n + j] = within + between;
                 }
-            for (int j = 0; j < n; j++)
-                for (int k = 0; k < n; k++)
-                    cov[j * n + k] = (c[j * n + k] + c[k * n + j]) * 0.5;
             ok = 1;
             PyBuffer_Release(&vcov);
         }

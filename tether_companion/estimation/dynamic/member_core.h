@@ -60,13 +60,23 @@ release(Views *v)
     v->count = 0;
 }
 
+/* Whether every one of the count doubles at a is finite: a[i] * 0 is nan for a nan or an
+ * infinity and +-0 otherwise, so the sum of these products is nan exactly when one is, in any
+ * order (four sums: the loop vectorises). */
 static inline int
 all_finite(const double *a, Py_ssize_t count)
 {
-    double sum = 0.0;
-    for (Py_ssize_t i = 0; i < count; i++)
-        sum += a[i] * 0.0; /* nan for a nan or an infinity */
-    return sum == 0.0;
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+    Py_ssize_t i = 0;
+    for (; i + 4 <= count; i += 4) {
+        s0 += a[i] * 0.0;
+        s1 += a[i + 1] * 0.0;
+        s2 += a[i + 2] * 0.0;
+        s3 += a[i + 3] * 0.0;
+    }
+    for (; i < count; i++)
+        s0 += a[i] * 0.0;
+    return (s0 + s1) + (s2 + s3) == 0.0;
 }
 
 /* The floats of a list or tuple of exactly n floats or ints into out; 0 (no error set) otherwise. */
@@ -92,25 +102,30 @@ read_numbers(PyObject *obj, double *out, Py_ssize_t n)
     return 1;
 }
 
-/* Whether the symmetric n x n matrix a is positive definite: every pivot of its Cholesky
- * factorisation > 0 (dpotrf's test; a nan fails it). */
+/* Whether the symmetric n x n matrix a (its upper triangle read) is positive definite: every
+ * pivot of its Cholesky factorisation > 0 (dpotrf's test; a nan fails it). Right-looking on the
+ * rows of U = L^T: each entry takes the same subtractions in the same order as the
+ * left-looking dot products (l_ik l_jk = u_ki u_kj), so the same pivots bit for bit, but the
+ * inner loop runs along contiguous rows (vectorised). */
 static inline int
 cholesky_ok(const double *a, int n)
 {
-    double l[MAX_N * MAX_N];
+    double u[MAX_N * MAX_N];
+    for (int j = 0; j < n; j++)
+        memcpy(u + j * n + j, a + j * n + j, sizeof(double) * (size_t)(n - j));
     for (int j = 0; j < n; j++) {
-        double d = a[j * n + j];
-        for (int k = 0; k < j; k++)
-            d -= l[j * n + k] * l[j * n + k];
+        double *restrict row_j = u + j * n;
+        double d = row_j[j];
         if (!(d > 0.0))
             return 0;
         d = sqrt(d);
-        l[j * n + j] = d;
+        for (int c = j + 1; c < n; c++)
+            row_j[c] /= d;
         for (int i = j + 1; i < n; i++) {
-            double v = a[i * n + j];
-            for (int k = 0; k < j; k++)
-                v -= l[i * n + k] * l[j * n + k];
-            l[i * n + j] = v / d;
+            double *restrict row_i = u + i * n;
+            const double f = row_j[i];
+            for (int c = i; c < n; c++)
+                row_i[c] -= f * row_j[c];
         }
     }
     return 1;

@@ -224,14 +224,15 @@ class TensionModeSession:
         ``position_ned_m`` is the position estimate relative to the anchor (NED, shape (3,),
         ``nan`` when there is none); ``height_m`` the height above ground (``nan``: unknown).
         """
+        # ModeInputs positional (a class called with keywords builds a dict: ~2k instructions)
         action = self.modes.step(
             ModeInputs(
-                time_s=time_s,
-                tension=self.tension,
-                armed=self.armed,
-                flight_mode=self.flight_mode,
-                position_ned_m=np.asarray(position_ned_m, dtype=float),
-                height_m=float(height_m),
+                time_s,  # time_s
+                self.tension,  # tension
+                self.armed,  # armed
+                self.flight_mode,  # flight_mode
+                np.asarray(position_ned_m, dtype=float),  # position_ned_m
+                float(height_m),  # height_m
             )
         )
         self.last_action = action

@@ -303,14 +303,15 @@ class Publisher:
         variances = estimate.covariance.diagonal().tolist()
         if send_inflated:
             variances[:3] = (float(self.config.inflated_variance_m2),) * 3
+        # positional (a class called with keywords builds a dict: ~2k instructions a call)
         publication = Publication(
-            time_usec=int(round(t * 1e6)),
-            position_ned_m=position,
-            tension_n=float(estimate.tension_n),
-            position_variance_m2=(variances[0], variances[1], variances[2]),
-            tension_variance_n2=variances[3] if len(variances) > 3 else 0.0,
-            health=health,
-            reset_counter=self.reset_counter,
+            int(round(t * 1e6)),  # time_usec
+            position,  # position_ned_m
+            float(estimate.tension_n),  # tension_n
+            (variances[0], variances[1], variances[2]),  # position_variance_m2
+            variances[3] if len(variances) > 3 else 0.0,  # tension_variance_n2
+            health,  # health
+            self.reset_counter,  # reset_counter
         )
         self.last = publication
         return out, publication

@@ -357,7 +357,8 @@ class EstimationSession:
 
     def _on_attitude(self, sample: AttitudeSample) -> Step:
         self._feed_attitude(sample)
-        return Step(messages=self._mode_tick(sample.time_s)) if self.messages else Step()
+        # Step(messages) positional: a class called with a keyword builds a dict
+        return Step(self._mode_tick(sample.time_s)) if self.messages else Step()
 
     def _feed_attitude(self, sample: AttitudeSample) -> None:
         """The attitude to the modes' tension filter (when it runs) and the EKF."""

@@ -327,7 +327,7 @@ def test_the_definiteness_test_is_choleskys() -> None:
 
 def test_a_process_noise_not_exactly_symmetric_is_left_to_numpy() -> None:
     """``step_covariance`` reads ``q``'s upper triangle only: a ``q`` not exactly symmetric
-    gives None (numpy then), the output untouched."""
+    gives None (numpy then), the output untouched; so does an output that is ``p`` itself."""
     rng = np.random.default_rng(3)
     _, p, q = random_start(rng)
     q = np.diag(q)
@@ -338,3 +338,4 @@ def test_a_process_noise_not_exactly_symmetric_is_left_to_numpy() -> None:
     assert np.all(out_p == 7.0)
     q[9, 2] = 1e-9
     assert core.step_covariance(step.phi, p, q, step.duration_s, out_p) is True
+    assert core.step_covariance(step.phi, p, q, step.duration_s, p) is None  # out must not be p

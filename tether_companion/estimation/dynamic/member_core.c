@@ -60,7 +60,8 @@ not_taken:
 
 /* step_covariance(phi, p, q, t, out) -> bool: out = phi p phi^T + q t (one covariance of
  * imu_batch.BatchStep.step_covariance; p and q symmetric), whether out is finite; None: not
- * taken (also for a q not exactly symmetric).
+ * taken (also for a q not exactly symmetric, or out sharing p's memory: p's rows are read
+ * while out is written).
  *
  * The product is computed once per entry of the upper triangle and mirrored, so out is exactly
  * symmetric without numpy's (A + A^T) / 2, and with phi's known sparsity: the zeros of phi are
@@ -88,7 +89,8 @@ step_covariance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         goto not_taken;
     const double *p = vp->buf, *phi = vphi->buf, *q = vq->buf;
     double *out = vout->buf;
-    if (!all_finite(p, (Py_ssize_t)n * n) || !all_finite(phi, (Py_ssize_t)n * n) || !isfinite(t))
+    if (!all_finite(p, (Py_ssize_t)n * n) || !all_finite(phi, (Py_ssize_t)n * n) || !isfinite(t) ||
+        (const double *)out == p)
         goto not_taken;
     for (int i = 0; i < n; i++)
         for (int j = i + 1; j < n; j++)

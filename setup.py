@@ -1,6 +1,7 @@
 """The optional C extensions (everything else is in pyproject.toml): the dynamic filter's
 generated models, the tension filter's generated predict/update (``tension_core.c``), the
-published bound approximation's step (``bound_core.c``) and the dynamic filter's members'
+published bound approximation's step (``bound_core.c``), the published covariance's added
+terms (``status_core.c``, ``published_terms.ADDED_POSITION_TERMS``: bit for bit) and the dynamic filter's members'
 matrix arithmetic (``member_core.c``: numpy's to 1e-12, not bit for bit;
 ``imu_batch.MEMBER_CORE``) with the bank's force-balance and scalar fusions over its members in
 one call each (``bank_fusion.c``, ``bank_updates.FUSE_FORCE_BALANCE`` / ``FUSE_SCALAR``: bit for bit
@@ -37,7 +38,15 @@ setup(
         Extension(
             "tether_companion.estimation.dynamic._bound_core",
             ["tether_companion/estimation/dynamic/bound_core.c"],
+            depends=["tether_companion/estimation/dynamic/straight_rows.h"],
             extra_compile_args=["-ffp-contract=off"],
+            optional=True,
+        ),
+        Extension(
+            "tether_companion.estimation.dynamic._status_core",
+            ["tether_companion/estimation/dynamic/status_core.c"],
+            depends=["tether_companion/estimation/dynamic/straight_rows.h"],
+            extra_compile_args=["-ffp-contract=off", "-fno-builtin-pow"],
             optional=True,
         ),
         Extension(

@@ -19,7 +19,14 @@ from optional_extension import import_extension, recording_c_calls
 
 from tether_companion.bench.dynamic import record
 from tether_companion.estimation.config import EstimatorConfig
-from tether_companion.estimation.dynamic import mixture, observability, offset_term, published_bound
+from tether_companion.estimation.dynamic import (
+    mixture,
+    observability,
+    offset_term,
+    published,
+    published_bound,
+    published_terms,
+)
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.feed import imu_ticks
 from tether_companion.physics.vehicle import load_vehicle
@@ -184,9 +191,11 @@ def test_where_c_could_differ_the_straight_rows_return_what_python_returns():
         core.unmodelled_rows(ROWS_PY, *args[:5])
 
 
-def test_a_flight_runs_the_straight_rows_in_c_with_the_python_floats():
+def test_a_flight_runs_the_straight_rows_in_c_with_the_python_floats(monkeypatch):
     """The take-off flight: every straight-cable term the status read adds goes through C (no
-    fallback) and gives the Python function's floats."""
+    fallback) and gives the Python function's floats (the added terms' Python reference run,
+    which calls them: their C twin has the rows written in, ``straight_rows.h``)."""
+    monkeypatch.setattr(published, "ADDED_POSITION_TERMS", published_terms.added_position_terms)
     vehicle = load_vehicle(load_scenario("realistic-takeoff-figure8").vehicle)
     estimator = DynamicTetherEstimator(EstimatorConfig(), vehicle)
     with recording_c_calls(offset_term, "STRAIGHT_ROWS", core.unmodelled_rows, ROWS_PY) as (

@@ -17,8 +17,7 @@
 #include <Python.h>
 #include <math.h>
 
-/* observability.MIN_TENSION_N [N] (tests/test_bound_core.py checks the two are equal) */
-#define MIN_TENSION_N 0.01
+#include "straight_rows.h"
 
 /* The items of a list or tuple and its length (NULL: neither). */
 static PyObject **
@@ -149,7 +148,8 @@ stepped_terms(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 }
 
 /* unmodelled_rows(fallback, n, e, d, tension_n, force_std_n, length_std_m) -> 3 lists of 3
- * floats: observability.unmodelled_position_rows's statements, in its order. */
+ * floats: observability.unmodelled_position_rows's statements, in its order
+ * (straight_rows.h). */
 static PyObject *
 unmodelled_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
@@ -162,33 +162,11 @@ unmodelled_rows(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         || !float_of(args[4], &tension_n) || !float_of(args[5], &force_std_n)
         || !float_of(args[6], &length_std_m))
         return PyObject_Vectorcall(args[0], args + 1, 6, NULL);
-    double distance = sqrt(n * n + e * e + d * d);
     double r[9];
-    if (distance == 0.0) {
-        for (int i = 0; i < 9; i++)
-            r[i] = 0.0;
-    }
-    else {
-        double u0 = n / distance, u1 = e / distance, u2 = d / distance;
-        double an0 = 1.0 - u0 * u0, an1 = -u1 * u0, an2 = -u2 * u0;
-        double ae0 = -u0 * u1, ae1 = 1.0 - u1 * u1, ae2 = -u2 * u1;
-        /* the divisor is at least MIN_TENSION_N, or NaN: never zero (no ZeroDivisionError) */
-        double gain = distance * force_std_n / (MIN_TENSION_N > tension_n ? MIN_TENSION_N
-                                                                            : tension_n);
-        double g = gain * gain, w = length_std_m * length_std_m;
-        r[0] = g * (an0 * an0 + ae0 * ae0) + w * u0 * u0;
-        r[1] = g * (an0 * an1 + ae0 * ae1) + w * u0 * u1;
-        r[2] = g * (an0 * an2 + ae0 * ae2) + w * u0 * u2;
-        r[3] = g * (an1 * an0 + ae1 * ae0) + w * u1 * u0;
-        r[4] = g * (an1 * an1 + ae1 * ae1) + w * u1 * u1;
-        r[5] = g * (an1 * an2 + ae1 * ae2) + w * u1 * u2;
-        r[6] = g * (an2 * an0 + ae2 * ae0) + w * u2 * u0;
-        r[7] = g * (an2 * an1 + ae2 * ae1) + w * u2 * u1;
-        r[8] = g * (an2 * an2 + ae2 * ae2) + w * u2 * u2;
-        /* a NaN's bits are the operand order's (see stepped_terms): left to Python */
-        if (!isfinite(r[0] + r[1] + r[2] + r[3] + r[4] + r[5] + r[6] + r[7] + r[8]))
-            return PyObject_Vectorcall(args[0], args + 1, 6, NULL);
-    }
+    straight_rows(n, e, d, tension_n, force_std_n, length_std_m, r);
+    /* a NaN's bits are the operand order's (see stepped_terms): left to Python */
+    if (!isfinite(r[0] + r[1] + r[2] + r[3] + r[4] + r[5] + r[6] + r[7] + r[8]))
+        return PyObject_Vectorcall(args[0], args + 1, 6, NULL);
     return Py_BuildValue("[[ddd][ddd][ddd]]", r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7],
                          r[8]);
 }

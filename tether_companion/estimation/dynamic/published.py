@@ -55,8 +55,8 @@ from tether_companion.estimation.dynamic.observability import (
 from tether_companion.estimation.dynamic.output import Approximation, ExactValues
 from tether_companion.estimation.dynamic.published_bound import approximation
 from tether_companion.estimation.dynamic.published_terms import (
+    ADDED_POSITION_TERMS,
     StatusSettings,
-    added_position_terms,
 )
 
 FloatArray = NDArray[np.float64]
@@ -291,8 +291,8 @@ class TickSource:
 
     def _added(self, x: list[float]) -> tuple[float, ...]:
         """What the published position covariance adds at the state's values ``x``
-        (:func:`.published_terms.added_position_terms`)."""
-        return added_position_terms(
+        (:func:`.published_terms.added_position_terms`, or its C twin)."""
+        return ADDED_POSITION_TERMS(
             x,
             self.constants.weight_n_per_m,
             self.settings,

@@ -16,14 +16,18 @@ terms).
 * on a tick the pull rule withholds, the bearing's ambiguity
   (:mod:`~tether_companion.estimation.dynamic.bearing_ambiguity`).
 
-Pure.
+:data:`ADDED_POSITION_TERMS` is what the status read calls: :func:`added_position_terms`, or
+its C twin (``status_core.c``). Pure.
 """
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
+from tether_companion.estimation import optional_core
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.bearing_ambiguity import bearing_ambiguity
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig
@@ -106,6 +110,15 @@ def added_position_terms(
         u12 + h12,
         u22 + h22,
     )
+
+
+ADDED_POSITION_TERMS: Callable[..., tuple[float, ...]] = added_position_terms
+""":func:`added_position_terms`, or where the optional C extension ``_status_core`` is built (and
+``TETHER_PURE_PYTHON`` is not set) its twin: the same floats, :func:`added_position_terms`
+called where C could differ (``status_core.c``; it runs at every IMU tick's status read)."""
+_CORE = optional_core.load("tether_companion.estimation.dynamic._status_core")
+if _CORE is not None:
+    ADDED_POSITION_TERMS = functools.partial(_CORE.added_position_terms, added_position_terms)
 
 
 def _ring(x: list[float], settings: StatusSettings) -> tuple[float, float, float]:

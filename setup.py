@@ -1,7 +1,8 @@
 """The optional C extensions (everything else is in pyproject.toml): the dynamic filter's
 generated models, the tension filter's generated predict/update (``tension_core.c``), the
 published bound approximation's step (``bound_core.c``), the published covariance's added
-terms (``status_core.c``, ``published_terms.ADDED_POSITION_TERMS``: bit for bit) and the dynamic filter's members'
+terms and the status decision (``status_core.c`` with ``status_decide.c``,
+``published_terms.ADDED_POSITION_TERMS``, ``observability.DECIDE``: bit for bit) and the dynamic filter's members'
 matrix arithmetic (``member_core.c``: numpy's to 1e-12, not bit for bit;
 ``imu_batch.MEMBER_CORE``) with the bank's force-balance and scalar fusions over its members in
 one call each (``bank_fusion.c``, ``bank_updates.FUSE_FORCE_BALANCE`` / ``FUSE_SCALAR``: bit for bit
@@ -44,8 +45,14 @@ setup(
         ),
         Extension(
             "tether_companion.estimation.dynamic._status_core",
-            ["tether_companion/estimation/dynamic/status_core.c"],
-            depends=["tether_companion/estimation/dynamic/straight_rows.h"],
+            [
+                "tether_companion/estimation/dynamic/status_core.c",
+                "tether_companion/estimation/dynamic/status_decide.c",
+            ],
+            depends=[
+                "tether_companion/estimation/dynamic/status_core.h",
+                "tether_companion/estimation/dynamic/straight_rows.h",
+            ],
             extra_compile_args=["-ffp-contract=off", "-fno-builtin-pow"],
             optional=True,
         ),

@@ -1,5 +1,6 @@
-"""The published covariance's added terms in C (``_status_core.added_position_terms``) against
-their Python reference ``published_terms.added_position_terms``: the same floats bit for bit on
+"""The status read's C twins (``_status_core``) against their Python references: the published
+covariance's added terms (``added_position_terms``, ``published_terms.added_position_terms``)
+and the status decision (``decide``, ``observability.decide``): the same floats bit for bit on
 seeded random arguments (every term on and off, positions over many decades, signed zeros,
 NaNs, infinities, negative and zero variances and tensions), on a real flight's arguments, and
 the Python function's result or exception wherever C could differ.
@@ -21,7 +22,13 @@ from optional_extension import import_extension, recording_c_calls
 
 from tether_companion.bench.dynamic import record
 from tether_companion.estimation.config import EstimatorConfig
-from tether_companion.estimation.dynamic import observability, published, published_terms, state
+from tether_companion.estimation.dynamic import (
+    observability,
+    output,
+    published,
+    published_terms,
+    state,
+)
 from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.published_terms import StatusSettings
 from tether_companion.estimation.feed import imu_ticks
@@ -221,3 +228,173 @@ def test_a_flight_runs_c_on_every_tick_with_the_python_floats():
     assert not fallbacks
     for args in calls:
         assert _bits(_c(*args)) == _bits(PY(*args))
+
+
+# ---------------------------------------------------------------- the status decision
+
+DECIDE_PY = observability.decide
+STATUS_NAMES = ["OK", "INITIALISING", "WEAK_PULL", "LEARNING", "SLACK", "ON_GROUND"]
+STATUSES = [None, *(getattr(output, name) for name in (*STATUS_NAMES, "STALE_INPUTS", "RESET"))]
+
+
+def _decide_c(**keywords: object) -> str | None:
+    return core.decide(DECIDE_PY, **keywords)
+
+
+def _near(rng: np.random.Generator, value: float) -> float:
+    """``value``, or within a few relative 1e-9 of it (the margin's edge), or far off."""
+    return [
+        value,
+        value * (1.0 + float(rng.uniform(-3e-9, 3e-9))),
+        abs(_floats(rng, 1, False, 2.0)[0]),
+    ][rng.integers(0, 3)]
+
+
+def _keywords(rng: np.random.Generator, special: bool) -> dict:
+    slack, max_std, min_pull = (abs(v) for v in _floats(rng, 3, False, 2.0))
+    a, c = (_near(rng, max_std * max_std) for _ in range(2))
+    keywords = {
+        "initialised": bool(rng.uniform() < 0.95),
+        "reset": bool(rng.uniform() < 0.05),
+        "on_ground": ["", "", "", "", "landed"][rng.integers(0, 5)],
+        "inputs_stale": bool(rng.uniform() < 0.05),
+        "tension_n": _near(rng, slack),
+        "slack_tension_n": slack,
+        "horizontal_m2": (a, float(rng.uniform(-0.5, 0.5)) * math.sqrt(a * c), c),
+        "max_horizontal_std_m": max_std,
+        "horizontal_pull_n": _near(rng, min_pull),
+        "min_horizontal_pull_n": min_pull,
+        "explained": [None, lambda: True, lambda: False, lambda: None][rng.integers(0, 4)],
+    }
+    for name, value in [
+        ("margin", [0.0, 1e-9][rng.integers(0, 2)]),
+        ("variance_tol", [0.0, float(rng.uniform(0.0, 1e-9))][rng.integers(0, 2)]),
+        ("range_unknown", bool(rng.uniform() < 0.1)),
+    ]:
+        if rng.uniform() < 0.8:  # else the default
+            keywords[name] = value
+    if rng.uniform() < 0.3:  # the larger variance within a few variance_tol of the bound's
+        tol = 1e-6 * max_std * max_std
+        keywords["variance_tol"] = tol
+        largest = max_std * max_std + float(rng.uniform(-8.0, 8.0)) * tol
+        keywords["horizontal_m2"] = (largest, 0.0, 0.5 * largest)
+    if special:
+        names = ["tension_n", "slack_tension_n", "max_horizontal_std_m", "horizontal_pull_n"]
+        names += ["min_horizontal_pull_n", "horizontal_m2", "margin", "variance_tol"]
+        for name in rng.choice(names, int(rng.integers(1, 3)), replace=False):
+            pick = SPECIAL[rng.integers(0, len(SPECIAL))]
+            if name == "horizontal_m2":
+                entries = list(keywords[name])
+                entries[rng.integers(0, 3)] = [pick, -1.0, 1e300][rng.integers(0, 3)]
+                keywords[name] = tuple(entries)
+            else:
+                keywords[name] = pick
+    return keywords
+
+
+@pytest.mark.parametrize("special", [False, True])
+def test_decide_equals_the_python_function_on_random_keywords(special, rng):
+    """Random statuses' inputs at, near and far from their thresholds (the margin's edges),
+    with and without the defaults, with NaNs, infinities, signed zeros, a negative variance
+    and an overflowing ``(a - c) ** 2``: the same status object (or None) or exception, and
+    ``explained`` asked exactly when the Python function asks it."""
+    seen = set()
+    for _ in range(40000):
+        keywords = _keywords(rng, special)
+        asked: list[str] = []
+        explained = keywords["explained"]
+        if explained is not None:
+            keywords["explained"] = lambda e=explained: asked.append("py") or e()
+        try:
+            expected = DECIDE_PY(**keywords)
+        except OverflowError:
+            with pytest.raises(OverflowError):
+                _decide_c(**keywords)
+            continue
+        if explained is not None:
+            keywords["explained"] = lambda e=explained: asked.append("c") or e()
+        got = _decide_c(**keywords)
+        assert got is expected, keywords
+        assert asked.count("c") == asked.count("py"), keywords
+        seen.add(got)
+    assert seen == set(STATUSES)  # every status and None decided
+
+
+def test_decide_where_c_could_differ_is_python_s():
+    """Ints, numpy floats, a list for the tuple, a truthy non-bool, a str subclass: the Python
+    function's status; a missing or unknown keyword, a positional argument: its TypeError; an
+    exception from ``explained`` propagates."""
+    keywords = {
+        "initialised": True,
+        "reset": False,
+        "on_ground": "",
+        "inputs_stale": False,
+        "tension_n": 4.0,
+        "slack_tension_n": 0.5,
+        "horizontal_m2": (0.04, 0.01, 0.09),
+        "max_horizontal_std_m": 0.2,
+        "horizontal_pull_n": 3.0,
+        "min_horizontal_pull_n": 1.0,
+        "explained": lambda: True,
+    }
+    assert _decide_c(**keywords) == DECIDE_PY(**keywords) == output.LEARNING
+    for name, bad in [
+        ("tension_n", 4),
+        ("tension_n", np.float64(0.2)),
+        ("horizontal_m2", [0.04, 0.01, 0.09]),
+        ("horizontal_m2", (0.01, 0.0, 0.01)),
+        ("initialised", 1),
+        ("reset", np.bool_(True)),
+        ("margin", 0),
+        ("range_unknown", 1),
+    ]:
+        changed = dict(keywords, **{name: bad})
+        assert _decide_c(**changed) is DECIDE_PY(**changed), name
+    for changed in [
+        {k: v for k, v in keywords.items() if k != "tension_n"},
+        dict(keywords, unknown=1.0),
+    ]:
+        with pytest.raises(TypeError):
+            DECIDE_PY(**changed)
+        with pytest.raises(TypeError):
+            _decide_c(**changed)
+    with pytest.raises(TypeError):
+        core.decide(DECIDE_PY, True, **keywords)
+
+    def fails() -> bool:
+        raise RuntimeError("explained")
+
+    with pytest.raises(RuntimeError):
+        _decide_c(**dict(keywords, explained=fails))
+
+
+def test_a_flight_decides_every_tick_in_c_with_the_python_status():
+    """The take-off flight: every approximate status goes through C (no fallback) and is the
+    Python function's."""
+    vehicle = load_vehicle(load_scenario("realistic-takeoff-figure8").vehicle)
+    estimator = DynamicTetherEstimator(EstimatorConfig(), vehicle)
+    calls: list[dict] = []
+    fallbacks: list[dict] = []
+
+    def fallback(**keywords: object) -> object:
+        fallbacks.append(keywords)
+        return DECIDE_PY(**keywords)
+
+    def recorded(**keywords: object) -> object:
+        calls.append(keywords)
+        return core.decide(fallback, **keywords)
+
+    saved = published.DECIDE
+    published.DECIDE = recorded
+    try:
+        for imu in imu_ticks(record("realistic-takeoff-figure8", 6.0), estimator):
+            estimate = estimator.on_imu(imu)
+            if estimate is not None:
+                estimate.status  # noqa: B018 (the status read decides)
+    finally:
+        published.DECIDE = saved
+    assert saved.func is core.decide  # the package runs C
+    assert len(calls) > 200
+    assert not fallbacks
+    for keywords in calls:
+        assert _decide_c(**keywords) is DECIDE_PY(**keywords)

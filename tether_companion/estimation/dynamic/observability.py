@@ -21,6 +21,7 @@ standard deviation of 0.3 m).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,6 +30,7 @@ from statistics import NormalDist
 import numpy as np
 from numpy.typing import NDArray
 
+from tether_companion.estimation import optional_core
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.output import (
     INITIALISING,
@@ -442,6 +444,15 @@ def decide(
     if learning is None:
         return None
     return LEARNING if learning else WEAK_PULL
+
+
+DECIDE: Callable[..., str | None] = decide
+""":func:`decide`, or where the optional C extension ``_status_core`` is built (and
+``TETHER_PURE_PYTHON`` is not set) its twin: the same status, :func:`decide` called where C could
+differ (``status_core.c``; the approximate status read calls it at every IMU tick)."""
+_CORE = optional_core.load("tether_companion.estimation.dynamic._status_core")
+if _CORE is not None:
+    DECIDE = functools.partial(_CORE.decide, decide)
 
 
 def _less(a: float, b: float, margin: float) -> bool | None:

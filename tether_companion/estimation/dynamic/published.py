@@ -46,9 +46,9 @@ from tether_companion.estimation.dynamic.mixture import (
 )
 from tether_companion.estimation.dynamic.models import ModelConstants
 from tether_companion.estimation.dynamic.observability import (
+    DECIDE,
     HoverUnknowns,
     assess,
-    decide,
     horizontal_pull_n,
     min_horizontal_pull_n,
 )
@@ -336,7 +336,7 @@ class TickSource:
             min_pull = min_horizontal_pull_n(
                 settings.pull_per_wind_n_s_per_m, settings.wind_std_mps, x[11], x[12]
             )
-        return decide(
+        return DECIDE(
             initialised=self.initialised_reason is None,
             reset=self.reset_reason is not None,
             on_ground=self.on_ground,

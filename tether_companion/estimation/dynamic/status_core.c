@@ -1,4 +1,5 @@
-/* published_terms.added_position_terms in C, float for float: the published position
+/* published_terms.added_position_terms in C, float for float (and the module _status_core,
+ * with observability.decide from status_decide.c): the published position
  * covariance's added terms, read at every IMU tick's status (and at every exact value), with
  * the terms it calls written out in their order:
  *
@@ -30,6 +31,7 @@
 #include <float.h>
 #include <math.h>
 
+#include "status_core.h"
 #include "straight_rows.h"
 
 /* state.TENSION, state.WIND.start, state.N_STATES (checked the same way) */
@@ -130,41 +132,6 @@ hypot2(double a, double b)
 }
 
 /* ------------------------------------------------------------------ reading the arguments */
-
-static int
-float_of(PyObject *value, double *out)
-{
-    if (!PyFloat_CheckExact(value))
-        return 0;
-    *out = PyFloat_AS_DOUBLE(value);
-    return 1;
-}
-
-/* The first `count` items of a list or tuple of at least `least` items (exactly `least` when
- * `exact`), all exact floats; 0 otherwise. */
-static int
-floats_of(PyObject *seq, Py_ssize_t least, int exact, Py_ssize_t count, double *out)
-{
-    PyObject **items;
-    Py_ssize_t size;
-    if (PyList_CheckExact(seq)) {
-        size = PyList_GET_SIZE(seq);
-        items = ((PyListObject *)seq)->ob_item;
-    }
-    else if (PyTuple_CheckExact(seq)) {
-        size = PyTuple_GET_SIZE(seq);
-        items = ((PyTupleObject *)seq)->ob_item;
-    }
-    else
-        return 0;
-    if (size < least || (exact && size != least))
-        return 0;
-    for (Py_ssize_t i = 0; i < count; i++) {
-        if (!float_of(items[i], &out[i]))
-            return 0;
-    }
-    return 1;
-}
 
 /* settings.<name> as an exact float; 0 when it is not one (an error is cleared: the
  * fallback reads it again and raises its own). */
@@ -341,12 +308,16 @@ static PyMethodDef methods[] = {
     {"added_position_terms", (PyCFunction)(void (*)(void))added_position_terms,
      METH_FASTCALL,
      "added_position_terms(fallback, *args): published_terms.added_position_terms(*args) in C."},
+    {"decide", (PyCFunction)(void (*)(void))status_decide, METH_FASTCALL | METH_KEYWORDS,
+     "decide(fallback, **keywords): observability.decide(**keywords) in C."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module_def = {
     PyModuleDef_HEAD_INIT, "_status_core",
-    "published_terms.added_position_terms in C (the Python function's twin).", -1, methods,
+    "published_terms.added_position_terms and observability.decide in C (the Python functions'"
+    " twins).",
+    -1, methods,
 };
 
 PyMODINIT_FUNC
@@ -358,6 +329,8 @@ PyInit__status_core(void)
     DRAG_PER_WIND = PyUnicode_InternFromString("drag_per_wind_n_s_per_m");
     if (WINCH_LENGTH_NOISE == NULL || PULL_PER_WIND == NULL || WIND_STD == NULL
         || DRAG_PER_WIND == NULL)
+        return NULL;
+    if (!status_decide_init())
         return NULL;
     return PyModule_Create(&module_def);
 }

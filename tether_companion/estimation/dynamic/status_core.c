@@ -3,8 +3,9 @@
  * covariance's added terms, read at every IMU tick's status (and at every exact value), with
  * the terms it calls written out in their order:
  *
- *   offset_term.offset_rows (the straight cable's: observability.unmodelled_position_rows,
- *   straight_rows.h, shared with bound_core.c),
+ *   offset_term.offset_rows (the catenary's plane rows with a fused winch length, their
+ *   span_per_horizontal_tension the Python model's; the straight cable's otherwise,
+ *   observability.unmodelled_position_rows in straight_rows.h, shared with bound_core.c),
  *   position_information.reduce_added_rows, position_information.height_excess,
  *   published_terms._along_range, published_terms._ring (observability.horizontal_pull_n,
  *   observability.min_horizontal_pull_n, bearing_ambiguity.bearing_ambiguity).
@@ -19,9 +20,8 @@
  *   - any argument that is not what the statements read as exact floats (a subclass, an int),
  *     winch_fused not exactly True or False, the information neither None nor a tuple of 13
  *     exact floats, a state of fewer than 13 items, a setting that is not an exact float;
- *   - a fused winch length on a cable with weight above the anchor's level (the catenary's
- *     plane rows: sag_range's model, not here);
- *   - `(drag / pull) ** 2` overflowing (Python raises OverflowError);
+ *   - `(drag / pull) ** 2` or `(radial * force_std) ** 2` overflowing (Python raises
+ *     OverflowError), the model raising or giving no exact float;
  *   - any non-finite result (a NaN's bits, a ZeroDivisionError's place: Python's).
  * Python's float +, -, *, /, abs, comparisons, math.sqrt of a sum of squares and math.exp
  * raise nothing else here. tests/test_status_core.py compares.
@@ -30,6 +30,7 @@
 #include <Python.h>
 #include <float.h>
 #include <math.h>
+#include <string.h>
 
 #include "status_core.h"
 #include "straight_rows.h"
@@ -202,6 +203,64 @@ ring(const double *x, PyObject *settings, double *r)
     return 1;
 }
 
+/* sag_range.span_per_horizontal_tension (the generated catenary model's Jacobian: Python's,
+ * imported at the first call) into *out; 0 when it raises or gives no exact float (the
+ * fallback then calls it again and does what it does). */
+static PyObject *SPAN_PER_HORIZONTAL_TENSION;
+
+static int
+span_per_horizontal_tension(double span, double height, double horizontal, double weight,
+                            double *out)
+{
+    if (SPAN_PER_HORIZONTAL_TENSION == NULL) {
+        PyObject *module = PyImport_ImportModule("tether_companion.estimation.dynamic.sag_range");
+        if (module == NULL) {
+            PyErr_Clear();
+            return 0;
+        }
+        SPAN_PER_HORIZONTAL_TENSION = PyObject_GetAttrString(module,
+                                                             "span_per_horizontal_tension");
+        Py_DECREF(module);
+        if (SPAN_PER_HORIZONTAL_TENSION == NULL) {
+            PyErr_Clear();
+            return 0;
+        }
+    }
+    PyObject *result = PyObject_CallFunction(SPAN_PER_HORIZONTAL_TENSION, "dddd", span, height,
+                                             horizontal, weight);
+    if (result == NULL) {
+        PyErr_Clear();
+        return 0;
+    }
+    int ok = float_of(result, out);
+    Py_DECREF(result);
+    return ok;
+}
+
+/* offset_term._plane_rows's upper triangle (nn, ne, nd, ee, ed, dd); 0 when
+ * `(radial * force_std) ** 2` overflows (OverflowError in Python). */
+static int
+plane_rows(double n, double e, double d, double span, double distance, double tension,
+           double radial_m_per_n, double force_std_n, double length_std_m, double *u)
+{
+    double h0 = n / span, h1 = e / span;
+    double u0 = n / distance, u1 = e / distance, u2 = d / distance;
+    double across = distance * force_std_n / tension;
+    double g_t = across * across;
+    double radial_force = radial_m_per_n * force_std_n;
+    double g_r = pow(radial_force, 2.0);
+    if (isfinite(radial_force) && isinf(g_r))
+        return 0;
+    double w = length_std_m * length_std_m;
+    u[0] = g_t * h1 * h1 + g_r * h0 * h0 + w * u0 * u0;
+    u[1] = -g_t * h0 * h1 + g_r * h0 * h1 + w * u0 * u1;
+    u[2] = w * u0 * u2;
+    u[3] = g_t * h0 * h0 + g_r * h1 * h1 + w * u1 * u1;
+    u[4] = w * u1 * u2;
+    u[5] = w * u2 * u2;
+    return 1;
+}
+
 /* position_information.reduce_added_rows on the upper triangle u, in place */
 static void
 reduce_rows(const double *info, double *u)
@@ -272,11 +331,26 @@ added_position_terms(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     tension = MIN_TENSION_N > tension ? MIN_TENSION_N : tension;
     double span = hypot2(n, e);
     double height = -d;
-    if (winch_fused && weight > 0.0 && span > 0.0 && height > 0.0)
-        goto python; /* the catenary's plane rows */
-    double rows[9], h[6], s[3] = {0.0, 0.0, 0.0}, r[3];
-    straight_rows(n, e, d, tension, force_std, length_std, rows);
-    double u[6] = {rows[0], rows[1], rows[2], rows[4], rows[5], rows[8]};
+    double u[6], h[6], s[3] = {0.0, 0.0, 0.0}, r[3];
+    int plane = 0;
+    if (winch_fused && weight > 0.0 && span > 0.0 && height > 0.0) {
+        double distance = hypot2(span, height);
+        double radial;
+        if (!span_per_horizontal_tension(span, height, tension * span / distance, weight,
+                                         &radial))
+            goto python;
+        if (isfinite(radial)) {
+            if (!plane_rows(n, e, d, span, distance, tension, radial, force_std, length_std, u))
+                goto python;
+            plane = 1;
+        }
+    }
+    if (!plane) {
+        double rows[9];
+        straight_rows(n, e, d, tension, force_std, length_std, rows);
+        double upper[6] = {rows[0], rows[1], rows[2], rows[4], rows[5], rows[8]};
+        memcpy(u, upper, sizeof(u));
+    }
     if (information != Py_None)
         reduce_rows(info, u);
     height_rows(n, e, d, height_excess_m2 + terrain_m2, winch_fused, h);

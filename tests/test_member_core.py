@@ -98,6 +98,24 @@ def test_batch_step_of_one_member_is_numpys_to_1e_12(monkeypatch: pytest.MonkeyP
     assert differs > 0
 
 
+def _bank(
+    x0: np.ndarray,
+    p0: np.ndarray,
+    q: np.ndarray,
+    constants: ModelConstants,
+    members: int,
+    consider: slice | None,
+) -> FilterBank:
+    """A bank of ``members`` filters from one start, member i's covariance scaled by 1 + 0.1 i."""
+    filters = [
+        MemberFilter(
+            x0, p0 * (1 + 0.1 * i), q, constants, generated.inertial, gate_probability=0.999
+        )
+        for i in range(members)
+    ]
+    return FilterBank(filters, 0.0, 30.0, consider=consider)
+
+
 @pytest.mark.parametrize("members", [1, 3])
 @pytest.mark.parametrize("consider", [state.CALIBRATION, None])
 def test_bank_steps_and_fuses_as_numpy_to_1e_12(
@@ -111,16 +129,7 @@ def test_bank_steps_and_fuses_as_numpy_to_1e_12(
     x0, p0, q = random_start(rng)
     constants = ModelConstants(1.5, 0.2, 0.0)
 
-    def bank() -> FilterBank:
-        filters = [
-            MemberFilter(
-                x0, p0 * (1 + 0.1 * i), q, constants, generated.inertial, gate_probability=0.999
-            )
-            for i in range(members)
-        ]
-        return FilterBank(filters, 0.0, 30.0, consider=consider)
-
-    banks = {"c": bank(), "numpy": bank()}
+    banks = {name: _bank(x0, p0, q, constants, members, consider) for name in ("c", "numpy")}
     accel = constants.models.accel
     statuses = set()
 
@@ -253,16 +262,7 @@ def test_a_long_chain_stays_symmetric_definite_and_near_numpy(
     x0, p0, q = random_start(rng)
     constants = ModelConstants(1.5, 0.2, 0.0)
 
-    def bank() -> FilterBank:
-        filters = [
-            MemberFilter(
-                x0, p0 * (1 + 0.1 * i), q, constants, generated.inertial, gate_probability=0.999
-            )
-            for i in range(3)
-        ]
-        return FilterBank(filters, 0.0, 30.0, consider=state.CALIBRATION)
-
-    banks = {"c": bank(), "numpy": bank()}
+    banks = {name: _bank(x0, p0, q, constants, 3, state.CALIBRATION) for name in ("c", "numpy")}
     accel = constants.models.accel
 
     def height(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -14,6 +14,7 @@ import functools
 import importlib
 import os
 import shutil
+import struct
 import sysconfig
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -80,3 +81,13 @@ def recording_c_calls(
     finally:
         setattr(owner, name, saved)
     assert isinstance(saved, functools.partial) and saved.func is c_function
+
+
+def float_bits(values: object) -> object:
+    """Nested lists/tuples of floats by their bit patterns (-0.0 != 0.0, NaNs compare), and
+    the containers' types: what a C twin's result must equal its Python reference's in."""
+    if isinstance(values, (list, tuple)):
+        return [type(values).__name__, [float_bits(v) for v in values]]
+    if isinstance(values, float):
+        return struct.pack("<d", values)
+    return (type(values).__name__, values)

@@ -15,6 +15,7 @@ import struct
 
 import numpy as np
 import pytest
+from optional_extension import float_bits as _bits
 from optional_extension import import_extension, recording_c_calls
 
 from tether_companion.bench.dynamic import record
@@ -39,16 +40,6 @@ PY = published_bound.stepped_terms
 
 def _c(*args: object) -> tuple:
     return core.stepped_terms(PY, *args)
-
-
-def _bits(values: object) -> object:
-    """Nested lists/tuples of floats by their bit patterns (-0.0 != 0.0, NaNs compare), and
-    the containers' types."""
-    if isinstance(values, (list, tuple)):
-        return [type(values).__name__, [_bits(v) for v in values]]
-    if isinstance(values, float):
-        return struct.pack("<d", values)
-    return (type(values).__name__, values)
 
 
 def _floats(rng: np.random.Generator, count: int, special: bool) -> list[float]:

@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import math
 import os
-import struct
 from dataclasses import replace
 
 import numpy as np
 import pytest
+from optional_extension import float_bits as _bits
 from optional_extension import import_extension, recording_c_calls
 
 from tether_companion.bench.dynamic import record
@@ -44,16 +44,6 @@ SPECIAL = [0.0, -0.0, math.nan, math.inf, -math.inf]
 
 def _c(*args: object) -> tuple:
     return core.added_position_terms(PY, *args)
-
-
-def _bits(values: object) -> object:
-    """Nested lists/tuples of floats by their bit patterns (-0.0 != 0.0, NaNs compare), and
-    the containers' types."""
-    if isinstance(values, (list, tuple)):
-        return [type(values).__name__, [_bits(v) for v in values]]
-    if isinstance(values, float):
-        return struct.pack("<d", values)
-    return (type(values).__name__, values)
 
 
 def _floats(rng: np.random.Generator, count: int, special: bool, decades: float = 6.0) -> list:

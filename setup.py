@@ -40,7 +40,7 @@ setup(
             "tether_companion.estimation.dynamic._bound_core",
             ["tether_companion/estimation/dynamic/bound_core.c"],
             depends=["tether_companion/estimation/dynamic/straight_rows.h"],
-            extra_compile_args=["-ffp-contract=off"],
+            extra_compile_args=["-ffp-contract=off", "-fno-builtin-pow"],
             optional=True,
         ),
         Extension(

@@ -391,3 +391,71 @@ def test_a_flight_decides_every_tick_in_c_with_the_python_status():
     assert not fallbacks
     for keywords in calls:
         assert _decide_c(**keywords) is DECIDE_PY(**keywords)
+
+
+# ---------------------------------------------------------------- the horizontal pulls
+
+PULL_PY = observability.horizontal_pull_n
+MIN_PULL_PY = observability.min_horizontal_pull_n
+
+
+def _result(function: object, *args: object) -> object:
+    try:
+        return _bits(function(*args))  # type: ignore[operator]
+    except Exception as exc:  # noqa: BLE001 - compared, not handled
+        return type(exc)
+
+
+def test_the_pulls_equal_the_python_functions_bit_for_bit(rng):
+    """``horizontal_pull`` and ``min_horizontal_pull`` against ``observability``'s functions on
+    40k random states and settings over up to 600 decades (the hypot's subnormal and overflow
+    scaling), signed zeros, NaN and infinities, positions at the anchor, states too short and
+    ints: the same floats, or the Python function's result or exception."""
+    for special in (False, True):
+        for _ in range(20000):
+            decades = [6.0, 150.0, 300.0][rng.integers(0, 3)]
+            x = _floats(rng, int(rng.integers(13, 18)), special, decades)
+            if rng.uniform() < 0.1:  # at the anchor (nan tension or not)
+                x[0], x[1], x[2] = [0.0, -0.0][rng.integers(0, 2)], 0.0, -0.0
+            if special and rng.uniform() < 0.05:
+                x = x[: int(rng.integers(0, 13))] if rng.uniform() < 0.5 else [*x[:6], 2, *x[7:]]
+            assert _result(core.horizontal_pull, PULL_PY, x) == _result(PULL_PY, x), x
+            settings = _floats(rng, 4, special, decades)
+            if special and rng.uniform() < 0.05:
+                settings[int(rng.integers(0, 4))] = 1
+            assert _result(core.min_horizontal_pull, MIN_PULL_PY, *settings) == _result(
+                MIN_PULL_PY, *settings
+            ), settings
+
+
+def test_the_least_pull_keeps_the_prior_at_a_tie():
+    """``max(wind_std, speed)``: the prior unless the speed is greater (a `>=` changes the sign
+    of a zero); a wrong argument count raises."""
+    for args in [(2.0, 0.0, 0.0, -0.0), (2.0, -0.0, 0.0, 0.0), (1.5, 3.0, 3.0, 0.0)]:
+        assert _bits(core.min_horizontal_pull(MIN_PULL_PY, *args)) == _bits(MIN_PULL_PY(*args))
+    with pytest.raises(TypeError):
+        core.min_horizontal_pull(MIN_PULL_PY, 1.0, 2.0, 3.0)
+    with pytest.raises(TypeError):
+        core.horizontal_pull(PULL_PY)
+
+
+def test_a_flight_s_pulls_run_in_c_with_the_python_floats():
+    """The take-off flight: every pull the approximate status read computes goes through C (no
+    fallback) and gives the Python function's floats."""
+    vehicle = load_vehicle(load_scenario("realistic-takeoff-figure8").vehicle)
+    estimator = DynamicTetherEstimator(EstimatorConfig(), vehicle)
+    with recording_c_calls(
+        published, "HORIZONTAL_PULL", core.horizontal_pull, PULL_PY
+    ) as (pulls, pull_fallbacks), recording_c_calls(
+        published, "MIN_HORIZONTAL_PULL", core.min_horizontal_pull, MIN_PULL_PY
+    ) as (least, least_fallbacks):
+        for imu in imu_ticks(record("realistic-takeoff-figure8", 6.0), estimator):
+            estimate = estimator.on_imu(imu)
+            if estimate is not None:
+                estimate.status  # noqa: B018 (the status read computes the pulls)
+    assert len(pulls) > 200 and len(least) == len(pulls)
+    assert not pull_fallbacks and not least_fallbacks
+    for args in pulls:
+        assert _bits(core.horizontal_pull(PULL_PY, *args)) == _bits(PULL_PY(*args))
+    for args in least:
+        assert _bits(core.min_horizontal_pull(MIN_PULL_PY, *args)) == _bits(MIN_PULL_PY(*args))

@@ -1,17 +1,20 @@
-/* published_bound.stepped_terms and observability.unmodelled_position_rows in C, float for
- * float (both run at every IMU tick's status read), and mixture.sd_bounds (once a mixture).
+/* published_bound.stepped_terms and approximation_tail, and
+ * observability.unmodelled_position_rows in C, float for float (all run at every IMU tick's
+ * status read), and mixture.sd_bounds (once a mixture).
  *
  * The published estimate's approximation steps the mixture's state over the batch and bounds
- * its position block (published_bound.py): every statement of stepped_terms here, the same
- * IEEE double operations in the same order (Python's left-to-right sums, `max` written out as
- * comparisons that keep the first value unless a later one is greater, NaN included), built
- * with -ffp-contract=off (no fused multiply-add), so the results are the same floats.
+ * its position block (published_bound.py): every statement of stepped_terms and
+ * approximation_tail here, the same IEEE double operations in the same order (Python's
+ * left-to-right sums, `max` written out as comparisons that keep the first value unless a
+ * later one is greater, NaN included), built with -ffp-contract=off (no fused multiply-add)
+ * and -fno-builtin-pow (libm's pow, as CPython's `**`), so the results are the same floats.
  *
  * Where C could differ it calls the Python function given as its first argument and returns
  * what it returns (or raises what it raises): any argument that is not an exact float, or a
  * list/tuple of the length and exact floats the statements read, and any non-finite result
- * (NaN bits). Python's float +, -, *, abs and comparisons never raise, so there is no other
- * case. tests/test_bound_core.py compares.
+ * (NaN bits), and a `** 2` that overflows (OverflowError in Python). Python's float +, -, *,
+ * abs and comparisons never raise, so there is no other case. tests/test_bound_core.py
+ * compares.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -223,6 +226,114 @@ sd_bounds(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     return Py_BuildValue("(Ndddd)", sd, largest, position, velocity, largest_value);
 }
 
+#define TAIL_ARGS 16
+#define EXACT_INT 4294967296LL /* 2 ** 32: a sum of such ints is exact in a double */
+
+/* sum(map(abs, jac))'s next step: `*sum += abs(item)` for an exact float or an exact int of
+ * magnitude below EXACT_INT (the model's Jacobian has int zeros); 0 for anything else.
+ * CPython 3.11's sum adds ints exactly and floats left to right in a double, starting from
+ * int 0: for ints this small, the same as adding each as a double from 0.0. */
+static int
+add_abs(PyObject *item, double *sum)
+{
+    if (PyFloat_CheckExact(item)) {
+        *sum += fabs(PyFloat_AS_DOUBLE(item));
+        return 1;
+    }
+    if (!PyLong_CheckExact(item))
+        return 0;
+    int overflow;
+    long long value = PyLong_AsLongLongAndOverflow(item, &overflow);
+    if (overflow || value <= -EXACT_INT || value >= EXACT_INT)
+        return 0;
+    *sum += (double)(value < 0 ? -value : value);
+    return 1;
+}
+
+/* approximation_tail(fallback, Approximation, rounding, finite_bound, x, t, north, north_east,
+ * east, down, spread, moved, row_sum, offset, largest_sd, largest_value, noise_largest,
+ * tension, jac, added_terms) -> (Approximation(...), spread, largest):
+ * published_bound.approximation_tail's statements in its order, with its module's
+ * Approximation, ROUNDING and FINITE_BOUND bound in front. x, t and tension are passed on as
+ * the same objects. Python's: any float argument that is not an exact float, jac neither None
+ * nor a list/tuple of exact floats and small exact ints (add_abs), added_terms not a list/tuple of 6 exact floats, the
+ * `** 2` overflowing (OverflowError), any non-finite float of the result (a NaN's bits). */
+static PyObject *
+approximation_tail(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 4 + TAIL_ARGS) {
+        PyErr_SetString(PyExc_TypeError,
+                        "approximation_tail takes the fallback, Approximation, rounding, "
+                        "finite_bound and 16 arguments");
+        return NULL;
+    }
+    PyObject *const *a = args + 4;
+    double rounding, finite_bound, t, north, north_east, east, down, spread, moved, row_sum;
+    double offset, largest_sd, largest_value, noise_largest, tension, added[6];
+    double jac_sum = 0.0;
+    int with_jac = a[14] != Py_None;
+    Py_ssize_t n_jac = 0;
+    PyObject **jac = with_jac ? items_of(a[14], &n_jac) : NULL;
+    int usable = float_of(args[2], &rounding) && float_of(args[3], &finite_bound)
+                 && float_of(a[1], &t) && float_of(a[2], &north) && float_of(a[3], &north_east)
+                 && float_of(a[4], &east) && float_of(a[5], &down) && float_of(a[6], &spread)
+                 && float_of(a[7], &moved) && float_of(a[8], &row_sum)
+                 && float_of(a[9], &offset) && float_of(a[10], &largest_sd)
+                 && float_of(a[11], &largest_value) && float_of(a[12], &noise_largest)
+                 && float_of(a[13], &tension) && (!with_jac || jac != NULL)
+                 && floats_at(a[15], 6, 1, 0, 6, added);
+    for (Py_ssize_t i = 0; usable && i < n_jac; i++)
+        usable = add_abs(jac[i], &jac_sum);
+    if (!usable)
+        return PyObject_Vectorcall(args[0], a, TAIL_ARGS, NULL);
+
+    double largest = largest_sd * row_sum;
+    double position_scale = largest_value * row_sum + offset;
+    north += added[0];
+    north_east += added[1];
+    east += added[3];
+    down += added[5];
+    double scale = largest * largest + t * noise_largest;
+    scale += added[0] + added[3] + added[5];
+    double tension_bound;
+    if (!with_jac)
+        tension_bound = largest * largest + t * noise_largest;
+    else {
+        double base = jac_sum * largest;
+        double square = pow(base, 2.0);
+        if (isinf(square) && isfinite(base)) /* OverflowError in Python */
+            return PyObject_Vectorcall(args[0], a, TAIL_ARGS, NULL);
+        tension_bound = square + t * noise_largest * jac_sum * jac_sum;
+    }
+    int finite = scale < finite_bound && tension_bound < finite_bound
+                 && position_scale < finite_bound && fabs(tension) < finite_bound;
+    double position_tol = rounding * position_scale;
+    double covariance_tol = finite ? rounding * scale + (1.0 + rounding) * moved : INFINITY;
+    /* a NaN's bits are the operand order's (see stepped_terms): left to Python */
+    if (!isfinite(north + north_east + east + down + position_tol + largest)
+        || (finite && !isfinite(covariance_tol)))
+        return PyObject_Vectorcall(args[0], a, TAIL_ARGS, NULL);
+
+    PyObject *horizontal = Py_BuildValue("(ddd)", north, north_east, east);
+    if (horizontal == NULL)
+        return NULL;
+    PyObject *made[8] = {a[0], a[1], horizontal, NULL, a[13], finite ? Py_True : Py_False,
+                         NULL, NULL};
+    made[3] = PyFloat_FromDouble(down);
+    made[6] = PyFloat_FromDouble(position_tol);
+    made[7] = PyFloat_FromDouble(covariance_tol);
+    PyObject *approx = NULL;
+    if (made[3] != NULL && made[6] != NULL && made[7] != NULL)
+        approx = PyObject_Vectorcall(args[1], made, 8, NULL);
+    Py_DECREF(horizontal);
+    Py_XDECREF(made[3]);
+    Py_XDECREF(made[6]);
+    Py_XDECREF(made[7]);
+    if (approx == NULL)
+        return NULL;
+    return Py_BuildValue("(Ndd)", approx, spread, largest);
+}
+
 static PyMethodDef methods[] = {
     {"stepped_terms", (PyCFunction)(void (*)(void))stepped_terms, METH_FASTCALL,
      "stepped_terms(fallback, *args): published_bound.stepped_terms(*args) in C."},
@@ -230,6 +341,9 @@ static PyMethodDef methods[] = {
      "unmodelled_rows(fallback, *args): observability.unmodelled_position_rows(*args) in C."},
     {"sd_bounds", (PyCFunction)(void (*)(void))sd_bounds, METH_FASTCALL,
      "sd_bounds(fallback, diagonal, x_values): mixture.sd_bounds(diagonal, x_values) in C."},
+    {"approximation_tail", (PyCFunction)(void (*)(void))approximation_tail, METH_FASTCALL,
+     "approximation_tail(fallback, Approximation, rounding, finite_bound, *args):"
+     " published_bound.approximation_tail(*args) in C."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -49,13 +49,13 @@ from tether_companion.estimation.dynamic.observability import (
     DECIDE,
     HoverUnknowns,
     assess,
-    horizontal_pull_n,
-    min_horizontal_pull_n,
 )
 from tether_companion.estimation.dynamic.output import Approximation, ExactValues
 from tether_companion.estimation.dynamic.published_bound import approximation
 from tether_companion.estimation.dynamic.published_terms import (
     ADDED_POSITION_TERMS,
+    HORIZONTAL_PULL,
+    MIN_HORIZONTAL_PULL,
     StatusSettings,
 )
 
@@ -270,8 +270,8 @@ class TickSource:
             slack_tension_n=settings.slack_tension_n,
             position_covariance_m2=published[:3, :3],
             max_horizontal_std_m=settings.max_horizontal_std_m,
-            horizontal_pull_n=0.0 if values is None else horizontal_pull_n(values),
-            min_horizontal_pull_n=min_horizontal_pull_n(
+            horizontal_pull_n=0.0 if values is None else HORIZONTAL_PULL(values),
+            min_horizontal_pull_n=MIN_HORIZONTAL_PULL(
                 settings.pull_per_wind_n_s_per_m,
                 settings.wind_std_mps,
                 float(x[state.WIND][0]),
@@ -332,8 +332,8 @@ class TickSource:
             x = approx.state
             tension, tol = approx.tension_n, approx.covariance_tol
             horizontal = approx.horizontal
-            pull = horizontal_pull_n(x)
-            min_pull = min_horizontal_pull_n(
+            pull = HORIZONTAL_PULL(x)
+            min_pull = MIN_HORIZONTAL_PULL(
                 settings.pull_per_wind_n_s_per_m, settings.wind_std_mps, x[11], x[12]
             )
         return DECIDE(

@@ -68,24 +68,70 @@ def approximation(
             block,
         )
     tension, jac = _tension_and_jacobian(constants, x)
+    return APPROXIMATION_TAIL(
+        x,
+        t,
+        north,
+        north_east,
+        east,
+        down,
+        spread,
+        moved,
+        row_sum,
+        offset,
+        bounds.largest_sd,
+        bounds.largest_value,
+        noise.largest,
+        tension,
+        jac,
+        added(x),
+    )
+
+
+def approximation_tail(
+    x: list[float],
+    t: float,
+    north: float,
+    north_east: float,
+    east: float,
+    down: float,
+    spread: float,
+    moved: float,
+    row_sum: float,
+    offset: float,
+    largest_sd: float,
+    largest_value: float,
+    noise_largest: float,
+    tension: float,
+    jac: Sequence[float] | None,
+    added_terms: tuple[float, ...],
+) -> tuple[Approximation, float, float]:
+    """:func:`approximation`'s result from the stepped state ``x`` over ``t`` [s], its
+    position block (``north``, ``north_east``, ``east``, ``down`` [m^2]) and
+    :func:`stepped_terms`' ``spread``, ``moved``, ``row_sum`` and ``offset``; the mixture's
+    largest standard deviation and ``|x_i|`` [SI], the process noise's largest [SI/s], the
+    tension [N] and its Jacobian row (None: the chord tension's own variance) and the added
+    position terms (north-north, north-east, _, east-east, _, down-down [m^2]).
+
+    The reference: :data:`APPROXIMATION_TAIL` is what runs."""
     # every row of Phi has sum_k |Phi_ik| <= row_sum, so with |P_kl| <= sd_k sd_l
     # (Cauchy-Schwarz) the terms of (Phi P Phi^T)_ij are below (row_sum max sd)^2, and those
     # of the stepped state below row_sum max |x| + |(D_p, D_v)|
-    largest = bounds.largest_sd * row_sum
-    position_scale = bounds.largest_value * row_sum + offset
-    added_nn, added_ne, _, added_ee, _, added_dd = added(x)
+    largest = largest_sd * row_sum
+    position_scale = largest_value * row_sum + offset
+    added_nn, added_ne, _, added_ee, _, added_dd = added_terms
     north += added_nn
     north_east += added_ne
     east += added_ee
     down += added_dd
-    scale = largest * largest + t * noise.largest
+    scale = largest * largest + t * noise_largest
     scale += added_nn + added_ee + added_dd
     # the tension's variance j^T (Phi P Phi^T + T Q) j, bounded the same way
     if jac is None:
-        tension_bound = largest * largest + t * noise.largest
+        tension_bound = largest * largest + t * noise_largest
     else:
         jac_sum = sum(map(abs, jac))
-        tension_bound = (jac_sum * largest) ** 2 + t * noise.largest * jac_sum * jac_sum
+        tension_bound = (jac_sum * largest) ** 2 + t * noise_largest * jac_sum * jac_sum
     finite = (  # nan fails
         scale < FINITE_BOUND
         and tension_bound < FINITE_BOUND
@@ -197,3 +243,15 @@ CORE = optional_core.load("tether_companion.estimation.dynamic._bound_core")
 """The C extension when it runs."""
 if CORE is not None:
     STEPPED_TERMS = functools.partial(CORE.stepped_terms, stepped_terms)
+
+
+APPROXIMATION_TAIL: Callable[..., tuple[Approximation, float, float]] = approximation_tail
+""":func:`approximation_tail`, or where ``_bound_core`` is built (and ``TETHER_PURE_PYTHON``
+is not set) its twin, bound to :class:`Approximation`, :data:`ROUNDING` and
+:data:`FINITE_BOUND`: the same floats and object, :func:`approximation_tail` called where C
+could differ (``bound_core.c``). An extension built before the function existed leaves the
+Python."""
+if CORE is not None and hasattr(CORE, "approximation_tail"):
+    APPROXIMATION_TAIL = functools.partial(
+        CORE.approximation_tail, approximation_tail, Approximation, ROUNDING, FINITE_BOUND
+    )

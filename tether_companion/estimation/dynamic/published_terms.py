@@ -120,6 +120,16 @@ _CORE = optional_core.load("tether_companion.estimation.dynamic._status_core")
 if _CORE is not None:
     ADDED_POSITION_TERMS = functools.partial(_CORE.added_position_terms, added_position_terms)
 
+HORIZONTAL_PULL: Callable[[list[float]], float] = horizontal_pull_n
+MIN_HORIZONTAL_PULL: Callable[[float, float, float, float], float] = min_horizontal_pull_n
+""":func:`~.observability.horizontal_pull_n` and :func:`~.observability.min_horizontal_pull_n`,
+or where ``_status_core`` is built with them (and ``TETHER_PURE_PYTHON`` is not set) their
+twins: the same floats, the Python function called where C could differ (``status_core.c``;
+the approximate status read calls both at every IMU tick)."""
+if _CORE is not None and hasattr(_CORE, "horizontal_pull"):
+    HORIZONTAL_PULL = functools.partial(_CORE.horizontal_pull, horizontal_pull_n)
+    MIN_HORIZONTAL_PULL = functools.partial(_CORE.min_horizontal_pull, min_horizontal_pull_n)
+
 
 def _ring(x: list[float], settings: StatusSettings) -> tuple[float, float, float]:
     """The bearing's ambiguity (nn, ne, ee) [m^2] at the state's values ``x`` when the pull

@@ -153,9 +153,17 @@ static PyObject *WINCH_LENGTH_NOISE, *PULL_PER_WIND, *WIND_STD, *DRAG_PER_WIND;
 
 /* ------------------------------------------------------------------ the terms */
 
+/* observability.horizontal_pull_n of a state's values */
+static double
+pull_of(const double *x)
+{
+    double distance = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+    return distance == 0.0 ? 0.0 : x[TENSION] * hypot2(x[0], x[1]) / distance;
+}
+
 /* observability.min_horizontal_pull_n */
 static double
-min_horizontal_pull(double pull_per_wind, double wind_std, double wind_n, double wind_e)
+least_pull(double pull_per_wind, double wind_std, double wind_n, double wind_e)
 {
     double speed = hypot2(wind_n, wind_e);
     return pull_per_wind * (speed > wind_std ? speed : wind_std);
@@ -175,13 +183,12 @@ ring(const double *x, PyObject *settings, double *r)
     if (!setting_of(settings, PULL_PER_WIND, &pull_per_wind)
         || !setting_of(settings, WIND_STD, &wind_std))
         return 0;
-    double distance = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
-    double pull = distance == 0.0 ? 0.0 : x[TENSION] * hypot2(x[0], x[1]) / distance;
+    double pull = pull_of(x);
     double wind_n = x[WIND], wind_e = x[WIND + 1];
-    double min_pull = min_horizontal_pull(pull_per_wind, wind_std, wind_n, wind_e);
+    double min_pull = least_pull(pull_per_wind, wind_std, wind_n, wind_e);
     if (!(pull < min_pull))
         return 1;
-    double drag = min_horizontal_pull(drag_per_wind, wind_std, wind_n, wind_e);
+    double drag = least_pull(drag_per_wind, wind_std, wind_n, wind_e);
     double n = x[0], e = x[1];
     double rho_sq = n * n + e * e;
     if (!(rho_sq > 0.0 && drag > 0.0 && isfinite(rho_sq + drag)))
@@ -378,19 +385,63 @@ python:
     return PyObject_Vectorcall(fallback, args + 1, 9, NULL);
 }
 
+/* ------------------------------------------------------------------ the horizontal pulls */
+
+/* horizontal_pull(fallback, x) -> observability.horizontal_pull_n(x): a state of at least 13
+ * exact floats (else Python's), a non-finite result Python's. */
+static PyObject *
+horizontal_pull(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 2) {
+        PyErr_SetString(PyExc_TypeError, "horizontal_pull takes the fallback and x");
+        return NULL;
+    }
+    double x[LEAST_STATES];
+    if (!floats_of(args[1], LEAST_STATES, 0, LEAST_STATES, x))
+        return PyObject_Vectorcall(args[0], args + 1, 1, NULL);
+    double pull = pull_of(x);
+    if (!isfinite(pull)) /* a NaN's bits: Python's */
+        return PyObject_Vectorcall(args[0], args + 1, 1, NULL);
+    return PyFloat_FromDouble(pull);
+}
+
+/* min_horizontal_pull(fallback, pull_per_wind_n_s_per_m, wind_std_mps, wind_n_mps,
+ * wind_e_mps) -> observability.min_horizontal_pull_n(...): exact floats (else Python's), a
+ * non-finite result Python's. */
+static PyObject *
+min_horizontal_pull(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "min_horizontal_pull takes the fallback and 4 floats");
+        return NULL;
+    }
+    double per_wind, wind_std, wind_n, wind_e;
+    if (!float_of(args[1], &per_wind) || !float_of(args[2], &wind_std)
+        || !float_of(args[3], &wind_n) || !float_of(args[4], &wind_e))
+        return PyObject_Vectorcall(args[0], args + 1, 4, NULL);
+    double pull = least_pull(per_wind, wind_std, wind_n, wind_e);
+    if (!isfinite(pull))
+        return PyObject_Vectorcall(args[0], args + 1, 4, NULL);
+    return PyFloat_FromDouble(pull);
+}
+
 static PyMethodDef methods[] = {
     {"added_position_terms", (PyCFunction)(void (*)(void))added_position_terms,
      METH_FASTCALL,
      "added_position_terms(fallback, *args): published_terms.added_position_terms(*args) in C."},
     {"decide", (PyCFunction)(void (*)(void))status_decide, METH_FASTCALL | METH_KEYWORDS,
      "decide(fallback, **keywords): observability.decide(**keywords) in C."},
+    {"horizontal_pull", (PyCFunction)(void (*)(void))horizontal_pull, METH_FASTCALL,
+     "horizontal_pull(fallback, x): observability.horizontal_pull_n(x) in C."},
+    {"min_horizontal_pull", (PyCFunction)(void (*)(void))min_horizontal_pull, METH_FASTCALL,
+     "min_horizontal_pull(fallback, *args): observability.min_horizontal_pull_n(*args) in C."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module_def = {
     PyModuleDef_HEAD_INIT, "_status_core",
-    "published_terms.added_position_terms and observability.decide in C (the Python functions'"
-    " twins).",
+    "published_terms.added_position_terms, observability.decide and the horizontal pulls in C"
+    " (the Python functions' twins).",
     -1, methods,
 };
 

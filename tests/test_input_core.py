@@ -224,3 +224,91 @@ def test_a_flight_s_attitudes_and_observations_run_in_c():
         assert _nested_bits(core.observe_tension(OBSERVE_PY, *args)) == _nested_bits(
             OBSERVE_PY(*args)
         )
+
+
+# ---------------------------------------------------------------- the motor lag's step
+
+LAG_PY = thrust_input.lagged_thrust_n
+
+
+def _lag_outcome(function: object, args: tuple) -> object:
+    try:
+        return _nested_bits(function(*args))  # type: ignore[operator]
+    except Exception as exc:  # noqa: BLE001 - compared, not handled
+        return type(exc)
+
+
+def _lag_args(rng: np.random.Generator, special: bool) -> tuple:
+    """A PWM sample's step: intervals around and at the restart gap (and nan, negative), thrusts
+    and time constants over many decades; with ``special`` now and then a signed zero, NaN or
+    infinity anywhere."""
+    dt = [
+        float(rng.uniform(0.0, 0.05)),
+        float(rng.uniform(0.0, 2.0)),
+        thrust_input.RESTART_GAP_S,
+        math.nextafter(thrust_input.RESTART_GAP_S, 2.0),
+        0.0,
+        -0.0,
+        math.nan,
+        float(-rng.uniform(0.0, 1.0)),
+    ][rng.integers(0, 8)]
+    values = [
+        float(rng.normal() * 10.0 ** rng.uniform(-3, 3)),  # command
+        dt,
+        float(rng.normal() * 10.0 ** rng.uniform(-3, 3)),  # thrust
+        float(rng.normal() * 10.0 ** rng.uniform(-3, 3)),  # last command
+        float(rng.uniform(0.0, 1.0)) if rng.uniform() < 0.9 else 0.0,  # interval
+        float(10.0 ** rng.uniform(-310, 3)),  # time constant, down to subnormal
+    ]
+    if special:
+        for i in rng.integers(0, 6, rng.integers(1, 3)):
+            values[i] = [0.0, -0.0, math.nan, math.inf, -math.inf][rng.integers(0, 5)]
+    return tuple(values)
+
+
+@pytest.mark.parametrize("special", [False, True])
+def test_the_motor_lag_step_equals_the_python_function_bit_for_bit(special, rng):
+    """``lagged_thrust`` against ``thrust_input.lagged_thrust_n`` on 40k random steps (the
+    restart gap's edges, nan, negative and zero intervals, time constants down to subnormal):
+    the same floats, or the Python function's result or exception. A `<` for the gap's `<=`,
+    or the decay's product distributed over the difference, fails this."""
+    for _ in range(20000):
+        args = _lag_args(rng, special)
+        assert _lag_outcome(lambda *a: core.lagged_thrust(LAG_PY, *a), args) == _lag_outcome(
+            LAG_PY, args
+        ), args
+
+
+def test_where_c_could_differ_the_motor_lag_step_is_python_s():
+    """Ints and numpy floats: the Python function's result; a wrong argument count raises."""
+    args = (12.0, 0.005, 11.0, 10.0, 0.005, 0.04)
+    for position, bad in [(0, 12), (1, np.float64(0.005)), (5, 1)]:
+        changed = list(args)
+        changed[position] = bad
+        assert _lag_outcome(lambda *a: core.lagged_thrust(LAG_PY, *a), tuple(changed)) == (
+            _lag_outcome(LAG_PY, tuple(changed))
+        )
+    with pytest.raises(TypeError):
+        core.lagged_thrust(LAG_PY, *args[:5])
+
+
+def test_a_flight_s_motor_lag_runs_in_c_with_the_python_floats():
+    """The motor lag over a flight's PWM samples (with a restart after a gap): every step goes
+    through C (no fallback) and gives the Python function's floats."""
+    vehicle = load_vehicle(load_scenario("realistic-circle").vehicle)
+    rng = np.random.default_rng(6)
+    samples = rng.uniform(1100.0, 1900.0, (300, vehicle.n_motors))
+    times = 0.005 * np.arange(300) + np.where(np.arange(300) >= 150, 2.0, 0.0)
+    with recording_c_calls(thrust_input, "LAGGED_THRUST", core.lagged_thrust, LAG_PY) as (
+        calls,
+        fallbacks,
+    ):
+        lag = MotorLagThrustInput(vehicle)
+        for pwm, t in zip(samples, times.tolist(), strict=True):
+            lag.total_thrust_n(pwm, t)
+    assert len(calls) == len(samples)
+    assert not fallbacks
+    for args in calls:
+        assert _lag_outcome(lambda *a: core.lagged_thrust(LAG_PY, *a), args) == _lag_outcome(
+            LAG_PY, args
+        )

@@ -1,7 +1,8 @@
 /* The tension filter's predict and update (tension_filter.py) in C, float for float; and, the
  * same way, the per-sample input arithmetic both filters read: the static thrust curve's sum
- * over the motors (thrust_input.static_thrust_n, per PWM sample), the attitude's rotation
- * rows (frames.rotation_ned_to_body_rows, per ATTITUDE sample) and the tension filter's
+ * over the motors (thrust_input.static_thrust_n, per PWM sample) and the motor lag's step
+ * (thrust_input.lagged_thrust_n, per PWM sample; libm's exp as math.exp), the attitude's
+ * rotation rows (frames.rotation_ned_to_body_rows, per ATTITUDE sample) and the tension filter's
  * observation (tension_kf.observe_tension_ned_values, per IMU tick).
  *
  * tension_filter.py generates, per filter, straight-line Python for
@@ -270,6 +271,44 @@ static_thrust(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     return PyFloat_FromDouble(total);
 }
 
+#define RESTART_GAP_S 1.0 /* thrust_input.RESTART_GAP_S */
+#define HOLD_FRACTION 0.5 /* thrust_input.HOLD_FRACTION */
+
+/* lagged_thrust(fallback, command_n, dt_s, thrust_n, last_command_n, interval_s,
+ * time_constant_s) -> (thrust_n, interval_s, expected_n): thrust_input.lagged_thrust_n,
+ * statement for statement (libm's exp, as math.exp). Python's: an argument that is not an
+ * exact float, a zero time constant (ZeroDivisionError), a non-finite result (a NaN's bits). */
+static PyObject *
+lagged_thrust(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 7) {
+        PyErr_SetString(PyExc_TypeError, "lagged_thrust takes the fallback and 6 arguments");
+        return NULL;
+    }
+    double k[6];
+    for (int i = 0; i < 6; i++) {
+        if (!PyFloat_CheckExact(args[1 + i]))
+            return PyObject_Vectorcall(args[0], args + 1, 6, NULL);
+        k[i] = PyFloat_AS_DOUBLE(args[1 + i]);
+    }
+    double command_n = k[0], dt_s = k[1], thrust_n = k[2], last_command_n = k[3];
+    double interval_s = k[4], time_constant_s = k[5];
+    if (time_constant_s == 0.0) /* Python's float division raises ZeroDivisionError */
+        return PyObject_Vectorcall(args[0], args + 1, 6, NULL);
+    if (!(0.0 < dt_s && dt_s <= RESTART_GAP_S))
+        thrust_n = command_n;
+    else {
+        double decay = exp(-dt_s / time_constant_s);
+        thrust_n = last_command_n + (thrust_n - last_command_n) * decay;
+        interval_s = dt_s;
+    }
+    double ahead = exp(-(HOLD_FRACTION * interval_s) / time_constant_s);
+    double expected_n = command_n + (thrust_n - command_n) * ahead;
+    if (!isfinite(thrust_n + interval_s + expected_n)) /* a NaN's bits: Python's */
+        return PyObject_Vectorcall(args[0], args + 1, 6, NULL);
+    return Py_BuildValue("(ddd)", thrust_n, interval_s, expected_n);
+}
+
 /* Three exact floats of a list or tuple (0: anything else). */
 static int
 row_of(PyObject *seq, double *out)
@@ -345,6 +384,9 @@ static PyMethodDef methods[] = {
     {"static_thrust", (PyCFunction)(void (*)(void))static_thrust, METH_FASTCALL,
      "static_thrust(fallback, pwm, pwm_min_us, per_us, scale, total, c1, c2): "
      "thrust_input.static_thrust_n in C."},
+    {"lagged_thrust", (PyCFunction)(void (*)(void))lagged_thrust, METH_FASTCALL,
+     "lagged_thrust(fallback, command_n, dt_s, thrust_n, last_command_n, interval_s, "
+     "time_constant_s): thrust_input.lagged_thrust_n in C."},
     {"observe_tension", (PyCFunction)(void (*)(void))observe_tension, METH_FASTCALL,
      "observe_tension(fallback, specific_force, rotation_rows, thrust_n, mass_kg): "
      "tension_kf.observe_tension_ned_values in C."},
@@ -356,7 +398,8 @@ static PyMethodDef methods[] = {
 static struct PyModuleDef module_def = {
     PyModuleDef_HEAD_INIT, "_tension_core",
     "The tension filter's generated predict and update, its observation, the static thrust "
-    "curve's sum and the attitude's rotation rows in C (the Python functions' twins).",
+    "curve's sum, the motor lag's step and the attitude's rotation rows in C (the Python "
+    "functions' twins).",
     -1,
     methods,
 };

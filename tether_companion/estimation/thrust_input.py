@@ -195,14 +195,51 @@ class MotorLagThrustInput:
             When the number of pulse widths is not the vehicle's motor count.
         """
         command_n = self._static.total_thrust_n(pwm_us, time_s)
-        dt = time_s - self._time_s
-        if not (0.0 < dt <= RESTART_GAP_S):  # first sample (nan), time went back, long gap
-            self._thrust_n = command_n
-        else:  # exact zero-order-hold response up to now, under the previous command
-            decay = self._lag.decay(dt)
-            self._thrust_n = self._command_n + (self._thrust_n - self._command_n) * decay
-            self._interval_s = dt
+        self._thrust_n, self._interval_s, expected_n = LAGGED_THRUST(
+            command_n,
+            time_s - self._time_s,
+            self._thrust_n,
+            self._command_n,
+            self._interval_s,
+            self._lag.time_constant_s,
+        )
         self._command_n = command_n
         self._time_s = time_s
-        ahead = self._lag.decay(HOLD_FRACTION * self._interval_s)
-        return command_n + (self._thrust_n - command_n) * ahead
+        return expected_n
+
+
+def lagged_thrust_n(
+    command_n: float,
+    dt_s: float,
+    thrust_n: float,
+    last_command_n: float,
+    interval_s: float,
+    time_constant_s: float,
+) -> tuple[float, float, float]:
+    """One PWM sample of :class:`MotorLagThrustInput`: the new command's static thrust
+    ``command_n`` [N] ``dt_s`` [s] after the last sample (nan for the first), the lagged thrust
+    ``thrust_n`` [N] under the previous command ``last_command_n`` [N] then, the last sample
+    interval ``interval_s`` [s] and the motor time constant [s]. Returns ``(thrust_n,
+    interval_s, expected_n)``: the lagged thrust now and the interval (restarted at the command
+    after a gap, :data:`RESTART_GAP_S`), and the thrust expected over the new command's hold
+    (``HOLD_FRACTION`` of the interval into it). Each decay is :meth:`MotorLag.decay`'s
+    ``exp(-dt / tau)``, written out.
+
+    The reference: :data:`LAGGED_THRUST` is what runs."""
+    if not (0.0 < dt_s <= RESTART_GAP_S):  # first sample (nan), time went back, long gap
+        thrust_n = command_n
+    else:  # exact zero-order-hold response up to now, under the previous command
+        decay = math.exp(-dt_s / time_constant_s)
+        thrust_n = last_command_n + (thrust_n - last_command_n) * decay
+        interval_s = dt_s
+    ahead = math.exp(-(HOLD_FRACTION * interval_s) / time_constant_s)
+    return thrust_n, interval_s, command_n + (thrust_n - command_n) * ahead
+
+
+LAGGED_THRUST: Callable[..., tuple[float, float, float]] = lagged_thrust_n
+""":func:`lagged_thrust_n`, or where ``_tension_core`` is built with it (and
+``TETHER_PURE_PYTHON`` is not set) its twin ``lagged_thrust``: the same floats (libm's ``exp``
+as ``math``'s), the Python function called where C could differ (arguments not exact floats,
+a zero time constant, a non-finite result)."""
+if _CORE is not None and hasattr(_CORE, "lagged_thrust"):
+    LAGGED_THRUST = functools.partial(_CORE.lagged_thrust, lagged_thrust_n)

@@ -256,8 +256,9 @@ add_abs(PyObject *item, double *sum)
  * published_bound.approximation_tail's statements in its order, with its module's
  * Approximation, ROUNDING and FINITE_BOUND bound in front. x, t and tension are passed on as
  * the same objects. Python's: any float argument that is not an exact float, jac neither None
- * nor a list/tuple of exact floats and small exact ints (add_abs), added_terms not a list/tuple of 6 exact floats, the
- * `** 2` overflowing (OverflowError), any non-finite float of the result (a NaN's bits). */
+ * nor a list/tuple of exact floats and small exact ints (add_abs), added_terms not a
+ * list/tuple of 6 exact floats, the `** 2` overflowing (OverflowError), any non-finite float
+ * of the result (a NaN's bits). */
 static PyObject *
 approximation_tail(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.aiding import AidStatus, fuse
 from tether_companion.estimation.dynamic.bank import (
     MERGE_DISTANCE_M,
     FilterBank,
@@ -61,9 +62,9 @@ def test_the_mixture_is_kept_while_every_member_holds_the_same_arrays() -> None:
 def test_the_member_the_data_favour_is_kept() -> None:
     bank = FilterBank([_member(-0.5), _member(0.0), _member(0.5)], start_s=0.0, max_bank_s=30.0)
     for k in range(400):
-        bank.update_others("x", np.array((2.5,)), _direct, np.array([[0.01]]))
-        result = bank.best.update("x", np.array((2.5,)), _direct, np.array([[0.01]]))
-        bank.add_best_nis(result.nis, 0.0)
+        best = bank.update_others("x", np.array((2.5,)), _direct, np.array([[0.01]]))
+        result = bank.filters[best].update("x", np.array((2.5,)), _direct, np.array([[0.01]]))
+        bank.add_evidence(best, result.nis, 0.0)
         bank.maybe_decide(0.1 * k)
     assert bank.decided
     assert bank.best.x[0] > 2.4
@@ -97,11 +98,11 @@ def test_a_wide_member_pays_for_its_width() -> None:
     wide.P = np.eye(N) * 25.0
     bank = FilterBank([narrow, wide], start_s=0.0, max_bank_s=30.0)
     for _ in range(20):
-        bank.update_others("x", np.array((2.05,)), _direct, np.array([[0.01]]))
-        result = bank.best.update("x", np.array((2.05,)), _direct, np.array([[0.01]]))
-        bank.add_best_nis(
-            result.nis, log_det_innovation(bank.best.P, _direct(bank.best.x)[1], np.array([[0.01]]))
-        )
+        best = bank.update_others("x", np.array((2.05,)), _direct, np.array([[0.01]]))
+        kf = bank.filters[best]
+        log_det_s = log_det_innovation(kf.P, _direct(kf.x)[1], np.array([[0.01]]))
+        result = kf.update("x", np.array((2.05,)), _direct, np.array([[0.01]]))
+        bank.add_evidence(best, result.nis, log_det_s)
     weights = bank.weights()
     assert weights[0] > weights[1]
 
@@ -159,3 +160,31 @@ def test_thrust_members_of_one_bearing_do_not_confirm_it() -> None:
     bank.log_weight[1] = -10.0
     bank.maybe_decide(3.5)
     assert bank.decided and not bank.bearing_confirmed
+
+
+def _both(xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """North and east position: a two-row reading (the cable angle's path through
+    :func:`aiding.fuse`)."""
+    jac = np.zeros((2, N))
+    jac[0, 0] = jac[1, 1] = 1.0
+    return np.array((xs[0], xs[1])), jac
+
+
+def test_a_sample_that_makes_another_member_the_best_is_fused_once_into_each() -> None:
+    """The best member (by a little) explains a two-row sample far worse than the other: the
+    other's evidence makes it the best before the best is fused. Each member still takes the
+    sample once, as a lone filter would (the best was re-read after the others' update: the
+    new best took the sample twice and the old one never, paper circle seed 2 at 3 s)."""
+    first, second = _member(-0.5), _member(0.5)
+    bank = FilterBank([first, second], start_s=0.0, max_bank_s=30.0)
+    bank.log_weight[0] += 0.1
+    assert bank.best is first
+    z, r = np.array((2.5, 0.0)), np.eye(2) * 0.01
+    alone = [_member(-0.5), _member(0.5)]
+    for kf in alone:
+        kf.update("xy", z, _both, r)
+    fuse(bank, "xy", AidStatus(), z, _both, r, 0.0)
+    assert bank.best is second  # the evidence moved the weights
+    for member, reference in zip(bank.filters, alone, strict=True):
+        np.testing.assert_allclose(member.x, reference.x, atol=1e-12)
+        np.testing.assert_allclose(member.P, reference.P, atol=1e-12)

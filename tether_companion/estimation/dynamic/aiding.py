@@ -230,9 +230,8 @@ def fuse(
         return _record_bank(
             bank, best, name, status, results, jacobians, priors, r_variance, time_s
         )
-    if not bank.decided:
-        bank.update_others(name, z, measure, r)
-    kf = bank.best
+    best_index = 0 if bank.decided else bank.update_others(name, z, measure, r)
+    kf = bank.filters[best_index]
     jacobians: list[FloatArray] = []
     priors: list[FloatArray] = []
 
@@ -244,7 +243,8 @@ def fuse(
 
     result = kf.update(name, z, measure_and_keep, r)
     if not bank.decided and jacobians:
-        bank.add_best_nis(result.nis, log_det_innovation(priors[0], jacobians[0], r))
+        log_det_s = log_det_innovation(priors[0], jacobians[0], r)
+        bank.add_evidence(best_index, result.nis, log_det_s)
     if math.isfinite(result.nis):
         status.last_innovation = kf.sensors[name].last_innovation
         status._last_jacobian, status._last_prior, status._last_noise = jacobians[0], priors[0], r

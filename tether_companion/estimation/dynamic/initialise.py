@@ -65,7 +65,7 @@ from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig, DynamicInitial
 from tether_companion.estimation.dynamic.start_angle import (
     AngleReadings,
-    held_slope_se,
+    held_standard_errors,
     quadratic_fit,
 )
 from tether_companion.estimation.dynamic.start_covariance import (
@@ -337,20 +337,20 @@ class Initialiser:
             math.isfinite(theta[T_ELEVATION]) and weightless
         ):  # a weightless cable placed by the readings
             motion = self._angles.motion(time_s, self.range_std_m, cfg.winch_length_noise_std_m)
-            if motion is not None:  # the end point as uncertain as the fit says, at least
-                position_var = np.diag(p)[state.POSITION]
-                p[state.POSITION, state.POSITION] += np.diag(
-                    np.maximum(motion[3] ** 2 - position_var, 0.0)
-                )
         if motion is None:
             by_azimuth = math.isfinite(theta[T_AZIMUTH]) and not weightless
             motion = self._fitted_motion(
                 time_s, scale, length_m, theta[T_WIND], by_azimuth, float(theta[T_WINCH_TENSION])
             )
         if motion is not None:  # the window's motion: position now and velocity
-            position, velocity, velocity_se, _ = motion
+            position, velocity, velocity_se, position_se = motion
             x[state.POSITION] = position
             x[state.VELOCITY] = velocity
+            # the end point as uncertain as the fit says, at least
+            position_var = np.diag(p)[state.POSITION]
+            p[state.POSITION, state.POSITION] += np.diag(
+                np.maximum(position_se**2 - position_var, 0.0)
+            )
             p[state.VELOCITY, state.VELOCITY] = np.diag(
                 np.maximum(velocity_se**2, cfg.initial.velocity_std_mps**2 * 0.25)
             )
@@ -461,10 +461,11 @@ class Initialiser:
         at the window's mean attitude; ``by_azimuth``: each tick placed with the cable angle
         read nearest in time and the winch's tension ``winch_tension`` [N] (``nan``: none),
         a heavy cable whose pull the wind could turn), and
-        the velocity's and the position's standard errors per axis [m/s, m] (the position's
-        not used: measured and not taken, start10); the velocity's counted over the held
-        height readings (:func:`.start_angle.held_slope_se`: as 191 independent ticks it read
-        0.40 m/s on realistic-circle seed 42 with the fit's v_d 1.5 m/s off, circle22)."""
+        the velocity's and the position's standard errors per axis [m/s, m], both counted
+        over the held height readings (:func:`.start_angle.held_standard_errors`: as 191
+        independent ticks the velocity's read 0.40 m/s on realistic-circle seed 42 with the
+        fit's v_d 1.5 m/s off, circle22; the MAVProxy test's paper circle started 1.1 s into
+        a recorded live stream: the position 0.39 m below the truth at a stated 0.07 m, live24)."""
         times, positions, readings = [], [], []
         drag = -self.mass_kg * self.drag_per_s * ((self._sum_d / self._n)[:, :2] @ wind_ne_mps)
         weight = self.config.cable_weight_n_per_m
@@ -486,7 +487,9 @@ class Initialiser:
             relative_s, np.asarray(positions)
         )
         # each tick's position holds the height read last: ~20 readings, not ~200 samples
-        velocity_se = held_slope_se(relative_s, np.asarray(readings), velocity_se)
+        held = np.asarray(readings)
+        velocity_se = held_standard_errors(relative_s, held, velocity_se, 1)
+        position_se = held_standard_errors(relative_s, held, position_se, 0)
         return position, velocity, velocity_se, position_se
 
     def _parameter_std(

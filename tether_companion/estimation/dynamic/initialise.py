@@ -461,8 +461,8 @@ class Initialiser:
         at the window's mean attitude; ``by_azimuth``: each tick placed with the cable angle
         read nearest in time and the winch's tension ``winch_tension`` [N] (``nan``: none),
         a heavy cable whose pull the wind could turn), and
-        the velocity's and the position's standard errors per axis [m/s, m], both counted
-        over the held height readings (:func:`.start_angle.held_standard_errors`: as 191
+        the velocity's and the position's standard errors per axis [m/s, m]; with a winch
+        length both counted over the held height readings (:func:`.start_angle.held_standard_errors`: as 191
         independent ticks the velocity's read 0.40 m/s on realistic-circle seed 42 with the
         fit's v_d 1.5 m/s off, circle22; the MAVProxy test's paper circle started 1.1 s into
         a recorded live stream: the position 0.39 m below the truth at a stated 0.07 m, live24)."""
@@ -486,6 +486,11 @@ class Initialiser:
         position, velocity, velocity_se, position_se = quadratic_fit(
             relative_s, np.asarray(positions)
         )
+        if not math.isfinite(length_m):
+            # no winch length to hold the range: the fit's errors over ~200 ticks as before
+            # and its position not used (with the honest errors the angle alone's light 1 N
+            # winch hover ran 46-54 m off, its heavy-cable start 2-5 sd short: startvel23)
+            return position, velocity, velocity_se, np.zeros(3)
         # each tick's position holds the height read last: ~20 readings, not ~200 samples
         held = np.asarray(readings)
         velocity_se = held_standard_errors(relative_s, held, velocity_se, 1)

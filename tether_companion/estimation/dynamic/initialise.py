@@ -461,11 +461,10 @@ class Initialiser:
         at the window's mean attitude; ``by_azimuth``: each tick placed with the cable angle
         read nearest in time and the winch's tension ``winch_tension`` [N] (``nan``: none),
         a heavy cable whose pull the wind could turn), and
-        the velocity's and the position's standard errors per axis [m/s, m]; with a winch
-        length both counted over the held height readings (:func:`.start_angle.held_standard_errors`: as 191
-        independent ticks the velocity's read 0.40 m/s on realistic-circle seed 42 with the
-        fit's v_d 1.5 m/s off, circle22; the MAVProxy test's paper circle started 1.1 s into
-        a recorded live stream: the position 0.39 m below the truth at a stated 0.07 m, live24)."""
+        the velocity's and the position's standard errors per axis [m/s, m], with a winch
+        length counted over the held height readings (:func:`.start_angle.held_standard_errors`;
+        over the ticks the paper circle's live start read 0.25 m/s and 0.07 m with the fit
+        1.5 m/s and 0.39 m off: circle22, live24)."""
         times, positions, readings = [], [], []
         drag = -self.mass_kg * self.drag_per_s * ((self._sum_d / self._n)[:, :2] @ wind_ne_mps)
         weight = self.config.cable_weight_n_per_m
@@ -486,10 +485,8 @@ class Initialiser:
         position, velocity, velocity_se, position_se = quadratic_fit(
             relative_s, np.asarray(positions)
         )
-        if not math.isfinite(length_m):
-            # no winch length to hold the range: the fit's errors over ~200 ticks as before
-            # and its position not used (with the honest errors the angle alone's light 1 N
-            # winch hover ran 46-54 m off, its heavy-cable start 2-5 sd short: startvel23)
+        if not math.isfinite(length_m):  # the errors over the ticks, the position's unused:
+            # honest, the angle alone's light 1 N hover ran 46 m off (placed short, startvel23)
             return position, velocity, velocity_se, np.zeros(3)
         # each tick's position holds the height read last: ~20 readings, not ~200 samples
         held = np.asarray(readings)

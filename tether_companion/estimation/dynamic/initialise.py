@@ -65,7 +65,7 @@ from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig, DynamicInitial
 from tether_companion.estimation.dynamic.start_angle import (
     AngleReadings,
-    held_standard_errors,
+    held_slope_se,
     quadratic_fit,
 )
 from tether_companion.estimation.dynamic.start_covariance import (
@@ -337,20 +337,20 @@ class Initialiser:
             math.isfinite(theta[T_ELEVATION]) and weightless
         ):  # a weightless cable placed by the readings
             motion = self._angles.motion(time_s, self.range_std_m, cfg.winch_length_noise_std_m)
+            if motion is not None:  # the end point as uncertain as the fit says, at least
+                position_var = np.diag(p)[state.POSITION]
+                p[state.POSITION, state.POSITION] += np.diag(
+                    np.maximum(motion[3] ** 2 - position_var, 0.0)
+                )
         if motion is None:
             by_azimuth = math.isfinite(theta[T_AZIMUTH]) and not weightless
             motion = self._fitted_motion(
                 time_s, scale, length_m, theta[T_WIND], by_azimuth, float(theta[T_WINCH_TENSION])
             )
         if motion is not None:  # the window's motion: position now and velocity
-            position, velocity, velocity_se, position_se = motion
+            position, velocity, velocity_se, _ = motion
             x[state.POSITION] = position
             x[state.VELOCITY] = velocity
-            # the end point as uncertain as the fit says, at least
-            position_var = np.diag(p)[state.POSITION]
-            p[state.POSITION, state.POSITION] += np.diag(
-                np.maximum(position_se**2 - position_var, 0.0)
-            )
             p[state.VELOCITY, state.VELOCITY] = np.diag(
                 np.maximum(velocity_se**2, cfg.initial.velocity_std_mps**2 * 0.25)
             )
@@ -461,10 +461,13 @@ class Initialiser:
         at the window's mean attitude; ``by_azimuth``: each tick placed with the cable angle
         read nearest in time and the winch's tension ``winch_tension`` [N] (``nan``: none),
         a heavy cable whose pull the wind could turn), and
-        the velocity's and the position's standard errors per axis [m/s, m], with a winch
-        length counted over the held height readings (:func:`.start_angle.held_standard_errors`;
-        over the ticks the paper circle's live start read 0.25 m/s and 0.07 m with the fit
-        1.5 m/s and 0.39 m off: circle22, live24)."""
+        the velocity's and the position's standard errors per axis [m/s, m] (the position's
+        not used: measured and not taken, start10, live24); with a winch length the velocity's
+        counted over the held height readings (:func:`.start_angle.held_slope_se`: as 191
+        independent ticks it read 0.40 m/s on realistic-circle seed 42 with the fit's v_d
+        1.5 m/s off, circle22; 0.25 m/s with it 1.5 m/s off on the MAVProxy test's live start,
+        live24). Without one, as over the ticks: honest, the angle alone's light 1 N winch
+        hover ran 46-54 m off (its heavy-cable start placed 2-5 sd short, startvel23)."""
         times, positions, readings = [], [], []
         drag = -self.mass_kg * self.drag_per_s * ((self._sum_d / self._n)[:, :2] @ wind_ne_mps)
         weight = self.config.cable_weight_n_per_m
@@ -485,13 +488,9 @@ class Initialiser:
         position, velocity, velocity_se, position_se = quadratic_fit(
             relative_s, np.asarray(positions)
         )
-        if not math.isfinite(length_m):  # the errors over the ticks, the position's unused:
-            # honest, the angle alone's light 1 N hover ran 46 m off (placed short, startvel23)
-            return position, velocity, velocity_se, np.zeros(3)
-        # each tick's position holds the height read last: ~20 readings, not ~200 samples
-        held = np.asarray(readings)
-        velocity_se = held_standard_errors(relative_s, held, velocity_se, 1)
-        position_se = held_standard_errors(relative_s, held, position_se, 0)
+        if math.isfinite(length_m):  # the winch's length holds the range (see the docstring)
+            # each tick's position holds the height read last: ~20 readings, not ~200 samples
+            velocity_se = held_slope_se(relative_s, np.asarray(readings), velocity_se)
         return position, velocity, velocity_se, position_se
 
     def _parameter_std(

@@ -236,17 +236,14 @@ def quadratic_fit(
     return value, slope, slope_se, value_se
 
 
-def held_standard_errors(
-    times: FloatArray, readings: FloatArray, standard_errors: FloatArray, coefficient: int
-) -> FloatArray:
-    """The standard errors ``standard_errors`` (3,) of an unweighted quadratic's value
-    (``coefficient`` 0) [m] or slope (1) [m/s] at time 0 (:func:`quadratic_fit`, which counts
-    the ``times`` (n,) [s] as independent samples) when the values hold readings from one to
-    the next, ``readings`` (n,) the index of the reading each holds (a 20 Hz rangefinder
-    under 200 Hz ticks): the coefficient's weights summed per reading,
-    ``sum_k (sum_{t in k} a_t)^2`` against ``sum_t a_t^2``, scale the variance."""
+def held_slope_se(times: FloatArray, readings: FloatArray, slope_se: FloatArray) -> FloatArray:
+    """The standard errors ``slope_se`` (3,) [m/s] of an unweighted quadratic's slope at time 0
+    (:func:`quadratic_fit`, which counts the ``times`` (n,) [s] as independent samples) when
+    the values hold readings from one to the next, ``readings`` (n,) the index of the reading
+    each holds (a 20 Hz rangefinder under 200 Hz ticks): the slope's weights summed per
+    reading, ``sum_k (sum_{t in k} a_t)^2`` against ``sum_t a_t^2``, scale the variance."""
     design = np.stack((np.ones_like(times), times, times * times), axis=1)
-    weights = np.linalg.pinv(design)[coefficient]  # the coefficient's weight on each value
+    weights = np.linalg.pinv(design)[1]  # the slope's weight on each value
     index = np.asarray(readings, dtype=np.int64)
     per_reading = np.bincount(index - index.min(), weights=weights)
-    return standard_errors * math.sqrt(float(per_reading @ per_reading) / float(weights @ weights))
+    return slope_se * math.sqrt(float(per_reading @ per_reading) / float(weights @ weights))

@@ -24,6 +24,8 @@ from tether_companion.service.config import load_service_config
 
 WINCH = (state.WINCH_OFFSET, state.WINCH_SCALE)
 ANGLE = (state.ELEVATION_ZERO, state.AZIMUTH_ZERO)
+HOLD_SEEDS = (5, 2)
+"""Tuning seeds of the hold test, tried in order until one flight meets its premise."""
 
 
 def _bank(members: int = 2) -> FilterBank:
@@ -152,11 +154,13 @@ def test_the_winchs_calibration_does_not_learn_while_its_length_is_not_fused(mon
     linearised where the cable was taut, the reading skipped exactly where it no longer holds.
 
     The premise is asserted, not assumed from one release time (startvel23's start moved seed
-    6's release out of its slack stretch, and so does sv23b's bank fix by 12.5 s): tuning seed
-    5, 12 s, the states released before 8 s and no length fused through the model from there
-    to the end while the cable angle is fused (40 readings at least). Over that stretch the
-    offset does not move (1e-3 m); with the hold taken out (``follow_length`` a no-op) it moves
-    +0.032 m by 12 s with the bank fix (+0.023 m by 12.2 s on 351c0c5, without it)."""
+    6's release out of its slack stretch, and so does sv23b's bank fix by 12.5 s): the first of
+    tuning seeds :data:`HOLD_SEEDS` whose flight, by 12 s, has the states released before 8 s
+    and no length fused through the model from there to the end while the cable angle is fused
+    (40 readings at least). Over that stretch the offset does not move (1e-3 m); with the hold
+    taken out (``follow_length`` a no-op) it moves +0.032 m by 12 s on seed 5 with the bank fix
+    (+0.023 m by 12.2 s on 351c0c5, without it), -0.0064 m on seed 2 with live24's start
+    velocity (whose start releases seed 5 only at 10.1 s)."""
     from tether_companion.estimation.dynamic.calibration_release import CalibrationRelease
     from tether_companion.estimation.dynamic.ground_station import GroundStationInputs
 
@@ -177,11 +181,17 @@ def test_the_winchs_calibration_does_not_learn_while_its_length_is_not_fused(mon
 
     monkeypatch.setattr(CalibrationRelease, "follow_length", spy_length)
     monkeypatch.setattr(GroundStationInputs, "fuse_angle", spy_angle)
-    estimator, _ = _fly("realistic-sagging-circle", 5, 12.0)
-    released_s = estimator.ground_station.calibration_release.released_time_s
-    assert released_s < 8.0, released_s  # released, then 4 s
-    assert held and not any(fused for fused, _ in held)  # no length fused through its model
-    assert angles_fused_while_held[0] >= 40, angles_fused_while_held
+    premises = {}
+    for seed in HOLD_SEEDS:
+        held.clear()
+        angles_fused_while_held[0] = 0
+        estimator, _ = _fly("realistic-sagging-circle", seed, 12.0)
+        released_s = estimator.ground_station.calibration_release.released_time_s
+        premises[seed] = (released_s, [fused for fused, _ in held], angles_fused_while_held[0])
+        if released_s < 8.0 and held and not any(premises[seed][1]) and premises[seed][2] >= 40:
+            break
+    else:
+        pytest.fail(f"no flight meets the premise (release [s], lengths fused, angles): {premises}")
     offset_at_hold, offset_now = held[0][1], estimator.bank.best.x[state.WINCH_OFFSET]
-    assert abs(offset_now - offset_at_hold) < 1e-3, (offset_at_hold, offset_now)
+    assert abs(offset_now - offset_at_hold) < 1e-3, (seed, offset_at_hold, offset_now)
     assert estimator.bank.consider == state.CALIBRATION  # held

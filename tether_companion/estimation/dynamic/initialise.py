@@ -44,6 +44,10 @@ where it leaves the anchor flat and may rest on the ground, by the force's pull 
 bearing; each tick of the motion fit by the reading nearest in time. On the light cable at
 the winch's 1 N the force alone started the figure-8 up to 7 m off (tuning seeds).
 
+The start's position and velocity are the window's motion at its end: a quadratic fit of
+the positions each tick's force places (:func:`~.start_motion.fitted_motion`), or of the
+cable angle's readings (:meth:`~.start_angle.AngleReadings.motion`).
+
 Not possible yet (reported, and the window starts again): no height and no winch length,
 thrust far below the weight (on the ground), cable slack, a cable that does not rise to the
 drone, or one resting on the ground when only a height is known, as a heavy cable is while
@@ -63,11 +67,7 @@ from numpy.typing import NDArray
 from tether_companion.constants import GRAVITY_MPS2
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.config import DynamicFilterConfig, DynamicInitial
-from tether_companion.estimation.dynamic.start_angle import (
-    AngleReadings,
-    held_slope_se,
-    quadratic_fit,
-)
+from tether_companion.estimation.dynamic.start_angle import AngleReadings
 from tether_companion.estimation.dynamic.start_covariance import (
     T_ACCEL,
     T_AZIMUTH,
@@ -80,7 +80,9 @@ from tether_companion.estimation.dynamic.start_covariance import (
     T_WIND,
     THETA_SIZE,
     start_state,
+    window_parameter_std,
 )
+from tether_companion.estimation.dynamic.start_motion import ForceSnapshot, fitted_motion
 from tether_companion.estimation.dynamic.start_placement import place
 
 FloatArray = NDArray[np.float64]
@@ -162,7 +164,7 @@ class Initialiser:
         self._n_height = 0
         self._sum_height = 0.0
         self._latest_height = math.nan
-        self._snapshots: list[tuple[float, FloatArray, FloatArray, float]] = []
+        self._snapshots: list[ForceSnapshot] = []
         self._snapshot_readings: list[int] = []
         """Each snapshot's height reading (its count in the window)."""
         self._angles = AngleReadings()
@@ -327,7 +329,17 @@ class Initialiser:
             return Initialisation(
                 None, None, f"cable slack (chord tension {y[3]:.2f} N < {cfg.slack_tension_n} N)"
             )
-        sigma, calibration_std = self._parameter_std(theta, n, scale_std)
+        sigma, calibration_std = window_parameter_std(
+            theta,
+            cfg,
+            scale_std,
+            self.accel_std_mps2,
+            n,
+            self.range_std_m,
+            self._n_height,
+            len(self._winch_tensions),
+            self._angles,
+        )
         x, p = start_state(theta, y, sigma, calibration_std, self._solve, cfg.initial)
         if x is None or p is None:
             return Initialisation(None, None, NO_COVARIANCE)
@@ -344,8 +356,19 @@ class Initialiser:
                 )
         if motion is None:
             by_azimuth = math.isfinite(theta[T_AZIMUTH]) and not weightless
-            motion = self._fitted_motion(
-                time_s, scale, length_m, theta[T_WIND], by_azimuth, float(theta[T_WINCH_TENSION])
+            wind = theta[T_WIND]
+            motion = fitted_motion(
+                time_s,
+                self._snapshots,
+                self._snapshot_readings,
+                scale,
+                length_m,
+                wind,
+                self._wind_drag_n(wind),
+                cfg.cable_weight_n_per_m,
+                self._angles,
+                by_azimuth,
+                float(theta[T_WINCH_TENSION]),
             )
         if motion is not None:  # the window's motion: position now and velocity
             position, velocity, velocity_se, _ = motion
@@ -447,77 +470,7 @@ class Initialiser:
         )
         return len(self._angles) > 0 and pull < least
 
-    def _fitted_motion(
-        self,
-        time_s: float,
-        scale: float,
-        length_m: float,
-        wind_ne_mps: FloatArray,
-        by_azimuth: bool = False,
-        winch_tension: float = math.nan,
-    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None:
-        """Position [m] and velocity [m/s] at ``time_s`` from a quadratic fit of the
-        window's per-tick positions (thrust scale ``scale``, the wind ``wind_ne_mps``'s drag
-        at the window's mean attitude; ``by_azimuth``: each tick placed with the cable angle
-        read nearest in time and the winch's tension ``winch_tension`` [N] (``nan``: none),
-        a heavy cable whose pull the wind could turn), and
-        the velocity's and the position's standard errors per axis [m/s, m] (the position's
-        not used: measured and not taken, start10, live24); with a winch length the velocity's
-        counted over the held height readings (:func:`.start_angle.held_slope_se`: as 191
-        independent ticks it read 0.40 m/s on realistic-circle seed 42 with the fit's v_d
-        1.5 m/s off, circle22; 0.25 m/s with it 1.5 m/s off on the MAVProxy test's live start,
-        live24). Without one, as over the ticks: honest, the angle alone's light 1 N winch
-        hover ran 46-54 m off (its heavy-cable start placed 2-5 sd short, startvel23)."""
-        times, positions, readings = [], [], []
-        drag = -self.mass_kg * self.drag_per_s * ((self._sum_d / self._n)[:, :2] @ wind_ne_mps)
-        weight = self.config.cable_weight_n_per_m
-        for snapshot, reading in zip(self._snapshots, self._snapshot_readings):
-            t, accel_force, thrust_vector, height = snapshot
-            force = accel_force + scale * thrust_vector
-            if wind_ne_mps.any():
-                force = force + drag
-            elevation, azimuth = self._angles.angle_at(t) if by_azimuth else (math.nan, math.nan)
-            placed = place(force, height, length_m, weight, elevation, azimuth, winch_tension)
-            if placed is not None:
-                times.append(t)
-                positions.append(placed[:3])
-                readings.append(reading)
-        if len(times) < 10:
-            return None
-        relative_s = np.asarray(times) - time_s
-        position, velocity, velocity_se, position_se = quadratic_fit(
-            relative_s, np.asarray(positions)
-        )
-        if math.isfinite(length_m):  # the winch's length holds the range (see the docstring)
-            # each tick's position holds the height read last: ~20 readings, not ~200 samples
-            velocity_se = held_slope_se(relative_s, np.asarray(readings), velocity_se)
-        return position, velocity, velocity_se, position_se
-
-    def _parameter_std(
-        self, theta: FloatArray, n: int, scale_std: float
-    ) -> tuple[FloatArray, FloatArray]:
-        """Standard deviations of the construction's parameters ``theta`` (the window's
-        noise averaged over its ``n`` ticks, the priors) and of the ground station's
-        calibration errors (winch offset [m] and scale, the angle's elevation and azimuth
-        zeros [rad]; 0 where the window does not use that sensor)."""
-        cfg = self.config
-        init = cfg.initial
-        sigma = np.zeros(THETA_SIZE)
-        sigma[T_ACCEL] = self.accel_std_mps2 / math.sqrt(n)
-        sigma[T_SCALE] = scale_std
-        sigma[T_BIAS] = init.accel_bias_std_mps2
-        sigma[T_WIND] = init.wind_std_mps
-        sigma[T_HEIGHT] = self.range_std_m / math.sqrt(max(self._n_height, 1))
-        sigma[T_LENGTH] = cfg.winch_length_noise_std_m
-        sigma[T_WINCH_TENSION] = cfg.load_cell_noise_std_n / math.sqrt(
-            max(len(self._winch_tensions), 1)
-        )
-        calibration_std = np.zeros(4)
-        if math.isfinite(theta[T_LENGTH]):  # the length places the drone: its calibration too
-            calibration_std[0:2] = cfg.winch_length_offset_std_m, cfg.winch_length_scale_std
-        if math.isfinite(theta[T_ELEVATION]):
-            sigma[T_ELEVATION], sigma[T_AZIMUTH] = self._angles.mean_noise_std(
-                float(theta[T_ELEVATION])
-            )
-            calibration_std[2:4] = self._angles.calibration_std()
-        return sigma, calibration_std
+    def _wind_drag_n(self, wind_ne_mps: FloatArray) -> FloatArray:
+        """The rotor drag's force (NED [N]) of the wind ``wind_ne_mps`` (north, east [m/s])
+        at the window's mean attitude."""
+        return -self.mass_kg * self.drag_per_s * ((self._sum_d / self._n)[:, :2] @ wind_ne_mps)

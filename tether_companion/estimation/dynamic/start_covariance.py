@@ -4,20 +4,23 @@
 vector ``theta`` of the window's parameters (its mean accelerometer force, the priors of
 what the window cannot measure, the height, the winch length, the cable angle and the
 winch's tension). :func:`start_state` maps their spread, and the ground station's
-calibration errors, through that construction by central differences, so the initial
+calibration errors (:func:`window_parameter_std`), through that construction by central
+differences, so the initial
 covariance carries the correlations (position with thrust scale, bias, wind and the
 calibration states) that let later data correct the position when those become known.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation.dynamic import state
-from tether_companion.estimation.dynamic.config import DynamicInitial
+from tether_companion.estimation.dynamic.config import DynamicFilterConfig, DynamicInitial
+from tether_companion.estimation.dynamic.start_angle import AngleReadings
 
 FloatArray = NDArray[np.float64]
 
@@ -115,3 +118,43 @@ def start_state(
     x[state.SCALE] = float(theta[T_SCALE])
     x[state.WIND] = theta[T_WIND]
     return x, p
+
+
+def window_parameter_std(
+    theta: FloatArray,
+    config: DynamicFilterConfig,
+    thrust_scale_std: float,
+    accel_std_mps2: float,
+    n_ticks: int,
+    range_std_m: float,
+    n_heights: int,
+    n_winch_tensions: int,
+    angles: AngleReadings,
+) -> tuple[FloatArray, FloatArray]:
+    """Standard deviations of the construction's parameters ``theta`` (``THETA_SIZE``,) and
+    of the ground station's calibration errors (4,): winch offset [m] and scale, the angle's
+    elevation and azimuth zeros [rad]; 0 where the window does not use that sensor.
+
+    The window's noise is averaged over its readings: the accelerometer's
+    ``accel_std_mps2`` [m/s^2 per tick] over ``n_ticks`` ticks, the rangefinder's
+    ``range_std_m`` [m] over ``n_heights`` heights, the load cell's (the config's) over
+    ``n_winch_tensions`` winch tensions, the cable angle's over its ``angles``. The rest are
+    priors: the thrust scale's ``thrust_scale_std``, the config's bias, wind and winch
+    length noise.
+    """
+    init = config.initial
+    sigma = np.zeros(THETA_SIZE)
+    sigma[T_ACCEL] = accel_std_mps2 / math.sqrt(n_ticks)
+    sigma[T_SCALE] = thrust_scale_std
+    sigma[T_BIAS] = init.accel_bias_std_mps2
+    sigma[T_WIND] = init.wind_std_mps
+    sigma[T_HEIGHT] = range_std_m / math.sqrt(max(n_heights, 1))
+    sigma[T_LENGTH] = config.winch_length_noise_std_m
+    sigma[T_WINCH_TENSION] = config.load_cell_noise_std_n / math.sqrt(max(n_winch_tensions, 1))
+    calibration_std = np.zeros(4)
+    if math.isfinite(theta[T_LENGTH]):  # the length places the drone: its calibration too
+        calibration_std[0:2] = config.winch_length_offset_std_m, config.winch_length_scale_std
+    if math.isfinite(theta[T_ELEVATION]):
+        sigma[T_ELEVATION], sigma[T_AZIMUTH] = angles.mean_noise_std(float(theta[T_ELEVATION]))
+        calibration_std[2:4] = angles.calibration_std()
+    return sigma, calibration_std

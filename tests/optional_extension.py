@@ -54,11 +54,16 @@ def import_extension(module: str) -> tuple[ModuleType | None, pytest.MarkDecorat
 
 @contextmanager
 def recording_c_calls(
-    owner: ModuleType, name: str, c_function: Callable, python_function: Callable
+    owner: ModuleType,
+    name: str,
+    c_function: Callable,
+    python_function: Callable,
+    bound: tuple = (),
 ) -> Iterator[tuple[list[tuple], list[tuple]]]:
     """For the block, ``owner.<name>`` (the package's ``functools.partial(c_function,
-    python_function)``: C with its Python fallback) records every call's arguments and every
-    fallback the C took to Python; yields ``(calls, fallbacks)``. Checks afterwards that the
+    python_function, *bound)``: C with its Python fallback and the objects it is bound to)
+    records every call's arguments and every fallback the C took to Python; yields ``(calls,
+    fallbacks)``. Checks afterwards that the
     name was bound to ``c_function`` (so the flight ran C, not Python alone); skips where
     ``TETHER_PURE_PYTHON`` is set (the package then runs the Python alone, by request)."""
     if os.environ.get("TETHER_PURE_PYTHON"):
@@ -72,7 +77,7 @@ def recording_c_calls(
 
     def recorded(*args: object) -> object:
         calls.append(args)
-        return c_function(fallback, *args)
+        return c_function(fallback, *bound, *args)
 
     saved = getattr(owner, name)
     setattr(owner, name, recorded)

@@ -10,12 +10,11 @@ where it could have been built (``optional_extension.import_extension``).
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 import pytest
 from optional_extension import float_bits as _bits
-from optional_extension import import_extension
+from optional_extension import import_extension, recording_c_calls
 
 from tether_companion.bench.dynamic import record
 from tether_companion.estimation.config import EstimatorConfig
@@ -131,31 +130,18 @@ def test_where_c_could_differ_it_returns_what_python_returns():
         core.approximation_tail(PY, *BOUND, *good[:15])
 
 
-def test_a_flight_runs_c_on_every_tick_with_the_python_floats(monkeypatch):
+def test_a_flight_runs_c_on_every_tick_with_the_python_floats():
     """The take-off flight: every approximation the status read makes goes through C (no
     fallback) and gives the Python function's floats and object."""
-    if os.environ.get("TETHER_PURE_PYTHON"):
-        pytest.skip("TETHER_PURE_PYTHON is set: the package runs the Python alone")
-    saved = published_bound.APPROXIMATION_TAIL
-    assert saved.func is core.approximation_tail  # type: ignore[attr-defined]
-    calls: list[tuple] = []
-    fallbacks: list[tuple] = []
-
-    def fallback(*args: object) -> object:
-        fallbacks.append(args)
-        return PY(*args)
-
-    def recorded(*args: object) -> object:
-        calls.append(args)
-        return core.approximation_tail(fallback, *BOUND, *args)
-
-    monkeypatch.setattr(published_bound, "APPROXIMATION_TAIL", recorded)
     vehicle = load_vehicle(load_scenario("realistic-takeoff-figure8").vehicle)
     estimator = DynamicTetherEstimator(EstimatorConfig(), vehicle)
-    for imu in imu_ticks(record("realistic-takeoff-figure8", 6.0), estimator):
-        estimate = estimator.on_imu(imu)
-        if estimate is not None:
-            estimate.status  # noqa: B018 (the status read makes the approximation)
+    ticks = imu_ticks(record("realistic-takeoff-figure8", 6.0), estimator)
+    tail = (published_bound, "APPROXIMATION_TAIL", core.approximation_tail, PY, BOUND)
+    with recording_c_calls(*tail) as (calls, fallbacks):
+        for imu in ticks:
+            estimate = estimator.on_imu(imu)
+            if estimate is not None:
+                estimate.status  # noqa: B018 (the status read makes the approximation)
     assert len(calls) > 200
     assert any(args[14] is not None for args in calls)
     assert not fallbacks

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tether_companion.estimation import optional_core
-from tether_companion.physics.motors import MotorLag
+from tether_companion.physics.motors import MotorLag, lag_decay
 from tether_companion.physics.thrust import ThrustCurve
 from tether_companion.physics.vehicle import VehicleProfile
 
@@ -222,17 +222,17 @@ def lagged_thrust_n(
     interval ``interval_s`` [s] and the motor time constant [s]. Returns ``(thrust_n,
     interval_s, expected_n)``: the lagged thrust now and the interval (restarted at the command
     after a gap, :data:`RESTART_GAP_S`), and the thrust expected over the new command's hold
-    (``HOLD_FRACTION`` of the interval into it). Each decay is :meth:`MotorLag.decay`'s
-    ``exp(-dt / tau)``, written out.
+    (``HOLD_FRACTION`` of the interval into it). Each decay is
+    :func:`~tether_companion.physics.motors.lag_decay`.
 
     The reference: :data:`LAGGED_THRUST` is what runs."""
     if not (0.0 < dt_s <= RESTART_GAP_S):  # first sample (nan), time went back, long gap
         thrust_n = command_n
     else:  # exact zero-order-hold response up to now, under the previous command
-        decay = math.exp(-dt_s / time_constant_s)
+        decay = lag_decay(dt_s, time_constant_s)
         thrust_n = last_command_n + (thrust_n - last_command_n) * decay
         interval_s = dt_s
-    ahead = math.exp(-(HOLD_FRACTION * interval_s) / time_constant_s)
+    ahead = lag_decay(HOLD_FRACTION * interval_s, time_constant_s)
     return thrust_n, interval_s, command_n + (thrust_n - command_n) * ahead
 
 

@@ -26,6 +26,12 @@ from tether_companion.physics.vehicle import VehicleProfile
 FloatArray = NDArray[np.float64]
 
 
+def lag_decay(dt_s: float, time_constant_s: float) -> float:
+    """``exp(-dt/tau)``: the fraction of a thrust error left after ``dt_s`` [s] of a first-order
+    lag with time constant ``time_constant_s`` [s]."""
+    return math.exp(-dt_s / time_constant_s)
+
+
 class MotorLag:
     """Exact first-order lag of motor thrusts toward their steady-state values.
 
@@ -42,7 +48,7 @@ class MotorLag:
 
     def decay(self, dt_s: float) -> float:
         """``exp(-dt/tau)``: the fraction of a thrust error left after ``dt_s`` seconds."""
-        return math.exp(-dt_s / self.time_constant_s)
+        return lag_decay(dt_s, self.time_constant_s)
 
 
 @functools.cache

@@ -58,7 +58,22 @@ class DynamicNoise:
         doc="accelerometer bias random walk, also carrying the flight controller's slowly"
         " wandering attitude error (g times its angle, 2 sigma^2 / tau) [(m/s^2)^2/s]",
     )
-    wind_m2ps3: float = spec(0.05, exclusive_minimum=0.0, doc="wind, north and east [m^2/s^3]")
+    wind_std_mps: float = spec(
+        3.0,
+        exclusive_minimum=0.0,
+        doc="the wind, north and east, as a first-order Gauss-Markov process about calm: its"
+        " stationary standard deviation (a light-turbulence day's mean wind and gusts at a few"
+        " metres) [m/s]",
+    )
+    wind_correlation_s: float = spec(
+        15.0,
+        exclusive_minimum=0.0,
+        doc="that process's correlation time: the wind reverts toward calm as exp(-t/tau)"
+        " and its white driving noise is 2 wind_std_mps^2 / tau (1.2 m^2/s^3 at 3 m/s, 15 s;"
+        " light Dryden gusts at a few metres, 1.5 m/s over ~5 s, drive 0.9 m^2/s^3). 15 s and"
+        " 3 m/s chosen on tuning seeds of the gusty hover (docs/estimation-history.md,"
+        " gust25) [s]",
+    )
 
 
 @dataclass(frozen=True)

@@ -63,7 +63,7 @@ from tether_companion.estimation.dynamic.ground_station_feed import GroundStatio
 from tether_companion.estimation.dynamic.imu_batch import ImuBatch
 from tether_companion.estimation.dynamic.mixture import MixtureValues
 from tether_companion.estimation.dynamic.models import ModelConstants
-from tether_companion.estimation.dynamic.noise import accel_measurement_std_mps2
+from tether_companion.estimation.dynamic.noise import accel_measurement_std_mps2, wind_decay_per_s
 from tether_companion.estimation.dynamic.on_ground import AutopilotLanded, on_ground_reason
 from tether_companion.estimation.dynamic.output import DynamicHealth, NavigationEstimate
 from tether_companion.estimation.dynamic.published import StatusSettings, TickSource
@@ -136,7 +136,7 @@ class DynamicTetherEstimator(InputFeed, GroundStationFeed):
         correlated residual makes every tick's sample mostly redundant; the force balance is
         the process in the other formulation, fused every tick)."""
         self._ticks_since_fusion = 0
-        self._batch = ImuBatch() if self._inertial else None
+        self._batch = ImuBatch(wind_decay_per_s(dynamic)) if self._inertial else None
         """The inertial prediction summed over the ticks since the members last stepped."""
         self._walk = TensionWalk(dynamic, config.staleness.tension_s)
         """The members' process noise: the chord tension's walk as the winch's tension allows."""

@@ -4,7 +4,9 @@ The inertial process (formulation (b), ``generated.inertial``) is affine in the 
 coefficients that depend only on the inputs ``u`` (attitude, specific force): ``p' = v``,
 ``v' = c(u) + J(u) b`` (``c`` the specific force rotated into NED plus gravity, ``J = -R^T``
 the Jacobian's bias columns: both taken from the generated function at the zero state), and
-the other states are random walks. The Euler steps of consecutive ticks (``p += dt v``, then
+the other states are random walks but the wind, a first-order Gauss-Markov process
+(``w' = -w / tau``, ``noise.wind_decay_per_s``) stepped exactly over the batch
+(``w_N = exp(-T / tau) w_0``: no input enters it). The Euler steps of consecutive ticks (``p += dt v``, then
 ``v += dt v'``) therefore compose into one step over the batch,
 
     p_N = p_0 + T v_0 + D_p + B_p b,        v_N = v_0 + D_v + B_v b,
@@ -15,7 +17,8 @@ position the velocity sums as they were before each tick: ``D_p = sum dt_k D_v(<
 per tick and shared by every bank member and by the published mean; a member then steps once
 per batch, with the state the tick-by-tick Euler gives (to rounding). The covariance goes
 through the same step's transition ``Phi = I + E`` (``E``: position rows ``T`` on the velocity
-and ``B_p`` on the bias columns; velocity rows ``B_v`` on the bias columns), ``Phi P Phi^T +
+and ``B_p`` on the bias columns; velocity rows ``B_v`` on the bias columns; the wind's diagonal
+``exp(-T / tau) - 1``), ``Phi P Phi^T +
 T Q``: the tick-by-tick covariance's Euler steps composed, with the second-order terms kept
 (``E P E^T``) and the process noise added once for the whole batch (not carried through the
 batch's own transition: second order in ``T``). PX4 EKF2 predicts over summed IMU deltas the
@@ -51,6 +54,8 @@ _TRANSITION_ENTRIES = np.array(
 )
 """Flat positions in ``Phi`` of ``T`` (position rows, velocity columns), ``B_p`` and ``B_v``
 (position and velocity rows, bias columns)."""
+_WIND_DIAGONAL = np.array([i * _N + i for i in range(state.WIND.start, state.WIND.stop)])
+"""Flat positions in ``Phi`` of the wind's decay over the batch."""
 
 
 def product(a: FloatArray, b: FloatArray) -> FloatArray:
@@ -140,6 +145,7 @@ class BatchStep:
         "d_v",
         "duration_s",
         "ticks",
+        "wind_decay_per_s",
     )
 
     def __init__(
@@ -150,8 +156,11 @@ class BatchStep:
         d_v: list[float],
         b_p: list[float],
         b_v: list[float],
+        wind_decay_per_s: float = 0.0,
     ) -> None:
         self.ticks = ticks
+        self.wind_decay_per_s = wind_decay_per_s
+        """The wind's reversion rate ``1 / tau`` [1/s] (0: a random walk)."""
         self.duration_s = duration_s
         """``T`` [s]."""
         self.d_p = d_p
@@ -174,6 +183,8 @@ class BatchStep:
             t = self.duration_s
             phi = _IDENTITY.copy()
             phi.flat[_TRANSITION_ENTRIES] = (t, t, t, *self.b_p, *self.b_v)
+            if self.wind_decay_per_s > 0.0:
+                phi.flat[_WIND_DIAGONAL] = math.exp(-t * self.wind_decay_per_s)
             self._phi = phi
         return phi
 
@@ -229,11 +240,14 @@ _IDENTITY = np.eye(_N)
 
 
 class ImuBatch:
-    """The summed inertial step of the IMU ticks since the last :meth:`clear`."""
+    """The summed inertial step of the IMU ticks since the last :meth:`clear`; the wind
+    reverts toward calm at ``wind_decay_per_s`` [1/s] (``noise.wind_decay_per_s``; 0: a random
+    walk)."""
 
-    __slots__ = ("_step", "b_p", "b_v", "d_p", "d_v", "duration_s", "ticks")
+    __slots__ = ("_step", "b_p", "b_v", "d_p", "d_v", "duration_s", "ticks", "wind_decay_per_s")
 
-    def __init__(self) -> None:
+    def __init__(self, wind_decay_per_s: float = 0.0) -> None:
+        self.wind_decay_per_s = wind_decay_per_s
         self.clear()
 
     def clear(self) -> None:
@@ -275,7 +289,13 @@ class ImuBatch:
         step = self._step
         if step is None:
             step = self._step = BatchStep(
-                self.ticks, self.duration_s, self.d_p, self.d_v, self.b_p, self.b_v
+                self.ticks,
+                self.duration_s,
+                self.d_p,
+                self.d_v,
+                self.b_p,
+                self.b_v,
+                self.wind_decay_per_s,
             )
         return step
 

@@ -9,8 +9,9 @@ cheaper operations:
 * prediction (one Euler step, ``x + h f``, ``P + h (F P + (F P)^T + Q)``): ``F`` is known in
   structure: the position rows are ``p' = v`` (so ``(F P)`` there is ``P``'s velocity rows,
   copied, not multiplied), the velocity rows are the generated ``dv'/dx`` (one 3xn by nxn
-  product; ``n`` = 17 states), the other rows are zero (random walks and constants); ``Q``
-  diagonal. No nxnxn product.
+  product; ``n`` = 17 states), the wind's ``-1 / tau`` on its own columns (a Gauss-Markov
+  process, ``noise.wind_decay_per_s``), the other rows are zero (random walks and constants);
+  ``Q`` diagonal. No nxnxn product.
 * the force-balance update with ``R = r I``: ``P H^T``, the 3x3 ``S`` tested for definiteness
   (Sylvester's leading minors) and inverted in scalars, ``NIS = y^T S^-1 y``, the gate,
   ``K = P H^T S^-1``, ``x + K y`` and ``P - K (P H^T)^T`` made exactly symmetric. That is the
@@ -65,6 +66,7 @@ FloatArray = NDArray[np.float64]
 _N = state.N_STATES
 _P = state.POSITION
 _V = state.VELOCITY
+_W = range(state.WIND.start, state.WIND.stop)
 
 
 class MemberFilter(ExtendedKalmanFilter):
@@ -83,6 +85,9 @@ class MemberFilter(ExtendedKalmanFilter):
         (``generated.inertial`` or a ``force_balance_*``).
     gate_probability, max_consecutive_rejections
         As for :class:`~tether_companion.estimation.ekf.ExtendedKalmanFilter`.
+    wind_decay_per_s
+        The wind's reversion rate toward calm, ``1 / tau`` [1/s], in :meth:`predict` (the
+        generated process leaves the wind's rate at 0; 0: a random walk).
     """
 
     def __init__(
@@ -95,6 +100,7 @@ class MemberFilter(ExtendedKalmanFilter):
         *,
         gate_probability: float = 1.0,
         max_consecutive_rejections: int = 0,
+        wind_decay_per_s: float = 0.0,
     ) -> None:
         super().__init__(
             x0,
@@ -107,9 +113,10 @@ class MemberFilter(ExtendedKalmanFilter):
         self._random_walk = False  # the prediction below runs the process, not a random walk
         self.constants = constants
         self.process_function = process
+        self.wind_decay_per_s = wind_decay_per_s
         self._q = np.diag(q_diagonal).copy()
         self._fp = np.zeros((_N, _N))
-        """``F P``, rows 0-5 rewritten each prediction, the rest stay zero."""
+        """``F P``, rows 0-5 and the wind's rewritten each prediction, the rest stay zero."""
         self.last_log_det_s = math.nan
         """``log det S`` of the last sample :meth:`test_force_balance` or :meth:`test_scalar`
         tested (the Gaussian likelihood's normalisation, for the bank's weights)."""
@@ -138,6 +145,9 @@ class MemberFilter(ExtendedKalmanFilter):
         x = self.x_values()
         xdot, dv = self.process_function(x, u, self.constants.values())  # type: ignore[arg-type]
         x = [a + dt_s * b for a, b in zip(x, xdot, strict=True)]
+        decay = self.wind_decay_per_s
+        for i in _W:
+            x[i] -= dt_s * decay * x[i]  # w' = -w / tau (the generated rate is 0)
         self.x = np.array(x)
         if not math.isfinite(sum(x)):
             self.reset()
@@ -146,6 +156,7 @@ class MemberFilter(ExtendedKalmanFilter):
         fp = self._fp
         fp[_P] = p[_V]
         fp[_V] = np.array(dv).reshape(3, _N) @ p
+        fp[state.WIND] = -decay * p[state.WIND]
         rate = fp + fp.T
         rate += self._q
         rate *= dt_s

@@ -6,6 +6,12 @@ converted with the nominal IMU period), and the force balance, fused once per
 ``imu_ticks_per_fusion`` ticks, carries what the model leaves out (gusts' drag, vibration, the
 flight controller's attitude error): correlated over about a second, its white equivalent per
 fused sample is ``force_residual_m2ps3`` over the fusion interval.
+
+The wind is a first-order Gauss-Markov process about calm, not a random walk: in a hover the
+winch length and the cable angle fix the position but not how the horizontal force splits
+between the cable's pull and the wind's drag, and a walking wind let the tension, the thrust
+scale and the wind drift together along that split (the gusty hover's north wind to -19 m/s
+against the truth's -4, the tension 6 sd off; docs/estimation-history.md, gust24 and gust25).
 """
 
 from __future__ import annotations
@@ -37,8 +43,15 @@ def process_noise_density(dynamic: DynamicFilterConfig) -> FloatArray:
     q[state.TENSION] = noise.tension_n2ps
     q[state.SCALE] = noise.thrust_scale_per_s
     q[state.BIAS] = noise.accel_bias_m2ps5
-    q[state.WIND] = noise.wind_m2ps3
+    q[state.WIND] = 2.0 * noise.wind_std_mps**2 / noise.wind_correlation_s
     return q
+
+
+def wind_decay_per_s(dynamic: DynamicFilterConfig) -> float:
+    """The wind's reversion rate toward calm, ``1 / tau`` [1/s]: the Gauss-Markov process
+    ``w' = -w / tau + n`` whose driving density :func:`process_noise_density` gives
+    (``2 sigma^2 / tau``, stationary standard deviation ``sigma``)."""
+    return 1.0 / dynamic.noise.wind_correlation_s
 
 
 def accel_measurement_std_mps2(dynamic: DynamicFilterConfig) -> float:

@@ -23,6 +23,7 @@ from tether_companion.estimation.dynamic.config import DynamicFilterConfig
 from tether_companion.estimation.dynamic.initialise import Initialiser
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.dynamic.models import ModelConstants
+from tether_companion.estimation.dynamic.noise import wind_decay_per_s
 
 
 class FilterStartup:
@@ -123,6 +124,7 @@ class FilterStartup:
                 process,
                 gate_probability=gate.probability,
                 max_consecutive_rejections=gate.max_consecutive_rejections,
+                wind_decay_per_s=wind_decay_per_s(self._dynamic),
             )
             for start in starts
         ]

@@ -52,7 +52,12 @@ The model (SI units, NED world, FRD body, ``R = R_v^b`` maps NED to body; state 
   and azimuth ``atan2(t_a_e, t_a_n)`` [rad from north], each read plus its zero error
   (the calibration states ``elevation_zero``, ``azimuth_zero``).
 
-All other states are random walks or constants (derivative 0).
+All other states are random walks or constants (derivative 0 here), but the wind: a
+first-order Gauss-Markov process about calm, ``w' = -w / tau`` plus white noise
+(``noise.wind_decay_per_s``). Its rate is linear with a constant coefficient and enters no
+measurement model, so the predictions apply it (the inertial batch's transition
+``exp(-T / tau)``, the force-balance member's Euler step) and the generated functions leave it
+out (their Jacobians are those of the models above).
 """
 
 from __future__ import annotations

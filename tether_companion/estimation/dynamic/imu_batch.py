@@ -6,8 +6,8 @@ coefficients that depend only on the inputs ``u`` (attitude, specific force): ``
 the Jacobian's bias columns: both taken from the generated function at the zero state), and
 the other states are random walks but the wind, a first-order Gauss-Markov process
 (``w' = -w / tau``, ``noise.wind_decay_per_s``) stepped exactly over the batch
-(``w_N = exp(-T / tau) w_0``: no input enters it). The Euler steps of consecutive ticks (``p += dt v``, then
-``v += dt v'``) therefore compose into one step over the batch,
+(``w_N = exp(-T / tau) w_0``: no input enters it). The Euler steps of consecutive ticks
+(``p += dt v``, then ``v += dt v'``) therefore compose into one step over the batch,
 
     p_N = p_0 + T v_0 + D_p + B_p b,        v_N = v_0 + D_v + B_v b,
 
@@ -54,8 +54,8 @@ _TRANSITION_ENTRIES = np.array(
 )
 """Flat positions in ``Phi`` of ``T`` (position rows, velocity columns), ``B_p`` and ``B_v``
 (position and velocity rows, bias columns)."""
-_WIND_DIAGONAL = np.array([i * _N + i for i in range(state.WIND.start, state.WIND.stop)])
-"""Flat positions in ``Phi`` of the wind's decay over the batch."""
+_WIND_NORTH, _WIND_EAST = range(state.WIND.start, state.WIND.stop)
+"""The wind's rows (and columns) in ``Phi``: its decay over the batch on the diagonal."""
 
 
 def product(a: FloatArray, b: FloatArray) -> FloatArray:
@@ -184,7 +184,9 @@ class BatchStep:
             phi = _IDENTITY.copy()
             phi.flat[_TRANSITION_ENTRIES] = (t, t, t, *self.b_p, *self.b_v)
             if self.wind_decay_per_s > 0.0:
-                phi.flat[_WIND_DIAGONAL] = math.exp(-t * self.wind_decay_per_s)
+                phi[_WIND_NORTH, _WIND_NORTH] = phi[_WIND_EAST, _WIND_EAST] = math.exp(
+                    -t * self.wind_decay_per_s
+                )
             self._phi = phi
         return phi
 

@@ -46,6 +46,11 @@ from tether_companion.estimation.ekf import MeasurementFunction
 
 FloatArray = NDArray[np.float64]
 
+PREDICT_BATCH = getattr(MEMBER_CORE, "predict_batch", None)
+"""``_member_core.predict_batch`` (bank_predict.c) where the extension runs and has it: the
+member-by-member loop of :meth:`FilterBank.predict_batch` over every member in one call, bit
+for bit; ``None`` where the loop must run (nothing changed)."""
+
 SELECT_WEIGHT = 0.99
 """Posterior weight at which one member is kept and the others dropped."""
 MIN_BANK_S = 3.0
@@ -183,7 +188,11 @@ class FilterBank(BankUpdates):
         ``q`` the process noise spectral density (n, n)), all members in stacked arrays."""
         filters = self.filters
         if MEMBER_CORE is not None:  # member by member, in C (imu_batch.MEMBER_CORE)
-            step = batch.step()
+            step = batch.step()  # every member in one C call, else this loop (its reference)
+            if PREDICT_BATCH is not None and PREDICT_BATCH(
+                filters, step.phi, step.d_p, step.d_v, q, step.duration_s, EMPTY
+            ):
+                return
             for kf in filters:
                 x = step.step_state(kf.x)
                 p, finite = step.step_member_covariance(kf.P, q)

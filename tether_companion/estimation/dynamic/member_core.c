@@ -24,6 +24,20 @@
  */
 #include "member_core.h"
 
+/* out = phi x + (d[0..5], 0...) for the n x n phi and the n-state x (imu_batch's
+ * BatchStep.step_state; step() and bank_predict.c): index-order sums over phi's nonzeros. */
+void
+member_step(const double *phi, const double *x, const double *d, int n, double *out)
+{
+    for (int i = 0; i < n; i++) {
+        double value = 0.0;
+        for (int k = 0; k < n; k++)
+            if (phi[i * n + k] != 0.0)
+                value += phi[i * n + k] * x[k];
+        out[i] = i < 6 ? value + d[i] : value;
+    }
+}
+
 /* step(phi, x, d_p, d_v, x_out) -> True: x_out = phi x + (d_p, d_v, 0...) (one state of
  * imu_batch.BatchStep.step_state; d_p, d_v lists of 3 floats); None: not taken. */
 static PyObject *
@@ -41,16 +55,9 @@ step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     if (!(vphi = take(&v, args[0], 2, n, n, 0)) || !(vout = take(&v, args[4], 1, n, 0, 1)))
         goto not_taken;
     const double *x = vx->buf, *phi = vphi->buf;
-    double *out = vout->buf;
     if (!all_finite(x, n) || !all_finite(phi, (Py_ssize_t)n * n))
         goto not_taken;
-    for (int i = 0; i < n; i++) {
-        double value = 0.0;
-        for (int k = 0; k < n; k++)
-            if (phi[i * n + k] != 0.0)
-                value += phi[i * n + k] * x[k];
-        out[i] = i < 6 ? value + d[i] : value;
-    }
+    member_step(phi, x, d, n, vout->buf);
     release(&v);
     Py_RETURN_TRUE;
 not_taken:
@@ -58,44 +65,13 @@ not_taken:
     Py_RETURN_NONE;
 }
 
-/* step_covariance(phi, p, q, t, out) -> bool: out = phi p phi^T + q t (one covariance of
- * imu_batch.BatchStep.step_covariance; p and q symmetric), whether out is finite; None: not
- * taken (also for a q not exactly symmetric, or out sharing p's memory: p's rows are read
- * while out is written).
- *
- * The product is computed once per entry of the upper triangle and mirrored, so out is exactly
- * symmetric without numpy's (A + A^T) / 2, and with phi's known sparsity: the zeros of phi are
- * skipped, and a unit row of phi (e_i: 1 on the diagonal, nothing else; the dynamic filter's
- * rows from 6 on) takes p's own row (phi p) or entry (A phi^T) without arithmetic. Only the
- * entries where both rows carry the batch's terms (the 6 x 6 position/velocity block) are sums
- * of sums; they differ from the symmetrised full product by rounding (tests/test_member_core.py
- * holds them to 1e-12 of the entry's scale). */
-static PyObject *
-step_covariance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+/* out = phi p phi^T + q t on the upper triangle, mirrored, for the n x n phi, p and q (p and q
+ * symmetric, finite; out not p's memory): step_covariance()'s arithmetic (below) and
+ * bank_predict.c's. */
+void
+member_step_covariance(const double *phi, const double *p, const double *q, double t, int n,
+                       double *out)
 {
-    if (nargs != 5)
-        return PyErr_Format(PyExc_TypeError, "step_covariance takes 5 arguments");
-    if (!PyFloat_Check(args[3]))
-        Py_RETURN_NONE;
-    double t = PyFloat_AS_DOUBLE(args[3]);
-    Views v = {.count = 0};
-    Py_buffer *vp, *vphi, *vq, *vout;
-    if (!(vp = take(&v, args[1], 2, ANY, ANY, 0)) || vp->shape[0] != vp->shape[1] ||
-        vp->shape[0] > MAX_N)
-        goto not_taken;
-    int n = (int)vp->shape[0];
-    if (!(vphi = take(&v, args[0], 2, n, n, 0)) || !(vq = take(&v, args[2], 2, n, n, 0)) ||
-        !(vout = take(&v, args[4], 2, n, n, 1)))
-        goto not_taken;
-    const double *p = vp->buf, *phi = vphi->buf, *q = vq->buf;
-    double *out = vout->buf;
-    if (!all_finite(p, (Py_ssize_t)n * n) || !all_finite(phi, (Py_ssize_t)n * n) || !isfinite(t) ||
-        (const double *)out == p)
-        goto not_taken;
-    for (int i = 0; i < n; i++)
-        for (int j = i + 1; j < n; j++)
-            if (q[i * n + j] != q[j * n + i])
-                goto not_taken;
     int count[MAX_N], col[MAX_N][MAX_N], unit[MAX_N];
     for (int i = 0; i < n; i++) {
         count[i] = 0;
@@ -134,6 +110,45 @@ step_covariance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
             }
             out[i * n + j] = out[j * n + i] = value + q[i * n + j] * t;
         }
+}
+
+/* step_covariance(phi, p, q, t, out) -> bool: out = phi p phi^T + q t (one covariance of
+ * imu_batch.BatchStep.step_covariance; p and q symmetric), whether out is finite; None: not
+ * taken (also for a q not exactly symmetric, or out sharing p's memory: p's rows are read
+ * while out is written).
+ *
+ * The product is computed once per entry of the upper triangle and mirrored, so out is exactly
+ * symmetric without numpy's (A + A^T) / 2, and with phi's known sparsity: the zeros of phi are
+ * skipped, and a unit row of phi (e_i: 1 on the diagonal, nothing else; the dynamic filter's
+ * rows from 6 on) takes p's own row (phi p) or entry (A phi^T) without arithmetic. Only the
+ * entries where both rows carry the batch's terms (the 6 x 6 position/velocity block) are sums
+ * of sums; they differ from the symmetrised full product by rounding (tests/test_member_core.py
+ * holds them to 1e-12 of the entry's scale). */
+static PyObject *
+step_covariance(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 5)
+        return PyErr_Format(PyExc_TypeError, "step_covariance takes 5 arguments");
+    if (!PyFloat_Check(args[3]))
+        Py_RETURN_NONE;
+    double t = PyFloat_AS_DOUBLE(args[3]);
+    Views v = {.count = 0};
+    Py_buffer *vp, *vphi, *vq, *vout;
+    if (!(vp = take(&v, args[1], 2, ANY, ANY, 0)) || vp->shape[0] != vp->shape[1] ||
+        vp->shape[0] > MAX_N)
+        goto not_taken;
+    int n = (int)vp->shape[0];
+    if (!(vphi = take(&v, args[0], 2, n, n, 0)) || !(vq = take(&v, args[2], 2, n, n, 0)) ||
+        !(vout = take(&v, args[4], 2, n, n, 1)))
+        goto not_taken;
+    const double *p = vp->buf, *phi = vphi->buf, *q = vq->buf;
+    double *out = vout->buf;
+    if (!all_finite(p, (Py_ssize_t)n * n) || !all_finite(phi, (Py_ssize_t)n * n) || !isfinite(t) ||
+        (const double *)out == p)
+        goto not_taken;
+    if (!exactly_symmetric(q, n))
+        goto not_taken;
+    member_step_covariance(phi, p, q, t, n, out);
     int ok = all_finite(out, (Py_ssize_t)n * n);
     release(&v);
     return PyBool_FromLong(ok);
@@ -466,6 +481,10 @@ static PyMethodDef methods[] = {
      "fuse_scalar(filters, sensor, z, measure, r_variance, hold_start, hold_stop, empty, "
      "result_type, fused, gated, log_weight, tempering): bank.FilterBank.update_scalar (no "
      "pseudo) over every member, bit for bit (bank_fusion.c); None: not taken, nothing changed."},
+    {"predict_batch", (PyCFunction)(void (*)(void))bank_predict_batch, METH_FASTCALL,
+     "predict_batch(filters, phi, d_p, d_v, q, t, empty): bank.FilterBank.predict_batch's "
+     "member-by-member step over every member, bit for bit (bank_predict.c); None: not taken, "
+     "nothing changed."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -79,6 +79,17 @@ all_finite(const double *a, Py_ssize_t count)
     return (s0 + s1) + (s2 + s3) == 0.0;
 }
 
+/* Whether the n x n q is exactly symmetric (q_ij == q_ji bit for bit, nan never). */
+static inline int
+exactly_symmetric(const double *q, int n)
+{
+    for (int i = 0; i < n; i++)
+        for (int j = i + 1; j < n; j++)
+            if (q[i * n + j] != q[j * n + i])
+                return 0;
+    return 1;
+}
+
 /* The floats of a list or tuple of exactly n floats or ints into out; 0 (no error set) otherwise. */
 static inline int
 read_numbers(PyObject *obj, double *out, Py_ssize_t n)
@@ -132,7 +143,10 @@ cholesky_ok(const double *a, int n)
 }
 
 
-/* member_core.c's arithmetic, shared with bank_fusion.c */
+/* member_core.c's arithmetic, shared with bank_fusion.c and bank_predict.c */
+void member_step(const double *phi, const double *x, const double *d, int n, double *out);
+void member_step_covariance(const double *phi, const double *p, const double *q, double t, int n,
+                            double *out);
 void member_project(const double *p, const double *h, int n, int m, double *pht, double *s);
 int member_gain_update(const double *x, const double *p, const double *pht, const double *s_inv,
                        const double *w, int n, int m, Py_ssize_t hold_start, Py_ssize_t hold_stop,
@@ -143,5 +157,8 @@ int member_solve_force_balance(const double *s, const double *y, double r, doubl
 /* bank_fusion.c */
 PyObject *bank_fuse_force_balance(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *bank_fuse_scalar(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+
+/* bank_predict.c */
+PyObject *bank_predict_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 
 #endif

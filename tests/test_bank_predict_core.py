@@ -1,0 +1,247 @@
+"""The bank's batch prediction over its members in one C call (``_member_core.predict_batch``,
+bank_predict.c) against its Python reference (the member-by-member loop of
+:meth:`FilterBank.predict_batch` with the extension's step functions): on random banks
+(members holding arrays or lists, transitions, batch sums, process noises) every member's
+state, covariance and repair counts equal bit for bit; where it does not take the members it
+returns None and changes nothing, and the loop then decides as it always did; on a flight it
+takes nearly every batch and the flight's estimates equal the loop's.
+
+The extension is optional; its absence fails this file where it could have been built
+(:mod:`optional_extension`).
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+
+import numpy as np
+import pytest
+from optional_extension import import_extension
+
+from tether_companion.bench.dynamic import record
+from tether_companion.estimation.config import EstimatorConfig
+from tether_companion.estimation.dynamic import bank as bank_module
+from tether_companion.estimation.dynamic import state
+from tether_companion.estimation.dynamic.bank import FilterBank
+from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
+from tether_companion.estimation.dynamic.imu_batch import ImuBatch
+from tether_companion.estimation.dynamic.member import MemberFilter
+from tether_companion.estimation.feed import imu_ticks
+from tether_companion.physics.vehicle import load_vehicle
+from tether_companion.sim.scenario import load_scenario
+
+core, pytestmark = import_extension("tether_companion.estimation.dynamic._member_core")
+
+_N = state.N_STATES
+
+
+def _bits(value: object) -> object:
+    """Floats by their bit patterns, arrays by their dtype, shape and bytes."""
+    if isinstance(value, np.ndarray):
+        return (value.dtype.str, value.shape, value.flags.c_contiguous, value.tobytes())
+    if isinstance(value, list):
+        return [_bits(v) for v in value]
+    if isinstance(value, float):
+        return struct.pack("<d", value)
+    return (type(value).__name__, value)
+
+
+def _member_bits(kf: MemberFilter) -> object:
+    return (_bits(kf._xa), _bits(kf._pa), _bits(kf._xl), _bits(kf._pl), kf.resets, kf.pd_repairs)
+
+
+def _value_bits(kf: MemberFilter) -> object:
+    """A member's values and counts whichever form holds them (a list-held member's x / P
+    property converts it, as the loop's kf.x and kf.P do)."""
+    return (_bits(kf.values()[0]), _bits(kf.values()[1]), kf.resets, kf.pd_repairs)
+
+
+def _skip_pure() -> None:
+    if os.environ.get("TETHER_PURE_PYTHON"):
+        pytest.skip("TETHER_PURE_PYTHON is set: the package runs the Python alone")
+
+
+def _bank(rng: np.random.Generator) -> FilterBank:
+    """1-6 members of random scales; some hold their values as lists (the scalar path's)."""
+    filters = []
+    for _ in range(int(rng.integers(1, 7))):
+        a = rng.normal(size=(_N, _N)) * 10.0 ** rng.uniform(-3, 1, _N)
+        kf = MemberFilter(
+            rng.normal(size=_N) * 10.0 ** rng.uniform(-2, 3), a @ a.T + 1e-6 * np.eye(_N),
+            np.full(_N, 1e-3), None, None,  # type: ignore[arg-type]
+        )  # fmt: skip
+        if rng.uniform() < 0.3:
+            kf._xl, kf._xa = kf._xa.tolist(), None
+        if rng.uniform() < 0.3:
+            kf._pl, kf._pa = kf._pa.ravel().tolist(), None
+        filters.append(kf)
+    return FilterBank(filters, 0.0, 6.0)
+
+
+def _batch(rng: np.random.Generator) -> ImuBatch:
+    """A batch of random sums (duration, D_p, D_v, B_p, B_v) as ImuBatch.add leaves them."""
+    batch = ImuBatch()
+    batch.ticks = int(rng.integers(1, 5))
+    batch.duration_s = float(rng.uniform(0.0, 0.05))
+    scale = 10.0 ** rng.uniform(-4, 1)
+    batch.d_p, batch.d_v = (rng.normal(size=3) * scale).tolist(), (rng.normal(size=3)).tolist()
+    batch.b_p, batch.b_v = (rng.normal(size=9) * 1e-3).tolist(), rng.normal(size=9).tolist()
+    if rng.uniform() < 0.2:  # exact zeros in the bias columns (their entries skipped)
+        batch.b_p = [0.0] * 9
+    return batch
+
+
+def _noise(rng: np.random.Generator) -> np.ndarray:
+    b = rng.normal(size=(_N, _N)) * 1e-2
+    return b @ b.T
+
+
+def _predict(bank: FilterBank, batch: ImuBatch, q: np.ndarray, c_path: bool) -> None:
+    """The bank's batch prediction with its one C call on (``c_path``) or off (the loop)."""
+    saved = bank_module.PREDICT_BATCH
+    bank_module.PREDICT_BATCH = core.predict_batch if c_path else None
+    try:
+        bank.predict_batch(batch, q)
+    finally:
+        bank_module.PREDICT_BATCH = saved
+
+
+def _copies(rng: np.random.Generator) -> tuple[FilterBank, FilterBank]:
+    state_now = rng.bit_generator.state
+    mine = _bank(rng)
+    rng.bit_generator.state = state_now
+    return mine, _bank(rng)
+
+
+def test_bit_for_bit_on_random_banks() -> None:
+    _skip_pure()
+    rng = np.random.default_rng(2525)
+    members = 0
+    for _ in range(150):
+        mine, reference = _copies(rng)
+        batch, q = _batch(rng), _noise(rng)
+        for _step in range(3):  # chained: each step from the last one's kept arrays
+            _predict(mine, batch, q, True)
+            _predict(reference, batch, q, False)
+            for a, b in zip(mine.filters, reference.filters, strict=True):
+                assert _member_bits(a) == _member_bits(b)
+        members += len(mine.filters)
+    assert members > 300
+
+
+def test_a_list_held_member_is_converted_as_the_loop_converts_it() -> None:
+    _skip_pure()
+    rng = np.random.default_rng(7)
+    bank = _bank(rng)
+    kf = bank.filters[0]
+    kf._xl, kf._xa = kf.x.tolist(), None
+    kf._pl, kf._pa = kf.P.ravel().tolist(), None
+    batch, q = _batch(rng), _noise(rng)
+    step = batch.step()
+    expected_x = step.step_state(np.array(kf._xl))
+    expected_p, _ = step.step_member_covariance(np.array(kf._pl).reshape(_N, _N), q)
+    assert core.predict_batch(
+        bank.filters, step.phi, step.d_p, step.d_v, q, step.duration_s, np.empty
+    )
+    assert kf._xl is None and kf._pl is None
+    assert _bits(kf._xa) == _bits(expected_x) and _bits(kf._pa) == _bits(expected_p)
+
+
+def _spoiled(spoil: str, rng: np.random.Generator) -> tuple[FilterBank, ImuBatch, np.ndarray]:
+    bank, batch, q = _bank(rng), _batch(rng), _noise(rng)
+    last = bank.filters[-1]  # the last member: the earlier ones are computed before it fails
+    if spoil == "state nan":
+        last.x[4] = np.nan
+    elif spoil == "covariance inf":
+        last.P[2, 9] = np.inf
+    elif spoil == "state near overflow":  # finite, but numpy's sum of the stepped state is not
+        last.x[:] = 1.5e307
+    elif spoil == "state entry past the bound":  # the sum finite: the loop keeps it
+        last.x[:] = 0.0
+        last.x[10] = np.finfo(float).max / _N * 1.01
+    elif spoil == "covariance overflows":
+        last.P[0, 0] = last.P[3, 3] = 1.7e308
+        batch.duration_s = 1e3
+    elif spoil == "noise asymmetric":
+        q[1, 3] += 1e-9
+    elif spoil == "noise nan":
+        q[5, 5] = np.nan
+    elif spoil == "sums nan":
+        batch.d_v[1] = np.nan
+    elif spoil == "sums short":
+        batch.d_p = batch.d_p[:2]
+    elif spoil == "duration int":
+        batch.duration_s = 0  # type: ignore[assignment]
+    elif spoil == "float32 state":
+        last._xa = last.x.astype(np.float32)
+    elif spoil == "strided covariance":
+        last._pa = np.asfortranarray(last.P + np.eye(_N) * 1e-9)
+    return bank, batch, q
+
+
+SPOILS = [
+    "state nan", "covariance inf", "state near overflow", "state entry past the bound",
+    "covariance overflows", "noise asymmetric", "noise nan", "sums nan", "sums short",
+    "duration int", "float32 state", "strided covariance",
+]  # fmt: skip
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")  # the loop's numpy on non-finite values
+@pytest.mark.parametrize("spoil", SPOILS)
+def test_not_taken_changes_nothing_and_the_loop_decides(spoil: str) -> None:
+    _skip_pure()
+    rng = np.random.default_rng(SPOILS.index(spoil))
+    bank, batch, q = _spoiled(spoil, rng)
+    before = [_value_bits(kf) for kf in bank.filters]
+    step = batch.step()
+    taken = core.predict_batch(
+        bank.filters, step.phi, step.d_p, step.d_v, q, step.duration_s, np.empty
+    )
+    assert taken is None
+    assert [_value_bits(kf) for kf in bank.filters] == before
+    rng = np.random.default_rng(SPOILS.index(spoil))
+    reference, batch, q = _spoiled(spoil, rng)
+    if spoil == "sums short":  # not a batch: the loop's numpy refuses it, on both paths
+        for c_path in (True, False):
+            with pytest.raises(ValueError):
+                _predict(bank, batch, q, c_path)
+        return
+    _predict(bank, batch, q, True)
+    _predict(reference, batch, q, False)
+    for a, b in zip(bank.filters, reference.filters, strict=True):
+        assert _member_bits(a) == _member_bits(b)
+
+
+def test_a_flight_takes_c_and_equals_the_loop() -> None:
+    _skip_pure()
+    vehicle = load_vehicle(load_scenario("realistic-circle").vehicle)
+    flight = record("realistic-circle", 8.0)
+    runs = []
+    for c_path in (True, False):
+        saved = bank_module.PREDICT_BATCH
+        calls = [0, 0]  # taken, not
+
+        def counted(*args: object, calls: list[int] = calls) -> object:
+            out = core.predict_batch(*args)
+            calls[out is None] += 1
+            return out
+
+        bank_module.PREDICT_BATCH = counted if c_path else None
+        try:
+            estimator = DynamicTetherEstimator(EstimatorConfig(), vehicle)
+            outputs = []
+            for imu in imu_ticks(flight, estimator):
+                estimate = estimator.on_imu(imu)
+                if estimate is not None:
+                    outputs.append(
+                        (estimate.status, _bits(estimate.position_ned_m),
+                         _bits(estimate.position_velocity_covariance))
+                    )  # fmt: skip
+        finally:
+            bank_module.PREDICT_BATCH = saved
+        runs.append((outputs, [_member_bits(kf) for kf in estimator.bank.filters], calls))
+    (mine, mine_members, calls), (reference, reference_members, _) = runs
+    assert calls[0] > 300 and calls[1] < 5, calls
+    assert mine == reference
+    assert mine_members == reference_members

@@ -50,6 +50,10 @@ PREDICT_BATCH = getattr(MEMBER_CORE, "predict_batch", None)
 """``_member_core.predict_batch`` (bank_predict.c) where the extension runs and has it: the
 member-by-member loop of :meth:`FilterBank.predict_batch` over every member in one call, bit
 for bit; ``None`` where the loop must run (nothing changed)."""
+BANK_MIXTURE = getattr(MEMBER_CORE, "bank_mixture", None)
+"""``_member_core.bank_mixture`` (bank_mixture.c) where the extension runs and has it:
+:meth:`FilterBank.mixture`'s cache test and moments over two or more members in one call, bit
+for bit; ``None`` where the Python must run."""
 
 SELECT_WEIGHT = 0.99
 """Posterior weight at which one member is kept and the others dropped."""
@@ -244,6 +248,11 @@ class FilterBank(BankUpdates):
         if len(filters) == 1:  # decided: the member's own arrays: read them, do not change them
             kf = filters[0]
             return kf.x, kf.P
+        if BANK_MIXTURE is not None:  # the cache's test and the moments in one C call
+            cache = BANK_MIXTURE(filters, self.log_weight, self._mixture_cache, EMPTY)
+            if cache is not None:
+                self._mixture_cache = cache
+                return cache[2]  # type: ignore[no-any-return]
         cached_arrays, cached_ll, moments = self._mixture_cache
         if (  # the same objects (identity, in C: this runs at every IMU tick); a member
             # holding its values as lists (``_xa``/``_pa`` None) has no array to be the same

@@ -53,21 +53,6 @@ drop_all(Predicted *members, Py_ssize_t count)
     }
 }
 
-/* The member's held array (`held`), or its property (`name`) where it holds a list; NULL with
- * no error set where neither gives one. */
-static PyObject *
-held_array(PyObject *kf, PyObject *held, PyObject *name)
-{
-    PyObject *value = PyObject_GetAttr(kf, held);
-    if (value == Py_None) {
-        Py_DECREF(value);
-        value = PyObject_GetAttr(kf, name);
-    }
-    if (value == NULL)
-        PyErr_Clear();
-    return value;
-}
-
 /* One member stepped into new arrays made by `empty`: 1 when healthy beyond doubt (see the
  * top), 0 (no error set) when the loop must run, -1 with an error set. */
 static int

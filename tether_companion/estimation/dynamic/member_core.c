@@ -319,6 +319,32 @@ not_taken:
     Py_RETURN_NONE;
 }
 
+/* The weighted mixture's mean sum w_i x_i into mean and covariance sum w_i P_i + sum w_i s_i
+ * s_i^T (s_i = x_i - mean; the P_i symmetric) on the upper triangle, mirrored, into cov, for
+ * `members` states xs[i] (n) and covariances ps[i] (n x n): mixture()'s arithmetic (below) and
+ * bank_mixture.c's. */
+void
+member_mixture(const double *w, const double *const *xs, const double *const *ps,
+               Py_ssize_t members, int n, double *mean, double *cov)
+{
+    for (int j = 0; j < n; j++) {
+        double value = 0.0;
+        for (Py_ssize_t i = 0; i < members; i++)
+            value += w[i] * xs[i][j];
+        mean[j] = value;
+    }
+    for (int j = 0; j < n; j++)
+        for (int k = j; k < n; k++) {
+            double within = 0.0, between = 0.0;
+            for (Py_ssize_t i = 0; i < members; i++) {
+                const double *x = xs[i];
+                within += w[i] * ps[i][j * n + k];
+                between += (x[j] - mean[j]) * w[i] * (x[k] - mean[k]);
+            }
+            cov[j * n + k] = cov[k * n + j] = within + between;
+        }
+}
+
 /* mixture(w, xs, ps, mean_out, cov_out) -> True: the weighted mixture's mean sum w_i x_i and
  * covariance sum w_i P_i + sum w_i s_i s_i^T (s_i = x_i - mean; the P_i symmetric) on the upper
  * triangle, mirrored: exactly symmetric (bank.FilterBank.mixture, whose (C + C^T) / 2 of the
@@ -359,23 +385,12 @@ mixture(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     }
     if (got == members && get(args[3], &vmean, 1, n, 0, 1)) {
         if (get(args[4], &vcov, 2, n, n, 1)) {
-            double *mean = vmean.buf, *cov = vcov.buf;
-            for (int j = 0; j < n; j++) {
-                double value = 0.0;
-                for (Py_ssize_t i = 0; i < members; i++)
-                    value += w[i] * ((const double *)vx[i].buf)[j];
-                mean[j] = value;
+            const double *xs[MAX_MEMBERS], *ps[MAX_MEMBERS];
+            for (Py_ssize_t i = 0; i < members; i++) {
+                xs[i] = vx[i].buf;
+                ps[i] = vp[i].buf;
             }
-            for (int j = 0; j < n; j++)
-                for (int k = j; k < n; k++) {
-                    double within = 0.0, between = 0.0;
-                    for (Py_ssize_t i = 0; i < members; i++) {
-                        const double *x = vx[i].buf;
-                        within += w[i] * ((const double *)vp[i].buf)[j * n + k];
-                        between += (x[j] - mean[j]) * w[i] * (x[k] - mean[k]);
-                    }
-                    cov[j * n + k] = cov[k * n + j] = within + between;
-                }
+            member_mixture(w, xs, ps, members, n, vmean.buf, vcov.buf);
             ok = 1;
             PyBuffer_Release(&vcov);
         }
@@ -481,6 +496,10 @@ static PyMethodDef methods[] = {
      "fuse_scalar(filters, sensor, z, measure, r_variance, hold_start, hold_stop, empty, "
      "result_type, fused, gated, log_weight, tempering): bank.FilterBank.update_scalar (no "
      "pseudo) over every member, bit for bit (bank_fusion.c); None: not taken, nothing changed."},
+    {"bank_mixture", (PyCFunction)(void (*)(void))bank_mixture, METH_FASTCALL,
+     "bank_mixture(filters, log_weight, cache, empty): bank.FilterBank.mixture's cache test and "
+     "moments over two or more members, bit for bit (bank_mixture.c): the cache kept (the same "
+     "object, or a new one); None: not taken."},
     {"predict_batch", (PyCFunction)(void (*)(void))bank_predict_batch, METH_FASTCALL,
      "predict_batch(filters, phi, d_p, d_v, q, t, empty): bank.FilterBank.predict_batch's "
      "member-by-member step over every member, bit for bit (bank_predict.c); None: not taken, "

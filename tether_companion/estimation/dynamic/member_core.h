@@ -90,6 +90,22 @@ exactly_symmetric(const double *q, int n)
     return 1;
 }
 
+/* A member's held array (attribute `held`, "_xa" / "_pa"), or where it holds a list (None there)
+ * its property `name` ("x" / "P"), which converts it as Python's kf.x / kf.P do; NULL with no
+ * error set where neither gives one. */
+static inline PyObject *
+held_array(PyObject *kf, PyObject *held, PyObject *name)
+{
+    PyObject *value = PyObject_GetAttr(kf, held);
+    if (value == Py_None) {
+        Py_DECREF(value);
+        value = PyObject_GetAttr(kf, name);
+    }
+    if (value == NULL)
+        PyErr_Clear();
+    return value;
+}
+
 /* The floats of a list or tuple of exactly n floats or ints into out; 0 (no error set) otherwise. */
 static inline int
 read_numbers(PyObject *obj, double *out, Py_ssize_t n)
@@ -147,6 +163,8 @@ cholesky_ok(const double *a, int n)
 void member_step(const double *phi, const double *x, const double *d, int n, double *out);
 void member_step_covariance(const double *phi, const double *p, const double *q, double t, int n,
                             double *out);
+void member_mixture(const double *w, const double *const *xs, const double *const *ps,
+                    Py_ssize_t members, int n, double *mean, double *cov);
 void member_project(const double *p, const double *h, int n, int m, double *pht, double *s);
 int member_gain_update(const double *x, const double *p, const double *pht, const double *s_inv,
                        const double *w, int n, int m, Py_ssize_t hold_start, Py_ssize_t hold_stop,
@@ -160,5 +178,8 @@ PyObject *bank_fuse_scalar(PyObject *self, PyObject *const *args, Py_ssize_t nar
 
 /* bank_predict.c */
 PyObject *bank_predict_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+
+/* bank_mixture.c */
+PyObject *bank_mixture(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 
 #endif

@@ -1,10 +1,12 @@
-"""The bank's batch prediction over its members in one C call (``_member_core.predict_batch``,
-bank_predict.c) against its Python reference (the member-by-member loop of
-:meth:`FilterBank.predict_batch` with the extension's step functions): on random banks
-(members holding arrays or lists, transitions, batch sums, process noises) every member's
-state, covariance and repair counts equal bit for bit; where it does not take the members it
-returns None and changes nothing, and the loop then decides as it always did; on a flight it
-takes nearly every batch and the flight's estimates equal the loop's.
+"""The bank's batch prediction and mixture over its members, each in one C call
+(``_member_core.predict_batch``, bank_predict.c; ``bank_mixture``, bank_mixture.c), against
+their Python references (the member-by-member loop of :meth:`FilterBank.predict_batch` with the
+extension's step functions; :meth:`FilterBank.mixture`'s cache test, weights and the
+extension's ``mixture``): on random banks (members holding arrays or lists, transitions, batch
+sums, process noises, log weights) every member's state, covariance and repair counts, every
+mixture and the cache equal bit for bit; where a call does not take the members it returns
+None and changes nothing the Python would not, and the Python then decides as it always did;
+on a flight both take nearly every call and the flight's estimates equal the Python's.
 
 The extension is optional; its absence fails this file where it could have been built
 (:mod:`optional_extension`).
@@ -12,6 +14,7 @@ The extension is optional; its absence fails this file where it could have been 
 
 from __future__ import annotations
 
+import math
 import os
 import struct
 
@@ -213,21 +216,127 @@ def test_not_taken_changes_nothing_and_the_loop_decides(spoil: str) -> None:
         assert _member_bits(a) == _member_bits(b)
 
 
-def test_a_flight_takes_c_and_equals_the_loop() -> None:
+def _mixture(bank: FilterBank, c_path: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The bank's mixture with its one C call on (``c_path``) or off (the Python)."""
+    saved = bank_module.BANK_MIXTURE
+    bank_module.BANK_MIXTURE = core.bank_mixture if c_path else None
+    try:
+        return bank.mixture()
+    finally:
+        bank_module.BANK_MIXTURE = saved
+
+
+def _cache_bits(bank: FilterBank) -> object:
+    arrays, ll, (mean, cov) = bank._mixture_cache
+    held = [a for kf in bank.filters for a in (kf._xa, kf._pa)]
+    return [a is b for a, b in zip(arrays, held, strict=True)], _bits(ll), _bits(mean), _bits(cov)
+
+
+def _weighted(rng: np.random.Generator, bank: FilterBank) -> None:
+    """Log weights of random spreads (ties, a dominant member, underflowing exponentials)."""
+    spread = float(10.0 ** rng.uniform(-3, 3))
+    ll = (rng.normal(size=len(bank.filters)) * spread).tolist()
+    if rng.uniform() < 0.2:
+        ll[-1] = ll[0]
+    bank.log_weight = ll
+
+
+def test_mixture_bit_for_bit_on_random_banks() -> None:
+    _skip_pure()
+    rng = np.random.default_rng(2526)
+    mixed = 0
+    for _ in range(200):
+        mine, reference = _copies(rng)
+        if len(mine.filters) < 2:
+            continue
+        state_now = rng.bit_generator.state
+        _weighted(rng, mine)
+        rng.bit_generator.state = state_now
+        _weighted(rng, reference)
+        got, expected = _mixture(mine, True), _mixture(reference, False)
+        assert _bits(list(got)) == _bits(list(expected))
+        assert _cache_bits(mine) == _cache_bits(reference)
+        for a, b in zip(mine.filters, reference.filters, strict=True):
+            assert _member_bits(a) == _member_bits(b)
+        mixed += 1
+    assert mixed > 120
+
+
+@pytest.mark.parametrize("c_path", [True, False])
+def test_the_cache_holds_until_a_weight_or_an_array_changes(c_path: bool) -> None:
+    _skip_pure()
+    rng = np.random.default_rng(31)
+    bank = _bank(rng)
+    while len(bank.filters) < 3:
+        bank = _bank(rng)
+    _weighted(rng, bank)
+    first = _mixture(bank, c_path)
+    again = _mixture(bank, c_path)
+    assert again[0] is first[0] and again[1] is first[1]
+    bank.log_weight[-1] += 1e-12  # in place, as the evidence is added
+    moved = _mixture(bank, c_path)
+    assert moved[0] is not first[0]
+    bank.filters[1]._pa = bank.filters[1].P.copy()  # the same values, another array
+    assert _mixture(bank, c_path)[1] is not moved[1]
+
+
+MIXTURE_SPOILS = ["one member", "log weight nan", "log weight inf", "log weight int",
+                  "state nan", "covariance inf", "float32 covariance"]  # fmt: skip
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")  # the numpy reference on non-finite values
+@pytest.mark.parametrize("spoil", MIXTURE_SPOILS)
+def test_mixture_not_taken_and_the_python_decides(spoil: str) -> None:
+    _skip_pure()
+    banks = []
+    for _ in range(2):
+        rng = np.random.default_rng(40 + MIXTURE_SPOILS.index(spoil))
+        bank = _bank(rng)
+        while len(bank.filters) < 3:
+            bank = _bank(rng)
+        _weighted(rng, bank)
+        last = bank.filters[-1]
+        if spoil == "one member":
+            bank.keep([0])
+        elif spoil.startswith("log weight"):
+            value = {"nan": math.nan, "inf": math.inf, "int": 3}[spoil.split()[-1]]
+            bank.log_weight[1] = value
+        elif spoil == "state nan":
+            last.x[2] = np.nan
+        elif spoil == "covariance inf":
+            last.P[4, 4] = np.inf
+        elif spoil == "float32 covariance":
+            last._pa = last.P.astype(np.float32)
+        banks.append(bank)
+    mine, reference = banks
+    cache = mine._mixture_cache
+    assert core.bank_mixture(mine.filters, mine.log_weight, cache, np.empty) is None
+    assert mine._mixture_cache is cache
+    got, expected = _mixture(mine, True), _mixture(reference, False)
+    assert _bits(list(got)) == _bits(list(expected))
+
+
+def test_a_flight_takes_c_and_equals_the_python() -> None:
     _skip_pure()
     vehicle = load_vehicle(load_scenario("realistic-circle").vehicle)
     flight = record("realistic-circle", 8.0)
     runs = []
     for c_path in (True, False):
-        saved = bank_module.PREDICT_BATCH
-        calls = [0, 0]  # taken, not
+        saved = bank_module.PREDICT_BATCH, bank_module.BANK_MIXTURE
+        calls = [0, 0, 0, 0]  # prediction taken, not; mixture taken, not
 
         def counted(*args: object, calls: list[int] = calls) -> object:
             out = core.predict_batch(*args)
             calls[out is None] += 1
             return out
 
+        def counted_mixture(*args: object, calls: list[int] = calls) -> object:
+            out = core.bank_mixture(*args)
+            calls[2 + (out is None)] += 1
+            return out
+
         bank_module.PREDICT_BATCH = counted if c_path else None
+        bank_module.BANK_MIXTURE = counted_mixture if c_path else None
         try:
             estimator = DynamicTetherEstimator(EstimatorConfig(), vehicle)
             outputs = []
@@ -239,9 +348,9 @@ def test_a_flight_takes_c_and_equals_the_loop() -> None:
                          _bits(estimate.position_velocity_covariance))
                     )  # fmt: skip
         finally:
-            bank_module.PREDICT_BATCH = saved
+            bank_module.PREDICT_BATCH, bank_module.BANK_MIXTURE = saved
         runs.append((outputs, [_member_bits(kf) for kf in estimator.bank.filters], calls))
     (mine, mine_members, calls), (reference, reference_members, _) = runs
-    assert calls[0] > 300 and calls[1] < 5, calls
+    assert calls[0] > 300 and calls[1] < 5 and calls[2] > 300 and calls[3] < 5, calls
     assert mine == reference
     assert mine_members == reference_members

@@ -61,6 +61,7 @@ setup(
             [
                 "tether_companion/estimation/dynamic/member_core.c",
                 "tether_companion/estimation/dynamic/bank_fusion.c",
+                "tether_companion/estimation/dynamic/bank_health.c",
                 "tether_companion/estimation/dynamic/bank_mixture.c",
                 "tether_companion/estimation/dynamic/bank_predict.c",
             ],

@@ -1,12 +1,14 @@
-"""The bank's batch prediction and mixture over its members, each in one C call
-(``_member_core.predict_batch``, bank_predict.c; ``bank_mixture``, bank_mixture.c), against
-their Python references (the member-by-member loop of :meth:`FilterBank.predict_batch` with the
-extension's step functions; :meth:`FilterBank.mixture`'s cache test, weights and the
-extension's ``mixture``): on random banks (members holding arrays or lists, transitions, batch
-sums, process noises, log weights) every member's state, covariance and repair counts, every
-mixture and the cache equal bit for bit; where a call does not take the members it returns
-None and changes nothing the Python would not, and the Python then decides as it always did;
-on a flight both take nearly every call and the flight's estimates equal the Python's.
+"""The bank's batch prediction, mixture and health test over its members, each in one C call
+(``_member_core.predict_batch``, bank_predict.c; ``bank_mixture``, bank_mixture.c;
+``bank_healthy_members``, bank_health.c), against their Python references (the
+member-by-member loop of :meth:`FilterBank.predict_batch` with the extension's step functions;
+:meth:`FilterBank.mixture`'s cache test, weights and the extension's ``mixture``;
+:meth:`FilterBank.drop_unhealthy`'s loop): on random banks (members holding arrays or lists,
+transitions, batch sums, process noises, log weights, spoiled states) every member's state,
+covariance and repair counts, every mixture, the cache and the members kept equal bit for bit;
+where a call does not take the members it returns None and changes nothing the Python would
+not, and the Python then decides as it always did; on a flight all three take nearly every
+call and the flight's estimates equal the Python's.
 
 The extension is optional; its absence fails this file where it could have been built
 (:mod:`optional_extension`).
@@ -316,14 +318,96 @@ def test_mixture_not_taken_and_the_python_decides(spoil: str) -> None:
     assert _bits(list(got)) == _bits(list(expected))
 
 
+def _drop(bank: FilterBank, c_path: bool, max_distance_m: float) -> None:
+    """The bank's drop_unhealthy with its one C call on (``c_path``) or off (the loop)."""
+    saved = bank_module.HEALTHY_MEMBERS
+    bank_module.HEALTHY_MEMBERS = core.bank_healthy_members if c_path else None
+    try:
+        bank.drop_unhealthy(max_distance_m)
+    finally:
+        bank_module.HEALTHY_MEMBERS = saved
+
+
+def _sicken(rng: np.random.Generator, bank: FilterBank) -> None:
+    """Some members' states spoiled: nan, inf, far from the anchor, at the limit, or summing
+    past the largest float (finite entries whose in-order sum overflows)."""
+    for kf in bank.filters:
+        x = kf.x
+        kind = int(rng.integers(0, 8))
+        if kind == 0:
+            x[int(rng.integers(0, _N))] = np.nan
+        elif kind == 1:
+            x[int(rng.integers(0, _N))] = -np.inf
+        elif kind == 2:
+            x[:3] = rng.normal(size=3) * 800.0
+        elif kind == 3:
+            x[:3] = (600.0, 800.0, 0.0)  # exactly 1000 m: kept (<=)
+        elif kind == 4:
+            x[5:9] = 1.7e308  # overflows in order
+        elif kind == 5:
+            x[5:9] = (1.7e308, -1.7e308, 1.7e308, -1.7e308)  # finite in order
+        elif kind == 6:
+            x[5:7] = (1.0e308, 0.9e308)  # just past the largest float
+        if rng.uniform() < 0.3:
+            kf._xl, kf._xa = kf._xa.tolist(), None
+
+
+def test_healthy_members_bit_for_bit_on_random_banks() -> None:
+    _skip_pure()
+    rng = np.random.default_rng(2527)
+    dropped = 0
+    for _ in range(300):
+        mine, reference = _copies(rng)
+        state_now = rng.bit_generator.state
+        _sicken(rng, mine)
+        rng.bit_generator.state = state_now
+        _sicken(rng, reference)
+        listed = [kf._xl is not None for kf in mine.filters]
+        assert core.bank_healthy_members(mine.filters, 1e6) is not None
+        assert [kf._xl is not None for kf in mine.filters] == listed  # read, not converted
+        before = len(mine.filters)
+        _drop(mine, True, 1000.0)
+        _drop(reference, False, 1000.0)
+        assert [kf.resets for kf in mine.filters] == [kf.resets for kf in reference.filters]
+        assert [_bits(kf.x_values()) for kf in mine.filters] == [
+            _bits(kf.x_values()) for kf in reference.filters
+        ]
+        assert _bits(mine.log_weight) == _bits(reference.log_weight)
+        dropped += before - len(mine.filters)
+    assert dropped > 100
+
+
+HEALTH_SPOILS = ["limit int", "list with an int", "float32 state", "2-D state", "short state"]
+
+
+@pytest.mark.parametrize("spoil", HEALTH_SPOILS)
+def test_healthy_members_not_taken(spoil: str) -> None:
+    _skip_pure()
+    rng = np.random.default_rng(50)
+    bank = _bank(rng)
+    last = bank.filters[-1]
+    limit: object = 1e6
+    if spoil == "limit int":
+        limit = 10**6
+    elif spoil == "list with an int":
+        last._xl, last._xa = [0, *last.x[1:].tolist()], None
+    elif spoil == "float32 state":
+        last._xa = last.x.astype(np.float32)
+    elif spoil == "2-D state":
+        last._xa = last.x.reshape(1, _N)
+    elif spoil == "short state":
+        last._xa = last.x[:2].copy()
+    assert core.bank_healthy_members(bank.filters, limit) is None
+
+
 def test_a_flight_takes_c_and_equals_the_python() -> None:
     _skip_pure()
     vehicle = load_vehicle(load_scenario("realistic-circle").vehicle)
     flight = record("realistic-circle", 8.0)
     runs = []
     for c_path in (True, False):
-        saved = bank_module.PREDICT_BATCH, bank_module.BANK_MIXTURE
-        calls = [0, 0, 0, 0]  # prediction taken, not; mixture taken, not
+        saved = bank_module.PREDICT_BATCH, bank_module.BANK_MIXTURE, bank_module.HEALTHY_MEMBERS
+        calls = [0] * 6  # prediction taken, not; mixture taken, not; health test taken, not
 
         def counted(*args: object, calls: list[int] = calls) -> object:
             out = core.predict_batch(*args)
@@ -335,8 +419,14 @@ def test_a_flight_takes_c_and_equals_the_python() -> None:
             calls[2 + (out is None)] += 1
             return out
 
+        def counted_health(*args: object, calls: list[int] = calls) -> object:
+            out = core.bank_healthy_members(*args)
+            calls[4 + (out is None)] += 1
+            return out
+
         bank_module.PREDICT_BATCH = counted if c_path else None
         bank_module.BANK_MIXTURE = counted_mixture if c_path else None
+        bank_module.HEALTHY_MEMBERS = counted_health if c_path else None
         try:
             estimator = DynamicTetherEstimator(EstimatorConfig(), vehicle)
             outputs = []
@@ -348,9 +438,10 @@ def test_a_flight_takes_c_and_equals_the_python() -> None:
                          _bits(estimate.position_velocity_covariance))
                     )  # fmt: skip
         finally:
-            bank_module.PREDICT_BATCH, bank_module.BANK_MIXTURE = saved
+            bank_module.PREDICT_BATCH, bank_module.BANK_MIXTURE, bank_module.HEALTHY_MEMBERS = saved
         runs.append((outputs, [_member_bits(kf) for kf in estimator.bank.filters], calls))
     (mine, mine_members, calls), (reference, reference_members, _) = runs
     assert calls[0] > 300 and calls[1] < 5 and calls[2] > 300 and calls[3] < 5, calls
+    assert calls[4] > 200 and calls[5] < 5, calls
     assert mine == reference
     assert mine_members == reference_members

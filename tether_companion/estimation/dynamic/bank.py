@@ -54,6 +54,10 @@ BANK_MIXTURE = getattr(MEMBER_CORE, "bank_mixture", None)
 """``_member_core.bank_mixture`` (bank_mixture.c) where the extension runs and has it:
 :meth:`FilterBank.mixture`'s cache test and moments over two or more members in one call, bit
 for bit; ``None`` where the Python must run."""
+HEALTHY_MEMBERS = getattr(MEMBER_CORE, "bank_healthy_members", None)
+"""``_member_core.bank_healthy_members`` (bank_health.c) where the extension runs and has it:
+:meth:`FilterBank.drop_unhealthy`'s test over every member in one call (the indices it keeps),
+bit for bit; ``None`` where the Python must run."""
 
 SELECT_WEIGHT = 0.99
 """Posterior weight at which one member is kept and the others dropped."""
@@ -232,12 +236,14 @@ class FilterBank(BankUpdates):
         if len(self.filters) == 1:  # nothing to choose between: the caller restarts
             return
         limit = max_distance_m**2
-        keep = []
-        for i, kf in enumerate(self.filters):
-            x = kf.x_values()
-            distance_sq = x[0] * x[0] + x[1] * x[1] + x[2] * x[2]
-            if math.isfinite(sum(x)) and distance_sq <= limit:
-                keep.append(i)
+        keep = None if HEALTHY_MEMBERS is None else HEALTHY_MEMBERS(self.filters, limit)
+        if keep is None:  # the test's reference (HEALTHY_MEMBERS: the same in one C call)
+            keep = []
+            for i, kf in enumerate(self.filters):
+                x = kf.x_values()
+                distance_sq = x[0] * x[0] + x[1] * x[1] + x[2] * x[2]
+                if math.isfinite(sum(x)) and distance_sq <= limit:
+                    keep.append(i)
         if keep and len(keep) < len(self.filters):
             self.keep(keep)
 

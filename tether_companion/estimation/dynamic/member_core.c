@@ -496,6 +496,9 @@ static PyMethodDef methods[] = {
      "fuse_scalar(filters, sensor, z, measure, r_variance, hold_start, hold_stop, empty, "
      "result_type, fused, gated, log_weight, tempering): bank.FilterBank.update_scalar (no "
      "pseudo) over every member, bit for bit (bank_fusion.c); None: not taken, nothing changed."},
+    {"bank_healthy_members", (PyCFunction)(void (*)(void))bank_healthy_members, METH_FASTCALL,
+     "bank_healthy_members(filters, limit): the indices bank.FilterBank.drop_unhealthy keeps, "
+     "bit for bit (bank_health.c); None: not taken."},
     {"bank_mixture", (PyCFunction)(void (*)(void))bank_mixture, METH_FASTCALL,
      "bank_mixture(filters, log_weight, cache, empty): bank.FilterBank.mixture's cache test and "
      "moments over two or more members, bit for bit (bank_mixture.c): the cache kept (the same "

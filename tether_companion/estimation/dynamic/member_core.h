@@ -179,6 +179,9 @@ PyObject *bank_fuse_scalar(PyObject *self, PyObject *const *args, Py_ssize_t nar
 /* bank_predict.c */
 PyObject *bank_predict_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 
+/* bank_health.c */
+PyObject *bank_healthy_members(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+
 /* bank_mixture.c */
 PyObject *bank_mixture(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from operator import attrgetter
 
 from tether_companion.estimation.dynamic.bank import FilterBank
 from tether_companion.estimation.dynamic.models import UNDEFINED
@@ -22,6 +23,7 @@ DIVERGED_AFTER_S = 1.0
 """Accelerometer innovations gated this long in a row [s]: the filter has diverged."""
 MAX_DISTANCE_M = 1000.0
 """A position farther than this from the anchor [m] is a divergence."""
+_RESETS = attrgetter("resets")
 
 
 class GatedAccelerometer:
@@ -49,12 +51,15 @@ class GatedAccelerometer:
 def step_bank(bank: FilterBank, step: Callable[[FilterBank], None]) -> str | None:
     """Run a prediction ``step`` on ``bank`` and drop the members it reset; the restart
     reason when it reset all of them or the cable model is undefined, else ``None``."""
-    resets_before = [kf.resets for kf in bank.filters]
+    resets_before = list(map(_RESETS, bank.filters))
     try:
         step(bank)
     except UNDEFINED:  # at the anchor, or zero tension: the cable model is undefined
         return "position at the anchor or no tension"
-    reset = [kf.resets != r for kf, r in zip(bank.filters, resets_before, strict=True)]
+    resets_after = list(map(_RESETS, bank.filters))
+    if resets_after == resets_before:  # the usual step: no member reset (no lists per member)
+        return None
+    reset = [after != r for after, r in zip(resets_after, resets_before, strict=True)]
     if all(reset):
         return "state or covariance not finite"
     if any(reset):  # drop the members that restarted

@@ -1,4 +1,5 @@
-/* The bank's mixture over its members in one C call (part of _member_core).
+/* The members' mixture (part of _member_core): its moments (the extension's `mixture`, called
+ * by bank.py with the members' arrays) and the bank's whole mixture in one C call.
  *
  * bank_mixture is FilterBank.mixture's path over two or more members where _member_core runs
  * (bank.py: the Python is the reference and the fallback), bit for bit: the cache's test (the
@@ -6,8 +7,8 @@
  * identity), else the members' arrays in order (kf.x, kf.P: a member holding lists is
  * converted by its properties, as the Python's are), the normalised weights as
  * FilterBank._weight_list computes them (max, libm's exp as math.exp, CPython 3.11's float
- * sum: one double added in order, then each divided by it) and the moments (member_core.c's
- * mixture) into new arrays made by `empty`; the new cache (arrays, log weights copied, (mean,
+ * sum: one double added in order, then each divided by it) and the moments (as `mixture`) into
+ * new arrays made by `empty`; the new cache (arrays, log weights copied, (mean,
  * cov)).
  *
  * It returns None, having changed nothing but the conversions the Python makes too, where the
@@ -16,6 +17,92 @@
  * MAX_MEMBERS members, and on CPython 3.12 or later (whose sum() of floats is compensated).
  */
 #include "member_core.h"
+
+/* The weighted mixture's mean sum w_i x_i into mean and covariance sum w_i P_i + sum w_i s_i
+ * s_i^T (s_i = x_i - mean; the P_i symmetric) on the upper triangle, mirrored, into cov, for
+ * `members` states xs[i] (n) and covariances ps[i] (n x n): member_mixture_moments()'s
+ * arithmetic (below) and bank_mixture()'s. */
+static void
+member_mixture(const double *w, const double *const *xs, const double *const *ps,
+               Py_ssize_t members, int n, double *mean, double *cov)
+{
+    for (int j = 0; j < n; j++) {
+        double value = 0.0;
+        for (Py_ssize_t i = 0; i < members; i++)
+            value += w[i] * xs[i][j];
+        mean[j] = value;
+    }
+    for (int j = 0; j < n; j++)
+        for (int k = j; k < n; k++) {
+            double within = 0.0, between = 0.0;
+            for (Py_ssize_t i = 0; i < members; i++) {
+                const double *x = xs[i];
+                within += w[i] * ps[i][j * n + k];
+                between += (x[j] - mean[j]) * w[i] * (x[k] - mean[k]);
+            }
+            cov[j * n + k] = cov[k * n + j] = within + between;
+        }
+}
+
+/* mixture(w, xs, ps, mean_out, cov_out) -> True: the weighted mixture's mean sum w_i x_i and
+ * covariance sum w_i P_i + sum w_i s_i s_i^T (s_i = x_i - mean; the P_i symmetric) on the upper
+ * triangle, mirrored: exactly symmetric (bank.FilterBank.mixture, whose (C + C^T) / 2 of the
+ * full C differs by rounding; w a list of floats, xs and ps lists of the members' (n,) and
+ * (n, n) arrays); None: not taken. */
+PyObject *
+member_mixture_moments(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 5)
+        return PyErr_Format(PyExc_TypeError, "mixture takes 5 arguments");
+    PyObject *wl = args[0], *xl = args[1], *pl = args[2];
+    if (!PyList_CheckExact(wl) || !PyList_CheckExact(xl) || !PyList_CheckExact(pl))
+        Py_RETURN_NONE;
+    Py_ssize_t members = PyList_GET_SIZE(wl);
+    if (members < 1 || members > MAX_MEMBERS || PyList_GET_SIZE(xl) != members ||
+        PyList_GET_SIZE(pl) != members)
+        Py_RETURN_NONE;
+    double w[MAX_MEMBERS];
+    if (!read_numbers(wl, w, members) || !all_finite(w, members))
+        Py_RETURN_NONE;
+    Py_buffer vx[MAX_MEMBERS], vp[MAX_MEMBERS], vmean, vcov;
+    Py_ssize_t got = 0;
+    int n = 0, ok = 0;
+    for (; got < members; got++) {
+        if (!get(PyList_GET_ITEM(xl, got), &vx[got], 1, got ? n : ANY, 0, 0))
+            break;
+        if (got == 0)
+            n = (int)vx[0].shape[0];
+        if (n > MAX_N || !get(PyList_GET_ITEM(pl, got), &vp[got], 2, n, n, 0)) {
+            PyBuffer_Release(&vx[got]);
+            break;
+        }
+        if (!all_finite(vx[got].buf, n) || !all_finite(vp[got].buf, (Py_ssize_t)n * n)) {
+            PyBuffer_Release(&vx[got]);
+            PyBuffer_Release(&vp[got]);
+            break;
+        }
+    }
+    if (got == members && get(args[3], &vmean, 1, n, 0, 1)) {
+        if (get(args[4], &vcov, 2, n, n, 1)) {
+            const double *xs[MAX_MEMBERS], *ps[MAX_MEMBERS];
+            for (Py_ssize_t i = 0; i < members; i++) {
+                xs[i] = vx[i].buf;
+                ps[i] = vp[i].buf;
+            }
+            member_mixture(w, xs, ps, members, n, vmean.buf, vcov.buf);
+            ok = 1;
+            PyBuffer_Release(&vcov);
+        }
+        PyBuffer_Release(&vmean);
+    }
+    for (Py_ssize_t i = 0; i < got; i++) {
+        PyBuffer_Release(&vx[i]);
+        PyBuffer_Release(&vp[i]);
+    }
+    if (ok)
+        Py_RETURN_TRUE;
+    Py_RETURN_NONE;
+}
 
 static PyObject *s_xa, *s_pa, *s_x, *s_p;
 

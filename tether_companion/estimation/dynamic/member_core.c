@@ -319,92 +319,6 @@ not_taken:
     Py_RETURN_NONE;
 }
 
-/* The weighted mixture's mean sum w_i x_i into mean and covariance sum w_i P_i + sum w_i s_i
- * s_i^T (s_i = x_i - mean; the P_i symmetric) on the upper triangle, mirrored, into cov, for
- * `members` states xs[i] (n) and covariances ps[i] (n x n): mixture()'s arithmetic (below) and
- * bank_mixture.c's. */
-void
-member_mixture(const double *w, const double *const *xs, const double *const *ps,
-               Py_ssize_t members, int n, double *mean, double *cov)
-{
-    for (int j = 0; j < n; j++) {
-        double value = 0.0;
-        for (Py_ssize_t i = 0; i < members; i++)
-            value += w[i] * xs[i][j];
-        mean[j] = value;
-    }
-    for (int j = 0; j < n; j++)
-        for (int k = j; k < n; k++) {
-            double within = 0.0, between = 0.0;
-            for (Py_ssize_t i = 0; i < members; i++) {
-                const double *x = xs[i];
-                within += w[i] * ps[i][j * n + k];
-                between += (x[j] - mean[j]) * w[i] * (x[k] - mean[k]);
-            }
-            cov[j * n + k] = cov[k * n + j] = within + between;
-        }
-}
-
-/* mixture(w, xs, ps, mean_out, cov_out) -> True: the weighted mixture's mean sum w_i x_i and
- * covariance sum w_i P_i + sum w_i s_i s_i^T (s_i = x_i - mean; the P_i symmetric) on the upper
- * triangle, mirrored: exactly symmetric (bank.FilterBank.mixture, whose (C + C^T) / 2 of the
- * full C differs by rounding; w a list of floats, xs and ps lists of the members' (n,) and
- * (n, n) arrays); None: not taken. */
-static PyObject *
-mixture(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    if (nargs != 5)
-        return PyErr_Format(PyExc_TypeError, "mixture takes 5 arguments");
-    PyObject *wl = args[0], *xl = args[1], *pl = args[2];
-    if (!PyList_CheckExact(wl) || !PyList_CheckExact(xl) || !PyList_CheckExact(pl))
-        Py_RETURN_NONE;
-    Py_ssize_t members = PyList_GET_SIZE(wl);
-    if (members < 1 || members > MAX_MEMBERS || PyList_GET_SIZE(xl) != members ||
-        PyList_GET_SIZE(pl) != members)
-        Py_RETURN_NONE;
-    double w[MAX_MEMBERS];
-    if (!read_numbers(wl, w, members) || !all_finite(w, members))
-        Py_RETURN_NONE;
-    Py_buffer vx[MAX_MEMBERS], vp[MAX_MEMBERS], vmean, vcov;
-    Py_ssize_t got = 0;
-    int n = 0, ok = 0;
-    for (; got < members; got++) {
-        if (!get(PyList_GET_ITEM(xl, got), &vx[got], 1, got ? n : ANY, 0, 0))
-            break;
-        if (got == 0)
-            n = (int)vx[0].shape[0];
-        if (n > MAX_N || !get(PyList_GET_ITEM(pl, got), &vp[got], 2, n, n, 0)) {
-            PyBuffer_Release(&vx[got]);
-            break;
-        }
-        if (!all_finite(vx[got].buf, n) || !all_finite(vp[got].buf, (Py_ssize_t)n * n)) {
-            PyBuffer_Release(&vx[got]);
-            PyBuffer_Release(&vp[got]);
-            break;
-        }
-    }
-    if (got == members && get(args[3], &vmean, 1, n, 0, 1)) {
-        if (get(args[4], &vcov, 2, n, n, 1)) {
-            const double *xs[MAX_MEMBERS], *ps[MAX_MEMBERS];
-            for (Py_ssize_t i = 0; i < members; i++) {
-                xs[i] = vx[i].buf;
-                ps[i] = vp[i].buf;
-            }
-            member_mixture(w, xs, ps, members, n, vmean.buf, vcov.buf);
-            ok = 1;
-            PyBuffer_Release(&vcov);
-        }
-        PyBuffer_Release(&vmean);
-    }
-    for (Py_ssize_t i = 0; i < got; i++) {
-        PyBuffer_Release(&vx[i]);
-        PyBuffer_Release(&vp[i]);
-    }
-    if (ok)
-        Py_RETURN_TRUE;
-    Py_RETURN_NONE;
-}
-
 /* member.solve_force_balance's scalars (force_balance() and bank_fusion.c): 1 with log det S
  * and out = (nis, S^-1 row-major (9), S^-1 y (3)); 0 when S is not positive definite, out[0]
  * the sum of its upper entries; -1 where C could differ (a non-finite input, sum or result:
@@ -483,7 +397,7 @@ static PyMethodDef methods[] = {
     {"update", (PyCFunction)(void (*)(void))update, METH_FASTCALL,
      "update(x, p, pht, s_inv, w, hold_start, hold_stop, x_out, p_out): the gain's update; "
      "whether finite and positive definite."},
-    {"mixture", (PyCFunction)(void (*)(void))mixture, METH_FASTCALL,
+    {"mixture", (PyCFunction)(void (*)(void))member_mixture_moments, METH_FASTCALL,
      "mixture(w, xs, ps, mean_out, cov_out): the weighted mixture's moments."},
     {"force_balance", (PyCFunction)(void (*)(void))force_balance, METH_FASTCALL,
      "force_balance(fallback, s_values, innovation, r_variance): member.solve_force_balance "

@@ -163,8 +163,6 @@ cholesky_ok(const double *a, int n)
 void member_step(const double *phi, const double *x, const double *d, int n, double *out);
 void member_step_covariance(const double *phi, const double *p, const double *q, double t, int n,
                             double *out);
-void member_mixture(const double *w, const double *const *xs, const double *const *ps,
-                    Py_ssize_t members, int n, double *mean, double *cov);
 void member_project(const double *p, const double *h, int n, int m, double *pht, double *s);
 int member_gain_update(const double *x, const double *p, const double *pht, const double *s_inv,
                        const double *w, int n, int m, Py_ssize_t hold_start, Py_ssize_t hold_stop,
@@ -183,6 +181,7 @@ PyObject *bank_predict_batch(PyObject *self, PyObject *const *args, Py_ssize_t n
 PyObject *bank_healthy_members(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 
 /* bank_mixture.c */
+PyObject *member_mixture_moments(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 PyObject *bank_mixture(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
 
 #endif

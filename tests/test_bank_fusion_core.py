@@ -20,19 +20,14 @@ import struct
 
 import numpy as np
 import pytest
+from bank_core_flight import fly_with_and_without_c
 from optional_extension import import_extension
 
-from tether_companion.bench.dynamic import record
-from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic import bank_updates as bank_module
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.bank import FilterBank
-from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.member import MemberFilter
 from tether_companion.estimation.ekf import UpdateResult
-from tether_companion.estimation.feed import imu_ticks
-from tether_companion.physics.vehicle import load_vehicle
-from tether_companion.sim.scenario import load_scenario
 
 core, pytestmark = import_extension("tether_companion.estimation.dynamic._member_core")
 
@@ -355,43 +350,14 @@ def test_scalar_not_taken_changes_nothing(spoil: str) -> None:
 
 
 def test_a_flight_takes_c_and_equals_python() -> None:
-    if os.environ.get("TETHER_PURE_PYTHON"):
-        pytest.skip("TETHER_PURE_PYTHON is set: the package runs the Python alone")
-    vehicle = load_vehicle(load_scenario("realistic-circle").vehicle)
-    flight = record("realistic-circle", 8.0)
-    runs = []
-    for c_path in (True, False):
-        saved = bank_module.FUSE_FORCE_BALANCE, bank_module.FUSE_SCALAR
-        calls = [0, 0, 0, 0]  # force balance taken, not; scalar taken, not
-
-        def counted(*args: object, calls: list[int] = calls) -> object:
-            out = core.fuse_force_balance(*args)
-            calls[out is None] += 1
-            return out
-
-        def counted_scalar(*args: object, calls: list[int] = calls) -> object:
-            out = core.fuse_scalar(*args)
-            calls[2 + (out is None)] += 1
-            return out
-
-        bank_module.FUSE_FORCE_BALANCE = counted if c_path else None
-        bank_module.FUSE_SCALAR = counted_scalar if c_path else None
-        try:
-            estimator = DynamicTetherEstimator(EstimatorConfig(), vehicle)
-            outputs = []
-            for imu in imu_ticks(flight, estimator):
-                estimate = estimator.on_imu(imu)
-                if estimate is not None:
-                    outputs.append(
-                        (estimate.status, _bits(estimate.position_ned_m),
-                         _bits(estimate.position_velocity_covariance))
-                    )  # fmt: skip
-                if estimator.bank is not None:
-                    outputs.append(_bits(list(estimator.bank.log_weight)))
-        finally:
-            bank_module.FUSE_FORCE_BALANCE, bank_module.FUSE_SCALAR = saved
-        runs.append((outputs, [_member_bits(kf) for kf in estimator.bank.filters], calls))
-    (mine, mine_members, calls), (reference, reference_members, _) = runs
-    assert calls[0] > 300 and calls[1] < 10 and calls[2] > 100 and calls[3] < 10, calls
+    (mine, mine_members, calls), (reference, reference_members, _) = fly_with_and_without_c(
+        bank_module,
+        {"FUSE_FORCE_BALANCE": core.fuse_force_balance, "FUSE_SCALAR": core.fuse_scalar},
+        _bits,
+        _member_bits,
+        log_weights=True,
+    )
+    balance, scalar = calls["FUSE_FORCE_BALANCE"], calls["FUSE_SCALAR"]
+    assert balance[0] > 300 and balance[1] < 10 and scalar[0] > 100 and scalar[1] < 10, calls
     assert mine == reference
     assert mine_members == reference_members

@@ -22,19 +22,14 @@ import struct
 
 import numpy as np
 import pytest
+from bank_core_flight import fly_with_and_without_c
 from optional_extension import import_extension
 
-from tether_companion.bench.dynamic import record
-from tether_companion.estimation.config import EstimatorConfig
 from tether_companion.estimation.dynamic import bank as bank_module
 from tether_companion.estimation.dynamic import state
 from tether_companion.estimation.dynamic.bank import FilterBank
-from tether_companion.estimation.dynamic.estimator import DynamicTetherEstimator
 from tether_companion.estimation.dynamic.imu_batch import ImuBatch
 from tether_companion.estimation.dynamic.member import MemberFilter
-from tether_companion.estimation.feed import imu_ticks
-from tether_companion.physics.vehicle import load_vehicle
-from tether_companion.sim.scenario import load_scenario
 
 core, pytestmark = import_extension("tether_companion.estimation.dynamic._member_core")
 
@@ -401,47 +396,19 @@ def test_healthy_members_not_taken(spoil: str) -> None:
 
 
 def test_a_flight_takes_c_and_equals_the_python() -> None:
-    _skip_pure()
-    vehicle = load_vehicle(load_scenario("realistic-circle").vehicle)
-    flight = record("realistic-circle", 8.0)
-    runs = []
-    for c_path in (True, False):
-        saved = bank_module.PREDICT_BATCH, bank_module.BANK_MIXTURE, bank_module.HEALTHY_MEMBERS
-        calls = [0] * 6  # prediction taken, not; mixture taken, not; health test taken, not
-
-        def counted(*args: object, calls: list[int] = calls) -> object:
-            out = core.predict_batch(*args)
-            calls[out is None] += 1
-            return out
-
-        def counted_mixture(*args: object, calls: list[int] = calls) -> object:
-            out = core.bank_mixture(*args)
-            calls[2 + (out is None)] += 1
-            return out
-
-        def counted_health(*args: object, calls: list[int] = calls) -> object:
-            out = core.bank_healthy_members(*args)
-            calls[4 + (out is None)] += 1
-            return out
-
-        bank_module.PREDICT_BATCH = counted if c_path else None
-        bank_module.BANK_MIXTURE = counted_mixture if c_path else None
-        bank_module.HEALTHY_MEMBERS = counted_health if c_path else None
-        try:
-            estimator = DynamicTetherEstimator(EstimatorConfig(), vehicle)
-            outputs = []
-            for imu in imu_ticks(flight, estimator):
-                estimate = estimator.on_imu(imu)
-                if estimate is not None:
-                    outputs.append(
-                        (estimate.status, _bits(estimate.position_ned_m),
-                         _bits(estimate.position_velocity_covariance))
-                    )  # fmt: skip
-        finally:
-            bank_module.PREDICT_BATCH, bank_module.BANK_MIXTURE, bank_module.HEALTHY_MEMBERS = saved
-        runs.append((outputs, [_member_bits(kf) for kf in estimator.bank.filters], calls))
-    (mine, mine_members, calls), (reference, reference_members, _) = runs
-    assert calls[0] > 300 and calls[1] < 5 and calls[2] > 300 and calls[3] < 5, calls
-    assert calls[4] > 200 and calls[5] < 5, calls
+    (mine, mine_members, calls), (reference, reference_members, _) = fly_with_and_without_c(
+        bank_module,
+        {
+            "PREDICT_BATCH": core.predict_batch,
+            "BANK_MIXTURE": core.bank_mixture,
+            "HEALTHY_MEMBERS": core.bank_healthy_members,
+        },
+        _bits,
+        _member_bits,
+    )
+    predicted, mixed = calls["PREDICT_BATCH"], calls["BANK_MIXTURE"]
+    tested = calls["HEALTHY_MEMBERS"]
+    assert predicted[0] > 300 and predicted[1] < 5 and mixed[0] > 300 and mixed[1] < 5, calls
+    assert tested[0] > 200 and tested[1] < 5, calls
     assert mine == reference
     assert mine_members == reference_members

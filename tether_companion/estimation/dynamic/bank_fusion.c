@@ -33,7 +33,7 @@ typedef struct {
     PyObject *x_new, *p_new; /* new references when not gated */
 } Member;
 
-static PyObject *s_xa, *s_pa, *s_xl, *s_pl, *s_sensors, *s_thresholds, *s_limit, *s_log_det,
+static PyObject *s_sensors, *s_thresholds, *s_limit, *s_log_det,
     *s_consecutive, *s_last_nis, *s_innovation, *s_gated, *s_forced, *s_fused, *s_three, *s_one;
 
 static int
@@ -41,10 +41,6 @@ intern_names(void)
 {
     if (s_three != NULL)
         return 1;
-    s_xa = PyUnicode_InternFromString("_xa");
-    s_pa = PyUnicode_InternFromString("_pa");
-    s_xl = PyUnicode_InternFromString("_xl");
-    s_pl = PyUnicode_InternFromString("_pl");
     s_sensors = PyUnicode_InternFromString("sensors");
     s_thresholds = PyUnicode_InternFromString("_thresholds");
     s_limit = PyUnicode_InternFromString("max_consecutive_rejections");
@@ -57,7 +53,7 @@ intern_names(void)
     s_fused = PyUnicode_InternFromString("fused");
     s_three = PyLong_FromLong(FB_M);
     s_one = PyLong_FromLong(1);
-    return s_xa && s_pa && s_xl && s_pl && s_sensors && s_thresholds && s_limit && s_log_det &&
+    return s_sensors && s_thresholds && s_limit && s_log_det &&
            s_consecutive && s_last_nis && s_innovation && s_gated && s_forced && s_fused &&
            s_three && s_one;
 }
@@ -133,7 +129,7 @@ member_setup(Member *mb, PyObject *kf, PyObject *sensor, int m, Py_ssize_t hold_
 {
     Py_INCREF(kf);
     mb->kf = kf;
-    if (!(mb->xa = PyObject_GetAttr(kf, s_xa)) || !(mb->pa = PyObject_GetAttr(kf, s_pa))) {
+    if (!(mb->xa = PyObject_GetAttr(kf, name_xa)) || !(mb->pa = PyObject_GetAttr(kf, name_pa))) {
         PyErr_Clear();
         return 0;
     }
@@ -382,10 +378,10 @@ commit_member(Member *mb, int m, PyObject *result_type, PyObject *fused, PyObjec
     }
     else {
         if ((mb->forced && increment(status, s_forced) < 0) ||
-            PyObject_SetAttr(mb->kf, s_xa, mb->x_new) < 0 ||
-            PyObject_SetAttr(mb->kf, s_xl, Py_None) < 0 ||
-            PyObject_SetAttr(mb->kf, s_pa, mb->p_new) < 0 ||
-            PyObject_SetAttr(mb->kf, s_pl, Py_None) < 0 || increment(status, s_fused) < 0 ||
+            PyObject_SetAttr(mb->kf, name_xa, mb->x_new) < 0 ||
+            PyObject_SetAttr(mb->kf, name_xl, Py_None) < 0 ||
+            PyObject_SetAttr(mb->kf, name_pa, mb->p_new) < 0 ||
+            PyObject_SetAttr(mb->kf, name_pl, Py_None) < 0 || increment(status, s_fused) < 0 ||
             set_new(status, s_consecutive, PyLong_FromLong(0)) < 0)
             return NULL;
     }

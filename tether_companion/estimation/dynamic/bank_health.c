@@ -14,14 +14,13 @@
  */
 #include "member_core.h"
 
-static PyObject *s_xa, *s_xl;
 
 /* Member kf's n state values into x (n <= MAX_N); 0 (no error set) where the Python must read
  * them, -1 with an error set. */
 static int
 state_values(PyObject *kf, double *x, int *n)
 {
-    PyObject *held = PyObject_GetAttr(kf, s_xl);
+    PyObject *held = PyObject_GetAttr(kf, name_xl);
     if (held == NULL)
         return -1;
     int ok = 0;
@@ -33,7 +32,7 @@ state_values(PyObject *kf, double *x, int *n)
         return ok;
     }
     Py_DECREF(held);
-    if (!(held = PyObject_GetAttr(kf, s_xa)))
+    if (!(held = PyObject_GetAttr(kf, name_xa)))
         return -1;
     Py_buffer view;
     if (get(held, &view, 1, ANY, 0, 0)) {
@@ -59,9 +58,6 @@ bank_healthy_members(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 #if PY_VERSION_HEX >= 0x030C0000
     Py_RETURN_NONE;
 #endif
-    if (s_xl == NULL && (!(s_xa = PyUnicode_InternFromString("_xa")) ||
-                         !(s_xl = PyUnicode_InternFromString("_xl"))))
-        return NULL;
     PyObject *filters = args[0];
     if (!PyList_CheckExact(filters) || PyList_GET_SIZE(filters) > MAX_MEMBERS ||
         !PyFloat_CheckExact(args[1]))

@@ -104,20 +104,6 @@ member_mixture_moments(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Py_RETURN_NONE;
 }
 
-static PyObject *s_xa, *s_pa, *s_x, *s_p;
-
-static int
-intern_names(void)
-{
-    if (s_p != NULL)
-        return 1;
-    s_xa = PyUnicode_InternFromString("_xa");
-    s_pa = PyUnicode_InternFromString("_pa");
-    s_x = PyUnicode_InternFromString("x");
-    s_p = PyUnicode_InternFromString("P");
-    return s_xa && s_pa && s_x && s_p;
-}
-
 /* 1 when cache = (arrays, log weights, moments) holds `filters`' arrays and `log_weight`, 0 when
  * not, -1 with an error set (as the Python's comparisons and attribute reads raise). */
 static int
@@ -136,7 +122,7 @@ cache_holds(PyObject *filters, PyObject *log_weight, PyObject *cache)
         return 0;
     for (int which = 0; which < 2; which++) /* every _xa, then every _pa, as the Python reads */
         for (Py_ssize_t i = 0; i < count; i++) {
-            PyObject *held = PyObject_GetAttr(PyList_GET_ITEM(filters, i), which ? s_pa : s_xa);
+            PyObject *held = PyObject_GetAttr(PyList_GET_ITEM(filters, i), which ? name_pa : name_xa);
             if (held == NULL)
                 return -1;
             Py_DECREF(held); /* the member holds it: only its identity is compared */
@@ -176,7 +162,7 @@ member_arrays(PyObject *filters)
     }
     for (Py_ssize_t i = 0; i < 2 * count; i++) {
         PyObject *kf = PyList_GET_ITEM(filters, i / 2);
-        PyObject *array = i % 2 ? held_array(kf, s_pa, s_p) : held_array(kf, s_xa, s_x);
+        PyObject *array = i % 2 ? held_array(kf, name_pa, name_p) : held_array(kf, name_xa, name_x);
         if (array == NULL) {
             Py_DECREF(arrays);
             return NULL;
@@ -254,8 +240,6 @@ bank_mixture(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 #if PY_VERSION_HEX >= 0x030C0000
     Py_RETURN_NONE;
 #endif
-    if (!intern_names())
-        return NULL;
     PyObject *filters = args[0], *log_weight = args[1], *cache = args[2];
     if (!PyList_CheckExact(filters) || !PyList_CheckExact(log_weight))
         Py_RETURN_NONE;

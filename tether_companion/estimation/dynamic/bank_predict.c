@@ -26,22 +26,6 @@ typedef struct {
     PyObject *x, *p, *x_new, *p_new; /* new references */
 } Predicted;
 
-static PyObject *s_xa, *s_pa, *s_xl, *s_pl, *s_x, *s_p;
-
-static int
-intern_names(void)
-{
-    if (s_p != NULL)
-        return 1;
-    s_xa = PyUnicode_InternFromString("_xa");
-    s_pa = PyUnicode_InternFromString("_pa");
-    s_xl = PyUnicode_InternFromString("_xl");
-    s_pl = PyUnicode_InternFromString("_pl");
-    s_x = PyUnicode_InternFromString("x");
-    s_p = PyUnicode_InternFromString("P");
-    return s_xa && s_pa && s_xl && s_pl && s_x && s_p;
-}
-
 static void
 drop_all(Predicted *members, Py_ssize_t count)
 {
@@ -59,7 +43,7 @@ static int
 predict_member(Predicted *mb, PyObject *kf, const double *phi, const double *d, const double *q,
                double t, int n, PyObject *empty, PyObject *shape_x, PyObject *shape_p)
 {
-    if (!(mb->x = held_array(kf, s_xa, s_x)) || !(mb->p = held_array(kf, s_pa, s_p)))
+    if (!(mb->x = held_array(kf, name_xa, name_x)) || !(mb->p = held_array(kf, name_pa, name_p)))
         return 0;
     Views v = {.count = 0};
     Py_buffer *vx, *vp, *vxo, *vpo;
@@ -97,8 +81,6 @@ bank_predict_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     if (nargs != 7)
         return PyErr_Format(PyExc_TypeError, "predict_batch takes 7 arguments");
-    if (!intern_names())
-        return NULL;
     PyObject *filters = args[0], *empty = args[6];
     if (!PyList_CheckExact(filters) || !PyFloat_Check(args[5]))
         Py_RETURN_NONE;
@@ -134,10 +116,10 @@ bank_predict_batch(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Py_XDECREF(shape_p);
     for (Py_ssize_t i = 0; i < count && outcome == 1; i++) { /* every member's _keep */
         PyObject *kf = PyList_GET_ITEM(filters, i);
-        if (PyObject_SetAttr(kf, s_xa, members[i].x_new) < 0 ||
-            PyObject_SetAttr(kf, s_xl, Py_None) < 0 ||
-            PyObject_SetAttr(kf, s_pa, members[i].p_new) < 0 ||
-            PyObject_SetAttr(kf, s_pl, Py_None) < 0)
+        if (PyObject_SetAttr(kf, name_xa, members[i].x_new) < 0 ||
+            PyObject_SetAttr(kf, name_xl, Py_None) < 0 ||
+            PyObject_SetAttr(kf, name_pa, members[i].p_new) < 0 ||
+            PyObject_SetAttr(kf, name_pl, Py_None) < 0)
             outcome = -1;
     }
     drop_all(members, done);

@@ -430,8 +430,16 @@ static struct PyModuleDef module_def = {
     methods,
 };
 
+PyObject *name_xa, *name_pa, *name_xl, *name_pl, *name_x, *name_p;
+
 PyMODINIT_FUNC
 PyInit__member_core(void)
 {
+    if (!(name_xa = PyUnicode_InternFromString("_xa")) ||
+        !(name_pa = PyUnicode_InternFromString("_pa")) ||
+        !(name_xl = PyUnicode_InternFromString("_xl")) ||
+        !(name_pl = PyUnicode_InternFromString("_pl")) ||
+        !(name_x = PyUnicode_InternFromString("x")) || !(name_p = PyUnicode_InternFromString("P")))
+        return NULL;
     return PyModule_Create(&module_def);
 }

@@ -17,6 +17,10 @@
 #define MAX_MEMBERS 64 /* the most bank members mixture() takes */
 #define ANY (-1)
 
+/* The members' attribute names the bank's sources read (bank_fusion.c, bank_health.c,
+ * bank_mixture.c, bank_predict.c), interned once when the module loads (member_core.c). */
+extern PyObject *name_xa, *name_pa, *name_xl, *name_pl, *name_x, *name_p;
+
 /* A C-contiguous float64 buffer of `obj` with `ndim` dimensions of sizes d0, d1 (ANY: any);
  * 0 without an error set when it is not one. */
 static inline int

@@ -9,8 +9,7 @@ one call each (``bank_fusion.c``, ``bank_updates.FUSE_FORCE_BALANCE`` / ``FUSE_S
 the bank's Python on those), and the flight controller's input frames' test and field read
 (``service/frame_core.c`` with ``frame_reader.c`` and ``frame_wire.h``,
 ``ingest_frames.FrameIngest``: its samples bit for bit) with the ingest's clock gate, reorder
-buffer and order check (``service/ingest_core.c``, ``Ingest.core``: bit for bit), and the trust
-gate's usual frame (``mavlink/trust_core.c``, ``LinkTrust.admit``: the same decisions and counts).
+buffer and order check (``service/ingest_core.c``, ``Ingest.core``: bit for bit).
 
 ``tether_companion/estimation/dynamic/generated_core.c`` is written by the derivation
 (``python -m tether_companion.estimation.dynamic.derivation.derive``) next to the Python
@@ -71,11 +70,6 @@ setup(
                 "tether_companion/estimation/dynamic/member_core.h",
             ],
             extra_compile_args=["-ffp-contract=off"],
-            optional=True,
-        ),
-        Extension(
-            "tether_companion.mavlink._trust_core",
-            ["tether_companion/mavlink/trust_core.c"],
             optional=True,
         ),
         Extension(

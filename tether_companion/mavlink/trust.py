@@ -41,7 +41,6 @@ from typing import Protocol
 
 from pymavlink.dialects.v20 import ardupilotmega as dialect
 
-from tether_companion.estimation.optional_core import load
 from tether_companion.mavlink.signing import SignatureVerifier, Signer, is_signed
 
 OFF = "off"
@@ -58,12 +57,6 @@ _COMMAND_LONG_ID = dialect.MAVLINK_MSG_ID_COMMAND_LONG
 _IDS_V2 = struct.Struct("<BBI")
 """A MAVLink 2 frame's system, component and message id (bytes 5-10: a whole frame, with its
 checksum, is at least 12 bytes)."""
-_CORE = load("tether_companion.mavlink._trust_core")
-ADMIT_CORE = getattr(_CORE, "admit", None)
-"""trust_core.c's ``admit``, :meth:`LinkTrust.admit` where built (None: not built, or
-``TETHER_PURE_PYTHON``): the usual frame (signing off, not a ground station's, the flight
-controller's at its pinned address or another system's) in one C call, every other frame by
-:meth:`LinkTrust.admit_reference`, which stays the reference (tests/test_trust_core.py)."""
 
 
 class FrameGate(Protocol):
@@ -167,9 +160,8 @@ class LinkTrust:
         self.events: list[str] = []
         """Log lines of address changes (the service prints and clears them)."""
 
-    def admit_reference(self, frame: bytes | bytearray, source: Hashable | None) -> bool:
-        """True when ``frame`` from ``source`` is believed (counted either way): the reference
-        of :data:`ADMIT_CORE`, and :meth:`admit` where it is not built."""
+    def admit(self, frame: bytes | bytearray, source: Hashable | None) -> bool:
+        """True when ``frame`` from ``source`` is believed (counted either way)."""
         counters = self.counters
         if frame[0] == _STX_V1:
             system, component, msg_id = frame[3], frame[4], frame[5]
@@ -203,9 +195,6 @@ class LinkTrust:
                 self._ground_stations.popitem(last=False)
         counters.admitted += 1
         return True
-
-    admit = ADMIT_CORE if ADMIT_CORE is not None else admit_reference
-    """``admit(frame, source) -> bool``: :meth:`admit_reference`'s decision (the C where built)."""
 
     def _fc_source_ok(self, source: Hashable | None, msg_id: int) -> bool:
         now = self._monotonic_s()

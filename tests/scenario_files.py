@@ -35,19 +35,26 @@ noise, 1.5 deg azimuth and 0.4 deg elevation biases per flight, 12-bit steps."""
 
 
 def gusty_hover_takeoff_scenario(
-    tmp_path: Path, duration_s: float, seed: int, ground_station: bool = False
+    tmp_path: Path,
+    duration_s: float,
+    seed: int,
+    ground_station: bool = False,
+    vehicle: str = "default-quad",
 ) -> Path:
     """The hover scenario's quad and 4 N winch in realistic-gusty-hover's wind (3 m/s mean,
     light Dryden turbulence), taking off from the ground under the hover point (4, 0, -2.5) m;
     the thrust map exact, no sensor biases; with ``ground_station`` the ground station's
     sensors have the realistic errors (:data:`REALISTIC_GROUND_STATION`), else none (the
-    exact length, the angle with 0.01 rad of white noise). Returns the scenario file's
-    path."""
+    exact length, the angle with 0.01 rad of white noise). ``vehicle``: the profile flown
+    (default-quad has no drag, so the wind moves only the cable; realistic-quad has the rotor
+    drag and body drag of a 450-class quad, so the gusts push the drone). Returns the
+    scenario file's path."""
     section = REALISTIC_GROUND_STATION if ground_station else "{enabled: false}"
     path = tmp_path / f"gusty-hover-takeoff-{seed}.yaml"
     path.write_text(
         f"""
 base: hover
+vehicle: {vehicle}
 duration_s: {duration_s}
 seed: {seed}
 wind: {{velocity_ned_m_s: [-2.0, 2.2, 0.0], turbulence_w20_mps: 7.7}}

@@ -297,6 +297,7 @@ def _closed_loop_hover(
     winch: bool = False,
     cable_angle: bool = False,
     ground_station: bool = False,
+    vehicle: str = "default-quad",
 ) -> dict:
     """Take off into the gusty hover (the emulator's navigation on its truth until our first
     estimate, as a pilot would climb in ALT_HOLD), then fly on nothing but the published
@@ -305,9 +306,10 @@ def _closed_loop_hover(
     the cable's direction at the anchor (DEBUG_VECT, 10 Hz, 0.01 rad per axis), and the
     service reads them; with ``ground_station`` they have the realistic scenarios' errors
     (the encoder's scale, offset, latency and steps, the angle's biases, latency and steps:
-    sim/ground_sensors.py), else the exact length and the angle's white noise only."""
+    sim/ground_sensors.py), else the exact length and the angle's white noise only;
+    ``vehicle`` the profile flown (and given to the service)."""
     path = gusty_hover_takeoff_scenario(
-        tmp_path, LATEST_START_S + SETTLE_S + HOLD_S, seed, ground_station
+        tmp_path, LATEST_START_S + SETTLE_S + HOLD_S, seed, ground_station, vehicle
     )
     emulator: dict = {"navigation": "vision"}
     overrides: dict = {"estimator": {"kind": "dynamic"}}
@@ -392,6 +394,48 @@ def test_closed_loop_gusty_hover_on_the_dynamic_filter_holds_within_0_3_m(
     m); either alone does not on every seed (strict xfails)."""
     results = {
         seed: _closed_loop_hover(tmp_path, seed, winch, cable_angle, ground_station)
+        for seed in range(1, 6)
+    }
+    for seed, result in results.items():
+        print(f"seed {seed}: {result}")  # the numbers the docs quote (pytest -s)
+    for seed, result in results.items():
+        assert result["start_s"] is not None, (seed, result)
+        assert result["mode"] == "AUTO" and result["armed"], (seed, result)
+        assert result["max_m"] <= 0.3, (seed, result)
+
+
+DRAG_WINCH_XFAIL = pytest.mark.xfail(
+    strict=True,
+    reason="the winch alone on a quad with drag never publishes in the gusty hover (seeds 1-5, "
+    "lead 2026-11-28): the length fixes the range, and the bearing comes from the horizontal "
+    "force, which the gusts' drag on an unknown wind shares with the cable's pull; the "
+    "filter withholds (the scorecard's realistic-gusty-hover winch alone: 0 % published)",
+)
+
+
+@pytest.mark.slow
+@pytest.mark.integration
+@pytest.mark.parametrize(
+    ("winch", "cable_angle", "ground_station"),
+    [
+        pytest.param(True, False, False, marks=DRAG_WINCH_XFAIL, id="winch"),
+        pytest.param(False, True, False, id="cable-angle"),
+        pytest.param(True, True, False, id="winch-cable-angle"),
+        pytest.param(True, True, True, id="winch-cable-angle-realistic"),
+    ],
+)
+def test_closed_loop_gusty_hover_with_drag_holds_within_0_3_m(
+    tmp_path, winch: bool, cable_angle: bool, ground_station: bool
+) -> None:
+    """The closed-loop hover above on realistic-quad (rotor drag 0.2 1/s and a 17 kg/m^2
+    body drag, as ArduPilot's SITL quad), so the gusts push the drone and the filter must tell
+    their drag from the cable's pull (default-quad has no drag: there the wind moves only the
+    cable). With the angle, alone or with the winch (exact or with the ground station's
+    realistic errors), it holds within 0.3 m on seeds 1-5."""
+    results = {
+        seed: _closed_loop_hover(
+            tmp_path, seed, winch, cable_angle, ground_station, vehicle="realistic-quad"
+        )
         for seed in range(1, 6)
     }
     for seed, result in results.items():

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import os
 import struct
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -105,6 +106,15 @@ def _predict(bank: FilterBank, batch: ImuBatch, q: np.ndarray, c_path: bool) -> 
         bank.predict_batch(batch, q)
     finally:
         bank_module.PREDICT_BATCH = saved
+
+
+def _same_draw(rng: np.random.Generator, change: Callable[..., None], *banks: FilterBank) -> None:
+    """``change(rng, bank)`` on each of ``banks`` from the same generator state (the generator
+    ends where the last call left it): equal banks stay equal."""
+    state_now = rng.bit_generator.state
+    for bank in banks:
+        rng.bit_generator.state = state_now
+        change(rng, bank)
 
 
 def _copies(rng: np.random.Generator) -> tuple[FilterBank, FilterBank]:
@@ -246,10 +256,7 @@ def test_mixture_bit_for_bit_on_random_banks() -> None:
         mine, reference = _copies(rng)
         if len(mine.filters) < 2:
             continue
-        state_now = rng.bit_generator.state
-        _weighted(rng, mine)
-        rng.bit_generator.state = state_now
-        _weighted(rng, reference)
+        _same_draw(rng, _weighted, mine, reference)
         got, expected = _mixture(mine, True), _mixture(reference, False)
         assert _bits(list(got)) == _bits(list(expected))
         assert _cache_bits(mine) == _cache_bits(reference)
@@ -353,10 +360,7 @@ def test_healthy_members_bit_for_bit_on_random_banks() -> None:
     dropped = 0
     for _ in range(300):
         mine, reference = _copies(rng)
-        state_now = rng.bit_generator.state
-        _sicken(rng, mine)
-        rng.bit_generator.state = state_now
-        _sicken(rng, reference)
+        _same_draw(rng, _sicken, mine, reference)
         listed = [kf._xl is not None for kf in mine.filters]
         assert core.bank_healthy_members(mine.filters, 1e6) is not None
         assert [kf._xl is not None for kf in mine.filters] == listed  # read, not converted
